@@ -1,0 +1,257 @@
+//! The pathlength importance W (DESIGN.md section 2): parsing `--gate` specs and the CPU twin of
+//! `shaders/lib/gate.wesl`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result, bail};
+
+use crate::gpu::layout;
+use crate::units::{SPEED_OF_LIGHT, parse_length};
+
+/// A sensor's pathlength importance. All lengths are optical path lengths in metres.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Gate {
+    /// W = 1: the steady-state image.
+    None,
+    /// W = 1 on [start, end), 0 elsewhere.
+    Box { start: f64, end: f64 },
+    /// W = exp(-(l - mean)^2 / (2 sigma^2)), peak 1.
+    Gaussian { mean: f64, sigma: f64 },
+    /// W = cos(2 pi f l / c + phase): continuous-wave time of flight (signed).
+    Cw { frequency_hz: f64, phase_deg: f64 },
+    /// Piecewise-linear W through (length, weight) points, 0 outside them.
+    Table { points: Vec<(f64, f64)>, source: PathBuf },
+    /// `bins` boxes [start + i width, start + (i + 1) width): a transient cube.
+    Transient { start: f64, width: f64, bins: u32 },
+}
+
+/// GATE_KIND values of the kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum GateKind {
+    None = 0,
+    Box = 1,
+    Gaussian = 2,
+    Cw = 3,
+    Table = 4,
+    Transient = 5,
+}
+
+impl Gate {
+    /// Parses `none`, `box:A..B`, `gaussian:MU,SIGMA`, `cw:FREQ_HZ,PHASE_DEG`, `table:FILE.csv`,
+    /// `transient:START,WIDTH,BINS`. Lengths accept `m`, `mm`, `ps`, `ns` suffixes.
+    pub fn parse(spec: &str) -> Result<Self> {
+        let (kind, args) = spec.split_once(':').unwrap_or((spec, ""));
+        let gate = match kind.trim() {
+            "none" => Gate::None,
+            "box" => {
+                let (a, b) = args.split_once("..").context("box gate: expected box:START..END, e.g. box:3.14..3.19")?;
+                Gate::Box { start: parse_length(a)?, end: parse_length(b)? }
+            }
+            "gaussian" => {
+                let [mu, sigma] = split_n(args, "gaussian:MEAN,SIGMA")?;
+                Gate::Gaussian { mean: parse_length(mu)?, sigma: parse_length(sigma)? }
+            }
+            "cw" => {
+                let [f, phase] = split_n(args, "cw:FREQ_HZ,PHASE_DEG")?;
+                let frequency_hz = parse_number(f, "cw frequency (Hz)")?;
+                let phase_deg = parse_number(phase, "cw phase (degrees)")?;
+                Gate::Cw { frequency_hz, phase_deg }
+            }
+            "table" => {
+                let path = Path::new(args.trim());
+                Gate::Table { points: read_gate_table(path)?, source: path.to_owned() }
+            }
+            "transient" => {
+                let [start, width, bins] = split_n(args, "transient:START,WIDTH,BINS")?;
+                let bins = bins.trim().parse::<u32>().ok().filter(|&b| b > 0).with_context(|| {
+                    format!("transient gate: `{bins}` is not a positive number of bins")
+                })?;
+                Gate::Transient { start: parse_length(start)?, width: parse_length(width)?, bins }
+            }
+            other => bail!(
+                "unknown gate kind `{other}`: use none, box:A..B, gaussian:MU,SIGMA, cw:FREQ_HZ,PHASE_DEG, \
+                 table:FILE.csv or transient:START,WIDTH,BINS"
+            ),
+        };
+        gate.validate()?;
+        Ok(gate)
+    }
+
+    fn validate(&self) -> Result<()> {
+        match *self {
+            Gate::Box { start, end } if !(end > start) => bail!("box gate: end {end} m must exceed start {start} m"),
+            Gate::Box { start, .. } if start < 0.0 => bail!("box gate: start {start} m is negative"),
+            Gate::Gaussian { sigma, .. } if !(sigma > 0.0) => bail!("gaussian gate: sigma {sigma} m must be positive"),
+            Gate::Cw { frequency_hz, .. } if !(frequency_hz > 0.0) => {
+                bail!("cw gate: frequency {frequency_hz} Hz must be positive")
+            }
+            Gate::Transient { width, .. } if !(width > 0.0) => bail!("transient gate: bin width {width} m must be positive"),
+            Gate::Transient { start, .. } if start < 0.0 => bail!("transient gate: start {start} m is negative"),
+            _ => Ok(()),
+        }
+    }
+
+    pub fn kind(&self) -> GateKind {
+        match self {
+            Gate::None => GateKind::None,
+            Gate::Box { .. } => GateKind::Box,
+            Gate::Gaussian { .. } => GateKind::Gaussian,
+            Gate::Cw { .. } => GateKind::Cw,
+            Gate::Table { .. } => GateKind::Table,
+            Gate::Transient { .. } => GateKind::Transient,
+        }
+    }
+
+    /// Film bins per pixel.
+    pub fn bins(&self) -> u32 {
+        match self {
+            Gate::Transient { bins, .. } => *bins,
+            _ => 1,
+        }
+    }
+
+    /// [start, end) of bin `i` (m), transient gates only.
+    pub fn bin_range(&self, i: u32) -> Option<(f64, f64)> {
+        match *self {
+            Gate::Transient { start, width, .. } => Some((start + width * i as f64, start + width * (i + 1) as f64)),
+            _ => None,
+        }
+    }
+
+    /// Upper end of the support (m); None when unbounded.
+    pub fn max_length(&self) -> Option<f64> {
+        match self {
+            Gate::Box { end, .. } => Some(*end),
+            Gate::Table { points, .. } => points.last().map(|p| p.0),
+            Gate::Transient { start, width, bins } => Some(start + width * *bins as f64),
+            _ => None,
+        }
+    }
+
+    /// The (length, weight) table for the GPU (empty unless a table gate).
+    pub fn table(&self) -> Vec<[f32; 2]> {
+        match self {
+            Gate::Table { points, .. } => points.iter().map(|&(l, w)| [l as f32, w as f32]).collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The kernels' gate parameters.
+    pub fn to_gpu(&self) -> layout::Gate {
+        let (p0, p1) = match *self {
+            Gate::None => (0.0, 0.0),
+            Gate::Box { start, end } => (start, end),
+            Gate::Gaussian { mean, sigma } => (mean, sigma),
+            Gate::Cw { frequency_hz, phase_deg } => {
+                (2.0 * std::f64::consts::PI * frequency_hz / SPEED_OF_LIGHT, phase_deg.to_radians())
+            }
+            Gate::Table { ref points, .. } => (points[0].0, points[points.len() - 1].0),
+            Gate::Transient { start, width, .. } => (start, width),
+        };
+        layout::Gate {
+            bins: self.bins(),
+            table_len: self.table().len() as u32,
+            p0: p0 as f32,
+            p1: p1 as f32,
+            max_length: self.max_length().map_or(f32::MAX, |m| m as f32),
+            ..Default::default()
+        }
+    }
+
+    /// A short human-readable description, with times alongside lengths.
+    pub fn describe(&self) -> String {
+        let ps = crate::units::metres_to_ps;
+        match self {
+            Gate::None => "none (steady state)".into(),
+            Gate::Box { start, end } => format!(
+                "box [{start} m, {end} m) (width {:.4} m = {:.2} ps)",
+                end - start,
+                ps(end - start)
+            ),
+            Gate::Gaussian { mean, sigma } => format!("gaussian mean {mean} m, sigma {sigma} m ({:.2} ps)", ps(*sigma)),
+            Gate::Cw { frequency_hz, phase_deg } => format!("cw {frequency_hz} Hz, phase {phase_deg} deg"),
+            Gate::Table { points, source } => format!("table {} ({} points)", source.display(), points.len()),
+            Gate::Transient { start, width, bins } => {
+                format!("transient {bins} bins of {width} m ({:.2} ps) from {start} m", ps(*width))
+            }
+        }
+    }
+}
+
+/// CPU twin of the kernels' gate for a given GPU parameter block and kind.
+pub fn gate_weight(kind: GateKind, g: &layout::Gate, table: &[[f32; 2]], path_length: f32) -> f32 {
+    match kind {
+        GateKind::None => 1.0,
+        GateKind::Box => (path_length >= g.p0 && path_length < g.p1) as u32 as f32,
+        GateKind::Gaussian => {
+            let z = (path_length - g.p0) / g.p1;
+            (-0.5 * z * z).exp()
+        }
+        GateKind::Cw => (g.p0 * path_length + g.p1).cos(),
+        GateKind::Table => gate_table_lookup(table, path_length),
+        GateKind::Transient => (gate_bin(kind, g, path_length) >= 0) as u32 as f32,
+    }
+}
+
+/// CPU twin of `gate_bin`: the transient bin of a length, -1 outside, 0 for other gates.
+pub fn gate_bin(kind: GateKind, g: &layout::Gate, path_length: f32) -> i32 {
+    if kind != GateKind::Transient {
+        return 0;
+    }
+    let x = ((path_length - g.p0) / g.p1).floor();
+    if x < 0.0 || x >= g.bins as f32 { -1 } else { x as i32 }
+}
+
+fn gate_table_lookup(table: &[[f32; 2]], l: f32) -> f32 {
+    let n = table.len();
+    if n == 0 || l < table[0][0] || l > table[n - 1][0] {
+        return 0.0;
+    }
+    let i = table.partition_point(|p| p[0] <= l) - 1;
+    if i == n - 1 {
+        return table[i][1];
+    }
+    let (a, b) = (table[i], table[i + 1]);
+    let f = (l - a[0]) / (b[0] - a[0]).max(1e-30);
+    a[1] + (b[1] - a[1]) * f.clamp(0.0, 1.0)
+}
+
+/// Reads a gate table: CSV lines `length,weight` (length in m or with a unit suffix), sorted by
+/// length; `#` comments and one header line are allowed.
+pub fn read_gate_table(path: &Path) -> Result<Vec<(f64, f64)>> {
+    let name = path.display();
+    let text = std::fs::read_to_string(path).with_context(|| format!("{name}: cannot read the gate table"))?;
+    let mut points = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let mut fields = line.split([',', ';', '\t']).map(str::trim);
+        let (Some(l), Some(w), None) = (fields.next(), fields.next(), fields.next()) else {
+            bail!("{name}:{}: expected two columns `length,weight`, got `{line}`", i + 1);
+        };
+        match (parse_length(l), w.parse::<f64>()) {
+            (Ok(l), Ok(w)) if w.is_finite() => points.push((l, w)),
+            _ if points.is_empty() && i == 0 => continue, // header line
+            _ => bail!("{name}:{}: `{line}` is not `length,weight`", i + 1),
+        }
+    }
+    if points.len() < 2 {
+        bail!("{name}: a gate table needs at least two points");
+    }
+    if points.windows(2).any(|w| !(w[1].0 > w[0].0)) {
+        bail!("{name}: lengths must increase strictly from line to line");
+    }
+    Ok(points)
+}
+
+fn split_n<'a, const N: usize>(args: &'a str, usage: &str) -> Result<[&'a str; N]> {
+    let parts: Vec<&str> = args.split(',').collect();
+    parts.try_into().map_err(|_| anyhow::anyhow!("expected {usage}, got `{args}`"))
+}
+
+fn parse_number(s: &str, what: &str) -> Result<f64> {
+    s.trim().parse::<f64>().ok().filter(|v| v.is_finite()).with_context(|| format!("{what}: `{s}` is not a number"))
+}

@@ -1,0 +1,60 @@
+//! The film: per-pixel, per-bin radiance estimates, and their output as EXR or NPY with the
+//! render's metadata.
+
+pub mod gate;
+pub mod output;
+
+pub use gate::{Gate, GateKind};
+
+/// Pixel estimates of a render: `data[((y * width + x) * bins + bin) * 3 + channel]`, row 0 at
+/// the top (the [H, W, T, 3] layout of mitransient). Values are bin-integrated radiance
+/// (W m^-2 sr^-1) weighted by the gate's W, averaged over `spp` samples per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pub bins: u32,
+    pub spp: u64,
+    pub data: Vec<f32>,
+}
+
+impl Film {
+    pub fn zeroed(width: u32, height: u32, bins: u32) -> Self {
+        Self { width, height, bins, spp: 0, data: vec![0.0; (width * height * bins * 3) as usize] }
+    }
+
+    /// Estimate of pixel (x, y), bin `bin`.
+    pub fn get(&self, x: u32, y: u32, bin: u32) -> [f32; 3] {
+        let i = (((y * self.width + x) * self.bins + bin) * 3) as usize;
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+
+    /// The image summed over bins ([H, W, 3]).
+    pub fn sum_bins(&self) -> Film {
+        let mut out = Film::zeroed(self.width, self.height, 1);
+        out.spp = self.spp;
+        for p in 0..(self.width * self.height) as usize {
+            for b in 0..self.bins as usize {
+                for c in 0..3 {
+                    out.data[p * 3 + c] += self.data[(p * self.bins as usize + b) * 3 + c];
+                }
+            }
+        }
+        out
+    }
+
+    /// Mean over all pixels (and bins summed) per channel.
+    pub fn mean_rgb(&self) -> [f64; 3] {
+        let mut acc = [0.0f64; 3];
+        for (i, v) in self.data.iter().enumerate() {
+            acc[i % 3] += *v as f64;
+        }
+        let n = (self.width * self.height) as f64;
+        acc.map(|a| a / n)
+    }
+
+    /// True when every value is finite.
+    pub fn all_finite(&self) -> bool {
+        self.data.iter().all(|v| v.is_finite())
+    }
+}

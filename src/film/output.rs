@@ -1,0 +1,133 @@
+//! Writing (and reading back) films: OpenEXR with one layer per transient bin and the metadata
+//! as string attributes, or NumPy `.npy` (float32 [H, W, 3] or [H, W, T, 3]) with a JSON sidecar.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result, bail};
+
+use super::Film;
+
+/// What is recorded with every output: (key, value) pairs, e.g. scene, method, gate, spp, seed,
+/// elapsed seconds, adapter.
+pub type Metadata = Vec<(String, String)>;
+
+/// Writes `film` to `path`; the format follows the extension (`.exr` or `.npy`).
+pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[String]) -> Result<()> {
+    if !film.all_finite() {
+        bail!("refusing to write {}: the film holds non-finite values", path.display());
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+    }
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("exr") => write_exr(path, film, metadata, bin_names),
+        Some("npy") => {
+            write_npy(path, film)?;
+            let sidecar = sidecar_path(path);
+            let map: serde_json::Map<String, serde_json::Value> =
+                metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
+            std::fs::write(&sidecar, serde_json::to_string_pretty(&map)? + "\n")
+                .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
+        }
+        _ => bail!("{}: unknown output format: use a .exr or .npy file name", path.display()),
+    }
+}
+
+/// `x.npy` -> `x.json`.
+pub fn sidecar_path(npy: &Path) -> PathBuf {
+    npy.with_extension("json")
+}
+
+fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[String]) -> Result<()> {
+    use exr::prelude::*;
+    let (w, h) = (film.width as usize, film.height as usize);
+    let mut attributes = ImageAttributes::new(IntegerBounds::from_dimensions((w, h)));
+    for (k, v) in metadata {
+        attributes.other.insert(Text::from(format!("gatetrace.{k}").as_str()), AttributeValue::Text(Text::from(v.as_str())));
+    }
+    let bins = film.bins as usize;
+    let layers: Vec<_> = (0..bins)
+        .map(|b| {
+            let channel = |c: usize| -> Vec<f32> { (0..w * h).map(|p| film.data[(p * bins + b) * 3 + c]).collect() };
+            let name = if bins == 1 { None } else { Some(Text::from(bin_names[b].as_str())) };
+            let layer_attributes = LayerAttributes { layer_name: name, ..LayerAttributes::default() };
+            Layer::new(
+                (w, h),
+                layer_attributes,
+                Encoding::FAST_LOSSLESS,
+                AnyChannels::sort(SmallVec::from_vec(vec![
+                    AnyChannel::new("R", FlatSamples::F32(channel(0))),
+                    AnyChannel::new("G", FlatSamples::F32(channel(1))),
+                    AnyChannel::new("B", FlatSamples::F32(channel(2))),
+                ])),
+            )
+        })
+        .collect();
+    Image::from_layers(attributes, layers)
+        .write()
+        .to_file(path)
+        .with_context(|| format!("{}: cannot write the EXR file", path.display()))
+}
+
+/// Writes float32 [H, W, 3] (one bin) or [H, W, T, 3] in NumPy's format (version 1.0, C order).
+pub fn write_npy(path: &Path, film: &Film) -> Result<()> {
+    let shape = if film.bins == 1 {
+        vec![film.height as usize, film.width as usize, 3]
+    } else {
+        vec![film.height as usize, film.width as usize, film.bins as usize, 3]
+    };
+    write_npy_f32(path, &shape, &film.data)
+}
+
+/// Writes a little-endian float32 C-order array.
+pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
+    assert_eq!(shape.iter().product::<usize>(), data.len());
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let tuple = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {tuple}, }}");
+    // Magic (6) + version (2) + length (2) + header + '\n' is a multiple of 64.
+    let total = 10 + header.len() + 1;
+    header.push_str(&" ".repeat(total.next_multiple_of(64) - total));
+    header.push('\n');
+    let mut bytes = Vec::with_capacity(10 + header.len() + data.len() * 4);
+    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in data {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Reads a little-endian float32 (or float64, converted) C-order `.npy` file: (shape, data).
+pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
+    let name = path.display();
+    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read"))?;
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        bail!("{name}: not a .npy file");
+    }
+    let (header_len, start) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 => (u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize, 12),
+        v => bail!("{name}: unsupported .npy version {v}"),
+    };
+    let header = std::str::from_utf8(&bytes[start..start + header_len]).context("npy header")?;
+    if header.contains("'fortran_order': True") {
+        bail!("{name}: Fortran-order arrays are not supported");
+    }
+    let descr = header.split("'descr':").nth(1).and_then(|s| s.split('\'').nth(1)).context("npy descr")?;
+    let shape_text = header.split("'shape':").nth(1).and_then(|s| s.split(['(', ')']).nth(1)).context("npy shape")?;
+    let shape: Vec<usize> =
+        shape_text.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse()).collect::<Result<_, _>>()?;
+    let body = &bytes[start + header_len..];
+    let count: usize = shape.iter().product();
+    let data: Vec<f32> = match descr {
+        "<f4" => body.chunks_exact(4).take(count).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect(),
+        "<f8" => body.chunks_exact(8).take(count).map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32).collect(),
+        other => bail!("{name}: unsupported dtype {other}"),
+    };
+    if data.len() != count {
+        bail!("{name}: file is shorter than its shape {shape:?}");
+    }
+    Ok((shape, data))
+}

@@ -1,0 +1,151 @@
+//! Compute kernels: one per file in `shaders/kernels/` (and test-only `shaders/probes/`), composed
+//! and validated by the build script. A kernel's WGSL file, entry point, Rust name and pipeline
+//! label are the same word; specialised variants add their overrides to the label.
+
+use std::borrow::Cow;
+
+use super::{GpuContext, Resources};
+
+/// How a kernel uses a binding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BindingKind {
+    Uniform,
+    StorageRead,
+    StorageReadWrite,
+}
+
+/// A resource a kernel uses, reflected from its WGSL.
+#[derive(Clone, Copy, Debug)]
+pub struct BindingInfo {
+    pub binding: u32,
+    /// The WGSL variable name, which is also the name the host binds a buffer under.
+    pub name: &'static str,
+    pub kind: BindingKind,
+}
+
+/// A composed, validated kernel and its reflected interface.
+#[derive(Debug)]
+pub struct KernelSource {
+    pub name: &'static str,
+    pub wgsl: &'static str,
+    pub workgroup_size: [u32; 3],
+    pub bindings: &'static [BindingInfo],
+    /// Names of the pipeline-overridable constants the kernel declares.
+    pub overrides: &'static [&'static str],
+}
+
+include!(concat!(env!("OUT_DIR"), "/kernels.rs"));
+
+/// The kernel source named `name` (panics on an unknown name: that is a programming error).
+pub fn kernel_source(name: &str) -> &'static KernelSource {
+    KERNEL_SOURCES
+        .iter()
+        .find(|k| k.name == name)
+        .unwrap_or_else(|| panic!("no kernel named `{name}` in shaders/"))
+}
+
+/// A compute pipeline with its bind-group layout.
+pub struct Kernel {
+    pub label: String,
+    pub source: &'static KernelSource,
+    pipeline: wgpu::ComputePipeline,
+    bind_group_layout: wgpu::BindGroupLayout,
+}
+
+impl Kernel {
+    /// Builds kernel `name` specialised with `constants`; constants the kernel does not declare
+    /// are ignored, so callers can pass one set of specialisation constants to every kernel.
+    pub fn new(ctx: &GpuContext, name: &str, constants: &[(&str, f64)]) -> Self {
+        let source = kernel_source(name);
+        let used: Vec<(&str, f64)> =
+            constants.iter().filter(|(k, _)| source.overrides.contains(k)).copied().collect();
+        let label = if used.is_empty() {
+            name.to_owned()
+        } else {
+            let list: Vec<String> = used.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            format!("{name}({})", list.join(","))
+        };
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(name),
+            source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(source.wgsl)),
+        });
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = source
+            .bindings
+            .iter()
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b.binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match b.kind {
+                        BindingKind::Uniform => wgpu::BufferBindingType::Uniform,
+                        BindingKind::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
+                        BindingKind::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let bind_group_layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&label), entries: &entries });
+        let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(&label),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(&label),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some(name),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &used,
+                zero_initialize_workgroup_memory: false,
+            },
+            cache: None,
+        });
+        Self { label, source, pipeline, bind_group_layout }
+    }
+
+    /// A bind group with every binding of the kernel taken from `resources` by name.
+    pub fn bind(&self, ctx: &GpuContext, resources: &Resources) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = self
+            .source
+            .bindings
+            .iter()
+            .map(|b| wgpu::BindGroupEntry {
+                binding: b.binding,
+                resource: resources.get(b.name).unwrap_or_else(|| {
+                    panic!("kernel `{}` binds `{}`, which was never created", self.label, b.name)
+                }).as_entire_binding(),
+            })
+            .collect();
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&self.label),
+            layout: &self.bind_group_layout,
+            entries: &entries,
+        })
+    }
+
+    /// Records a dispatch of `invocations` invocations along x.
+    pub fn dispatch(&self, pass: &mut wgpu::ComputePass, bind_group: &wgpu::BindGroup, invocations: u32) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups(invocations.div_ceil(self.source.workgroup_size[0]), 1, 1);
+    }
+
+    /// Records an indirect dispatch whose workgroup counts are at `offset` (bytes) in `args`.
+    pub fn dispatch_indirect(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        bind_group: &wgpu::BindGroup,
+        args: &wgpu::Buffer,
+        offset: u64,
+    ) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups_indirect(args, offset);
+    }
+}

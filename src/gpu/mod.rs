@@ -1,0 +1,11 @@
+//! GPU plumbing: the headless device, the structs shared with WGSL, the kernels and the
+//! buffers they bind by name.
+
+pub mod context;
+pub mod kernels;
+pub mod layout;
+pub mod resources;
+
+pub use context::GpuContext;
+pub use kernels::Kernel;
+pub use resources::Resources;

@@ -1,0 +1,125 @@
+//! Integrators and the render loop. `path` is the wavefront path tracer (DESIGN.md section 4.1);
+//! `direct` and `ellipsoidal` (bidirectional methods) are not available yet.
+
+pub mod path;
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, bail};
+
+use crate::film::{Film, Gate};
+use crate::gpu::GpuContext;
+use crate::scene::PreparedScene;
+pub use path::PathTracer;
+
+/// Sampling strategy (`--method`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Unidirectional path tracing with next-event estimation and MIS.
+    Path,
+    /// Bidirectional path tracing with direct connections.
+    Direct,
+    /// Bidirectional path tracing with ellipsoidal connections.
+    Ellipsoidal,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Path => "path",
+            Method::Direct => "direct",
+            Method::Ellipsoidal => "ellipsoidal",
+        }
+    }
+}
+
+/// Everything that defines a render besides the scene and the sample budget.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    /// Image size (pixels).
+    pub width: u32,
+    pub height: u32,
+    pub method: Method,
+    pub gate: Gate,
+    /// Paths keep at most this many scattering vertices (0: lights seen directly).
+    pub max_bounces: u32,
+    /// Russian roulette from this many scattering vertices on; None: never.
+    pub rr_depth: Option<u32>,
+    pub seed: u32,
+    /// Samples per pixel traced together in one wave; None chooses from the image size.
+    pub samples_per_wave: Option<u32>,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            width: 256,
+            height: 256,
+            method: Method::Path,
+            gate: Gate::None,
+            max_bounces: 8,
+            rr_depth: None,
+            seed: 0,
+            samples_per_wave: None,
+        }
+    }
+}
+
+/// How long to render.
+#[derive(Clone, Copy, Debug)]
+pub enum Budget {
+    /// Exactly this many samples per pixel.
+    Samples(u64),
+    /// Whole waves until this much wall time has passed.
+    Time(Duration),
+}
+
+/// Progress of a render, reported after every wave.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    pub waves: u64,
+    pub spp: u64,
+    pub elapsed: Duration,
+}
+
+/// A finished render.
+pub struct RenderOutput {
+    pub film: Film,
+    pub elapsed: Duration,
+}
+
+/// Renders `scene` with `settings` until `budget` is spent, calling `progress` after each wave.
+pub fn render(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    budget: Budget,
+    mut progress: impl FnMut(Progress),
+) -> Result<RenderOutput> {
+    match settings.method {
+        Method::Path => {}
+        m => bail!(
+            "--method {} is not yet available: this version implements `path` \
+             (bidirectional methods arrive in a later version)",
+            m.name()
+        ),
+    }
+    let start = Instant::now();
+    let mut tracer = PathTracer::new(ctx, scene, settings)?;
+    let mut waves = 0;
+    loop {
+        let spp = tracer.samples_done();
+        let next = match budget {
+            Budget::Samples(n) if spp >= n => break,
+            Budget::Samples(n) => (n - spp).min(tracer.samples_per_wave() as u64) as u32,
+            Budget::Time(t) if start.elapsed() >= t && spp > 0 => break,
+            Budget::Time(_) => tracer.samples_per_wave(),
+        };
+        tracer.render_wave(next);
+        ctx.wait_idle()?;
+        waves += 1;
+        progress(Progress { waves, spp: tracer.samples_done(), elapsed: start.elapsed() });
+    }
+    let film = tracer.film()?;
+    Ok(RenderOutput { film, elapsed: start.elapsed() })
+}

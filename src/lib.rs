@@ -1,0 +1,15 @@
+//! gatetrace: a physically based GPU renderer for time-of-flight cameras.
+//!
+//! Time is optical path length in metres (c = 1); a pixel measures
+//! I = integral of W(|x|) f(x) over paths x, where W is the sensor's pathlength importance (the
+//! gate). See DESIGN.md-style documentation in the README for units and conventions.
+
+pub mod bench;
+pub mod bvh;
+pub mod film;
+pub mod gpu;
+pub mod integrator;
+pub mod rng;
+pub mod sampling;
+pub mod scene;
+pub mod units;

@@ -1,0 +1,206 @@
+//! The `gatetrace` command line.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{Context as _, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use gatetrace::film::Gate;
+use gatetrace::film::output::{Metadata, write_film};
+use gatetrace::gpu::GpuContext;
+use gatetrace::integrator::{Budget, Method, RenderSettings, render};
+use gatetrace::scene::{PreparedScene, load_gltf};
+
+/// The scene rendered when none is given.
+const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
+
+/// gatetrace: a physically based GPU renderer for time-of-flight cameras.
+///
+/// Time is optical path length (OPL) in metres, with c = 1: a path's length runs from the point
+/// on the light through every scattering vertex to the camera's pinhole. Wherever a length is
+/// asked for, `ps` and `ns` suffixes give times instead (c = 0.299792458 mm/ps).
+#[derive(Parser)]
+#[command(version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render an image (or a transient cube) to EXR or NPY.
+    Render(RenderArgs),
+    /// Measure samples per second of `path` on the Cornell box at 64x64 and 256x256.
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
+    scene: Option<PathBuf>,
+    /// Sampling method. `direct` and `ellipsoidal` are not available yet.
+    #[arg(long, value_enum, default_value_t = Method::Path)]
+    method: Method,
+    /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
+    /// `none` (steady state); `box:A..B` (W = 1 on [A, B)); `gaussian:MU,SIGMA`;
+    /// `cw:FREQ_HZ,PHASE_DEG` (W = cos(2 pi f l / c + phase), signed); `table:FILE.csv`
+    /// (rows `length,weight`, linear in between, 0 outside); `transient:START,WIDTH,BINS`
+    /// (a cube of BINS bin-integrated images).
+    #[arg(long, default_value = "none", value_name = "SPEC")]
+    gate: String,
+    /// Samples per pixel (default 64 unless --time is given).
+    #[arg(long, conflicts_with = "time")]
+    spp: Option<u64>,
+    /// Render whole passes until this many seconds have passed, instead of --spp.
+    #[arg(long, value_name = "SECONDS")]
+    time: Option<f64>,
+    /// Image size in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "256x256", value_parser = parse_resolution)]
+    res: (u32, u32),
+    /// Maximum number of scattering vertices of a path (0: only lights seen directly).
+    #[arg(long, default_value_t = 8)]
+    max_bounces: u32,
+    /// Start Russian roulette after this many scattering vertices (off when not given).
+    #[arg(long)]
+    rr_depth: Option<u32>,
+    /// Random seed; equal seeds and settings give identical images.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Samples per pixel traced together in one GPU wave (chosen from the image size by default).
+    #[arg(long)]
+    samples_per_wave: Option<u32>,
+    /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
+    /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr.
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Seconds of rendering per measurement.
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Maximum number of scattering vertices.
+    #[arg(long, default_value_t = 5)]
+    max_bounces: u32,
+}
+
+fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{s}` is not WIDTHxHEIGHT (e.g. 256x256)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("resolution {w}x{h} must be between 1x1 and 16384x16384"));
+    }
+    Ok((w, h))
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(args) => run_render(args),
+        Command::Bench(args) => gatetrace::bench::run_bench(args.seconds, args.max_bounces, Path::new(DEFAULT_SCENE)),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run_render(args: RenderArgs) -> Result<()> {
+    let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
+    let budget = match (args.spp, args.time) {
+        (_, Some(t)) if !(t > 0.0 && t.is_finite()) => bail!("--time {t}: give a positive number of seconds"),
+        (_, Some(t)) => Budget::Time(Duration::from_secs_f64(t)),
+        (Some(0), _) => bail!("--spp must be at least 1"),
+        (Some(n), None) => Budget::Samples(n),
+        (None, None) => Budget::Samples(64),
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from(format!("{}.exr", scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render")))
+    });
+    if !matches!(out.extension().and_then(|e| e.to_str()), Some("exr" | "npy")) {
+        bail!("--out {}: the file name must end in .exr or .npy", out.display());
+    }
+    let settings = RenderSettings {
+        width: args.res.0,
+        height: args.res.1,
+        method: args.method,
+        gate: gate.clone(),
+        max_bounces: args.max_bounces,
+        rr_depth: args.rr_depth,
+        seed: args.seed,
+        samples_per_wave: args.samples_per_wave,
+    };
+    if settings.method != Method::Path {
+        bail!("--method {} is not yet available: this version implements `path`", settings.method.name());
+    }
+
+    let scene = PreparedScene::new(load_gltf(&scene_path)?)?;
+    let ctx = GpuContext::new()?;
+    let bar = progress_bar(budget);
+    let output = render(&ctx, &scene, &settings, budget, |p| {
+        match budget {
+            Budget::Samples(_) => bar.set_position(p.spp),
+            Budget::Time(_) => bar.set_position(p.elapsed.as_millis() as u64),
+        }
+        let rate = (p.spp * (settings.width * settings.height) as u64) as f64 / p.elapsed.as_secs_f64().max(1e-9);
+        bar.set_message(format!("{} passes, {} spp, {:.2} Msamples/s", p.waves, p.spp, rate / 1e6));
+    })?;
+    bar.finish_and_clear();
+
+    let film = &output.film;
+    let secs = output.elapsed.as_secs_f64();
+    let metadata: Metadata = vec![
+        ("scene".into(), scene_path.display().to_string()),
+        ("method".into(), settings.method.name().into()),
+        ("gate".into(), args.gate.clone()),
+        ("gate_description".into(), gate.describe()),
+        ("spp".into(), film.spp.to_string()),
+        ("seed".into(), settings.seed.to_string()),
+        ("max_bounces".into(), settings.max_bounces.to_string()),
+        ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
+        ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
+        ("elapsed_seconds".into(), format!("{secs:.3}")),
+        ("adapter".into(), ctx.adapter_description()),
+        ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
+        ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
+    ];
+    let bin_names: Vec<String> = (0..gate.bins())
+        .map(|b| {
+            let (a, z) = gate.bin_range(b).unwrap_or((0.0, 0.0));
+            format!("bin{b:04}_{a:.6}m_{z:.6}m")
+        })
+        .collect();
+    write_film(&out, film, &metadata, &bin_names)?;
+    let mean = film.mean_rgb();
+    println!(
+        "{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+        scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+        settings.width,
+        settings.height,
+        settings.method.name(),
+        args.gate,
+        film.spp,
+        secs,
+        (film.spp * (settings.width * settings.height) as u64) as f64 / secs / 1e6,
+        ctx.adapter_info.name,
+        mean[0],
+        mean[1],
+        mean[2],
+        out.display()
+    );
+    Ok(())
+}
+
+fn progress_bar(budget: Budget) -> indicatif::ProgressBar {
+    let (len, unit) = match budget {
+        Budget::Samples(n) => (n, "spp"),
+        Budget::Time(t) => (t.as_millis() as u64, "ms"),
+    };
+    let bar = indicatif::ProgressBar::new(len);
+    let template = format!("{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{msg}} (ETA {{eta}})");
+    bar.set_style(indicatif::ProgressStyle::with_template(&template).unwrap().progress_chars("=> "));
+    bar
+}

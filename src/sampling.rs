@@ -1,0 +1,47 @@
+//! Warps of uniform numbers and the MIS heuristic. CPU twin of `shaders/lib/sampling.wesl`.
+
+use glam::{Vec2, Vec3};
+
+/// Orthonormal basis (t, b, n) around the unit vector `n` (Duff et al. 2017).
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub t: Vec3,
+    pub b: Vec3,
+    pub n: Vec3,
+}
+
+impl Frame {
+    pub fn from_normal(n: Vec3) -> Self {
+        let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        Self {
+            t: Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+            b: Vec3::new(b, sign + n.y * n.y * a, -n.y),
+            n,
+        }
+    }
+
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.t * v.x + self.b * v.y + self.n * v.z
+    }
+}
+
+/// Cosine-weighted direction about +z; pdf = z / pi (sr^-1).
+pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let r = u.x.sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u.x).max(0.0).sqrt())
+}
+
+/// Uniform point on a triangle as barycentrics (b1, b2) of v1 and v2; pdf = 1 / area.
+pub fn sample_triangle_barycentrics(u: Vec2) -> Vec2 {
+    let su = u.x.sqrt();
+    Vec2::new(u.y * su, (1.0 - u.y) * su)
+}
+
+/// Power heuristic (beta = 2).
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 <= 0.0 { 0.0 } else { a2 / (a2 + b2) }
+}

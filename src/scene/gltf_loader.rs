@@ -1,0 +1,348 @@
+//! glTF 2.0 loading (DESIGN.md section 3): triangles with node transforms baked in, the first
+//! camera, Lambertian albedo from baseColor (x texture), emissive materials as area lights,
+//! KHR_lights_punctual point lights. Every problem is reported with the file's name.
+
+use std::path::Path;
+
+use anyhow::{Context as _, Result, anyhow, bail};
+use glam::{Mat3, Mat4, Vec2, Vec3};
+
+use super::{CameraDesc, MaterialDesc, PointLight, Scene, SceneTriangle, TextureData};
+
+/// Loads a `.gltf` or `.glb` file.
+pub fn load_gltf(path: &Path) -> Result<Scene> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers = gltf::import_buffers(&gltf.document, Some(base), gltf.blob.clone())
+        .map_err(|e| anyhow!("{name}: cannot load a buffer: {e}"))?;
+    let images = gltf::import_images(&gltf.document, Some(base), &buffers)
+        .map_err(|e| anyhow!("{name}: cannot load an image: {e}"))?;
+    Loader { name: &name, buffers: &buffers, images: &images }.load(&gltf.document)
+}
+
+struct Loader<'a> {
+    name: &'a str,
+    buffers: &'a [gltf::buffer::Data],
+    images: &'a [gltf::image::Data],
+}
+
+/// What the scene-graph walk collects.
+#[derive(Default)]
+struct Collected {
+    triangles: Vec<SceneTriangle>,
+    point_lights: Vec<PointLight>,
+    camera: Option<CameraDesc>,
+    dropped_degenerate: usize,
+}
+
+impl Loader<'_> {
+    fn load(&self, doc: &gltf::Document) -> Result<Scene> {
+        let name = self.name;
+        let scene = doc
+            .default_scene()
+            .or_else(|| doc.scenes().next())
+            .ok_or_else(|| anyhow!("{name}: the file has no scene"))?;
+        let mut textures = Vec::new();
+        let mut texture_of_image = std::collections::HashMap::new();
+        let mut materials = Vec::new();
+        for m in doc.materials() {
+            materials.push(self.material(&m, &mut textures, &mut texture_of_image)?);
+        }
+        // Primitives without a material get glTF's default material (white, one-sided).
+        let default_material = materials.len() as u32;
+        materials.push(MaterialDesc {
+            name: "(default)".into(),
+            base_color: Vec3::ONE,
+            base_color_texture: None,
+            emission: Vec3::ZERO,
+            double_sided: false,
+            metallic: 1.0,
+            roughness: 1.0,
+        });
+
+        let mut c = Collected::default();
+        for node in scene.nodes() {
+            self.walk(&node, Mat4::IDENTITY, &materials, default_material, &mut c)?;
+        }
+        let camera = c.camera.ok_or_else(|| {
+            anyhow!("{name}: no camera: gatetrace renders from the first perspective camera node of the scene")
+        })?;
+        let emissive = c.triangles.iter().any(|t| materials[t.material as usize].is_emissive());
+        if !emissive && c.point_lights.is_empty() {
+            bail!(
+                "{name}: no light: add an emissive material (emissiveFactor, KHR_materials_emissive_strength) \
+                 or a KHR_lights_punctual point light"
+            );
+        }
+        if c.triangles.is_empty() {
+            bail!("{name}: the scene has no triangles");
+        }
+        if c.triangles.len() > crate::gpu::layout::MAX_TRIANGLES as usize {
+            bail!("{name}: {} triangles exceed the supported {}", c.triangles.len(), crate::gpu::layout::MAX_TRIANGLES);
+        }
+        if c.dropped_degenerate > 0 {
+            eprintln!("warning: {name}: dropped {} zero-area triangles", c.dropped_degenerate);
+        }
+        Ok(Scene {
+            source: name.to_owned(),
+            triangles: c.triangles,
+            materials,
+            textures,
+            point_lights: c.point_lights,
+            camera,
+            dropped_degenerate: c.dropped_degenerate,
+        })
+    }
+
+    fn walk(
+        &self,
+        node: &gltf::Node,
+        parent: Mat4,
+        materials: &[MaterialDesc],
+        default_material: u32,
+        c: &mut Collected,
+    ) -> Result<()> {
+        let name = self.name;
+        let node_name = node.name().map(|n| format!("node `{n}`")).unwrap_or(format!("node {}", node.index()));
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let world = parent * local;
+        if !world.is_finite() {
+            bail!("{name}: {node_name} has a non-finite transform");
+        }
+        if let Some(camera) = node.camera()
+            && c.camera.is_none()
+        {
+            c.camera = Some(self.camera(&camera, world, &node_name)?);
+        }
+        if let Some(light) = node.light() {
+            self.punctual_light(&light, world, &node_name, c)?;
+        }
+        if let Some(mesh) = node.mesh() {
+            self.mesh(&mesh, world, &node_name, default_material, materials, c)?;
+        }
+        for child in node.children() {
+            self.walk(&child, world, materials, default_material, c)?;
+        }
+        Ok(())
+    }
+
+    fn camera(&self, camera: &gltf::Camera, world: Mat4, node_name: &str) -> Result<CameraDesc> {
+        let name = self.name;
+        let gltf::camera::Projection::Perspective(p) = camera.projection() else {
+            bail!("{name}: {node_name}: orthographic cameras are not supported (use a perspective camera)");
+        };
+        let yfov = p.yfov();
+        if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
+            bail!("{name}: {node_name}: camera yfov {yfov} rad is not in (0, pi)");
+        }
+        let (_, rotation, position) = world.to_scale_rotation_translation();
+        let frame = Mat3::from_quat(rotation);
+        Ok(CameraDesc {
+            position,
+            right: frame.x_axis.normalize(),
+            up: frame.y_axis.normalize(),
+            forward: (-frame.z_axis).normalize(),
+            yfov,
+        })
+    }
+
+    fn punctual_light(
+        &self,
+        light: &gltf::khr_lights_punctual::Light,
+        world: Mat4,
+        node_name: &str,
+        c: &mut Collected,
+    ) -> Result<()> {
+        let name = self.name;
+        match light.kind() {
+            gltf::khr_lights_punctual::Kind::Point => {
+                let intensity = Vec3::from(light.color()) * light.intensity();
+                if !intensity.is_finite() || intensity.min_element() < 0.0 {
+                    bail!("{name}: {node_name}: point light intensity {intensity} is not finite and non-negative");
+                }
+                c.point_lights.push(PointLight { position: world.transform_point3(Vec3::ZERO), intensity });
+                Ok(())
+            }
+            gltf::khr_lights_punctual::Kind::Spot { .. } => {
+                bail!("{name}: {node_name}: spot lights are not supported yet (use a point light or an emitter)")
+            }
+            gltf::khr_lights_punctual::Kind::Directional => {
+                bail!("{name}: {node_name}: directional lights are not supported (a time-of-flight source is at a finite distance)")
+            }
+        }
+    }
+
+    fn mesh(
+        &self,
+        mesh: &gltf::Mesh,
+        world: Mat4,
+        node_name: &str,
+        default_material: u32,
+        materials: &[MaterialDesc],
+        c: &mut Collected,
+    ) -> Result<()> {
+        let name = self.name;
+        let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
+        let mesh_name = mesh.name().map(|n| format!("mesh `{n}`")).unwrap_or(format!("mesh {}", mesh.index()));
+        for (pi, prim) in mesh.primitives().enumerate() {
+            let what = format!("{node_name}, {mesh_name}, primitive {pi}");
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                bail!("{name}: {what}: primitive mode {:?} is not supported (triangles only)", prim.mode());
+            }
+            let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
+            let positions: Vec<Vec3> = reader
+                .read_positions()
+                .ok_or_else(|| anyhow!("{name}: {what}: no POSITION attribute"))?
+                .map(|p| world.transform_point3(Vec3::from(p)))
+                .collect();
+            if let Some(bad) = positions.iter().position(|p| !p.is_finite()) {
+                bail!("{name}: {what}: vertex {bad} is not finite");
+            }
+            let normals: Option<Vec<Vec3>> = reader
+                .read_normals()
+                .map(|it| it.map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero()).collect());
+            let material = prim.material().index().map_or(default_material, |i| i as u32);
+            let uv_set = materials[material as usize]
+                .base_color_texture
+                .and(prim.material().pbr_metallic_roughness().base_color_texture().map(|t| t.tex_coord()));
+            let uvs: Option<Vec<Vec2>> =
+                uv_set.and_then(|set| reader.read_tex_coords(set)).map(|it| it.into_f32().map(Vec2::from).collect());
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(it) => it.into_u32().collect(),
+                None => (0..positions.len() as u32).collect(),
+            };
+            if indices.len() % 3 != 0 {
+                bail!("{name}: {what}: {} indices is not a multiple of 3", indices.len());
+            }
+            if let Some(&i) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+                bail!("{name}: {what}: index {i} is out of range ({} vertices)", positions.len());
+            }
+            if normals.as_ref().is_some_and(|n| n.len() != positions.len())
+                || uvs.as_ref().is_some_and(|u| u.len() != positions.len())
+            {
+                bail!("{name}: {what}: attribute counts differ from the POSITION count");
+            }
+            for tri in indices.chunks_exact(3) {
+                let [a, b, cc] = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+                let t = SceneTriangle {
+                    positions: [positions[a], positions[b], positions[cc]],
+                    normals: normals.as_ref().map(|n| [n[a], n[b], n[cc]]),
+                    uvs: uvs.as_ref().map_or([Vec2::ZERO; 3], |u| [u[a], u[b], u[cc]]),
+                    material,
+                };
+                let area = t.area();
+                if !(area > 0.0) || !area.is_finite() {
+                    c.dropped_degenerate += 1;
+                    continue;
+                }
+                c.triangles.push(t);
+            }
+        }
+        Ok(())
+    }
+
+    fn material(
+        &self,
+        m: &gltf::Material,
+        textures: &mut Vec<TextureData>,
+        texture_of_image: &mut std::collections::HashMap<(usize, bool, bool), u32>,
+    ) -> Result<MaterialDesc> {
+        let name = self.name;
+        let label = m.name().map(|n| format!("material `{n}`")).unwrap_or(format!("material {:?}", m.index()));
+        let pbr = m.pbr_metallic_roughness();
+        let [r, g, b, _] = pbr.base_color_factor();
+        let base_color = Vec3::new(r, g, b);
+        let emission = Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
+        if !base_color.is_finite() || base_color.min_element() < 0.0 {
+            bail!("{name}: {label}: baseColorFactor {base_color} is not finite and non-negative");
+        }
+        if !emission.is_finite() || emission.min_element() < 0.0 {
+            bail!("{name}: {label}: emission {emission} is not finite and non-negative");
+        }
+        if m.emissive_texture().is_some() {
+            eprintln!("warning: {name}: {label}: emissiveTexture is ignored (uniform emission only)");
+        }
+        let metallic = pbr.metallic_factor();
+        if metallic > 0.0 {
+            eprintln!("warning: {name}: {label}: metallic {metallic} is rendered as Lambertian in this version");
+        }
+        let base_color_texture = match pbr.base_color_texture() {
+            None => None,
+            Some(info) => {
+                let texture = info.texture();
+                let sampler = texture.sampler();
+                let clamp_u = sampler.wrap_s() == gltf::texture::WrappingMode::ClampToEdge;
+                let clamp_v = sampler.wrap_t() == gltf::texture::WrappingMode::ClampToEdge;
+                let image = texture.source().index();
+                let key = (image, clamp_u, clamp_v);
+                if let Some(&t) = texture_of_image.get(&key) {
+                    Some(t)
+                } else {
+                    let data = self.images.get(image).ok_or_else(|| anyhow!("{name}: {label}: image {image} is missing"))?;
+                    let mut tex = decode_srgb_image(data).with_context(|| format!("{name}: {label}: image {image}"))?;
+                    tex.clamp_u = clamp_u;
+                    tex.clamp_v = clamp_v;
+                    textures.push(tex);
+                    let t = textures.len() as u32 - 1;
+                    texture_of_image.insert(key, t);
+                    Some(t)
+                }
+            }
+        };
+        Ok(MaterialDesc {
+            name: m.name().unwrap_or("").to_owned(),
+            base_color,
+            base_color_texture,
+            emission,
+            double_sided: m.double_sided(),
+            metallic,
+            roughness: pbr.roughness_factor(),
+        })
+    }
+}
+
+/// Decodes an 8- or 16-bit sRGB-encoded (or float, linear) image to linear RGB.
+fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
+    use gltf::image::Format as F;
+    let (channels, bytes_per_channel, float) = match data.format {
+        F::R8 => (1, 1, false),
+        F::R8G8 => (2, 1, false),
+        F::R8G8B8 => (3, 1, false),
+        F::R8G8B8A8 => (4, 1, false),
+        F::R16 => (1, 2, false),
+        F::R16G16 => (2, 2, false),
+        F::R16G16B16 => (3, 2, false),
+        F::R16G16B16A16 => (4, 2, false),
+        F::R32G32B32FLOAT => (3, 4, true),
+        F::R32G32B32A32FLOAT => (4, 4, true),
+    };
+    let texel_count = (data.width * data.height) as usize;
+    if data.pixels.len() < texel_count * channels * bytes_per_channel {
+        bail!("pixel data is shorter than {}x{} texels", data.width, data.height);
+    }
+    let channel = |i: usize| -> f32 {
+        let o = i * bytes_per_channel;
+        match (bytes_per_channel, float) {
+            (1, _) => srgb_to_linear(data.pixels[o] as f32 / 255.0),
+            (2, _) => srgb_to_linear(u16::from_le_bytes([data.pixels[o], data.pixels[o + 1]]) as f32 / 65535.0),
+            _ => f32::from_le_bytes(data.pixels[o..o + 4].try_into().unwrap()),
+        }
+    };
+    let texels = (0..texel_count)
+        .map(|t| {
+            let base = t * channels;
+            match channels {
+                1 | 2 => Vec3::splat(channel(base)),
+                _ => Vec3::new(channel(base), channel(base + 1), channel(base + 2)),
+            }
+        })
+        .collect();
+    Ok(TextureData { width: data.width, height: data.height, texels, clamp_u: false, clamp_v: false })
+}
+
+/// sRGB transfer function, encoded [0, 1] to linear.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}

@@ -1,0 +1,129 @@
+//! The light table and light sampling. CPU twin of `shaders/lib/lights.wesl`.
+//!
+//! Every emissive triangle is an area light and every KHR_lights_punctual point light is a point
+//! light; next-event estimation picks one with probability proportional to its power.
+
+use glam::{Vec2, Vec3};
+
+use super::Scene;
+use crate::gpu::layout::{LIGHT_AREA, LIGHT_DOUBLE_SIDED, LIGHT_POINT, Light, NONE, Triangle};
+use crate::sampling::sample_triangle_barycentrics;
+
+/// Lights with their selection CDF.
+#[derive(Clone, Debug, Default)]
+pub struct LightTable {
+    pub lights: Vec<Light>,
+    /// cdf[i] = P(pick a light with index <= i); the last entry is 1.
+    pub cdf: Vec<f32>,
+    /// For each light, the scene triangle (load order) it comes from, or NONE.
+    pub source_triangle: Vec<u32>,
+}
+
+impl LightTable {
+    /// Builds the table; `bvh_position[i]` is where scene triangle `i` lies in BVH order.
+    pub fn build(scene: &Scene, bvh_position: &[u32]) -> Self {
+        let mut lights = Vec::new();
+        let mut source_triangle = Vec::new();
+        let mut power = Vec::new();
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let m = &scene.materials[t.material as usize];
+            if !m.is_emissive() {
+                continue;
+            }
+            let area = t.area();
+            let sides = if m.double_sided { 2.0 } else { 1.0 };
+            power.push(sides * std::f64::consts::PI * area as f64 * mean(m.emission));
+            lights.push(Light {
+                kind: LIGHT_AREA,
+                emission: m.emission,
+                triangle: bvh_position[i],
+                area,
+                flags: if m.double_sided { LIGHT_DOUBLE_SIDED } else { 0 },
+                ..Default::default()
+            });
+            source_triangle.push(i as u32);
+        }
+        for p in &scene.point_lights {
+            power.push(4.0 * std::f64::consts::PI * mean(p.intensity));
+            lights.push(Light {
+                position: p.position,
+                kind: LIGHT_POINT,
+                emission: p.intensity,
+                triangle: NONE,
+                ..Default::default()
+            });
+            source_triangle.push(NONE);
+        }
+        let total: f64 = power.iter().sum();
+        if total <= 0.0 {
+            power.iter_mut().for_each(|p| *p = 1.0);
+        }
+        let total: f64 = power.iter().sum();
+        let mut cdf = Vec::with_capacity(power.len());
+        let mut acc = 0.0;
+        for (l, p) in lights.iter_mut().zip(&power) {
+            acc += p;
+            cdf.push((acc / total) as f32);
+            l.select_pdf = (p / total) as f32;
+        }
+        if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        Self { lights, cdf, source_triangle }
+    }
+
+    /// Index of the light whose CDF interval holds `u` in [0, 1) (as `select_light` in WGSL).
+    pub fn select(&self, u: f32) -> usize {
+        let (mut lo, mut hi) = (0usize, self.cdf.len() - 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if u < self.cdf[mid] { hi = mid } else { lo = mid + 1 }
+        }
+        lo
+    }
+
+    /// Samples a point on a light (twin of `sample_light`); `triangles` in BVH order.
+    pub fn sample(&self, triangles: &[Triangle], u_select: f32, u: Vec2) -> LightSample {
+        let index = self.select(u_select);
+        let light = &self.lights[index];
+        if light.kind == LIGHT_POINT {
+            return LightSample {
+                position: light.position,
+                normal: Vec3::ZERO,
+                emission: light.emission,
+                pdf: light.select_pdf,
+                is_point: true,
+                double_sided: false,
+                triangle: light.triangle,
+            };
+        }
+        let tri = &triangles[light.triangle as usize];
+        let b = sample_triangle_barycentrics(u);
+        LightSample {
+            position: tri.v0 + b.x * tri.e1 + b.y * tri.e2,
+            normal: tri.e1.cross(tri.e2).normalize(),
+            emission: light.emission,
+            pdf: light.select_pdf / light.area,
+            is_point: false,
+            double_sided: light.flags & LIGHT_DOUBLE_SIDED != 0,
+            triangle: light.triangle,
+        }
+    }
+}
+
+/// A sampled point on a light (twin of WGSL `LightSample`).
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub emission: Vec3,
+    /// Area pdf with selection (m^-2) for area lights; selection probability for point lights.
+    pub pdf: f32,
+    pub is_point: bool,
+    pub double_sided: bool,
+    pub triangle: u32,
+}
+
+fn mean(v: Vec3) -> f64 {
+    (v.x as f64 + v.y as f64 + v.z as f64) / 3.0
+}

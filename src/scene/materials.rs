@@ -1,0 +1,119 @@
+//! Material and texture tables for the GPU, and the CPU twin of `shaders/lib/materials.wesl`.
+
+use glam::{Vec2, Vec3};
+
+use super::Scene;
+use crate::gpu::layout::{
+    MATERIAL_DOUBLE_SIDED, MATERIAL_EMISSIVE, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TextureInfo,
+};
+
+/// GPU materials of a scene.
+pub fn gpu_materials(scene: &Scene) -> Vec<Material> {
+    scene
+        .materials
+        .iter()
+        .map(|m| Material {
+            base_color: m.base_color,
+            base_color_texture: m.base_color_texture.unwrap_or(NONE),
+            emission: m.emission,
+            flags: if m.double_sided { MATERIAL_DOUBLE_SIDED } else { 0 }
+                | if m.is_emissive() { MATERIAL_EMISSIVE } else { 0 },
+            metallic: m.metallic,
+            roughness: m.roughness,
+            reserved0: 0,
+            reserved1: 0,
+        })
+        .collect()
+}
+
+/// Texture directory and texels (each texel two `pack2x16float` words: (r, g), (b, 1)).
+pub fn gpu_textures(scene: &Scene) -> (Vec<TextureInfo>, Vec<[u32; 2]>) {
+    let mut infos = Vec::new();
+    let mut texels = Vec::new();
+    for t in &scene.textures {
+        infos.push(TextureInfo {
+            offset: texels.len() as u32,
+            width: t.width,
+            height: t.height,
+            wrap: if t.clamp_u { TEXTURE_CLAMP_U } else { 0 } | if t.clamp_v { TEXTURE_CLAMP_V } else { 0 },
+        });
+        texels.extend(t.texels.iter().map(|c| [pack2x16float(c.x, c.y), pack2x16float(c.z, 1.0)]));
+    }
+    (infos, texels)
+}
+
+/// WGSL's pack2x16float: two f32 to IEEE half floats, `a` in the low 16 bits.
+pub fn pack2x16float(a: f32, b: f32) -> u32 {
+    f32_to_f16(a) as u32 | (f32_to_f16(b) as u32) << 16
+}
+
+/// WGSL's unpack2x16float.
+pub fn unpack2x16float(x: u32) -> Vec2 {
+    Vec2::new(f16_to_f32(x as u16), f16_to_f32((x >> 16) as u16))
+}
+
+/// Round-to-nearest-even f32 -> f16 bits (finite inputs; overflow saturates to infinity).
+fn f32_to_f16(v: f32) -> u16 {
+    let bits = v.to_bits();
+    let sign = ((bits >> 16) & 0x8000) as u16;
+    let exp = ((bits >> 23) & 0xff) as i32;
+    let mant = bits & 0x7f_ffff;
+    if exp == 0xff {
+        return sign | 0x7c00 | if mant != 0 { 0x200 } else { 0 };
+    }
+    let e = exp - 127 + 15;
+    if e >= 0x1f {
+        return sign | 0x7c00;
+    }
+    if e <= 0 {
+        if e < -10 {
+            return sign;
+        }
+        let m = mant | 0x80_0000;
+        let shift = (14 - e) as u32;
+        let half = m >> shift;
+        let rem = m & ((1 << shift) - 1);
+        let halfway = 1 << (shift - 1);
+        let round = rem > halfway || (rem == halfway && half & 1 == 1);
+        return sign | (half + round as u32) as u16;
+    }
+    let half = ((e as u32) << 10) | (mant >> 13);
+    let rem = mant & 0x1fff;
+    let round = rem > 0x1000 || (rem == 0x1000 && half & 1 == 1);
+    sign | (half + round as u32) as u16
+}
+
+fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = (h >> 10) & 0x1f;
+    let mant = (h & 0x3ff) as f32;
+    match exp {
+        0 => sign * mant * 2f32.powi(-24),
+        0x1f => if mant == 0.0 { sign * f32::INFINITY } else { f32::NAN },
+        e => sign * (1.0 + mant / 1024.0) * 2f32.powi(e as i32 - 15),
+    }
+}
+
+/// Bilinear texture lookup (twin of `texture_bilinear`).
+pub fn texture_bilinear(infos: &[TextureInfo], texels: &[[u32; 2]], index: u32, uv: Vec2) -> Vec3 {
+    let info = infos[index as usize];
+    let x = uv.x * info.width as f32 - 0.5;
+    let y = uv.y * info.height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let wrap = |i: i32, n: u32, clamp: bool| -> u32 {
+        if clamp { i.clamp(0, n as i32 - 1) as u32 } else { i.rem_euclid(n as i32) as u32 }
+    };
+    let cu = info.wrap & TEXTURE_CLAMP_U != 0;
+    let cv = info.wrap & TEXTURE_CLAMP_V != 0;
+    let (xa, xb) = (wrap(x0 as i32, info.width, cu), wrap(x0 as i32 + 1, info.width, cu));
+    let (ya, yb) = (wrap(y0 as i32, info.height, cv), wrap(y0 as i32 + 1, info.height, cv));
+    let texel = |x: u32, y: u32| {
+        let w = texels[(info.offset + y * info.width + x) as usize];
+        let rg = unpack2x16float(w[0]);
+        Vec3::new(rg.x, rg.y, unpack2x16float(w[1]).x)
+    };
+    let top = texel(xa, ya).lerp(texel(xb, ya), fx);
+    let bottom = texel(xa, yb).lerp(texel(xb, yb), fx);
+    top.lerp(bottom, fy)
+}

@@ -1,0 +1,82 @@
+//! A scene in the kernels' layout: triangles and shading in BVH order, the flattened BVH,
+//! materials, textures and lights. CPU twins and tests read the same arrays the GPU gets.
+
+use anyhow::Result;
+
+use super::Scene;
+use super::lights::LightTable;
+use super::materials::{gpu_materials, gpu_textures};
+use crate::bvh::Bvh;
+use crate::gpu::layout::{BvhNode, Material, NONE, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
+
+/// Everything the kernels read about a scene.
+#[derive(Clone, Debug)]
+pub struct PreparedScene {
+    pub scene: Scene,
+    pub bvh: Bvh,
+    pub triangles: Vec<Triangle>,
+    pub shading: Vec<TriangleShading>,
+    pub materials: Vec<Material>,
+    pub texture_infos: Vec<TextureInfo>,
+    pub texels: Vec<[u32; 2]>,
+    pub lights: LightTable,
+    /// Ray-origin offset scale (m), 1e-6 of the scene's extent.
+    pub ray_epsilon: f32,
+}
+
+impl PreparedScene {
+    pub fn new(scene: Scene) -> Result<Self> {
+        let positions: Vec<_> = scene.triangles.iter().map(|t| t.positions).collect();
+        let bvh = Bvh::build(&positions);
+        let position_of = bvh.positions();
+        let lights = LightTable::build(&scene, &position_of);
+        let mut light_of_triangle = vec![NONE; scene.triangles.len()];
+        for (l, &src) in lights.source_triangle.iter().enumerate() {
+            if src != NONE {
+                light_of_triangle[src as usize] = l as u32;
+            }
+        }
+        let mut triangles = Vec::with_capacity(bvh.order.len());
+        let mut shading = Vec::with_capacity(bvh.order.len());
+        for &i in &bvh.order {
+            let t = &scene.triangles[i as usize];
+            let [a, b, c] = t.positions;
+            triangles.push(Triangle {
+                v0: a,
+                material: t.material,
+                e1: b - a,
+                light: light_of_triangle[i as usize],
+                e2: c - a,
+                source: i,
+            });
+            let n = t.normals.unwrap_or([(b - a).cross(c - a).normalize(); 3]);
+            shading.push(TriangleShading {
+                n0: n[0],
+                u0: t.uvs[0].x,
+                n1: n[1],
+                v0: t.uvs[0].y,
+                n2: n[2],
+                u1: t.uvs[1].x,
+                v1: t.uvs[1].y,
+                u2: t.uvs[2].x,
+                v2: t.uvs[2].y,
+                flags: if t.normals.is_some() { SHADING_HAS_NORMALS } else { 0 },
+            });
+        }
+        let (texture_infos, texels) = gpu_textures(&scene);
+        let ray_epsilon = 1e-6 * scene.extent();
+        Ok(Self { materials: gpu_materials(&scene), scene, bvh, triangles, shading, texture_infos, texels, lights, ray_epsilon })
+    }
+
+    pub fn nodes(&self) -> &[BvhNode] {
+        &self.bvh.nodes
+    }
+
+    pub fn has_textures(&self) -> bool {
+        !self.texture_infos.is_empty()
+    }
+
+    pub fn has_point_lights(&self) -> bool {
+        !self.scene.point_lights.is_empty()
+    }
+}

@@ -1,0 +1,609 @@
+#!/usr/bin/env python3
+"""Render peer reference data for a glTF scene with Mitsuba 3 + mitransient.
+
+This tool produces an independent ("peer") reference for gatetrace: it reads a
+glTF 2.0 scene itself (JSON + base64 / external buffers, or .glb), builds the
+equivalent Mitsuba 3 scene in memory and renders it with mitransient's
+``transient_path`` integrator into a ``transient_hdr_film``, repeating the
+render for several independent passes (different seeds) so that every output
+comes with the variance of its mean.
+
+Requirements
+------------
+* Python >= 3.9 with ``pip install mitsuba mitransient numpy``
+  (verified with mitsuba 3.9.1, drjit 1.5.0, mitransient 1.3.1, numpy 2.4.6).
+* The ``llvm_ad_*`` variants need a system LLVM shared library; on Debian 12:
+  ``apt-get install -y libllvm19``.  ``--variant cuda_ad_rgb`` uses an NVIDIA
+  GPU instead.
+
+Units and conventions
+---------------------
+* Lengths are the glTF's metres.  **Time is optical path length in metres**
+  (not seconds), measured from the emitter to the camera and including both
+  the light segment and the camera segment (mitransient's
+  ``camera_unwarp = false``).  Divide by c = 299792458 m/s for seconds.
+* Bin ``b`` of the transient cube covers ``[start + b*bin_width,
+  start + (b+1)*bin_width)`` metres and holds the *bin-integrated* radiance
+  (the sum of all contributions whose path length falls into the bin, not a
+  density per metre).  Summing bins therefore gives a box time gate.
+* ``--max-bounces N`` counts diffuse reflections: N = 0 sees emitters only,
+  1 is direct lighting.  Mitsuba's ``max_depth`` is ``N + 1``.  Russian
+  roulette is disabled (``rr_depth`` beyond ``max_depth``).
+* Materials become one-sided Lambertian ``diffuse`` BSDFs with the
+  ``baseColorFactor`` RGB (wrapped in ``twosided`` when ``doubleSided``);
+  metallic/roughness and textures are ignored with a warning.  Emissive
+  materials get an ``area`` emitter with radiance ``emissiveFactor *
+  KHR_materials_emissive_strength`` (Mitsuba area lights emit on the front
+  side only, also for double-sided materials: a warning is printed).
+* The camera is the glTF's first camera: ``perspective`` sensor, vertical fov
+  ``yfov`` (``fov_axis = 'y'``), ``near_clip = znear``, pinhole, box pixel
+  filter, ``independent`` sampler.  glTF cameras look down -z with +y up;
+  Mitsuba cameras look down +z with +x to the *left*, so the node matrix is
+  multiplied by diag(-1, 1, -1) (a 180 degree turn about y).
+* Mitsuba starts camera rays on the near plane, so the first ``near_clip /
+  cos(angle to the optical axis)`` metres of the camera segment are *not*
+  counted in the path length (checked: znear 0.5 shifts everything by about
+  0.52 m).  With the canonical znear = 1e-5 this is negligible; a warning is
+  printed when it could exceed 1% of a bin.
+* The steady image is accumulated by a separate ``hdrfilm`` from every
+  path, whatever its length; when the bins cover all path lengths it equals
+  the sum of the bins (checked to 1e-6).
+
+Output (.npz, all arrays float32, row 0 = top of the image, RGB last)
+--------------------------------------------------------------------
+``transient_mean`` [H, W, T, 3]   mean over passes of the transient cube
+``transient_var``  [H, W, T, 3]   variance of that mean (sample variance
+                                   over passes / passes)
+``steady_mean``    [H, W, 3]      steady image: the integrator's steady
+``steady_var``     [H, W, 3]      output, all path lengths (not only the
+                                   binned range), and its variance of the mean
+``gate_mean``      [H, W, 3]      only with ``--gate A B``: sum of the bins
+``gate_var``       [H, W, 3]      covering [A, B) (must lie on bin edges); the
+                                   variance is taken over per-pass gate images
+``meta``           0-d str        JSON: versions, settings, bin edges, seeds,
+                                   timings and the command line
+
+Example (Cornell box; ~3.5 min on 2 CPU cores for 16 x 8192 spp, comparable
+with shared/references/cornell_box_peer.npz)::
+
+    python tools/peer_reference.py assets/scenes/cornell_box.gltf -o cb.npz \\
+        --res 64 64 --max-bounces 5 --spp 8192 --passes 16 --seed 1 \\
+        --start 1.94 --bin-width 0.05 --bins 40 --gate 3.14 3.19
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import hashlib
+import json
+import math
+import os
+import platform
+import shlex
+import struct
+import sys
+import time
+import urllib.parse
+
+import numpy as np
+
+# --------------------------------------------------------------------------
+# glTF loading (numpy only)
+# --------------------------------------------------------------------------
+
+_COMPONENT_DTYPES = {
+    5120: np.int8, 5121: np.uint8, 5122: np.int16,
+    5123: np.uint16, 5125: np.uint32, 5126: np.float32,
+}
+_TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4,
+               "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+
+def _warn(msg: str) -> None:
+    print(f"warning: {msg}", file=sys.stderr)
+
+
+def _read_gltf_file(path: str):
+    """Return (json dict, embedded GLB binary chunk or None)."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:4] == b"glTF":
+        _, version, length = struct.unpack_from("<4sII", data, 0)
+        if version != 2:
+            raise ValueError(f"{path}: unsupported GLB version {version}")
+        offset, doc, bin_chunk = 12, None, None
+        while offset < length:
+            chunk_len, chunk_type = struct.unpack_from("<II", data, offset)
+            chunk = data[offset + 8: offset + 8 + chunk_len]
+            if chunk_type == 0x4E4F534A:  # JSON
+                doc = json.loads(chunk.decode("utf-8"))
+            elif chunk_type == 0x004E4942 and bin_chunk is None:  # BIN
+                bin_chunk = chunk
+            offset += 8 + chunk_len
+        if doc is None:
+            raise ValueError(f"{path}: GLB without a JSON chunk")
+        return doc, bin_chunk
+    return json.loads(data.decode("utf-8")), None
+
+
+def _load_buffers(doc, base_dir, glb_bin):
+    buffers = []
+    for i, buf in enumerate(doc.get("buffers", [])):
+        uri = buf.get("uri")
+        if uri is None:
+            if i != 0 or glb_bin is None:
+                raise ValueError(f"buffer {i} has no uri and no GLB chunk")
+            raw = glb_bin
+        elif uri.startswith("data:"):
+            header, _, payload = uri.partition(",")
+            if not header.endswith(";base64"):
+                raise ValueError(f"buffer {i}: only base64 data URIs supported")
+            raw = base64.b64decode(payload)
+        else:
+            with open(os.path.join(base_dir, urllib.parse.unquote(uri)), "rb") as f:
+                raw = f.read()
+        if len(raw) < buf["byteLength"]:
+            raise ValueError(f"buffer {i} is shorter than its byteLength")
+        buffers.append(raw)
+    return buffers
+
+
+def _read_accessor(doc, buffers, index):
+    """Return the accessor's data as an array of shape [count, ncomp]."""
+    acc = doc["accessors"][index]
+    dtype = np.dtype(_COMPONENT_DTYPES[acc["componentType"]]).newbyteorder("<")
+    ncomp = _TYPE_SIZES[acc["type"]]
+    count = acc["count"]
+    if "sparse" in acc:
+        raise NotImplementedError(f"accessor {index}: sparse accessors unsupported")
+    if "bufferView" not in acc:
+        return np.zeros((count, ncomp), dtype=dtype)
+    view = doc["bufferViews"][acc["bufferView"]]
+    raw = buffers[view["buffer"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    elem = dtype.itemsize * ncomp
+    stride = view.get("byteStride", elem)
+    if stride == elem:
+        out = np.frombuffer(raw, dtype=dtype, count=count * ncomp, offset=start)
+        out = out.reshape(count, ncomp)
+    else:
+        out = np.empty((count, ncomp), dtype=dtype)
+        for k in range(count):
+            out[k] = np.frombuffer(raw, dtype=dtype, count=ncomp,
+                                   offset=start + k * stride)
+    if acc.get("normalized", False) and dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        out = np.maximum(out.astype(np.float64) / info.max, -1.0)
+    return out
+
+
+def _quat_to_matrix(q):
+    x, y, z, w = (float(v) for v in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _node_local_matrix(node):
+    if "matrix" in node:
+        # glTF stores 4x4 matrices column-major.
+        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    m = np.eye(4)
+    t = node.get("translation", [0.0, 0.0, 0.0])
+    r = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
+    s = node.get("scale", [1.0, 1.0, 1.0])
+    m[:3, :3] = _quat_to_matrix(r) @ np.diag(np.asarray(s, dtype=np.float64))
+    m[:3, 3] = t
+    return m
+
+
+def _material_info(doc, index):
+    """Extract the Lambertian + emissive parameters of a glTF material."""
+    if index is None:
+        _warn("primitive without material: using white (1,1,1) Lambertian")
+        return {"name": "<default>", "albedo": [1.0, 1.0, 1.0],
+                "emission": [0.0, 0.0, 0.0], "double_sided": False}
+    mat = doc["materials"][index]
+    name = mat.get("name", f"material{index}")
+    pbr = mat.get("pbrMetallicRoughness", {})
+    albedo = [float(v) for v in pbr.get("baseColorFactor", [1, 1, 1, 1])[:3]]
+    metallic = float(pbr.get("metallicFactor", 1.0))
+    if metallic != 0.0:
+        _warn(f"material '{name}': metallicFactor {metallic} ignored (Lambertian)")
+    for tex in ("baseColorTexture", "metallicRoughnessTexture"):
+        if tex in pbr:
+            _warn(f"material '{name}': {tex} ignored")
+    for tex in ("emissiveTexture", "normalTexture", "occlusionTexture"):
+        if tex in mat:
+            _warn(f"material '{name}': {tex} ignored")
+    strength = float(mat.get("extensions", {})
+                     .get("KHR_materials_emissive_strength", {})
+                     .get("emissiveStrength", 1.0))
+    emission = [float(v) * strength for v in mat.get("emissiveFactor", [0, 0, 0])]
+    return {"name": name, "albedo": albedo, "emission": emission,
+            "double_sided": bool(mat.get("doubleSided", False))}
+
+
+def load_gltf(path):
+    """Parse a glTF 2.0 file into world-space triangle meshes and a camera.
+
+    Returns a dict with ``meshes`` (list of dicts: name, positions [N,3],
+    normals [N,3] or None, faces [M,3] uint32, material dict) and ``camera``
+    (dict: to_world 4x4 in glTF camera convention, yfov, znear, zfar,
+    aspect_ratio) or None.
+    """
+    doc, glb_bin = _read_gltf_file(path)
+    buffers = _load_buffers(doc, os.path.dirname(os.path.abspath(path)), glb_bin)
+    for ext in doc.get("extensionsRequired", []):
+        if ext != "KHR_materials_emissive_strength":
+            _warn(f"required extension {ext} is not supported")
+
+    nodes = doc.get("nodes", [])
+    if doc.get("scenes"):
+        roots = doc["scenes"][doc.get("scene", 0)].get("nodes", [])
+    else:
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+
+    meshes, camera_nodes = [], []
+    stack = [(i, np.eye(4)) for i in reversed(roots)]
+    while stack:  # depth-first, in document order
+        ni, parent = stack.pop()
+        node = nodes[ni]
+        world = parent @ _node_local_matrix(node)
+        stack.extend((c, world) for c in reversed(node.get("children", [])))
+        if "camera" in node:
+            camera_nodes.append((node["camera"], world))
+        if "mesh" in node:
+            mesh = doc["meshes"][node["mesh"]]
+            lin = world[:3, :3]
+            flip = np.linalg.det(lin) < 0
+            normal_matrix = np.linalg.inv(lin).T
+            for pi, prim in enumerate(mesh["primitives"]):
+                mode = prim.get("mode", 4)
+                if mode != 4:
+                    raise NotImplementedError(
+                        f"mesh '{mesh.get('name')}' primitive {pi}: mode {mode} "
+                        "(only TRIANGLES=4 supported)")
+                attrs = prim["attributes"]
+                pos = _read_accessor(doc, buffers, attrs["POSITION"]).astype(np.float64)
+                pos = pos @ lin.T + world[:3, 3]
+                nrm = None
+                if "NORMAL" in attrs:
+                    nrm = _read_accessor(doc, buffers, attrs["NORMAL"]).astype(np.float64)
+                    nrm = nrm @ normal_matrix.T
+                    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+                if "indices" in prim:
+                    idx = _read_accessor(doc, buffers, prim["indices"]).reshape(-1)
+                else:
+                    idx = np.arange(len(pos))
+                faces = idx.astype(np.uint32).reshape(-1, 3)
+                if flip:  # mirrored transform: glTF says to reverse winding
+                    faces = faces[:, ::-1].copy()
+                base = node.get("name") or mesh.get("name") or "mesh"
+                base = "".join(ch if ch.isalnum() else "_" for ch in base)
+                name = f"{base}_{ni}_{pi}"  # unique scene-dict key
+                meshes.append({
+                    "name": name,
+                    "positions": pos.astype(np.float32),
+                    "normals": None if nrm is None else nrm.astype(np.float32),
+                    "faces": faces,
+                    "material": _material_info(doc, prim.get("material")),
+                })
+                _check_winding(meshes[-1])
+
+    camera = None
+    if camera_nodes:
+        cam_index, cam_world = min(camera_nodes, key=lambda c: c[0])
+        cam = doc["cameras"][cam_index]
+        if cam.get("type") != "perspective":
+            raise NotImplementedError("only perspective cameras are supported")
+        p = cam["perspective"]
+        camera = {"index": cam_index, "to_world": cam_world,
+                  "yfov": float(p["yfov"]), "znear": float(p["znear"]),
+                  "zfar": float(p["zfar"]) if "zfar" in p else None,
+                  "aspect_ratio": p.get("aspectRatio")}
+    return {"meshes": meshes, "camera": camera, "doc": doc}
+
+
+def _check_winding(mesh):
+    """Warn when vertex normals disagree with the counter-clockwise winding.
+
+    Mitsuba decides the front side (for one-sided BSDFs and area lights) from
+    the shading frame, so inconsistent data would render differently from a
+    renderer that uses the geometric normal.
+    """
+    if mesh["normals"] is None:
+        return
+    p, f, n = mesh["positions"], mesh["faces"], mesh["normals"]
+    geo = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    avg = n[f].sum(axis=1)
+    if np.any(np.einsum("ij,ij->i", geo, avg) < 0):
+        _warn(f"mesh '{mesh['name']}': vertex normals oppose the winding order")
+
+
+# --------------------------------------------------------------------------
+# Mitsuba scene
+# --------------------------------------------------------------------------
+
+# glTF camera: looks down -z, +y up, +x right.  Mitsuba camera: looks down +z,
+# +y up, +x left.  Rotating 180 degrees about y maps one onto the other.
+_GLTF_TO_MITSUBA_CAMERA = np.diag([-1.0, 1.0, -1.0, 1.0])
+
+
+def build_mitsuba_scene(mi, scene, args, max_depth):
+    """Return the Mitsuba scene dict for the parsed glTF scene."""
+    cam = scene["camera"]
+    if cam is None:
+        raise ValueError("the glTF has no camera")
+    width, height = args.res
+    if cam["aspect_ratio"] is not None and abs(cam["aspect_ratio"] - width / height) > 1e-6:
+        _warn(f"camera aspectRatio {cam['aspect_ratio']} differs from --res "
+              f"{width}x{height}; the vertical fov is kept")
+
+    # Largest near-plane offset (image corner) that Mitsuba leaves out of the
+    # optical path length.
+    tan_y = math.tan(cam["yfov"] / 2)
+    corner = math.sqrt(1 + tan_y ** 2 * (1 + (width / height) ** 2))
+    if cam["znear"] * corner > 0.01 * args.bin_width:
+        _warn(f"znear {cam['znear']} m: Mitsuba omits up to "
+              f"{cam['znear'] * corner:.3g} m of the camera segment from the "
+              "path length (rays start on the near plane)")
+
+    to_world = cam["to_world"] @ _GLTF_TO_MITSUBA_CAMERA
+    sensor = {
+        "type": "perspective",
+        "fov": math.degrees(cam["yfov"]),
+        "fov_axis": "y",
+        "near_clip": cam["znear"],
+        "to_world": mi.ScalarTransform4f(to_world.tolist()),
+        "sampler": {"type": "independent", "sample_count": args.spp},
+        "film": {
+            "type": "transient_hdr_film",
+            "width": width,
+            "height": height,
+            "temporal_bins": args.bins,
+            "start_opl": args.start,
+            "bin_width_opl": args.bin_width,
+            "rfilter": {"type": "box"},
+        },
+    }
+    if cam["zfar"] is not None:
+        sensor["far_clip"] = cam["zfar"]
+
+    out = {
+        "type": "scene",
+        "integrator": {
+            "type": "transient_path",
+            "max_depth": max_depth,
+            "rr_depth": max_depth + 1,  # Russian roulette never starts
+            "camera_unwarp": False,
+        },
+        "sensor": sensor,
+    }
+    for m in scene["meshes"]:
+        out[m["name"]] = _make_mesh(mi, m)
+    return out
+
+
+def _make_mesh(mi, m):
+    mat = m["material"]
+    bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": mat["albedo"]}}
+    if mat["double_sided"]:
+        bsdf = {"type": "twosided", "material": bsdf}
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
+    if any(v > 0 for v in mat["emission"]):
+        if mat["double_sided"]:
+            _warn(f"material '{mat['name']}': Mitsuba area lights emit on the "
+                  "front side only; the back side will not emit")
+        props["emitter"] = mi.load_dict(
+            {"type": "area", "radiance": {"type": "rgb", "value": mat["emission"]}})
+    has_normals = m["normals"] is not None
+    mesh = mi.Mesh(m["name"], len(m["positions"]), len(m["faces"]),
+                   props=props, has_vertex_normals=has_normals)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(m["positions"].ravel())
+    params["faces"] = mi.UInt32(m["faces"].ravel())
+    if has_normals:
+        params["vertex_normals"] = mi.Float(m["normals"].ravel())
+    params.update()
+    return mesh
+
+
+# --------------------------------------------------------------------------
+# Rendering
+# --------------------------------------------------------------------------
+
+class _RunningMoments:
+    """Welford mean/variance over passes, in float64."""
+
+    def __init__(self):
+        self.n, self.mean, self.m2 = 0, None, None
+
+    def add(self, x):
+        x = np.asarray(x, dtype=np.float64)
+        self.n += 1
+        if self.mean is None:
+            self.mean, self.m2 = x.copy(), np.zeros_like(x)
+            return
+        delta = x - self.mean
+        self.mean += delta / self.n
+        self.m2 += delta * (x - self.mean)
+
+    def mean_and_var_of_mean(self):
+        if self.n < 2:
+            return self.mean, np.full_like(self.mean, np.nan)
+        return self.mean, self.m2 / (self.n - 1) / self.n
+
+
+def gate_bins(args):
+    """Return (first, last_exclusive) bin indices of --gate, or None."""
+    if args.gate is None:
+        return None
+    a, b = args.gate
+    ka, kb = (a - args.start) / args.bin_width, (b - args.start) / args.bin_width
+    ia, ib = round(ka), round(kb)
+    tol = 1e-6
+    if abs(ka - ia) > tol or abs(kb - ib) > tol:
+        raise SystemExit(
+            f"error: --gate {a} {b} does not lie on bin edges "
+            f"(start {args.start}, width {args.bin_width}: edges at "
+            f"start + k*width); pick --start/--bin-width so that it does")
+    if not (0 <= ia < ib <= args.bins):
+        raise SystemExit(f"error: --gate {a} {b} is outside the binned range "
+                         f"[{args.start}, {args.start + args.bins * args.bin_width})")
+    return ia, ib
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__[__doc__.index("Requirements"):],
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", help="glTF 2.0 scene (.gltf or .glb)")
+    p.add_argument("-o", "--output", default=None,
+                   help="output .npz (default: <scene stem>_peer.npz)")
+    p.add_argument("--res", nargs=2, type=int, default=[64, 64],
+                   metavar=("W", "H"), help="image size (default 64 64)")
+    p.add_argument("--max-bounces", type=int, default=5,
+                   help="maximum number of reflections (default 5; "
+                        "Mitsuba max_depth = this + 1)")
+    p.add_argument("--spp", type=int, default=256,
+                   help="samples per pixel per pass (default 256)")
+    p.add_argument("--passes", type=int, default=8,
+                   help="independent passes for the variance (default 8)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="base seed; every render call gets its own seed "
+                        "derived from it (default 0)")
+    p.add_argument("--start", type=float, default=0.0,
+                   help="start of the first time bin, metres of optical path")
+    p.add_argument("--bin-width", type=float, default=0.1,
+                   help="time bin width, metres of optical path (default 0.1)")
+    p.add_argument("--bins", type=int, default=100,
+                   help="number of time bins (default 100)")
+    p.add_argument("--gate", nargs=2, type=float, metavar=("A", "B"),
+                   help="also write gate_mean/gate_var: the sum of the bins "
+                        "covering [A, B) metres; A and B must be bin edges")
+    p.add_argument("--chunk-spp", type=int, default=1024,
+                   help="render a pass in calls of at most this many spp to "
+                        "bound memory (default 1024)")
+    p.add_argument("--variant", default="llvm_ad_rgb",
+                   help="Mitsuba variant (default llvm_ad_rgb; cuda_ad_rgb "
+                        "for a GPU); must be an RGB variant")
+    p.add_argument("--threads", type=int, default=None,
+                   help="CPU threads for the LLVM backend (default: all)")
+    args = p.parse_args(argv)
+    if args.max_bounces < 0 or args.spp < 1 or args.passes < 1 or args.bins < 1:
+        p.error("--max-bounces must be >= 0; --spp, --passes, --bins >= 1")
+    if args.bin_width <= 0:
+        p.error("--bin-width must be > 0")
+    if not args.variant.endswith("_rgb"):
+        p.error("only RGB variants are supported")
+    if args.passes < 2:
+        _warn("with a single pass the variances are NaN")
+    return args
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    gate = gate_bins(args)
+    out_path = args.output or os.path.splitext(os.path.basename(args.scene))[0] + "_peer.npz"
+
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant(args.variant)
+    import mitransient  # noqa: F401  (registers transient_* plugins)
+    if args.threads is not None:
+        dr.set_thread_count(args.threads)
+
+    scene_data = load_gltf(args.scene)
+    max_depth = args.max_bounces + 1
+    scene_dict = build_mitsuba_scene(mi, scene_data, args, max_depth)
+    scene = mi.load_dict(scene_dict)
+    integrator = scene.integrator()
+    sensor = scene.sensors()[0]
+
+    chunks = [args.chunk_spp] * (args.spp // args.chunk_spp)
+    if args.spp % args.chunk_spp:
+        chunks.append(args.spp % args.chunk_spp)
+    seeds = np.random.SeedSequence(args.seed).generate_state(
+        args.passes * len(chunks), dtype=np.uint32).reshape(args.passes, len(chunks))
+
+    steady_m, trans_m, gate_m = _RunningMoments(), _RunningMoments(), _RunningMoments()
+    t0 = time.time()
+    pass_times = []
+    for p in range(args.passes):
+        tp = time.time()
+        steady = trans = 0.0
+        for c, spp in enumerate(chunks):
+            s_img, t_img = integrator.render(scene, sensor, seed=int(seeds[p, c]), spp=spp)
+            # Weight chunks by their share of the pass's samples.
+            steady = steady + np.array(s_img, dtype=np.float64) * (spp / args.spp)
+            trans = trans + np.array(t_img, dtype=np.float64) * (spp / args.spp)
+        steady_m.add(steady[..., :3])
+        trans_m.add(trans[..., :3])
+        if gate is not None:
+            gate_m.add(trans[:, :, gate[0]:gate[1], :3].sum(axis=2))
+        pass_times.append(time.time() - tp)
+        print(f"pass {p + 1}/{args.passes}: {pass_times[-1]:.1f} s, "
+              f"steady image mean {steady[..., :3].reshape(-1, 3).mean(0)}",
+              file=sys.stderr, flush=True)
+    total = time.time() - t0
+
+    with open(args.scene, "rb") as f:
+        scene_sha = hashlib.sha256(f.read()).hexdigest()
+    meta = {
+        "tool": "tools/peer_reference.py",
+        "command_line": " ".join(shlex.quote(a) for a in sys.argv),
+        "scene": args.scene,
+        "scene_sha256": scene_sha,
+        "versions": {
+            "mitsuba": mi.__version__, "drjit": dr.__version__,
+            "mitransient": mitransient.__version__, "numpy": np.__version__,
+            "python": platform.python_version(),
+        },
+        "variant": args.variant,
+        "integrator": {"type": "transient_path", "max_depth": max_depth,
+                       "rr_depth": max_depth + 1, "camera_unwarp": False},
+        "film": {"type": "transient_hdr_film", "rfilter": "box",
+                 "width": args.res[0], "height": args.res[1]},
+        "sampler": "independent",
+        "max_bounces": args.max_bounces,
+        "spp_per_pass": args.spp,
+        "passes": args.passes,
+        "chunks_spp": chunks,
+        "seed": args.seed,
+        "render_seeds": seeds.tolist(),
+        "time_unit": "metres of optical path (camera and light segments included)",
+        "start": args.start, "bin_width": args.bin_width, "bins": args.bins,
+        "bin_edges": [args.start + k * args.bin_width for k in range(args.bins + 1)],
+        "gate": args.gate, "gate_bins": list(gate) if gate else None,
+        "camera": {"yfov_rad": scene_data["camera"]["yfov"],
+                   "znear": scene_data["camera"]["znear"]},
+        "layout": "row 0 at the top, RGB last; transient [H,W,T,3]; "
+                  "*_var = variance of the mean over passes",
+        "seconds_total": total,
+        "seconds_per_pass": pass_times,
+        "threads": dr.thread_count(),
+    }
+
+    out = {}
+    for key, mom in (("steady", steady_m), ("transient", trans_m), ("gate", gate_m)):
+        if mom.n == 0:
+            continue
+        mean, var = mom.mean_and_var_of_mean()
+        out[f"{key}_mean"] = mean.astype(np.float32)
+        out[f"{key}_var"] = var.astype(np.float32)
+    out["meta"] = np.array(json.dumps(meta, indent=1))
+    np.savez_compressed(out_path, **out)
+    print(f"wrote {out_path} ({total:.1f} s)", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
