@@ -96,6 +96,12 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 }
 
 fn main() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        // Mesa's Vulkan driver probes for a Wayland display and complains when this is unset;
+        // a headless render needs none.
+        // SAFETY: nothing else runs yet: main has not started any thread.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
@@ -132,6 +138,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         rr_depth: args.rr_depth,
         seed: args.seed,
         samples_per_wave: args.samples_per_wave,
+        binding_limit: None,
     };
     if settings.method != Method::Path {
         bail!("--method {} is not yet available: this version implements `path`", settings.method.name());

@@ -31,3 +31,23 @@ pub fn parse_length(text: &str) -> Result<f64> {
 pub fn metres_to_ps(metres: f64) -> f64 {
     metres / (SPEED_OF_LIGHT * 1e-12)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lengths_and_times_convert_with_c() {
+        assert_eq!(parse_length("3.14").unwrap(), 3.14);
+        assert_eq!(parse_length("3.14m").unwrap(), 3.14);
+        assert!((parse_length("2.5mm").unwrap() - 0.0025).abs() < 1e-15);
+        // DESIGN.md: 12.5 ps = 3.747 mm, 200 ps = 59.96 mm, 1 ns = 299.79 mm.
+        assert!((parse_length("12.5ps").unwrap() - 3.747405725e-3).abs() < 1e-12);
+        assert!((parse_length("200 ps").unwrap() - 0.0599584916).abs() < 1e-10);
+        assert!((parse_length("1ns").unwrap() - 0.299792458).abs() < 1e-12);
+        assert!((metres_to_ps(0.299792458) - 1000.0).abs() < 1e-9);
+        for bad in ["", "abc", "1.2.3", "5s", "nan", "inf"] {
+            assert!(parse_length(bad).is_err(), "`{bad}` must be rejected");
+        }
+    }
+}

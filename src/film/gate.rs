@@ -129,6 +129,15 @@ impl Gate {
         }
     }
 
+    /// Lower end of the support (m): paths shorter than this have W = 0.
+    pub fn min_length(&self) -> f64 {
+        match self {
+            Gate::Box { start, .. } | Gate::Transient { start, .. } => *start,
+            Gate::Table { points, .. } => points[0].0,
+            _ => 0.0,
+        }
+    }
+
     /// The (length, weight) table for the GPU (empty unless a table gate).
     pub fn table(&self) -> Vec<[f32; 2]> {
         match self {
@@ -223,18 +232,20 @@ pub fn read_gate_table(path: &Path) -> Result<Vec<(f64, f64)>> {
     let name = path.display();
     let text = std::fs::read_to_string(path).with_context(|| format!("{name}: cannot read the gate table"))?;
     let mut points = Vec::new();
+    let mut first_row = true;
     for (i, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
             continue;
         }
+        let header_allowed = std::mem::replace(&mut first_row, false);
         let mut fields = line.split([',', ';', '\t']).map(str::trim);
         let (Some(l), Some(w), None) = (fields.next(), fields.next(), fields.next()) else {
             bail!("{name}:{}: expected two columns `length,weight`, got `{line}`", i + 1);
         };
         match (parse_length(l), w.parse::<f64>()) {
             (Ok(l), Ok(w)) if w.is_finite() => points.push((l, w)),
-            _ if points.is_empty() && i == 0 => continue, // header line
+            _ if header_allowed => continue, // header line
             _ => bail!("{name}:{}: `{line}` is not `length,weight`", i + 1),
         }
     }
@@ -254,4 +265,59 @@ fn split_n<'a, const N: usize>(args: &'a str, usage: &str) -> Result<[&'a str; N
 
 fn parse_number(s: &str, what: &str) -> Result<f64> {
     s.trim().parse::<f64>().ok().filter(|v| v.is_finite()).with_context(|| format!("{what}: `{s}` is not a number"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse_into_gates() {
+        assert_eq!(Gate::parse("none").unwrap(), Gate::None);
+        assert_eq!(Gate::parse("box:3.14..3.19").unwrap(), Gate::Box { start: 3.14, end: 3.19 });
+        assert_eq!(Gate::parse("gaussian:3,0.01").unwrap(), Gate::Gaussian { mean: 3.0, sigma: 0.01 });
+        assert_eq!(Gate::parse("cw:20e6,90").unwrap(), Gate::Cw { frequency_hz: 20e6, phase_deg: 90.0 });
+        assert_eq!(Gate::parse("transient:1.94,0.1,20").unwrap(), Gate::Transient { start: 1.94, width: 0.1, bins: 20 });
+        let Gate::Transient { start, width, .. } = Gate::parse("transient:10ns,12.5ps,8").unwrap() else { panic!() };
+        assert!((start - 2.99792458).abs() < 1e-12 && (width - 3.747405725e-3).abs() < 1e-12);
+        for bad in ["box:3", "box:3..2", "gaussian:1", "gaussian:1,0", "cw:-5,0", "transient:0,0.1,0", "transient:0,0,3", "x"] {
+            assert!(Gate::parse(bad).is_err(), "`{bad}` must be rejected");
+        }
+    }
+
+    #[test]
+    fn cpu_weights_follow_the_definitions() {
+        let eval = |g: &Gate, l: f32| gate_weight(g.kind(), &g.to_gpu(), &g.table(), l);
+        let b = Gate::parse("box:1..2").unwrap();
+        assert_eq!((eval(&b, 0.99), eval(&b, 1.0), eval(&b, 1.99), eval(&b, 2.0)), (0.0, 1.0, 1.0, 0.0));
+        let g = Gate::parse("gaussian:3,0.5").unwrap();
+        assert_eq!(eval(&g, 3.0), 1.0);
+        assert!((eval(&g, 3.5) - (-0.5f32).exp()).abs() < 1e-6);
+        // cw at 149.896229 MHz has a 2 m wavelength: W(0.5 m) = cos(pi / 2 + phase).
+        let c = Gate::parse("cw:149.896229e6,0").unwrap();
+        assert!(eval(&c, 0.5).abs() < 1e-5 && (eval(&c, 1.0) + 1.0).abs() < 1e-5);
+        let t = Gate::parse("transient:1,0.5,4").unwrap();
+        let g = t.to_gpu();
+        assert_eq!((gate_bin(t.kind(), &g, 0.99), gate_bin(t.kind(), &g, 1.0), gate_bin(t.kind(), &g, 2.99)), (-1, 0, 3));
+        assert_eq!(gate_bin(t.kind(), &g, 3.0), -1);
+        assert_eq!(t.max_length(), Some(3.0));
+        assert_eq!(t.bin_range(1), Some((1.5, 2.0)));
+    }
+
+    #[test]
+    fn tables_interpolate_linearly_and_report_bad_rows() {
+        let dir = std::env::temp_dir().join(format!("gatetrace_gate_table_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("good.csv");
+        std::fs::write(&good, "# trapezoid\nlength,weight\n1.0,0\n2.0,1\n3.0,1\n4,0\n").unwrap();
+        let t = Gate::parse(&format!("table:{}", good.display())).unwrap();
+        let eval = |l: f32| gate_weight(t.kind(), &t.to_gpu(), &t.table(), l);
+        assert_eq!((eval(0.5), eval(1.5), eval(2.5), eval(3.75), eval(4.5)), (0.0, 0.5, 1.0, 0.25, 0.0));
+        let bad = dir.join("bad.csv");
+        std::fs::write(&bad, "1.0,0\n2.0\n").unwrap();
+        let e = format!("{:#}", Gate::parse(&format!("table:{}", bad.display())).unwrap_err());
+        assert!(e.contains("bad.csv:2"), "{e}");
+        std::fs::write(&bad, "1.0,0\n0.5,1\n").unwrap();
+        assert!(format!("{:#}", Gate::parse(&format!("table:{}", bad.display())).unwrap_err()).contains("increase"));
+    }
 }

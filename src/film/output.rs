@@ -131,3 +131,24 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
     }
     Ok((shape, data))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn npy_round_trips() {
+        let dir = std::env::temp_dir().join(format!("gatetrace_npy_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let film = Film { width: 3, height: 2, bins: 4, spp: 1, data: (0..72).map(|i| i as f32 * 0.5).collect() };
+        let path = dir.join("cube.npy");
+        write_npy(&path, &film).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!((bytes.len() - 72 * 4) % 64, 0, "header padded to 64 bytes");
+        let (shape, data) = read_npy_f32(&path).unwrap();
+        assert_eq!(shape, vec![2, 3, 4, 3]);
+        assert_eq!(data, film.data);
+        let bad = Film { data: vec![f32::NAN; 72], ..film };
+        assert!(write_film(&path, &bad, &vec![], &[]).is_err(), "non-finite films are refused");
+    }
+}

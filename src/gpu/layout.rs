@@ -248,3 +248,6 @@ pub struct QueueCounters {
     pub shadow_rays: u32,
     pub reserved: u32,
 }
+
+/// `shaders/lib/layout.wesl` composed to WGSL by the build script (for the layout test).
+pub const LAYOUT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/layout.wgsl"));

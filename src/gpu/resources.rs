@@ -32,11 +32,12 @@ impl Resources {
         out
     }
 
-    /// Creates storage buffer `name` holding `data` (at least 16 bytes, so empty tables still bind).
+    /// Creates storage buffer `name` holding `data` (at least one element and 16 bytes, so empty
+    /// tables still bind).
     pub fn storage_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, data: &[T]) -> Result<()> {
         let mut bytes = bytemuck::cast_slice::<T, u8>(data).to_vec();
         check_size(ctx, name, bytes.len() as u64)?;
-        bytes.resize(bytes.len().max(16), 0);
+        bytes.resize(bytes.len().max(16).max(size_of::<T>()), 0);
         let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(name),
             contents: &bytes,
@@ -73,6 +74,118 @@ impl Resources {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
         self.insert(name, buffer);
+    }
+}
+
+/// How an array is laid out over up to [`MAX_CHUNKS`] bindings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkLayout {
+    /// log2 of the elements per chunk; 0 when the array fits one binding.
+    pub bits: u32,
+    /// Number of bindings in use.
+    pub chunks: u32,
+}
+
+/// Bindings an array may be split into (`name`, `name_1`, `name_2`, `name_3` in WGSL).
+pub const MAX_CHUNKS: u64 = 4;
+
+impl ChunkLayout {
+    /// Layout of `count` elements of `element_size` bytes with at most `limit` bytes per binding.
+    pub fn new(name: &str, count: u64, element_size: u64, limit: u64) -> Result<Self> {
+        if count * element_size <= limit {
+            return Ok(Self { bits: 0, chunks: 1 });
+        }
+        let per_chunk = (limit / element_size).max(1);
+        let bits = 63 - per_chunk.leading_zeros();
+        let chunks = count.div_ceil(1 << bits);
+        if chunks > MAX_CHUNKS || bits == 0 {
+            bail!(
+                "`{name}` needs {:.1} MiB, more than {MAX_CHUNKS} bindings of {:.1} MiB; reduce the resolution, \
+                 bins or the scene's size",
+                (count * element_size) as f64 / 1048576.0,
+                limit as f64 / 1048576.0
+            );
+        }
+        Ok(Self { bits, chunks: chunks as u32 })
+    }
+
+    /// Element range of chunk `c` for an array of `count` elements.
+    pub fn range(&self, c: u32, count: u64) -> std::ops::Range<u64> {
+        if self.bits == 0 {
+            return 0..count;
+        }
+        let size = 1u64 << self.bits;
+        (c as u64 * size).min(count)..((c as u64 + 1) * size).min(count)
+    }
+}
+
+/// WGSL names of the chunks of array `name`.
+pub fn chunk_names(name: &'static str) -> [&'static str; 4] {
+    match name {
+        "triangles" => ["triangles", "triangles_1", "triangles_2", "triangles_3"],
+        "triangle_shading" => ["triangle_shading", "triangle_shading_1", "triangle_shading_2", "triangle_shading_3"],
+        "bvh_nodes" => ["bvh_nodes", "bvh_nodes_1", "bvh_nodes_2", "bvh_nodes_3"],
+        "film" => ["film", "film_1", "film_2", "film_3"],
+        other => panic!("`{other}` is not a split array"),
+    }
+}
+
+impl Resources {
+    /// Creates split storage array `name` holding `data`, at most `limit` bytes per binding;
+    /// unused chunks get a tiny placeholder buffer.
+    pub fn storage_chunked_init<T: bytemuck::Pod>(
+        &mut self,
+        ctx: &GpuContext,
+        name: &'static str,
+        data: &[T],
+        limit: u64,
+    ) -> Result<ChunkLayout> {
+        let layout = ChunkLayout::new(name, data.len() as u64, size_of::<T>() as u64, limit)?;
+        for (c, chunk_name) in chunk_names(name).into_iter().enumerate() {
+            let r = layout.range(c as u32, data.len() as u64);
+            self.storage_init(ctx, chunk_name, &data[r.start as usize..r.end as usize])?;
+        }
+        Ok(layout)
+    }
+
+    /// Creates zeroed split storage array `name` of `count` elements of `element_size` bytes.
+    pub fn storage_chunked_zeroed(
+        &mut self,
+        ctx: &GpuContext,
+        name: &'static str,
+        count: u64,
+        element_size: u64,
+        limit: u64,
+    ) -> Result<ChunkLayout> {
+        let layout = ChunkLayout::new(name, count, element_size, limit)?;
+        for (c, chunk_name) in chunk_names(name).into_iter().enumerate() {
+            let r = layout.range(c as u32, count);
+            self.storage_zeroed(ctx, chunk_name, (r.end - r.start) * element_size, wgpu::BufferUsages::empty())?;
+        }
+        Ok(layout)
+    }
+
+    /// Reads split array `name` of `count` elements back to the host.
+    pub fn read_chunked<T: bytemuck::Pod>(
+        &self,
+        ctx: &GpuContext,
+        name: &'static str,
+        layout: ChunkLayout,
+        count: u64,
+    ) -> Result<Vec<T>> {
+        let mut out = Vec::with_capacity(count as usize);
+        for c in 0..layout.chunks {
+            let r = layout.range(c, count);
+            out.extend(read_buffer::<T>(ctx, &self.buffers[chunk_names(name)[c as usize]], (r.end - r.start) as usize)?);
+        }
+        Ok(out)
+    }
+
+    /// Zeroes every chunk of split array `name`.
+    pub fn clear_chunked(&self, encoder: &mut wgpu::CommandEncoder, name: &'static str) {
+        for chunk_name in chunk_names(name) {
+            encoder.clear_buffer(&self.buffers[chunk_name], 0, None);
+        }
     }
 }
 
@@ -115,4 +228,19 @@ pub fn read_buffer<T: bytemuck::Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, co
     let data = bytemuck::pod_collect_to_vec::<u8, T>(&slice.get_mapped_range()?);
     staging.unmap();
     Ok(data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunk_layouts_cover_the_array_in_power_of_two_chunks() {
+        assert_eq!(ChunkLayout::new("a", 10, 4, 40).unwrap(), ChunkLayout { bits: 0, chunks: 1 });
+        let l = ChunkLayout::new("a", 60, 48, 1000).unwrap();
+        assert_eq!(l, ChunkLayout { bits: 4, chunks: 4 }, "20 fit, 16 per chunk");
+        let covered: Vec<u64> = (0..l.chunks).flat_map(|c| l.range(c, 60)).collect();
+        assert_eq!(covered, (0..60).collect::<Vec<_>>());
+        assert!(ChunkLayout::new("a", 1000, 48, 1000).is_err(), "more than four chunks");
+    }
 }

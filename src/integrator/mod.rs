@@ -48,6 +48,9 @@ pub struct RenderSettings {
     pub seed: u32,
     /// Samples per pixel traced together in one wave; None chooses from the image size.
     pub samples_per_wave: Option<u32>,
+    /// Largest storage binding to use (bytes); None: the device's limit. Smaller values force
+    /// the split-array layout (used by tests to check it against the unsplit one).
+    pub binding_limit: Option<u64>,
 }
 
 impl Default for RenderSettings {
@@ -61,6 +64,7 @@ impl Default for RenderSettings {
             rr_depth: None,
             seed: 0,
             samples_per_wave: None,
+            binding_limit: None,
         }
     }
 }
@@ -88,6 +92,29 @@ pub struct RenderOutput {
     pub elapsed: Duration,
 }
 
+/// Why no path of the scene can reach the gate, if none can (checked before any work).
+pub fn unreachable_gate(scene: &PreparedScene, settings: &RenderSettings) -> Option<String> {
+    let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
+    let gate = &settings.gate;
+    if let Some(end) = gate.max_length()
+        && end <= shortest as f64
+    {
+        return Some(format!(
+            "gate {} ends at {end} m, but the shortest possible path (pinhole to the nearest light) is {shortest:.4} m",
+            gate.describe()
+        ));
+    }
+    if gate.min_length() > longest as f64 {
+        return Some(format!(
+            "gate {} starts at {} m, beyond the longest path possible with {} bounces in this scene ({longest:.4} m)",
+            gate.describe(),
+            gate.min_length(),
+            settings.max_bounces
+        ));
+    }
+    None
+}
+
 /// Renders `scene` with `settings` until `budget` is spent, calling `progress` after each wave.
 pub fn render(
     ctx: &GpuContext,
@@ -105,6 +132,11 @@ pub fn render(
         ),
     }
     let start = Instant::now();
+    if let Some(reason) = unreachable_gate(scene, settings) {
+        eprintln!("warning: {reason}: the image is black; no samples were traced");
+        let g = &settings.gate;
+        return Ok(RenderOutput { film: Film::zeroed(settings.width, settings.height, g.bins()), elapsed: start.elapsed() });
+    }
     let mut tracer = PathTracer::new(ctx, scene, settings)?;
     let mut waves = 0;
     loop {

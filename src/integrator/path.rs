@@ -17,7 +17,7 @@ use anyhow::Result;
 use super::RenderSettings;
 use crate::film::Film;
 use crate::gpu::layout::{Contribution, Hit, NONE, PathState, QueueCounters, RenderParams, ShadowRay, WaveParams};
-use crate::gpu::resources::read_buffer;
+use crate::gpu::resources::ChunkLayout;
 use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::scene::PreparedScene;
 
@@ -53,6 +53,9 @@ pub struct PathTracer<'a> {
     stages: Stages,
     bindings: Bindings,
     resources: Resources,
+    film_layout: ChunkLayout,
+    /// Specialisation constants of the kernels (the scene's and the gate's).
+    constants: Vec<(&'static str, f64)>,
     samples_per_wave: u32,
     /// Samples per pixel accumulated in the film.
     samples_in_film: u64,
@@ -89,9 +92,10 @@ impl<'a> PathTracer<'a> {
         let mut r = Resources::default();
         r.uniform_init(ctx, "params", &params);
         r.uniform_init(ctx, "wave", &WaveParams::default());
-        r.storage_init(ctx, "triangles", &scene.triangles)?;
-        r.storage_init(ctx, "triangle_shading", &scene.shading)?;
-        r.storage_init(ctx, "bvh_nodes", &scene.bvh.nodes)?;
+        let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
+        let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
+        let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
+        let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
         r.storage_init(ctx, "materials", &scene.materials)?;
         r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
         r.storage_init(ctx, "texels", &scene.texels)?;
@@ -107,15 +111,21 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "contributions", 2 * size_of::<Contribution>() as u64 * slots as u64, none)?;
-        r.storage_zeroed(ctx, "film", 12 * pixels as u64 * gate.bins() as u64, none)?;
+        let film_len = 3 * pixels as u64 * gate.bins() as u64;
+        let film = r.storage_chunked_zeroed(ctx, "film", film_len, 4, limit)?;
 
         let constants = [
             ("GATE_KIND", gate.kind() as u32 as f64),
             ("HAS_TEXTURES", scene.has_textures() as u32 as f64),
             ("HAS_POINT_LIGHTS", scene.has_point_lights() as u32 as f64),
+            ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),
+            ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),
+            ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
+            ("FILM_CHUNK_BITS", film.bits as f64),
         ];
+        let constants = constants.to_vec();
         let with = |extra: (&'static str, f64)| {
-            let mut c = constants.to_vec();
+            let mut c = constants.clone();
             c.push(extra);
             c
         };
@@ -142,7 +152,28 @@ impl<'a> PathTracer<'a> {
             trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
             accumulate: stages.accumulate.bind(ctx, &even),
         };
-        Ok(Self { ctx, params, stages, bindings, resources: r, samples_per_wave, samples_in_film: 0, next_sample: 0 })
+        Ok(Self {
+            ctx,
+            params,
+            stages,
+            bindings,
+            resources: r,
+            film_layout: film,
+            constants,
+            samples_per_wave,
+            samples_in_film: 0,
+            next_sample: 0,
+        })
+    }
+
+    /// The named buffers the kernels bind (scene, wavefront state, film).
+    pub fn resources(&self) -> &Resources {
+        &self.resources
+    }
+
+    /// The specialisation constants every kernel of this render gets.
+    pub fn constants(&self) -> &[(&'static str, f64)] {
+        &self.constants
     }
 
     /// Samples per pixel of a full wave.
@@ -193,7 +224,7 @@ impl<'a> PathTracer<'a> {
     pub fn film(&self) -> Result<Film> {
         let bins = self.params.gate.bins;
         let mut film = Film::zeroed(self.params.width, self.params.height, bins);
-        let sums: Vec<f32> = read_buffer(self.ctx, self.resources.get("film").unwrap(), film.data.len())?;
+        let sums: Vec<f32> = self.resources.read_chunked(self.ctx, "film", self.film_layout, film.data.len() as u64)?;
         let n = self.samples_in_film.max(1) as f64;
         film.data = sums.iter().map(|&v| (v as f64 / n) as f32).collect();
         film.spp = self.samples_in_film;
@@ -203,9 +234,8 @@ impl<'a> PathTracer<'a> {
     /// Clears the film; later samples continue the random sequence, so the next estimate is
     /// independent of the previous one (for batch statistics).
     pub fn reset_film(&mut self) {
-        let film = self.resources.get("film").unwrap();
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
-        encoder.clear_buffer(film, 0, None);
+        self.resources.clear_chunked(&mut encoder, "film");
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;
     }

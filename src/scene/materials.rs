@@ -117,3 +117,23 @@ pub fn texture_bilinear(infos: &[TextureInfo], texels: &[[u32; 2]], index: u32, 
     let bottom = texel(xa, yb).lerp(texel(xb, yb), fx);
     top.lerp(bottom, fy)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn half_floats_round_to_nearest_even() {
+        for v in [0.0f32, 1.0, -2.5, 0.21586, 65504.0, 6.1e-5, 3.0e-7, 1e-8] {
+            let back = unpack2x16float(pack2x16float(v, -v));
+            let tol = v.abs() / 2048.0 + 6e-8;
+            assert!((back.x - v).abs() <= tol && (back.y + v).abs() <= tol, "{v} -> {back}");
+        }
+        assert_eq!(pack2x16float(1.0, 0.0), 0x3c00);
+        // One half-float ulp at 1 is 4/4096.
+        assert_eq!(pack2x16float(1.0 + 2.0 / 4096.0, 0.0), 0x3c00, "a tie rounds to even");
+        assert_eq!(pack2x16float(1.0 + 6.0 / 4096.0, 0.0), 0x3c02, "a tie rounds to even");
+        assert_eq!(pack2x16float(1.0 + 3.0 / 4096.0, 0.0), 0x3c01);
+        assert!(unpack2x16float(pack2x16float(1e6, 0.0)).x.is_infinite());
+    }
+}

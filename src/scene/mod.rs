@@ -105,9 +105,79 @@ impl Scene {
         (lo, hi)
     }
 
+    /// Shortest and longest optical path length (m) any light path with at most `max_bounces`
+    /// scattering vertices can have: at least the distance from the pinhole to the nearest
+    /// light, at most (max_bounces + 1) diagonals of the scene's bounds.
+    pub fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
+        let camera = self.camera.position;
+        let mut shortest = f32::INFINITY;
+        for t in &self.triangles {
+            if self.materials[t.material as usize].is_emissive() {
+                shortest = shortest.min(distance_to_triangle(camera, t.positions));
+            }
+        }
+        for l in &self.point_lights {
+            shortest = shortest.min(camera.distance(l.position));
+        }
+        let (lo, hi) = self.bounds();
+        (shortest, (max_bounces as f32 + 1.0) * (hi - lo).length())
+    }
+
     /// Length of the bounds' diagonal (m): the scene's scale for relative tolerances.
     pub fn extent(&self) -> f32 {
         let (lo, hi) = self.bounds();
         (hi - lo).length().max(f32::MIN_POSITIVE)
+    }
+}
+
+/// Distance from `p` to the closest point of triangle `t` (Ericson, Real-Time Collision
+/// Detection, 5.1.5).
+pub fn distance_to_triangle(p: Vec3, t: [Vec3; 3]) -> f32 {
+    let [a, b, c] = t;
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return p.distance(a);
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return p.distance(b);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return p.distance(a + ab * (d1 / (d1 - d3)));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return p.distance(c);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return p.distance(a + ac * (d2 / (d2 - d6)));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return p.distance(b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    p.distance(a + ab * (vb * denom) + ac * (vc * denom))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn point_triangle_distance_covers_every_region() {
+        let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        assert_eq!(distance_to_triangle(Vec3::new(0.2, 0.2, 3.0), t), 3.0, "face");
+        assert_eq!(distance_to_triangle(Vec3::new(-1.0, -1.0, 0.0), t), 2f32.sqrt(), "vertex a");
+        assert_eq!(distance_to_triangle(Vec3::new(2.0, 0.0, 0.0), t), 1.0, "vertex b");
+        assert_eq!(distance_to_triangle(Vec3::new(0.0, 3.0, 0.0), t), 2.0, "vertex c");
+        assert_eq!(distance_to_triangle(Vec3::new(0.5, -2.0, 0.0), t), 2.0, "edge ab");
+        assert_eq!(distance_to_triangle(Vec3::new(-2.0, 0.5, 0.0), t), 2.0, "edge ac");
+        assert!((distance_to_triangle(Vec3::new(1.0, 1.0, 0.0), t) - 0.5f32.sqrt()).abs() < 1e-6, "edge bc");
     }
 }

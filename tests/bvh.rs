@@ -1,0 +1,178 @@
+//! The stackless BVH: the CPU traversal against brute force, the GPU traversal against the CPU
+//! twin, and the split (multi-binding) layout against the single-binding one.
+
+mod common;
+
+use gatetrace::bvh::Bvh;
+use gatetrace::bvh::traverse::{brute_force_closest, trace_any, trace_closest};
+use gatetrace::gpu::layout::{NONE, Triangle};
+use gatetrace::integrator::{PathTracer, RenderSettings};
+use gatetrace::rng::Rng;
+use glam::Vec3;
+
+/// A soup of `n` random triangles in [-1, 1]^3 with sizes spread over two orders of magnitude.
+fn random_soup(n: usize, seed: u32) -> Vec<[Vec3; 3]> {
+    let mut rng = Rng::new(seed, 0, 0);
+    let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+    (0..n)
+        .map(|i| {
+            let centre = v() * 2.0 - 1.0;
+            let size = 0.01 + 0.3 * (i % 7) as f32 / 7.0;
+            [centre + (v() - 0.5) * size, centre + (v() - 0.5) * size, centre + (v() - 0.5) * size]
+        })
+        .collect()
+}
+
+fn bvh_triangles(soup: &[[Vec3; 3]], bvh: &Bvh) -> Vec<Triangle> {
+    bvh.order
+        .iter()
+        .map(|&i| {
+            let [a, b, c] = soup[i as usize];
+            Triangle { v0: a, e1: b - a, e2: c - a, source: i, ..Default::default() }
+        })
+        .collect()
+}
+
+/// Random rays from inside and around the soup; one in four ignores a random triangle.
+fn random_rays(n: usize, triangles: usize, seed: u32) -> Vec<(Vec3, Vec3, f32, u32)> {
+    let mut rng = Rng::new(seed, 1, 0);
+    (0..n)
+        .map(|i| {
+            let o = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 3.0 - 1.5;
+            let d = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5).normalize_or(Vec3::X);
+            let t_max = if i % 3 == 0 { 0.5 + rng.next_f32() } else { 1e30 };
+            let ignore = if i % 4 == 0 { (rng.next_f32() * triangles as f32) as u32 } else { NONE };
+            (o, d, t_max, ignore)
+        })
+        .collect()
+}
+
+#[test]
+fn bvh_layout_is_a_valid_stackless_tree() {
+    let soup = random_soup(3000, 7);
+    let bvh = Bvh::build(&soup);
+    // Every triangle appears exactly once.
+    let mut seen = vec![false; soup.len()];
+    for &i in &bvh.order {
+        assert!(!seen[i as usize], "triangle {i} in two leaves");
+        seen[i as usize] = true;
+    }
+    assert!(seen.iter().all(|&s| s));
+    // Skip links point forward and past the node; inner nodes contain their children's boxes.
+    let nodes = &bvh.nodes;
+    assert_eq!(nodes[0].skip as usize, nodes.len());
+    for (i, n) in nodes.iter().enumerate() {
+        assert!(n.skip as usize > i && n.skip as usize <= nodes.len());
+        if n.leaf == 0 {
+            let child = &nodes[i + 1];
+            assert!(child.min.cmpge(n.min).all() && child.max.cmple(n.max).all());
+            let second = &nodes[child.skip as usize];
+            assert!(second.min.cmpge(n.min).all() && second.max.cmple(n.max).all());
+            assert_eq!(second.skip, n.skip, "second child's subtree must end where its parent's does");
+        } else {
+            for k in n.leaf_range().unwrap() {
+                for p in soup[bvh.order[k as usize] as usize] {
+                    assert!(p.cmpge(n.min - 1e-6).all() && p.cmple(n.max + 1e-6).all());
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn cpu_traversal_matches_brute_force() {
+    let soup = random_soup(2000, 11);
+    let bvh = Bvh::build(&soup);
+    let tris = bvh_triangles(&soup, &bvh);
+    let mut hits = 0;
+    for (o, d, t_max, ignore) in random_rays(20_000, tris.len(), 3) {
+        let a = trace_closest(&bvh.nodes, &tris, o, d, t_max, ignore);
+        let b = brute_force_closest(&tris, o, d, t_max, ignore);
+        // Same intersection routine, so equal hits are bitwise equal; ties in t may pick either.
+        assert_eq!(a.t, b.t, "closest distance differs for ray {o} {d}");
+        if a.triangle != b.triangle {
+            assert_ne!(a.triangle, NONE);
+        }
+        let any = trace_any(&bvh.nodes, &tris, o, d, t_max, ignore, NONE);
+        assert_eq!(any, b.triangle != NONE, "any-hit disagrees with closest-hit for ray {o} {d}");
+        hits += (b.triangle != NONE) as usize;
+    }
+    assert!(hits > 2000 && hits < 18_000, "the ray set should both hit and miss ({hits} hits)");
+}
+
+#[test]
+fn gpu_traversal_matches_cpu_twin() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    // The probe traverses the BVH bound by a tracer; use the Cornell box plus rays from inside.
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
+    let rays = random_rays(4096, scene.triangles.len(), 5);
+    let mut input = Vec::new();
+    for (o, d, t_max, ignore) in &rays {
+        input.push([o.x * 0.6, o.y * 0.6, o.z * 0.6, t_max.min(1e30)]);
+        input.push([d.x, d.y, d.z, f32::from_bits(*ignore)]);
+    }
+    let out = common::run_probe(&ctx, &tracer, "probe_trace", &[], &input, 2 * rays.len());
+    let mut hits = 0;
+    for (i, (o, d, t_max, ignore)) in rays.iter().enumerate() {
+        let o = *o * 0.6;
+        let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, o, *d, *t_max, *ignore);
+        let gpu_t = out[2 * i][0];
+        let gpu_tri = out[2 * i][1].to_bits();
+        assert_eq!(gpu_tri, cpu.triangle, "ray {i}: GPU hit triangle {gpu_tri}, CPU {}", cpu.triangle);
+        if cpu.triangle != NONE {
+            hits += 1;
+            assert!((gpu_t - cpu.t).abs() <= 1e-5 * cpu.t.max(1.0), "ray {i}: t {gpu_t} vs {}", cpu.t);
+            assert!((out[2 * i][2] - cpu.b1).abs() < 1e-4 && (out[2 * i][3] - cpu.b2).abs() < 1e-4);
+        }
+        let cpu_any = trace_any(&scene.bvh.nodes, &scene.triangles, o, *d, *t_max, *ignore, NONE);
+        assert_eq!(out[2 * i + 1][0] == 1.0, cpu_any, "ray {i}: any-hit differs");
+    }
+    assert!(hits > 1000, "too few hits ({hits}) to test anything");
+}
+
+#[test]
+fn split_buffers_render_identically() {
+    use common::gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
+    use gatetrace::film::Gate;
+    use gatetrace::gpu::resources::ChunkLayout;
+    use gatetrace::scene::{PreparedScene, load_gltf};
+    // A soup of 60 triangles in front of an emitter, seen by a camera on +z.
+    let soup = random_soup(60, 3);
+    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
+    for t in &soup {
+        for p in t {
+            mesh.indices.push(mesh.positions.len() as u32);
+            mesh.positions.push((*p * 0.5).to_array());
+        }
+    }
+    let gltf = Scene {
+        meshes: vec![mesh, quad_z(1.0, -1.0, true, 1)],
+        materials: vec![Material { double_sided: true, ..Material::diffuse([0.7, 0.6, 0.5]) }, Material::emitter(3.0)],
+        camera: Some(Camera { position: [0.0, 0.0, 3.0], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.8 }),
+        point_lights: vec![],
+    };
+    let dir = common::scratch_dir("split_buffers");
+    let scene = PreparedScene::new(load_gltf(&gltf.write(&dir, "soup.gltf")).unwrap()).unwrap();
+    // Find a binding limit that splits every array into 2-4 chunks; the transient film's size
+    // is tuned with its bin count.
+    let (t, n) = (scene.triangles.len() as u64, scene.bvh.nodes.len() as u64);
+    let (width, height) = (4u32, 4u32);
+    let splits = |limit: u64, bins: u64| {
+        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("film", 3 * 16 * bins, 4)]
+            .iter()
+            .all(|&(name, count, size)| ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2))
+    };
+    let (limit, bins) = (64..4096u64)
+        .flat_map(|l| (1..64u64).map(move |b| (l, b)))
+        .find(|&(l, b)| splits(l, b))
+        .expect("some binding limit splits every array");
+    let gate = Gate::Transient { start: 0.0, width: 10.0 / bins as f64, bins: bins as u32 };
+    let base = RenderSettings { width, height, max_bounces: 3, seed: 9, gate, ..Default::default() };
+    let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
+    let ctx = common::gpu();
+    let a = common::render_films(&ctx, &scene, &base, 1, 16).remove(0);
+    let b = common::render_films(&ctx, &scene, &split, 1, 16).remove(0);
+    assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the test image is nearly black");
+    assert_eq!(a.data, b.data, "limit {limit} B, {bins} bins: split layout changed the image");
+}

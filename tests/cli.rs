@@ -1,0 +1,110 @@
+//! The `gatetrace` command: outputs with their metadata, help text, and errors for bad input.
+
+mod common;
+
+use std::process::{Command, Output};
+
+use gatetrace::film::output::read_npy_f32;
+
+fn gatetrace(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gatetrace")).args(args).output().expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn help_explains_units() {
+    let o = gatetrace(&["render", "--help"]);
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout).split_whitespace().collect::<Vec<_>>().join(" ");
+    for needle in ["metres", "ps", "box:A..B", "transient:START,WIDTH,BINS", "--spp", "--time", "[H, W, T, 3]"] {
+        assert!(text.contains(needle), "render --help should mention `{needle}`:\n{text}");
+    }
+}
+
+#[test]
+fn npy_output_has_the_documented_layout_and_metadata() {
+    let dir = common::scratch_dir("cli_npy");
+    let out = dir.join("steady.npy");
+    let o = gatetrace(&["render", "--res", "12x8", "--spp", "4", "--max-bounces", "2", "--seed", "5", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (shape, data) = read_npy_f32(&out).unwrap();
+    assert_eq!(shape, vec![8, 12, 3], "[H, W, 3]");
+    assert!(data.iter().all(|v| v.is_finite()) && data.iter().any(|&v| v > 0.0));
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("steady.json")).unwrap()).unwrap();
+    for key in ["scene", "method", "gate", "spp", "seed", "elapsed_seconds", "adapter"] {
+        assert!(meta.get(key).is_some(), "metadata lacks `{key}`: {meta}");
+    }
+    assert_eq!(meta["spp"], "4");
+    assert_eq!(meta["seed"], "5");
+    assert_eq!(meta["method"], "path");
+
+    let cube = dir.join("cube.npy");
+    let o = gatetrace(&["render", "--res", "6x4", "--spp", "2", "--gate", "transient:1.9,0.5,7", "--out", cube.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (shape, _) = read_npy_f32(&cube).unwrap();
+    assert_eq!(shape, vec![4, 6, 7, 3], "[H, W, T, 3]");
+}
+
+#[test]
+fn exr_output_has_a_layer_per_bin_and_metadata() {
+    use exr::prelude::*;
+    let dir = common::scratch_dir("cli_exr");
+    let out = dir.join("cube.exr");
+    let o = gatetrace(&["render", "--res", "6x4", "--spp", "2", "--gate", "transient:6.5ns,200ps,5", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let image = read_all_data_from_file(&out).unwrap();
+    assert_eq!(image.layer_data.len(), 5, "one layer per bin");
+    // Custom attributes are stored in the headers; the reader files them under the layers.
+    let attribute = |key: &str| {
+        let key = Text::from(key);
+        image.attributes.other.get(&key).or_else(|| image.layer_data[0].attributes.other.get(&key)).cloned()
+    };
+    let gate = attribute("gatetrace.gate").expect("gate attribute");
+    assert!(matches!(&gate, AttributeValue::Text(t) if t.to_string() == "transient:6.5ns,200ps,5"), "{gate:?}");
+    assert!(attribute("gatetrace.adapter").is_some());
+    assert!(attribute("gatetrace.spp").is_some());
+    for layer in &image.layer_data {
+        assert_eq!(layer.size, Vec2(6, 4));
+        assert_eq!(layer.channel_data.list.len(), 3);
+    }
+}
+
+#[test]
+fn time_budget_renders_whole_passes() {
+    let dir = common::scratch_dir("cli_time");
+    let out = dir.join("timed.npy");
+    let o = gatetrace(&["render", "--res", "8x8", "--time", "0.5", "--samples-per-wave", "3", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
+    let spp: u64 = meta["spp"].as_str().unwrap().parse().unwrap();
+    assert!(spp >= 3 && spp % 3 == 0, "whole waves of 3 samples, got {spp}");
+}
+
+#[test]
+fn bad_input_gives_clear_errors() {
+    let dir = common::scratch_dir("cli_errors");
+    let out = dir.join("x.npy");
+    let out = out.to_str().unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (&["render", "/nonexistent/scene.gltf", "--out", out], "/nonexistent/scene.gltf"),
+        (&["render", "--gate", "box:3.2..3.1", "--out", out], "must exceed"),
+        (&["render", "--gate", "wobble:1", "--out", out], "unknown gate kind"),
+        (&["render", "--gate", "box:1x..2", "--out", out], "not a length"),
+        (&["render", "--gate", "table:/nonexistent.csv", "--out", out], "/nonexistent.csv"),
+        (&["render", "--method", "direct", "--out", out], "not yet available"),
+        (&["render", "--method", "ellipsoidal", "--out", out], "not yet available"),
+        (&["render", "--out", "image.png"], ".exr or .npy"),
+        (&["render", "--spp", "0", "--out", out], "at least 1"),
+        (&["render", "--res", "0x4", "--out", out], "resolution"),
+    ];
+    for (args, needle) in cases {
+        let o = gatetrace(args);
+        assert!(!o.status.success(), "{args:?} must fail");
+        let e = stderr(&o);
+        assert!(e.contains(needle), "{args:?}: error should mention `{needle}`, got:\n{e}");
+        assert!(!e.contains("panicked"), "{args:?} panicked:\n{e}");
+    }
+}

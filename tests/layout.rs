@@ -1,0 +1,58 @@
+//! Every struct shared with WGSL has the same member names, offsets and size on both sides:
+//! the WGSL is reflected with naga and compared with `offset_of!` on the Rust twin.
+
+use std::mem::{offset_of, size_of};
+
+use gatetrace::gpu::layout::*;
+
+/// (struct name, size, [(member, offset)]) of the Rust twins, in declaration order.
+macro_rules! rust_layout {
+    ($($ty:ident { $($field:ident),* $(,)? })*) => {
+        vec![$((stringify!($ty), size_of::<$ty>(), vec![$((stringify!($field), offset_of!($ty, $field))),*])),*]
+    };
+}
+
+#[test]
+fn wgsl_structs_match_rust_structs() {
+    let rust = rust_layout! {
+        Triangle { v0, material, e1, light, e2, source }
+        TriangleShading { n0, u0, n1, v0, n2, u1, v1, u2, v2, flags }
+        BvhNode { min, skip, max, leaf }
+        Material { base_color, base_color_texture, emission, flags, metallic, roughness, reserved0, reserved1 }
+        TextureInfo { offset, width, height, wrap }
+        Light { position, kind, emission, triangle, area, select_pdf, flags, reserved }
+        Camera { position, tan_half_fov_y, right, aspect, up, reserved0, forward, reserved1 }
+        Gate { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }
+        RenderParams { camera, gate, width, height, seed, max_bounces, rr_depth, light_count, node_count,
+                       triangle_count, ray_epsilon, reserved0, reserved1, reserved2 }
+        WaveParams { sample_base, samples, slot_count, reserved }
+        PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, pixel, rng, origin_triangle, reserved }
+        Hit { t, triangle, b1, b2 }
+        ShadowRay { origin, t_max, direction, slot, ignore0, ignore1, reserved0, reserved1 }
+        Contribution { radiance, path_length }
+        QueueCounters { rays, next_rays, shadow_rays, reserved }
+    };
+    let module = naga::front::wgsl::parse_str(LAYOUT_WGSL).expect("layout.wgsl parses");
+    let mut wgsl_structs = Vec::new();
+    for (_, ty) in module.types.iter() {
+        if let (Some(name), naga::TypeInner::Struct { members, span }) = (&ty.name, &ty.inner) {
+            let members: Vec<(String, usize)> =
+                members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect();
+            wgsl_structs.push((name.clone(), *span as usize, members));
+        }
+    }
+    // Structs used only inside kernels (Frame, Surface, LightSample) live in other modules.
+    for (name, size, members) in &rust {
+        let (_, wgsl_size, wgsl_members) = wgsl_structs
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .unwrap_or_else(|| panic!("struct {name} is not in shaders/lib/layout.wesl"));
+        let rust_members: Vec<(String, usize)> = members.iter().map(|(m, o)| (m.to_string(), *o)).collect();
+        assert_eq!(&rust_members, wgsl_members, "member names or offsets of {name} differ (Rust vs WGSL)");
+        assert_eq!(size, wgsl_size, "size of {name} differs (Rust vs WGSL)");
+    }
+    let rust_names: Vec<&str> = rust.iter().map(|(n, _, _)| *n).collect();
+    for (name, _, _) in &wgsl_structs {
+        assert!(rust_names.contains(&name.as_str()), "WGSL struct {name} has no Rust twin in src/gpu/layout.rs");
+    }
+}

@@ -1,0 +1,318 @@
+//! Sampling routines: chi-square tests of the CPU twins against their densities, and the WGSL
+//! versions against the CPU twins on lavapipe (probe kernels).
+
+mod common;
+
+use common::stats::{chi2_sf, chi2_test, normal_two_sided_p, sidak, t_critical, t_two_sided_p};
+use gatetrace::film::Gate;
+use gatetrace::integrator::{PathTracer, RenderSettings};
+use gatetrace::rng::{Rng, rng_seed};
+use gatetrace::sampling::{Frame, power_heuristic, sample_cosine_hemisphere, sample_triangle_barycentrics};
+use glam::{Vec2, Vec3};
+use std::f64::consts::PI;
+
+/// Family-wise false-alarm rate of the chi-square tests in this file.
+const ALPHA: f64 = 0.01;
+/// Number of chi-square tests in this file (for the Sidak correction).
+const CHI2_TESTS: usize = 3;
+
+#[test]
+fn statistics_helpers_match_tabulated_values() {
+    assert!((normal_two_sided_p(1.959964) - 0.05).abs() < 1e-6);
+    assert!((chi2_sf(3.841459, 1.0) - 0.05).abs() < 1e-6);
+    assert!((chi2_sf(124.342, 100.0) - 0.05).abs() < 1e-4);
+    assert!((t_critical(0.05, 10.0) - 2.228139).abs() < 1e-4);
+    assert!((t_critical(0.01, 30.0) - 2.749996).abs() < 1e-4);
+    assert!((t_two_sided_p(2.0, 1e6) - normal_two_sided_p(2.0)).abs() < 1e-5);
+}
+
+#[test]
+fn cosine_hemisphere_sampling_follows_cos_over_pi() {
+    let (nc, np) = (20usize, 40usize);
+    let n = 400_000;
+    let mut observed = vec![0.0; nc * np];
+    let mut rng = Rng::new(1, 2, 3);
+    for _ in 0..n {
+        let d = sample_cosine_hemisphere(rng.next_vec2());
+        assert!((d.length() - 1.0).abs() < 1e-5 && d.z >= 0.0);
+        let c = ((d.z as f64 * nc as f64) as usize).min(nc - 1);
+        let phi = (d.y as f64).atan2(d.x as f64).rem_euclid(2.0 * PI);
+        let p = ((phi / (2.0 * PI) * np as f64) as usize).min(np - 1);
+        observed[c * np + p] += 1.0;
+    }
+    // P(cell) = (dphi / pi) (c1^2 - c0^2) / 2 for cos(theta) in [c0, c1).
+    let mut expected = vec![0.0; nc * np];
+    for c in 0..nc {
+        let (c0, c1) = (c as f64 / nc as f64, (c + 1) as f64 / nc as f64);
+        for p in 0..np {
+            expected[c * np + p] = n as f64 * (2.0 * PI / np as f64) / PI * 0.5 * (c1 * c1 - c0 * c0);
+        }
+    }
+    let (stat, dof, p) = chi2_test(&observed, &expected);
+    assert!(p > sidak(ALPHA, CHI2_TESTS), "chi2 = {stat:.1} with {dof} dof, p = {p:.2e}");
+}
+
+#[test]
+fn triangle_sampling_is_uniform() {
+    let g = 24usize;
+    let n = 400_000;
+    let mut observed = vec![0.0; g * g];
+    let mut rng = Rng::new(4, 5, 6);
+    for _ in 0..n {
+        let b = sample_triangle_barycentrics(rng.next_vec2());
+        assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6);
+        let (i, j) = (((b.x * g as f32) as usize).min(g - 1), ((b.y * g as f32) as usize).min(g - 1));
+        observed[i * g + j] += 1.0;
+    }
+    // Area of cell (i, j) inside b1 + b2 <= 1, over the triangle's area 1/2.
+    let expected: Vec<f64> = (0..g * g)
+        .map(|k| {
+            let (i, j) = (k / g, k % g);
+            let inside = if i + j + 2 <= g { 1.0 } else if i + j + 1 == g { 0.5 } else { 0.0 };
+            n as f64 * inside / (g * g) as f64 * 2.0
+        })
+        .collect();
+    let (stat, dof, p) = chi2_test(&observed, &expected);
+    assert!(p > sidak(ALPHA, CHI2_TESTS), "chi2 = {stat:.1} with {dof} dof, p = {p:.2e}");
+}
+
+/// A light table over three emissive triangles of different areas and radiances and one point
+/// light, built from a scene assembled in memory.
+fn light_test_scene() -> gatetrace::scene::Scene {
+    use gatetrace::scene::{CameraDesc, MaterialDesc, PointLight, Scene, SceneTriangle};
+    let material = |e: f32| MaterialDesc {
+        name: String::new(),
+        base_color: Vec3::ZERO,
+        base_color_texture: None,
+        emission: Vec3::new(e, e, 0.5 * e),
+        double_sided: false,
+        metallic: 0.0,
+        roughness: 1.0,
+    };
+    let tri = |a: [f32; 3], b: [f32; 3], c: [f32; 3], m: u32| SceneTriangle {
+        positions: [a.into(), b.into(), c.into()],
+        normals: None,
+        uvs: [Vec2::ZERO; 3],
+        material: m,
+    };
+    Scene {
+        source: "memory".into(),
+        triangles: vec![
+            tri([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0),
+            tri([2.0, 0.0, 1.0], [2.0, 3.0, 1.0], [2.0, 0.0, 2.0], 1),
+            tri([0.0, 0.0, -1.0], [0.2, 0.1, -1.0], [0.0, 0.3, -1.2], 2),
+            tri([5.0, 5.0, 5.0], [6.0, 5.0, 5.0], [5.0, 6.0, 5.0], 3),
+        ],
+        materials: vec![material(1.0), material(4.0), material(30.0), material(0.0)],
+        textures: vec![],
+        point_lights: vec![PointLight { position: Vec3::new(0.0, 3.0, 0.0), intensity: Vec3::splat(0.2) }],
+        camera: CameraDesc { position: Vec3::Z, right: Vec3::X, up: Vec3::Y, forward: -Vec3::Z, yfov: 1.0 },
+        dropped_degenerate: 0,
+    }
+}
+
+#[test]
+fn light_sampling_follows_power_and_area() {
+    let scene = light_test_scene();
+    let prepared = gatetrace::scene::PreparedScene::new(scene).unwrap();
+    let table = &prepared.lights;
+    assert_eq!(table.lights.len(), 4, "three emissive triangles and one point light");
+    // Selection probabilities are proportional to power: pi A mean(L) for one-sided emitters,
+    // 4 pi mean(I) for point lights.
+    let power: Vec<f64> = table
+        .lights
+        .iter()
+        .map(|l| {
+            let mean = (l.emission.x + l.emission.y + l.emission.z) as f64 / 3.0;
+            if l.kind == gatetrace::gpu::layout::LIGHT_POINT { 4.0 * PI * mean } else { PI * l.area as f64 * mean }
+        })
+        .collect();
+    let total: f64 = power.iter().sum();
+    for (l, p) in table.lights.iter().zip(&power) {
+        assert!((l.select_pdf as f64 - p / total).abs() < 1e-6);
+    }
+    // Sample points; cell = (light, quarter of the triangle by midpoint subdivision).
+    let n = 400_000;
+    let cells = 4 * table.lights.len();
+    let mut observed = vec![0.0; cells];
+    let mut rng = Rng::new(7, 8, 9);
+    for _ in 0..n {
+        let s = table.sample(&prepared.triangles, rng.next_f32(), rng.next_vec2());
+        let (light, quarter) = if s.is_point {
+            let l = table.lights.iter().position(|l| l.position == s.position).unwrap();
+            (l, 0)
+        } else {
+            let l = table.lights.iter().position(|l| l.triangle == s.triangle).unwrap();
+            let t = &prepared.triangles[s.triangle as usize];
+            assert!((s.pdf - table.lights[l].select_pdf / table.lights[l].area).abs() < 1e-6 * s.pdf);
+            // Barycentrics of the point: solve p - v0 = b1 e1 + b2 e2 in the least-squares sense.
+            let d = s.position - t.v0;
+            let (a11, a12, a22) = (t.e1.dot(t.e1), t.e1.dot(t.e2), t.e2.dot(t.e2));
+            let (r1, r2) = (t.e1.dot(d), t.e2.dot(d));
+            let det = a11 * a22 - a12 * a12;
+            let b1 = (r1 * a22 - r2 * a12) / det;
+            let b2 = (a11 * r2 - a12 * r1) / det;
+            let b0 = 1.0 - b1 - b2;
+            let q = if b1 > 0.5 { 1 } else if b2 > 0.5 { 2 } else if b0 > 0.5 { 0 } else { 3 };
+            (l, q)
+        };
+        observed[4 * light + quarter] += 1.0;
+    }
+    let mut expected = vec![0.0; cells];
+    for (i, l) in table.lights.iter().enumerate() {
+        if l.kind == gatetrace::gpu::layout::LIGHT_POINT {
+            expected[4 * i] = n as f64 * l.select_pdf as f64;
+        } else {
+            for q in 0..4 {
+                expected[4 * i + q] = n as f64 * l.select_pdf as f64 / 4.0;
+            }
+        }
+    }
+    let (stat, dof, p) = chi2_test(&observed, &expected);
+    assert!(p > sidak(ALPHA, CHI2_TESTS), "chi2 = {stat:.1} with {dof} dof, p = {p:.2e}");
+}
+
+#[test]
+fn frames_are_orthonormal() {
+    let mut rng = Rng::new(3, 3, 3);
+    for _ in 0..10_000 {
+        let n = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5).normalize();
+        let f = Frame::from_normal(n);
+        for (a, b) in [(f.t, f.b), (f.t, f.n), (f.b, f.n)] {
+            assert!(a.dot(b).abs() < 1e-5);
+        }
+        for v in [f.t, f.b] {
+            assert!((v.length() - 1.0).abs() < 1e-5);
+        }
+        assert!((f.t.cross(f.b) - n).length() < 1e-4, "right-handed frame");
+    }
+}
+
+#[test]
+fn power_heuristic_is_a_partition_of_unity() {
+    let mut rng = Rng::new(1, 1, 1);
+    for _ in 0..1000 {
+        let (a, b) = (rng.next_f32() * 10.0, rng.next_f32() * 10.0);
+        assert!((power_heuristic(a, b) + power_heuristic(b, a) - 1.0).abs() < 1e-6);
+    }
+    assert_eq!(power_heuristic(0.0, 0.0), 0.0);
+}
+
+// ---- WGSL against the CPU twins ----
+
+/// Precision the Vulkan spec guarantees for sin/cos on [-pi, pi]: 2^-11 absolute.
+const SIN_COS_ABS: f32 = 1.0 / 2048.0;
+/// Allowance for correctly-rounded-ish sqrt, division and normalize (a few ulp).
+const FEW_ULP: f32 = 4e-7;
+
+fn tracer_for<'a>(ctx: &'a gatetrace::gpu::GpuContext, scene: &gatetrace::scene::PreparedScene, gate: Gate) -> PathTracer<'a> {
+    PathTracer::new(ctx, scene, &RenderSettings { width: 32, height: 24, gate, ..Default::default() }).unwrap()
+}
+
+fn uniform_inputs(n: usize, seed: u32) -> Vec<[f32; 4]> {
+    let mut rng = Rng::new(seed, 0, 0);
+    (0..n).map(|_| [rng.next_f32(), rng.next_f32(), rng.next_f32(), rng.next_f32()]).collect()
+}
+
+fn assert_close(what: &str, i: usize, gpu: f32, cpu: f32, abs: f32, rel: f32) {
+    assert!(
+        (gpu - cpu).abs() <= abs + rel * cpu.abs(),
+        "{what}, record {i}: GPU {gpu} vs CPU {cpu} (abs {abs}, rel {rel})"
+    );
+}
+
+#[test]
+fn wgsl_sampling_matches_cpu_twins() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let input = uniform_inputs(4096, 1);
+    let run = |f: u32, input: &[[f32; 4]]| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len());
+
+    for (i, (x, g)) in input.iter().zip(run(0, &input)).enumerate() {
+        let c = sample_cosine_hemisphere(Vec2::new(x[0], x[1]));
+        for k in 0..3 {
+            assert_close("cosine hemisphere", i, g[k], c[k], SIN_COS_ABS, FEW_ULP);
+        }
+    }
+    for (i, (x, g)) in input.iter().zip(run(1, &input)).enumerate() {
+        let c = sample_triangle_barycentrics(Vec2::new(x[0], x[1]));
+        assert_close("triangle barycentrics", i, g[0], c.x, 0.0, FEW_ULP);
+        assert_close("triangle barycentrics", i, g[1], c.y, 0.0, FEW_ULP);
+    }
+    let normals: Vec<[f32; 4]> = input.iter().map(|x| [x[0] - 0.5, x[1] - 0.5, x[2] - 0.5, 0.0]).collect();
+    for (i, (x, g)) in normals.iter().zip(run(2, &normals)).enumerate() {
+        let f = Frame::from_normal(Vec3::new(x[0], x[1], x[2]).normalize());
+        let c = f.to_world(Vec3::new(0.25, -0.5, 0.75));
+        for k in 0..3 {
+            assert_close("frame", i, g[k], c[k], 1e-6, 1e-5);
+        }
+    }
+    let seeds: Vec<[f32; 4]> = (0..4096u32).map(|i| [f32::from_bits(i * 7919), f32::from_bits(i % 97), f32::from_bits(i / 3), 0.0]).collect();
+    for (i, (x, g)) in seeds.iter().zip(run(3, &seeds)).enumerate() {
+        let mut rng = Rng { state: rng_seed(x[0].to_bits(), x[1].to_bits(), x[2].to_bits()) };
+        let c = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+        assert_eq!([g[0], g[1], g[2]], c, "rng record {i}");
+        assert_eq!(g[3].to_bits(), rng.state, "rng state {i}");
+    }
+    let pairs: Vec<[f32; 4]> = input.iter().map(|x| [x[0] * 5.0, x[1] * 0.1, 0.0, 0.0]).collect();
+    for (i, (x, g)) in pairs.iter().zip(run(8, &pairs)).enumerate() {
+        assert_close("power heuristic", i, g[0], power_heuristic(x[0], x[1]), 0.0, FEW_ULP * 4.0);
+    }
+}
+
+#[test]
+fn wgsl_camera_and_lights_match_cpu_twins() {
+    use gatetrace::scene::camera::camera_direction;
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let run = |f: u32, input: &[[f32; 4]]| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len());
+    let camera = scene.scene.camera.to_gpu(32, 24);
+    let film: Vec<[f32; 4]> = uniform_inputs(2048, 2).iter().map(|x| [x[0] * 32.0, x[1] * 24.0, 0.0, 0.0]).collect();
+    for (i, (x, g)) in film.iter().zip(run(5, &film)).enumerate() {
+        let c = camera_direction(&camera, Vec2::new(x[0], x[1]), 32, 24);
+        for k in 0..3 {
+            assert_close("camera direction", i, g[k], c[k], 1e-6, 1e-5);
+        }
+    }
+    let input = uniform_inputs(2048, 3);
+    for (i, (x, g)) in input.iter().zip(run(6, &input)).enumerate() {
+        let c = scene.lights.sample(&scene.triangles, x[0], Vec2::new(x[1], x[2]));
+        for k in 0..3 {
+            assert_close("light sample position", i, g[k], c.position[k], 1e-6, 1e-5);
+        }
+        assert_close("light sample pdf", i, g[3], c.pdf, 0.0, 1e-6);
+    }
+}
+
+#[test]
+fn wgsl_gates_match_cpu_twin() {
+    use gatetrace::film::gate::{gate_bin, gate_weight};
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let dir = common::scratch_dir("wgsl_gates");
+    let table = dir.join("trapezoid.csv");
+    std::fs::write(&table, "length_m,weight\n2.0,0\n2.5,1\n3.0,1\n3.2,-0.5\n4.0,0\n").unwrap();
+    let gates = [
+        Gate::parse("box:2.5..3.1").unwrap(),
+        Gate::parse("gaussian:3.0,0.1").unwrap(),
+        Gate::parse("cw:50e6,30").unwrap(),
+        Gate::parse(&format!("table:{}", table.display())).unwrap(),
+        Gate::parse("transient:1.94,0.1,20").unwrap(),
+        Gate::None,
+    ];
+    let lengths: Vec<[f32; 4]> = uniform_inputs(4096, 4).iter().map(|x| [1.5 + 3.5 * x[0], 0.0, 0.0, 0.0]).collect();
+    for gate in gates {
+        let tracer = tracer_for(&ctx, &scene, gate.clone());
+        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 4.0)], &lengths, lengths.len());
+        let (kind, g, tab) = (gate.kind(), gate.to_gpu(), gate.table());
+        for (i, (x, o)) in lengths.iter().zip(out).enumerate() {
+            let w = gate_weight(kind, &g, &tab, x[0]);
+            // exp and cos differ between libm and the device within the Vulkan precision.
+            let abs = if kind == gatetrace::film::GateKind::Cw { SIN_COS_ABS } else { 1e-6 };
+            assert_close(&format!("{} weight", gate.describe()), i, o[0], w, abs, 1e-5);
+            assert_eq!(o[1], gate_bin(kind, &g, x[0]) as f32, "{} bin of {}", gate.describe(), x[0]);
+        }
+    }
+}
