@@ -108,3 +108,19 @@ fn bad_input_gives_clear_errors() {
         assert!(!e.contains("panicked"), "{args:?} panicked:\n{e}");
     }
 }
+
+#[test]
+fn without_an_adapter_the_error_says_how_to_get_one() {
+    // Point the Vulkan loader at no driver at all.
+    let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+        .args(["render", "--res", "4x4", "--spp", "1", "--out", "/dev/null.npy"])
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env_remove("WGPU_ADAPTER_NAME")
+        .env_remove("WGPU_BACKEND")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("no GPU adapter") && e.contains("mesa-vulkan-drivers"), "{e}");
+}
