@@ -87,7 +87,7 @@ fn first_return_of_a_plane_lit_from_the_camera() {
     let settings = RenderSettings { width: w, height: h, max_bounces: 3, gate, ..Default::default() };
     let ctx = common::gpu();
     let batches = 16;
-    let (stats, _) = common::render_batches(&ctx, &scene, &settings, batches, 16);
+    let stats = common::render_batches(&ctx, &scene, &settings, batches, 16);
     let (mean, var) = (stats.mean(), stats.var_of_mean());
     let t = (yfov / 2.0).tan();
     let pixel = 2.0 * t / w as f64;
@@ -156,4 +156,117 @@ fn gates_no_path_can_reach_are_black_without_tracing() {
     }
     let reachable = RenderSettings { gate: Gate::Box { start: 1.9, end: 1.95 }, max_bounces: 5, ..Default::default() };
     assert!(unreachable_gate(&scene, &reachable).is_none());
+}
+
+#[test]
+fn signed_and_smooth_gates_weigh_the_same_paths() {
+    // Same seed, same paths; only W differs. cw with phase 180 deg is exactly the negative of
+    // phase 0 (cos(x + pi) = -cos(x) up to f32 rounding of the argument); a Gaussian far wider
+    // than the scene weighs every path by 1 - O(1e-12), i.e. gives the steady image.
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 4, seed: 8, ..Default::default() };
+    let render = |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, 8).remove(0);
+    let steady = render(Gate::None);
+    let cw0 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 0.0 });
+    let cw180 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 180.0 });
+    let mut negative = 0;
+    for ((a, b), s) in cw0.data.iter().zip(&cw180.data).zip(&steady.data) {
+        // |W| <= 1 per term; the two cosines differ by at most a few f32 ulps of the argument.
+        assert!((a + b).abs() <= 1e-5 * s + 1e-7, "cw 0 deg {a} vs 180 deg {b}");
+        assert!(a.abs() <= s * (1.0 + 1e-5) + 1e-7, "|cw| cannot exceed the steady value");
+        negative += (*a < 0.0) as usize;
+    }
+    assert!(negative > 0, "at 100 MHz (3 m wavelength) some pixels must come out negative");
+    let wide = render(Gate::Gaussian { mean: 3.0, sigma: 1e6 });
+    for (a, s) in wide.data.iter().zip(&steady.data) {
+        assert!((a - s).abs() <= 1e-6 * s, "wide gaussian {a} vs steady {s}");
+    }
+}
+
+/// Area of the part of polygon `poly` (film coordinates) inside the pixel [x, x+1] x [y, y+1]
+/// (Sutherland-Hodgman clipping, then the shoelace formula).
+fn clipped_area(poly: &[(f64, f64)], x: f64, y: f64) -> f64 {
+    let mut p = poly.to_vec();
+    // Half-planes as (axis, bound, keep_greater).
+    for (axis, bound, greater) in [(0, x, true), (0, x + 1.0, false), (1, y, true), (1, y + 1.0, false)] {
+        let inside = |q: &(f64, f64)| {
+            let v = if axis == 0 { q.0 } else { q.1 };
+            if greater { v >= bound } else { v <= bound }
+        };
+        let mut out = Vec::new();
+        for i in 0..p.len() {
+            let (a, b) = (p[i], p[(i + 1) % p.len()]);
+            let (va, vb) = if axis == 0 { (a.0, b.0) } else { (a.1, b.1) };
+            if inside(&a) {
+                out.push(a);
+            }
+            if inside(&a) != inside(&b) {
+                let t = (bound - va) / (vb - va);
+                out.push((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)));
+            }
+        }
+        p = out;
+        if p.is_empty() {
+            return 0.0;
+        }
+    }
+    0.5 * (0..p.len()).map(|i| p[i].0 * p[(i + 1) % p.len()].1 - p[(i + 1) % p.len()].0 * p[i].1).sum::<f64>().abs()
+}
+
+#[test]
+fn pixels_partly_on_the_light_read_radiance_times_coverage() {
+    // With max_bounces 0 a pixel of the Cornell box reads L x (fraction of the pixel whose rays
+    // hit the light). The light's triangles project to triangles on the film (pinhole), so the
+    // coverage is exact polygon clipping. Pixels that are never hit or always hit read exactly
+    // 0 or L; the others are compared with z-scores from the batch variance.
+    let scene = common::cornell_box();
+    let (w, h) = (64u32, 64u32);
+    let cam = scene.scene.camera;
+    let tan_half = (0.5 * cam.yfov as f64).tan();
+    let project = |p: glam::Vec3| {
+        let d = (p - cam.position).as_dvec3();
+        let depth = d.dot(cam.forward.as_dvec3());
+        let x_ndc = d.dot(cam.right.as_dvec3()) / depth / tan_half;
+        let y_ndc = d.dot(cam.up.as_dvec3()) / depth / tan_half;
+        ((x_ndc + 1.0) * 0.5 * w as f64, (1.0 - y_ndc) * 0.5 * h as f64)
+    };
+    let lights: Vec<Vec<(f64, f64)>> = scene
+        .scene
+        .triangles
+        .iter()
+        .filter(|t| scene.scene.materials[t.material as usize].is_emissive())
+        .map(|t| t.positions.iter().map(|&p| project(p)).collect())
+        .collect();
+    let radiance = 10.0;
+    let settings = RenderSettings { width: w, height: h, max_bounces: 0, seed: 21, ..Default::default() };
+    let ctx = common::gpu();
+    let (batches, spp) = (16, 256);
+    let stats = common::render_batches(&ctx, &scene, &settings, batches, spp);
+    let (mean, var) = (stats.mean(), stats.var_of_mean());
+    let pixels = (w * h) as usize;
+    let p_each = sidak(0.01, pixels);
+    let limit = t_critical(p_each, (batches - 1) as f64);
+    let samples = (batches * spp as usize) as f64;
+    let mut partial = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let coverage: f64 = lights.iter().map(|t| clipped_area(t, x as f64, y as f64)).sum();
+            let expected = radiance * coverage;
+            let i = ((y * w + x) * 3) as usize;
+            let got = mean[i];
+            if var[i] == 0.0 {
+                // Every sample gave the same value: all hits or all misses. Such a run must
+                // not be too unlikely under the exact coverage.
+                let p = if got == 0.0 { (1.0 - coverage).powf(samples) } else { coverage.powf(samples) };
+                assert!(got == 0.0 || got == radiance, "pixel ({x}, {y}) = {got}");
+                assert!(p >= p_each, "pixel ({x}, {y}): {got} in every sample, but the coverage is {coverage:.6}");
+            } else {
+                partial += 1;
+                let z = (got - expected) / var[i].sqrt();
+                assert!(z.abs() < limit, "pixel ({x}, {y}): {got:.5} vs {expected:.5} (coverage {coverage:.5}, z = {z:.2})");
+            }
+        }
+    }
+    assert!(partial >= 20, "the light's outline crosses at least 20 pixels ({partial})");
 }

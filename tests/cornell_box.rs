@@ -18,23 +18,13 @@ fn settings(gate: Gate, seed: u32) -> RenderSettings {
     RenderSettings { width: 64, height: 64, max_bounces: 5, gate, seed, ..Default::default() }
 }
 
-/// Per-batch films -> per-element mean and variance of the mean over batches.
-fn batch_mean_var(films: &[Film]) -> (Vec<f64>, Vec<f64>) {
-    let n = films.len() as f64;
-    let len = films[0].data.len();
-    let mut mean = vec![0.0; len];
-    let mut var = vec![0.0; len];
+/// Per-element mean over batches, as f32 (for failure images).
+fn batch_mean(films: &[Film]) -> Vec<f32> {
+    let mut stats = common::stats::BatchStats::new(films[0].data.len());
     for f in films {
-        for (m, v) in mean.iter_mut().zip(&f.data) {
-            *m += *v as f64 / n;
-        }
+        stats.add(&f.data);
     }
-    for f in films {
-        for ((s, m), v) in var.iter_mut().zip(&mean).zip(&f.data) {
-            *s += (*v as f64 - m).powi(2) / (n - 1.0) / n;
-        }
-    }
-    (mean, var)
+    stats.mean().iter().map(|&v| v as f32).collect()
 }
 
 /// Sums over groups of elements: `group(i)` gives the group of element i (None: skip).
@@ -86,11 +76,7 @@ fn check_image(name: &str, films: &[Film], reference: &str) {
     let (shape, peer_mean) = common::reference(&format!("cornell_box_peer/{reference}_mean.npy"));
     let (_, peer_var) = common::reference(&format!("cornell_box_peer/{reference}_var.npy"));
     assert_eq!(shape, vec![64, 64, 3]);
-    let write_failure = || {
-        let (mean, _) = batch_mean_var(films);
-        let mean: Vec<f32> = mean.iter().map(|&v| v as f32).collect();
-        common::write_failure_images(name, &shape, &mean, &peer_mean).display().to_string()
-    };
+    let write_failure = || common::write_failure_images(name, &shape, &batch_mean(films), &peer_mean).display().to_string();
     // Image mean per channel: |z| < 4 (the acceptance criterion).
     let channel = group_z(films, &peer_mean, &peer_var, 3, |i| Some(i % 3));
     for (c, (ours, peer, z)) in channel.iter().enumerate() {
@@ -143,13 +129,20 @@ fn transient_cube_matches_peer_per_bin() {
     let limit = t_critical(sidak(ALPHA, bins.len()), (films.len() - 1) as f64);
     for (g, (ours, peer, z)) in bins.iter().enumerate() {
         if z.abs() >= limit {
-            let (mean, _) = batch_mean_var(&films);
-            let mean: Vec<f32> = mean.iter().map(|&v| v as f32).collect();
-            let dir = common::write_failure_images("cornell_box_transient", &shape, &mean, &peer_mean);
+            let dir = common::write_failure_images("cornell_box_transient", &shape, &batch_mean(&films), &peer_mean);
             panic!("bin {} channel {}: {ours} vs peer {peer} (z = {z:.2}, limit {limit:.2}); images in {}", g / 3, g % 3, dir.display());
         }
     }
     // Nothing arrives before the shortest path (light -> wall -> camera, 1.9403 m).
     let first_bin_total: f64 = bins[..3].iter().map(|b| b.0).sum();
     assert!(first_bin_total > 0.0, "light reaches the camera in the first bin [1.94, 2.04)");
+}
+
+#[test]
+fn russian_roulette_keeps_the_steady_image_unbiased() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let settings = RenderSettings { rr_depth: Some(1), ..settings(Gate::None, 4) };
+    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 64);
+    check_image("cornell_box_steady_rr1", &films, "steady");
 }

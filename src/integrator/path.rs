@@ -220,6 +220,16 @@ impl<'a> PathTracer<'a> {
         self.next_sample += samples as u64;
     }
 
+    /// Traces `spp` more samples of every pixel, in as few waves as possible.
+    pub fn render_samples(&mut self, spp: u64) {
+        let mut left = spp;
+        while left > 0 {
+            let n = left.min(self.samples_per_wave as u64) as u32;
+            self.render_wave(n);
+            left -= n as u64;
+        }
+    }
+
     /// The film's current estimate (sums divided by the samples per pixel).
     pub fn film(&self) -> Result<Film> {
         let bins = self.params.gate.bins;

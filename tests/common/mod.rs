@@ -36,38 +36,13 @@ pub fn render_batches(
     settings: &RenderSettings,
     batches: usize,
     spp: u32,
-) -> (BatchStats, Film) {
-    let mut tracer = PathTracer::new(ctx, scene, settings).unwrap();
-    let mut stats = None;
-    let mut last = None;
-    for _ in 0..batches {
-        let mut left = spp;
-        while left > 0 {
-            let n = left.min(tracer.samples_per_wave());
-            tracer.render_wave(n);
-            left -= n;
-        }
-        let film = tracer.film().unwrap();
-        assert!(film.all_finite(), "non-finite pixel values");
-        stats.get_or_insert_with(|| BatchStats::new(film.data.len())).add(&film.data);
-        last = Some(film);
-        tracer.reset_film();
+) -> BatchStats {
+    let films = render_films(ctx, scene, settings, batches, spp);
+    let mut stats = BatchStats::new(films[0].data.len());
+    for film in &films {
+        stats.add(&film.data);
     }
-    (stats.unwrap(), last.unwrap())
-}
-
-/// Per-channel image mean and its variance from per-element batch statistics, treating the
-/// batch means of the image as the samples (so correlations between pixels are accounted for).
-pub fn image_mean_from_batches(films: &[Film]) -> ([f64; 3], [f64; 3]) {
-    let means: Vec<[f64; 3]> = films.iter().map(|f| f.mean_rgb()).collect();
-    let n = means.len() as f64;
-    let mut mean = [0.0; 3];
-    let mut var = [0.0; 3];
-    for c in 0..3 {
-        mean[c] = means.iter().map(|m| m[c]).sum::<f64>() / n;
-        var[c] = means.iter().map(|m| (m[c] - mean[c]).powi(2)).sum::<f64>() / (n - 1.0) / n;
-    }
-    (mean, var)
+    stats
 }
 
 /// Renders `batches` films of `spp` each and returns them (for image-level statistics).
@@ -81,12 +56,7 @@ pub fn render_films(
     let mut tracer = PathTracer::new(ctx, scene, settings).unwrap();
     (0..batches)
         .map(|_| {
-            let mut left = spp;
-            while left > 0 {
-                let n = left.min(tracer.samples_per_wave());
-                tracer.render_wave(n);
-                left -= n;
-            }
+            tracer.render_samples(spp as u64);
             let film = tracer.film().unwrap();
             assert!(film.all_finite(), "non-finite pixel values");
             tracer.reset_film();
