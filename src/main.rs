@@ -6,9 +6,9 @@ use std::time::Duration;
 use anyhow::{Context as _, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
-use gatetrace::film::output::{Metadata, write_film};
+use gatetrace::film::output::{Metadata, OutputFormat, check_writable, write_film};
 use gatetrace::gpu::GpuContext;
-use gatetrace::integrator::{Budget, Method, RenderSettings, render};
+use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render};
 use gatetrace::scene::{PreparedScene, load_gltf};
 
 /// The scene rendered when none is given.
@@ -58,7 +58,7 @@ struct RenderArgs {
     #[arg(long, default_value = "256x256", value_parser = parse_resolution)]
     res: (u32, u32),
     /// Maximum number of scattering vertices of a path (0: only lights seen directly).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
     max_bounces: u32,
     /// Start Russian roulette after this many scattering vertices (off when not given).
     #[arg(long)]
@@ -66,9 +66,10 @@ struct RenderArgs {
     /// Random seed; equal seeds and settings give identical images.
     #[arg(long, default_value_t = 0)]
     seed: u32,
-    /// Samples per pixel traced together in one GPU wave (chosen from the image size by default).
+    /// Samples per pixel of one pass, traced together on the GPU when they fit (chosen from the
+    /// image size by default). --time renders whole passes.
     #[arg(long)]
-    samples_per_wave: Option<u32>,
+    samples_per_pass: Option<u32>,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
     /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr.
     #[arg(long, short)]
@@ -117,8 +118,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
     let budget = match (args.spp, args.time) {
-        (_, Some(t)) if !(t > 0.0 && t.is_finite()) => bail!("--time {t}: give a positive number of seconds"),
-        (_, Some(t)) => Budget::Time(Duration::from_secs_f64(t)),
+        (_, Some(t)) => match Duration::try_from_secs_f64(t) {
+            Ok(d) if t > 0.0 => Budget::Time(d),
+            _ => bail!("--time {t}: give a positive number of seconds"),
+        },
         (Some(0), _) => bail!("--spp must be at least 1"),
         (Some(n), None) => Budget::Samples(n),
         (None, None) => Budget::Samples(64),
@@ -126,9 +129,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!("{}.exr", scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render")))
     });
-    if !matches!(out.extension().and_then(|e| e.to_str()), Some("exr" | "npy")) {
-        bail!("--out {}: the file name must end in .exr or .npy", out.display());
-    }
+    OutputFormat::of(&out)?;
     let settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
@@ -137,12 +138,13 @@ fn run_render(args: RenderArgs) -> Result<()> {
         max_bounces: args.max_bounces,
         rr_depth: args.rr_depth,
         seed: args.seed,
-        samples_per_wave: args.samples_per_wave,
+        samples_per_pass: args.samples_per_pass,
+        light_strategy: LightStrategy::Mis,
         binding_limit: None,
     };
-    if settings.method != Method::Path {
-        bail!("--method {} is not yet available: this version implements `path`", settings.method.name());
-    }
+    settings.method.ensure_available()?;
+    film_elements(&settings)?;
+    check_writable(&out)?;
 
     let scene = PreparedScene::new(load_gltf(&scene_path)?)?;
     let ctx = GpuContext::new()?;
@@ -153,7 +155,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             Budget::Time(_) => bar.set_position(p.elapsed.as_millis() as u64),
         }
         let rate = (p.spp * (settings.width * settings.height) as u64) as f64 / p.elapsed.as_secs_f64().max(1e-9);
-        bar.set_message(format!("{} passes, {} spp, {:.2} Msamples/s", p.waves, p.spp, rate / 1e6));
+        bar.set_message(format!("{} passes, {} spp, {:.2} Msamples/s", p.passes, p.spp, rate / 1e6));
     })?;
     bar.finish_and_clear();
 
@@ -171,16 +173,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
         ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
         ("elapsed_seconds".into(), format!("{secs:.3}")),
         ("adapter".into(), ctx.adapter_description()),
+        ("truncated_traversals".into(), output.truncated_traversals.to_string()),
         ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
         ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
     ];
-    let bin_names: Vec<String> = (0..gate.bins())
-        .map(|b| {
-            let (a, z) = gate.bin_range(b).unwrap_or((0.0, 0.0));
-            format!("bin{b:04}_{a:.6}m_{z:.6}m")
-        })
-        .collect();
-    write_film(&out, film, &metadata, &bin_names)?;
+    let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
+    write_film(&out, film, &metadata, &bin_ranges)?;
     let mean = film.mean_rgb();
     println!(
         "{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",

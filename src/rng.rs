@@ -1,36 +1,48 @@
-//! Random numbers: one PCG32 stream per path. CPU twin of `shaders/lib/rng.wesl`.
+//! Random numbers: counter-based, one stream per path. CPU twin of `shaders/lib/rng.wesl`
+//! (`pcg4d`, `Rng`, `rng_next` there; `pcg4d`, [`Rng`], [`Rng::next_f32`] here).
 
-/// PCG RXS-M-XS output permutation; also an integer hash.
-pub fn pcg_hash(x: u32) -> u32 {
-    let state = x.wrapping_mul(747796405).wrapping_add(2891336453);
-    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277803737);
-    (word >> 22) ^ word
+/// The 4D PCG hash of Jarzynski and Olano ("Hash Functions for GPU Rendering", JCGT 2020).
+pub fn pcg4d(input: [u32; 4]) -> [u32; 4] {
+    let mut v = input.map(|x| x.wrapping_mul(1664525).wrapping_add(1013904223));
+    let mix = |v: &mut [u32; 4]| {
+        v[0] = v[0].wrapping_add(v[1].wrapping_mul(v[3]));
+        v[1] = v[1].wrapping_add(v[2].wrapping_mul(v[0]));
+        v[2] = v[2].wrapping_add(v[0].wrapping_mul(v[1]));
+        v[3] = v[3].wrapping_add(v[1].wrapping_mul(v[2]));
+    };
+    mix(&mut v);
+    v = v.map(|x| x ^ (x >> 16));
+    mix(&mut v);
+    v
 }
 
-/// Initial state of the stream of sample `sample` of pixel `pixel` under render seed `seed`.
-pub fn rng_seed(seed: u32, pixel: u32, sample: u32) -> u32 {
-    pcg_hash(pcg_hash(pcg_hash(seed).wrapping_add(pixel)).wrapping_add(sample))
-}
-
-/// A PCG32 stream (twin of `rng_next` on a `u32` state).
+/// The random stream of one path: number i is a hash of (pixel, sample, seed, i).
 #[derive(Clone, Copy, Debug)]
 pub struct Rng {
-    pub state: u32,
+    /// Pixel index (row-major).
+    pub pixel: u32,
+    /// Sample index within the pixel.
+    pub sample: u32,
+    /// Render seed.
+    pub seed: u32,
+    /// Numbers drawn so far.
+    pub dimension: u32,
 }
 
 impl Rng {
+    /// The stream of sample `sample` of pixel `pixel` under render seed `seed`.
     pub fn new(seed: u32, pixel: u32, sample: u32) -> Self {
-        Self { state: rng_seed(seed, pixel, sample) }
+        Self { pixel, sample, seed, dimension: 0 }
     }
 
-    /// Next uniform number in [0, 1) with 24 random bits.
+    /// Next uniform number in [0, 1) with 24 random bits (twin of `rng_next`).
     pub fn next_f32(&mut self) -> f32 {
-        self.state = self.state.wrapping_mul(747796405).wrapping_add(2891336453);
-        let s = self.state;
-        let word = ((s >> ((s >> 28) + 4)) ^ s).wrapping_mul(277803737);
-        (((word >> 22) ^ word) >> 8) as f32 * (1.0 / 16777216.0)
+        let h = pcg4d([self.pixel, self.sample, self.seed, self.dimension]);
+        self.dimension = self.dimension.wrapping_add(1);
+        (h[0] >> 8) as f32 * (1.0 / 16777216.0)
     }
 
+    /// Two numbers (twin of `rng_next2`).
     pub fn next_vec2(&mut self) -> glam::Vec2 {
         let a = self.next_f32();
         glam::Vec2::new(a, self.next_f32())

@@ -40,8 +40,19 @@ pub fn sample_triangle_barycentrics(u: Vec2) -> Vec2 {
     Vec2::new(u.y * su, (1.0 - u.y) * su)
 }
 
-/// Power heuristic (beta = 2).
+/// Power heuristic (beta = 2) from the ratio of the pdfs, so huge pdfs do not overflow
+/// (twin of `power_heuristic`).
 pub fn power_heuristic(a: f32, b: f32) -> f32 {
-    let (a2, b2) = (a * a, b * b);
-    if a2 + b2 <= 0.0 { 0.0 } else { a2 / (a2 + b2) }
+    let (pa, pb) = (a.min(f32::MAX), b.min(f32::MAX));
+    if pa <= 0.0 {
+        return 0.0;
+    }
+    if pa >= pb {
+        let r = pb / pa;
+        1.0 / (1.0 + r * r)
+    } else {
+        let r = pa / pb;
+        let r2 = r * r;
+        r2 / (1.0 + r2)
+    }
 }

@@ -76,11 +76,11 @@ fn exr_output_has_a_layer_per_bin_and_metadata() {
 fn time_budget_renders_whole_passes() {
     let dir = common::scratch_dir("cli_time");
     let out = dir.join("timed.npy");
-    let o = gatetrace(&["render", "--res", "8x8", "--time", "0.5", "--samples-per-wave", "3", "--out", out.to_str().unwrap()]);
+    let o = gatetrace(&["render", "--res", "8x8", "--time", "0.5", "--samples-per-pass", "3", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
     let spp: u64 = meta["spp"].as_str().unwrap().parse().unwrap();
-    assert!(spp >= 3 && spp % 3 == 0, "whole waves of 3 samples, got {spp}");
+    assert!(spp >= 3 && spp % 3 == 0, "whole passes of 3 samples, got {spp}");
 }
 
 #[test]

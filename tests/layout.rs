@@ -22,15 +22,16 @@ fn wgsl_structs_match_rust_structs() {
         TextureInfo { offset, width, height, wrap }
         Light { position, kind, emission, triangle, area, select_pdf, flags, reserved }
         Camera { position, tan_half_fov_y, right, aspect, up, reserved0, forward, reserved1 }
-        Gate { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }
-        RenderParams { camera, gate, width, height, seed, max_bounces, rr_depth, light_count, node_count,
-                       triangle_count, ray_epsilon, reserved0, reserved1, reserved2 }
-        WaveParams { sample_base, samples, slot_count, reserved }
-        PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, pixel, rng, origin_triangle, reserved }
+        GateParams { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }
+        RenderParams { camera, gate, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
+                       reserved0, reserved1, reserved2 }
+        WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, reserved0, reserved1, reserved2 }
+        PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, normal, origin_triangle, pixel, sample,
+                    dimension, reserved }
         Hit { t, triangle, b1, b2 }
         ShadowRay { origin, t_max, direction, slot, ignore0, ignore1, reserved0, reserved1 }
         Contribution { radiance, path_length }
-        QueueCounters { rays, next_rays, shadow_rays, reserved }
+        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals }
     };
     let module = naga::front::wgsl::parse_str(LAYOUT_WGSL).expect("layout.wgsl parses");
     let mut wgsl_structs = Vec::new();

@@ -1,36 +1,54 @@
 #!/usr/bin/env bash
-# Prepares a Debian/Ubuntu machine to build and run gatetrace:
+# Prepares a Debian/Ubuntu machine to build and run gatetrace, installing what is missing:
 #   - a Vulkan driver: when none is installed, Mesa's CPU implementation lavapipe
-#     (package mesa-vulkan-drivers) is installed with apt-get (through sudo when not root);
-#   - a Rust toolchain (1.95 or newer): checked, and installed with rustup when missing.
-# Safe to run repeatedly; it does nothing when everything is present.
-set -euo pipefail
+#     (mesa-vulkan-drivers) is installed with apt-get (through sudo when not root);
+#   - a C toolchain (build-essential: cargo needs a linker) and curl;
+#   - a Rust toolchain (1.95 or newer), with rustup, when cargo is missing.
+# tools/render.sh and tools/test.sh source this file, so cargo is on PATH for them afterwards.
+# Running it directly does the same installs. Safe to repeat: it does nothing when all is there.
 
-as_root() {
+gatetrace_as_root() {
     if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
 }
 
-have_vulkan_driver() {
+gatetrace_apt_install() {
+    echo "setup: installing $* with apt-get" >&2
+    if [ -z "${GATETRACE_APT_UPDATED:-}" ]; then
+        gatetrace_as_root apt-get update -qq || return 1
+        GATETRACE_APT_UPDATED=1
+    fi
+    gatetrace_as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$@" >/dev/null
+}
+
+gatetrace_have_vulkan_driver() {
     ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1' || return 1
+    [ -n "${VK_DRIVER_FILES:-}${VK_ICD_FILENAMES:-}" ] && return 0
     for dir in /usr/share/vulkan/icd.d /etc/vulkan/icd.d /usr/local/share/vulkan/icd.d; do
         ls "$dir"/*.json >/dev/null 2>&1 && return 0
     done
-    [ -n "${VK_DRIVER_FILES:-}${VK_ICD_FILENAMES:-}" ]
+    return 1
 }
 
-if ! have_vulkan_driver; then
-    echo "setup: no Vulkan driver found; installing Mesa lavapipe (mesa-vulkan-drivers)" >&2
-    as_root apt-get update -qq
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
-fi
-
-if ! command -v cargo >/dev/null 2>&1; then
-    if [ -x "$HOME/.cargo/bin/cargo" ]; then
-        echo "setup: cargo is in ~/.cargo/bin; add it to PATH (source ~/.cargo/env)" >&2
-    else
-        echo "setup: no Rust toolchain; installing one with rustup" >&2
-        curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
-        echo "setup: Rust installed; run \`source ~/.cargo/env\` (or open a new shell) and repeat the command" >&2
+gatetrace_setup() {
+    if ! gatetrace_have_vulkan_driver; then
+        echo "setup: no Vulkan driver found; installing Mesa's lavapipe" >&2
+        gatetrace_apt_install mesa-vulkan-drivers libvulkan1 || return 1
     fi
-    exit 1
+    if ! command -v cc >/dev/null 2>&1; then
+        gatetrace_apt_install build-essential || return 1
+    fi
+    if [ -f "$HOME/.cargo/env" ]; then
+        . "$HOME/.cargo/env"
+    fi
+    if ! command -v cargo >/dev/null 2>&1; then
+        command -v curl >/dev/null 2>&1 || gatetrace_apt_install curl ca-certificates || return 1
+        echo "setup: no Rust toolchain; installing one with rustup" >&2
+        curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal || return 1
+        . "$HOME/.cargo/env"
+    fi
+}
+
+if [ "${BASH_SOURCE[0]}" = "$0" ]; then
+    set -euo pipefail
+    gatetrace_setup
 fi

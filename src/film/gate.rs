@@ -14,26 +14,59 @@ pub enum Gate {
     /// W = 1: the steady-state image.
     None,
     /// W = 1 on [start, end), 0 elsewhere.
-    Box { start: f64, end: f64 },
+    Box {
+        /// Start (m).
+        start: f64,
+        /// End (m), excluded.
+        end: f64,
+    },
     /// W = exp(-(l - mean)^2 / (2 sigma^2)), peak 1.
-    Gaussian { mean: f64, sigma: f64 },
+    Gaussian {
+        /// Mean (m).
+        mean: f64,
+        /// Standard deviation (m).
+        sigma: f64,
+    },
     /// W = cos(2 pi f l / c + phase): continuous-wave time of flight (signed).
-    Cw { frequency_hz: f64, phase_deg: f64 },
+    Cw {
+        /// Modulation frequency (Hz).
+        frequency_hz: f64,
+        /// Phase (degrees).
+        phase_deg: f64,
+    },
     /// Piecewise-linear W through (length, weight) points, 0 outside them.
-    Table { points: Vec<(f64, f64)>, source: PathBuf },
+    Table {
+        /// (length m, weight) points, increasing in length.
+        points: Vec<(f64, f64)>,
+        /// The CSV file they came from.
+        source: PathBuf,
+    },
     /// `bins` boxes [start + i width, start + (i + 1) width): a transient cube.
-    Transient { start: f64, width: f64, bins: u32 },
+    Transient {
+        /// Start of bin 0 (m).
+        start: f64,
+        /// Bin width (m).
+        width: f64,
+        /// Number of bins.
+        bins: u32,
+    },
 }
 
 /// GATE_KIND values of the kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]
 pub enum GateKind {
+    /// W = 1.
     None = 0,
+    /// W = 1 on [start, end).
     Box = 1,
+    /// Gaussian W.
     Gaussian = 2,
+    /// Continuous-wave cosine W.
     Cw = 3,
+    /// Tabulated W.
     Table = 4,
+    /// One box per bin.
     Transient = 5,
 }
 
@@ -43,7 +76,8 @@ impl Gate {
     pub fn parse(spec: &str) -> Result<Self> {
         let (kind, args) = spec.split_once(':').unwrap_or((spec, ""));
         let gate = match kind.trim() {
-            "none" => Gate::None,
+            "none" if args.is_empty() => Gate::None,
+            "none" => bail!("the `none` gate takes no parameters (got `{args}`)"),
             "box" => {
                 let (a, b) = args.split_once("..").context("box gate: expected box:START..END, e.g. box:3.14..3.19")?;
                 Gate::Box { start: parse_length(a)?, end: parse_length(b)? }
@@ -79,7 +113,18 @@ impl Gate {
     }
 
     fn validate(&self) -> Result<()> {
+        // The kernels evaluate W in f32: a gate must stay distinct from its neighbours there.
+        let f32_distinct = |a: f64, b: f64| (b as f32) > (a as f32);
         match *self {
+            Gate::Box { start, end } if end > start && !f32_distinct(start, end) => {
+                bail!("box gate [{start}, {end}) m is narrower than f32 resolution at that length")
+            }
+            Gate::Gaussian { mean, sigma } if sigma > 0.0 && sigma < 1e-6 * mean.abs().max(1.0) => {
+                bail!("gaussian gate: sigma {sigma} m is below f32 resolution (1e-6 of the mean, or of 1 m)")
+            }
+            Gate::Transient { start, width, .. } if width > 0.0 && !f32_distinct(start, start + width) => {
+                bail!("transient gate: bins of {width} m are narrower than f32 resolution at {start} m")
+            }
             Gate::Box { start, end } if !(end > start) => bail!("box gate: end {end} m must exceed start {start} m"),
             Gate::Box { start, .. } if start < 0.0 => bail!("box gate: start {start} m is negative"),
             Gate::Gaussian { sigma, .. } if !(sigma > 0.0) => bail!("gaussian gate: sigma {sigma} m must be positive"),
@@ -92,6 +137,7 @@ impl Gate {
         }
     }
 
+    /// The kernels' specialisation for this gate.
     pub fn kind(&self) -> GateKind {
         match self {
             Gate::None => GateKind::None,
@@ -103,7 +149,7 @@ impl Gate {
         }
     }
 
-    /// Film bins per pixel.
+    /// Film bins per pixel (1 unless transient).
     pub fn bins(&self) -> u32 {
         match self {
             Gate::Transient { bins, .. } => *bins,
@@ -147,7 +193,7 @@ impl Gate {
     }
 
     /// The kernels' gate parameters.
-    pub fn to_gpu(&self) -> layout::Gate {
+    pub fn to_gpu(&self) -> layout::GateParams {
         let (p0, p1) = match *self {
             Gate::None => (0.0, 0.0),
             Gate::Box { start, end } => (start, end),
@@ -158,7 +204,7 @@ impl Gate {
             Gate::Table { ref points, .. } => (points[0].0, points[points.len() - 1].0),
             Gate::Transient { start, width, .. } => (start, width),
         };
-        layout::Gate {
+        layout::GateParams {
             bins: self.bins(),
             table_len: self.table().len() as u32,
             p0: p0 as f32,
@@ -189,7 +235,7 @@ impl Gate {
 }
 
 /// CPU twin of the kernels' gate for a given GPU parameter block and kind.
-pub fn gate_weight(kind: GateKind, g: &layout::Gate, table: &[[f32; 2]], path_length: f32) -> f32 {
+pub fn gate_weight(kind: GateKind, g: &layout::GateParams, table: &[[f32; 2]], path_length: f32) -> f32 {
     match kind {
         GateKind::None => 1.0,
         GateKind::Box => (path_length >= g.p0 && path_length < g.p1) as u32 as f32,
@@ -204,7 +250,7 @@ pub fn gate_weight(kind: GateKind, g: &layout::Gate, table: &[[f32; 2]], path_le
 }
 
 /// CPU twin of `gate_bin`: the transient bin of a length, -1 outside, 0 for other gates.
-pub fn gate_bin(kind: GateKind, g: &layout::Gate, path_length: f32) -> i32 {
+pub fn gate_bin(kind: GateKind, g: &layout::GateParams, path_length: f32) -> i32 {
     if kind != GateKind::Transient {
         return 0;
     }
@@ -280,7 +326,7 @@ mod tests {
         assert_eq!(Gate::parse("transient:1.94,0.1,20").unwrap(), Gate::Transient { start: 1.94, width: 0.1, bins: 20 });
         let Gate::Transient { start, width, .. } = Gate::parse("transient:10ns,12.5ps,8").unwrap() else { panic!() };
         assert!((start - 2.99792458).abs() < 1e-12 && (width - 3.747405725e-3).abs() < 1e-12);
-        for bad in ["box:3", "box:3..2", "gaussian:1", "gaussian:1,0", "cw:-5,0", "transient:0,0.1,0", "transient:0,0,3", "x"] {
+        for bad in ["none:foo", "box:3.14..3.140000001", "gaussian:3,1e-50", "transient:1000,1e-9,3", "box:3", "box:3..2", "gaussian:1", "gaussian:1,0", "cw:-5,0", "transient:0,0.1,0", "transient:0,0,3", "x"] {
             assert!(Gate::parse(bad).is_err(), "`{bad}` must be rejected");
         }
     }

@@ -11,17 +11,56 @@ use super::Film;
 /// elapsed seconds, adapter.
 pub type Metadata = Vec<(String, String)>;
 
+/// Output file formats, chosen by the file name's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// OpenEXR.
+    Exr,
+    /// NumPy `.npy` with a `.json` metadata sidecar.
+    Npy,
+}
+
+impl OutputFormat {
+    /// The format of `path` (`.exr` or `.npy`, any case).
+    pub fn of(path: &Path) -> Result<Self> {
+        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+            Some("exr") => Ok(Self::Exr),
+            Some("npy") => Ok(Self::Npy),
+            _ => bail!("{}: unknown output format: the file name must end in .exr or .npy", path.display()),
+        }
+    }
+}
+
+/// Checks before a render that `path` can be written: creates its directory and opens the file
+/// (a file that did not exist is removed again).
+pub fn check_writable(path: &Path) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+    }
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .with_context(|| format!("{}: cannot write the output file", path.display()))?;
+    if !existed {
+        let _ = std::fs::remove_file(path);
+    }
+    Ok(())
+}
+
 /// Writes `film` to `path`; the format follows the extension (`.exr` or `.npy`).
-pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[String]) -> Result<()> {
+/// `bin_ranges` are the [start, end) lengths (m) of transient bins, for EXR layer attributes.
+pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, f64)]) -> Result<()> {
     if !film.all_finite() {
         bail!("refusing to write {}: the film holds non-finite values", path.display());
     }
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
     }
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("exr") => write_exr(path, film, metadata, bin_names),
-        Some("npy") => {
+    match OutputFormat::of(path)? {
+        OutputFormat::Exr => write_exr(path, film, metadata, bin_ranges),
+        OutputFormat::Npy => {
             write_npy(path, film)?;
             let sidecar = sidecar_path(path);
             let map: serde_json::Map<String, serde_json::Value> =
@@ -29,7 +68,6 @@ pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[St
             std::fs::write(&sidecar, serde_json::to_string_pretty(&map)? + "\n")
                 .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
         }
-        _ => bail!("{}: unknown output format: use a .exr or .npy file name", path.display()),
     }
 }
 
@@ -38,7 +76,7 @@ pub fn sidecar_path(npy: &Path) -> PathBuf {
     npy.with_extension("json")
 }
 
-fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[String]) -> Result<()> {
+fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, f64)]) -> Result<()> {
     use exr::prelude::*;
     let (w, h) = (film.width as usize, film.height as usize);
     let mut attributes = ImageAttributes::new(IntegerBounds::from_dimensions((w, h)));
@@ -49,8 +87,14 @@ fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[String]
     let layers: Vec<_> = (0..bins)
         .map(|b| {
             let channel = |c: usize| -> Vec<f32> { (0..w * h).map(|p| film.data[(p * bins + b) * 3 + c]).collect() };
-            let name = if bins == 1 { None } else { Some(Text::from(bin_names[b].as_str())) };
-            let layer_attributes = LayerAttributes { layer_name: name, ..LayerAttributes::default() };
+            let mut layer_attributes = LayerAttributes::default();
+            if bins > 1 {
+                layer_attributes.layer_name = Some(Text::from(format!("bin{b:05}").as_str()));
+                if let Some(&(start, end)) = bin_ranges.get(b) {
+                    let range = format!("[{start}, {end}) m of optical path");
+                    layer_attributes.other.insert(Text::from("gatetrace.bin_range"), AttributeValue::Text(Text::from(range.as_str())));
+                }
+            }
             Layer::new(
                 (w, h),
                 layer_attributes,
@@ -65,6 +109,7 @@ fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_names: &[String]
         .collect();
     Image::from_layers(attributes, layers)
         .write()
+        .non_parallel()
         .to_file(path)
         .with_context(|| format!("{}: cannot write the EXR file", path.display()))
 }
@@ -150,5 +195,7 @@ mod tests {
         assert_eq!(data, film.data);
         let bad = Film { data: vec![f32::NAN; 72], ..film };
         assert!(write_film(&path, &bad, &vec![], &[]).is_err(), "non-finite films are refused");
+        assert_eq!(OutputFormat::of(Path::new("A.EXR")).unwrap(), OutputFormat::Exr);
+        assert!(OutputFormat::of(Path::new("a.png")).is_err());
     }
 }

@@ -6,13 +6,17 @@ use anyhow::{Context as _, Result, bail};
 pub const NO_ADAPTER_HINT: &str = "gatetrace needs a Vulkan (or Metal/DX12) device. On a machine without a GPU, \
 install Mesa's CPU implementation lavapipe: `sudo apt-get install -y mesa-vulkan-drivers` (Debian/Ubuntu).";
 
-/// A device and queue with the adapter's name, limits and the optional features gatetrace uses.
+/// A device and queue with the adapter's name and limits (the device gets all of the adapter's
+/// limits, e.g. storage bindings per stage).
 pub struct GpuContext {
+    /// The device.
     pub device: wgpu::Device,
+    /// Its queue.
     pub queue: wgpu::Queue,
+    /// Name, backend and type of the adapter.
     pub adapter_info: wgpu::AdapterInfo,
+    /// The device's limits.
     pub limits: wgpu::Limits,
-    pub features: wgpu::Features,
 }
 
 impl GpuContext {
@@ -28,19 +32,17 @@ impl GpuContext {
         let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
         let adapter = choose_adapter(adapters)?;
         let adapter_info = adapter.get_info();
-        let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_FLOAT32_ATOMIC;
-        let features = adapter.features() & wanted;
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("gatetrace"),
-            required_features: features,
+            required_features: wgpu::Features::empty(),
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter `{}`", adapter_info.name))?;
-        Ok(Self { device, queue, adapter_info, limits, features })
+        Ok(Self { device, queue, adapter_info, limits })
     }
 
     /// "name (backend, device type)", as recorded with every output.

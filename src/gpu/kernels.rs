@@ -9,26 +9,35 @@ use super::{GpuContext, Resources};
 /// How a kernel uses a binding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BindingKind {
+    /// `var<uniform>`.
     Uniform,
+    /// `var<storage, read>`.
     StorageRead,
+    /// `var<storage, read_write>`.
     StorageReadWrite,
 }
 
 /// A resource a kernel uses, reflected from its WGSL.
 #[derive(Clone, Copy, Debug)]
 pub struct BindingInfo {
+    /// `@binding` number in group 0.
     pub binding: u32,
     /// The WGSL variable name, which is also the name the host binds a buffer under.
     pub name: &'static str,
+    /// How the kernel accesses it.
     pub kind: BindingKind,
 }
 
 /// A composed, validated kernel and its reflected interface.
 #[derive(Debug)]
 pub struct KernelSource {
+    /// The file name = entry point name.
     pub name: &'static str,
+    /// The composed WGSL.
     pub wgsl: &'static str,
+    /// `@workgroup_size`.
     pub workgroup_size: [u32; 3],
+    /// Every resource the kernel uses.
     pub bindings: &'static [BindingInfo],
     /// Names of the pipeline-overridable constants the kernel declares.
     pub overrides: &'static [&'static str],
@@ -46,7 +55,9 @@ pub fn kernel_source(name: &str) -> &'static KernelSource {
 
 /// A compute pipeline with its bind-group layout.
 pub struct Kernel {
+    /// Pipeline label (the kernel's name, with a variant in parentheses).
     pub label: String,
+    /// The composed WGSL and its reflected interface.
     pub source: &'static KernelSource,
     pipeline: wgpu::ComputePipeline,
     bind_group_layout: wgpu::BindGroupLayout,
@@ -55,15 +66,15 @@ pub struct Kernel {
 impl Kernel {
     /// Builds kernel `name` specialised with `constants`; constants the kernel does not declare
     /// are ignored, so callers can pass one set of specialisation constants to every kernel.
-    pub fn new(ctx: &GpuContext, name: &str, constants: &[(&str, f64)]) -> Self {
+    /// The pipeline label is the kernel's name, with `variant` in parentheses when one kernel
+    /// serves several stages (e.g. `setup_dispatch(rays)`).
+    pub fn new(ctx: &GpuContext, name: &str, variant: Option<&str>, constants: &[(&str, f64)]) -> Self {
         let source = kernel_source(name);
         let used: Vec<(&str, f64)> =
             constants.iter().filter(|(k, _)| source.overrides.contains(k)).copied().collect();
-        let label = if used.is_empty() {
-            name.to_owned()
-        } else {
-            let list: Vec<String> = used.iter().map(|(k, v)| format!("{k}={v}")).collect();
-            format!("{name}({})", list.join(","))
+        let label = match variant {
+            Some(v) => format!("{name}({v})"),
+            None => name.to_owned(),
         };
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(name),

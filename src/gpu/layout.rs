@@ -9,13 +9,19 @@ use glam::Vec3;
 
 /// "No triangle / light / texture" in index fields (WGSL `NONE`).
 pub const NONE: u32 = u32::MAX;
+/// [`TriangleShading::flags`]: the vertex normals are the mesh's own.
 pub const SHADING_HAS_NORMALS: u32 = 1;
+/// [`Material::flags`]: both faces reflect (and emit).
 pub const MATERIAL_DOUBLE_SIDED: u32 = 1;
-pub const MATERIAL_EMISSIVE: u32 = 2;
+/// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
+/// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_V: u32 = 2;
+/// [`Light::kind`]: an emissive triangle.
 pub const LIGHT_AREA: u32 = 0;
+/// [`Light::kind`]: a point light.
 pub const LIGHT_POINT: u32 = 1;
+/// [`Light::flags`]: an area light that emits from both faces.
 pub const LIGHT_DOUBLE_SIDED: u32 = 1;
 /// Largest triangle count a BVH leaf can hold (4 bits of `BvhNode::leaf`).
 pub const MAX_LEAF_TRIANGLES: u32 = 15;
@@ -26,12 +32,15 @@ pub const MAX_TRIANGLES: u32 = (1 << 28) - 1;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Triangle {
+    /// Vertex 0 (m).
     pub v0: Vec3,
     /// Index into the material table.
     pub material: u32,
+    /// v1 - v0 (m).
     pub e1: Vec3,
     /// Index into the light table, or [`NONE`].
     pub light: u32,
+    /// Edge v1 - v0 (m) is `e1`; this is v2 - v0 (m).
     pub e2: Vec3,
     /// Index of the triangle in load order.
     pub source: u32,
@@ -41,14 +50,23 @@ pub struct Triangle {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct TriangleShading {
+    /// Unit normal at vertex 0.
     pub n0: Vec3,
+    /// Texture coordinate u of vertex 0.
     pub u0: f32,
+    /// Unit normal at vertex 1.
     pub n1: Vec3,
+    /// Texture coordinate v of vertex 0.
     pub v0: f32,
+    /// Unit normal at vertex 2.
     pub n2: Vec3,
+    /// Texture coordinate u of vertex 1.
     pub u1: f32,
+    /// Texture coordinate v of vertex 1.
     pub v1: f32,
+    /// Texture coordinate u of vertex 2.
     pub u2: f32,
+    /// Texture coordinate v of vertex 2.
     pub v2: f32,
     /// [`SHADING_HAS_NORMALS`].
     pub flags: u32,
@@ -58,14 +76,18 @@ pub struct TriangleShading {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct BvhNode {
+    /// Box minimum corner (m).
     pub min: Vec3,
+    /// First node after this node's subtree (the node count ends a traversal).
     pub skip: u32,
+    /// Box maximum corner (m).
     pub max: Vec3,
     /// 0 for an inner node; for a leaf `(count << 28) | first`.
     pub leaf: u32,
 }
 
 impl BvhNode {
+    /// The triangles of a leaf (BVH positions); None for an inner node.
     pub fn leaf_range(&self) -> Option<std::ops::Range<u32>> {
         (self.leaf != 0).then(|| {
             let first = self.leaf & MAX_TRIANGLES;
@@ -80,14 +102,19 @@ impl BvhNode {
 pub struct Material {
     /// Linear RGB albedo (times the texture when `base_color_texture` is not [`NONE`]).
     pub base_color: Vec3,
+    /// Index into the texture table, or [`NONE`].
     pub base_color_texture: u32,
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
-    /// [`MATERIAL_DOUBLE_SIDED`], [`MATERIAL_EMISSIVE`].
+    /// [`MATERIAL_DOUBLE_SIDED`].
     pub flags: u32,
+    /// glTF metallic factor (reserved for the conductor lobe).
     pub metallic: f32,
+    /// glTF roughness factor (reserved for the conductor lobe).
     pub roughness: f32,
+    /// Padding.
     pub reserved0: u32,
+    /// Padding.
     pub reserved1: u32,
 }
 
@@ -95,8 +122,11 @@ pub struct Material {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct TextureInfo {
+    /// First texel in the texel buffer.
     pub offset: u32,
+    /// Width in texels.
     pub width: u32,
+    /// Height in texels.
     pub height: u32,
     /// [`TEXTURE_CLAMP_U`] | [`TEXTURE_CLAMP_V`].
     pub wrap: u32,
@@ -120,6 +150,7 @@ pub struct Light {
     pub select_pdf: f32,
     /// [`LIGHT_DOUBLE_SIDED`].
     pub flags: u32,
+    /// Padding.
     pub reserved: u32,
 }
 
@@ -131,27 +162,42 @@ pub struct Camera {
     pub position: Vec3,
     /// tan(yfov / 2).
     pub tan_half_fov_y: f32,
+    /// Unit vector along +x of the image.
     pub right: Vec3,
     /// Width / height.
     pub aspect: f32,
+    /// Unit vector along +y of the image (up).
     pub up: Vec3,
+    /// Padding.
     pub reserved0: u32,
+    /// Unit viewing direction.
     pub forward: Vec3,
+    /// Padding.
     pub reserved1: u32,
 }
 
-/// Pathlength importance parameters; see `shaders/lib/layout.wesl` for the meaning per kind.
+/// The kernels' gate parameters (the kind is the GATE_KIND override); built by
+/// `film::Gate::to_gpu`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
-pub struct Gate {
+pub struct GateParams {
+    /// Film bins per pixel (1 unless transient).
     pub bins: u32,
+    /// Points of a table gate.
     pub table_len: u32,
+    /// Padding.
     pub reserved0: u32,
+    /// Padding.
     pub reserved1: u32,
+    /// box: start (m); gaussian: mean (m); cw: 2 pi f / c (rad/m); transient: start (m);
+    /// table: first tabulated length (m).
     pub p0: f32,
+    /// box: end (m); gaussian: sigma (m); cw: phase (rad); transient: bin width (m);
+    /// table: last tabulated length (m).
     pub p1: f32,
     /// Upper end of the support (m); `f32::MAX` when unbounded.
     pub max_length: f32,
+    /// Padding.
     pub reserved2: f32,
 }
 
@@ -159,49 +205,87 @@ pub struct Gate {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct RenderParams {
+    /// The pinhole camera.
     pub camera: Camera,
-    pub gate: Gate,
+    /// The pathlength importance.
+    pub gate: GateParams,
+    /// Image width (pixels).
     pub width: u32,
+    /// Image height (pixels).
     pub height: u32,
+    /// Render seed.
     pub seed: u32,
+    /// Largest number of scattering vertices of a path.
     pub max_bounces: u32,
     /// Russian roulette starts at this depth ([`NONE`]: never).
     pub rr_depth: u32,
+    /// Entries of the light table.
     pub light_count: u32,
+    /// Nodes of the BVH.
     pub node_count: u32,
-    pub triangle_count: u32,
     /// Ray-origin offset scale (m).
     pub ray_epsilon: f32,
+    /// Always 1.0 (an opaque one for the kernels' error-free sums).
+    pub one: f32,
+    /// Padding.
     pub reserved0: u32,
+    /// Padding.
     pub reserved1: u32,
+    /// Padding.
     pub reserved2: u32,
 }
 
-/// Settings of one wave of samples.
+/// Settings of one wave: samples `sample_base..sample_base + samples` of the pixels
+/// `pixel_base..pixel_base + pixel_count` (row-major), one path slot each
+/// (slot = sample_in_wave * pixel_count + pixel_in_wave).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct WaveParams {
+    /// First sample index of the wave.
     pub sample_base: u32,
+    /// Samples per pixel in the wave.
     pub samples: u32,
+    /// First pixel of the wave.
+    pub pixel_base: u32,
+    /// Pixels in the wave.
+    pub pixel_count: u32,
+    /// `pixel_count * samples`.
     pub slot_count: u32,
-    pub reserved: u32,
+    /// Padding.
+    pub reserved0: u32,
+    /// Padding.
+    pub reserved1: u32,
+    /// Padding.
+    pub reserved2: u32,
 }
 
 /// State of one path between wavefront stages.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct PathState {
+    /// The path's last vertex (m): the pinhole or a surface point.
     pub origin: Vec3,
     /// Optical path length from the pinhole to `origin` (m).
     pub path_length: f32,
+    /// Unit direction of the next ray.
     pub direction: Vec3,
     /// Solid-angle pdf of `direction` (sr^-1); 0 for camera rays.
     pub bsdf_pdf: f32,
+    /// Product of f cos / pdf so far.
     pub throughput: Vec3,
+    /// Scattering vertices so far.
     pub depth: u32,
-    pub pixel: u32,
-    pub rng: u32,
+    /// Unit normal at `origin` on the side the ray leaves (zero at the pinhole).
+    pub normal: Vec3,
+    /// Triangle under `origin`, or [`NONE`].
     pub origin_triangle: u32,
+    /// Pixel index (row-major).
+    pub pixel: u32,
+    /// Sample index within the pixel.
+    pub sample: u32,
+    /// Random numbers drawn so far.
+    pub dimension: u32,
+    /// Padding.
     pub reserved: u32,
 }
 
@@ -213,7 +297,9 @@ pub struct Hit {
     pub t: f32,
     /// Triangle (BVH order) or [`NONE`].
     pub triangle: u32,
+    /// Barycentric coordinate of vertex 1.
     pub b1: f32,
+    /// Barycentric coordinate of vertex 2.
     pub b2: f32,
 }
 
@@ -221,13 +307,21 @@ pub struct Hit {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct ShadowRay {
+    /// Ray origin (m), offset from the surface.
     pub origin: Vec3,
+    /// Distance to the light sample (m).
     pub t_max: f32,
+    /// Unit direction.
     pub direction: Vec3,
+    /// The path slot whose contribution waits for this ray.
     pub slot: u32,
+    /// Triangle to ignore (the origin's).
     pub ignore0: u32,
+    /// Triangle to ignore (the light's).
     pub ignore1: u32,
+    /// Padding.
     pub reserved0: u32,
+    /// Padding.
     pub reserved1: u32,
 }
 
@@ -235,7 +329,9 @@ pub struct ShadowRay {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Contribution {
+    /// Radiance estimate (W m^-2 sr^-1), before the gate's weight.
     pub radiance: Vec3,
+    /// Optical path length of the contribution's path (m).
     pub path_length: f32,
 }
 
@@ -243,10 +339,14 @@ pub struct Contribution {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct QueueCounters {
+    /// Paths in `ray_queue` this round.
     pub rays: u32,
+    /// Paths pushed to `next_ray_queue`.
     pub next_rays: u32,
+    /// Rays pushed to `shadow_queue`.
     pub shadow_rays: u32,
-    pub reserved: u32,
+    /// Traversals the device cut short (lavapipe's loop limit); never reset during a render.
+    pub truncated_traversals: u32,
 }
 
 /// `shaders/lib/layout.wesl` composed to WGSL by the build script (for the layout test).

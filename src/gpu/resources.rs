@@ -100,8 +100,8 @@ impl ChunkLayout {
         let chunks = count.div_ceil(1 << bits);
         if chunks > MAX_CHUNKS || bits == 0 {
             bail!(
-                "`{name}` needs {:.1} MiB, more than {MAX_CHUNKS} bindings of {:.1} MiB; reduce the resolution, \
-                 bins or the scene's size",
+                "`{name}` needs {:.1} MiB, more than {MAX_CHUNKS} bindings of {:.1} MiB allow on this device; \
+                 reduce its size (the film: resolution and bins; scene arrays: triangle count)",
                 (count * element_size) as f64 / 1048576.0,
                 limit as f64 / 1048576.0
             );

@@ -137,15 +137,20 @@ impl Loader<'_> {
         if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
             bail!("{name}: {node_name}: camera yfov {yfov} rad is not in (0, pi)");
         }
-        let (_, rotation, position) = world.to_scale_rotation_translation();
+        let (scale, rotation, position) = world.to_scale_rotation_translation();
         let frame = Mat3::from_quat(rotation);
-        Ok(CameraDesc {
+        let camera = CameraDesc {
             position,
             right: frame.x_axis.normalize(),
             up: frame.y_axis.normalize(),
             forward: (-frame.z_axis).normalize(),
             yfov,
-        })
+        };
+        let finite = [camera.position, camera.right, camera.up, camera.forward].iter().all(|v| v.is_finite());
+        if !finite || scale.min_element().abs() < 1e-12 {
+            bail!("{name}: {node_name}: the camera's transform is degenerate (zero scale or non-finite)");
+        }
+        Ok(camera)
     }
 
     fn punctual_light(
@@ -233,7 +238,10 @@ impl Loader<'_> {
                     material,
                 };
                 let area = t.area();
-                if !(area > 0.0) || !area.is_finite() {
+                if !area.is_finite() {
+                    bail!("{name}: {what}: a triangle's area overflows f32 (coordinates too large)");
+                }
+                if area <= 0.0 {
                     c.dropped_degenerate += 1;
                     continue;
                 }

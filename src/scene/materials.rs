@@ -4,7 +4,7 @@ use glam::{Vec2, Vec3};
 
 use super::Scene;
 use crate::gpu::layout::{
-    MATERIAL_DOUBLE_SIDED, MATERIAL_EMISSIVE, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TextureInfo,
+    MATERIAL_DOUBLE_SIDED, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TextureInfo,
 };
 
 /// GPU materials of a scene.
@@ -16,8 +16,7 @@ pub fn gpu_materials(scene: &Scene) -> Vec<Material> {
             base_color: m.base_color,
             base_color_texture: m.base_color_texture.unwrap_or(NONE),
             emission: m.emission,
-            flags: if m.double_sided { MATERIAL_DOUBLE_SIDED } else { 0 }
-                | if m.is_emissive() { MATERIAL_EMISSIVE } else { 0 },
+            flags: if m.double_sided { MATERIAL_DOUBLE_SIDED } else { 0 },
             metallic: m.metallic,
             roughness: m.roughness,
             reserved0: 0,

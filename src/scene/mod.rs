@@ -123,9 +123,17 @@ impl Scene {
         (shortest, (max_bounces as f32 + 1.0) * (hi - lo).length())
     }
 
-    /// Length of the bounds' diagonal (m): the scene's scale for relative tolerances.
-    pub fn extent(&self) -> f32 {
-        let (lo, hi) = self.bounds();
+    /// Diagonal of the triangles' bounds (m), the camera and point lights left out: the
+    /// geometry's scale for relative tolerances.
+    pub fn triangle_extent(&self) -> f32 {
+        let mut lo = glam::Vec3::INFINITY;
+        let mut hi = glam::Vec3::NEG_INFINITY;
+        for t in &self.triangles {
+            for p in t.positions {
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
         (hi - lo).length().max(f32::MIN_POSITIVE)
     }
 }

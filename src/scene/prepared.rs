@@ -7,7 +7,7 @@ use super::Scene;
 use super::lights::LightTable;
 use super::materials::{gpu_materials, gpu_textures};
 use crate::bvh::Bvh;
-use crate::gpu::layout::{BvhNode, Material, NONE, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
+use crate::gpu::layout::{Material, NONE, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
 
 /// Everything the kernels read about a scene.
 #[derive(Clone, Debug)]
@@ -20,7 +20,7 @@ pub struct PreparedScene {
     pub texture_infos: Vec<TextureInfo>,
     pub texels: Vec<[u32; 2]>,
     pub lights: LightTable,
-    /// Ray-origin offset scale (m), 1e-6 of the scene's extent.
+    /// Ray-origin offset scale (m), 1e-6 of the extent of the scene's triangles.
     pub ray_epsilon: f32,
 }
 
@@ -64,12 +64,8 @@ impl PreparedScene {
             });
         }
         let (texture_infos, texels) = gpu_textures(&scene);
-        let ray_epsilon = 1e-6 * scene.extent();
+        let ray_epsilon = 1e-6 * scene.triangle_extent();
         Ok(Self { materials: gpu_materials(&scene), scene, bvh, triangles, shading, texture_infos, texels, lights, ray_epsilon })
-    }
-
-    pub fn nodes(&self) -> &[BvhNode] {
-        &self.bvh.nodes
     }
 
     pub fn has_textures(&self) -> bool {

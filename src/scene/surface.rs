@@ -13,7 +13,6 @@ pub struct Surface {
     pub uv: Vec2,
     pub material: u32,
     pub light: u32,
-    pub area: f32,
 }
 
 pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], hit: &Hit) -> Surface {
@@ -21,9 +20,7 @@ pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], hit: &Hit
     let sh = &shading[hit.triangle as usize];
     let b0 = 1.0 - hit.b1 - hit.b2;
     let position = tri.v0 + hit.b1 * tri.e1 + hit.b2 * tri.e2;
-    let c = tri.e1.cross(tri.e2);
-    let len = c.length();
-    let ng = c / len;
+    let ng = tri.e1.cross(tri.e2).normalize();
     let mut ns = ng;
     if sh.flags & SHADING_HAS_NORMALS != 0 {
         let n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
@@ -32,7 +29,7 @@ pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], hit: &Hit
         }
     }
     let uv = b0 * Vec2::new(sh.u0, sh.v0) + hit.b1 * Vec2::new(sh.u1, sh.v1) + hit.b2 * Vec2::new(sh.u2, sh.v2);
-    Surface { position, geometric_normal: ng, shading_normal: ns, uv, material: tri.material, light: tri.light, area: 0.5 * len }
+    Surface { position, geometric_normal: ng, shading_normal: ns, uv, material: tri.material, light: tri.light }
 }
 
 /// Ray origin just off the surface (twin of `offset_ray_origin`).

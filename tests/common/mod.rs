@@ -56,7 +56,7 @@ pub fn render_films(
     let mut tracer = PathTracer::new(ctx, scene, settings).unwrap();
     (0..batches)
         .map(|_| {
-            tracer.render_samples(spp as u64);
+            tracer.render_samples(spp as u64).unwrap();
             let film = tracer.film().unwrap();
             assert!(film.all_finite(), "non-finite pixel values");
             tracer.reset_film();
@@ -106,7 +106,7 @@ pub fn run_probe(
     resources.storage_zeroed(ctx, "probe_output", 16 * outputs as u64, wgpu::BufferUsages::empty()).unwrap();
     let mut constants = tracer.constants().to_vec();
     constants.extend_from_slice(extra);
-    let k = Kernel::new(ctx, kernel, &constants);
+    let k = Kernel::new(ctx, kernel, None, &constants);
     let bind_group = k.bind(ctx, &resources);
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     {
