@@ -2,7 +2,8 @@
 //!
 //! Time is optical path length in metres (c = 1); a pixel measures
 //! I = integral of W(|x|) f(x) over paths x, where W is the sensor's pathlength importance (the
-//! gate). See DESIGN.md-style documentation in the README for units and conventions.
+//! gate). The README documents units, conventions and the architecture.
+#![warn(missing_docs)]
 
 pub mod bench;
 pub mod bvh;

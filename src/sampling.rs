@@ -5,12 +5,16 @@ use glam::{Vec2, Vec3};
 /// Orthonormal basis (t, b, n) around the unit vector `n` (Duff et al. 2017).
 #[derive(Clone, Copy, Debug)]
 pub struct Frame {
+    /// First tangent.
     pub t: Vec3,
+    /// Second tangent.
     pub b: Vec3,
+    /// The normal.
     pub n: Vec3,
 }
 
 impl Frame {
+    /// The frame around unit vector `n` (twin of `frame_from_normal`).
     pub fn from_normal(n: Vec3) -> Self {
         let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
         let a = -1.0 / (sign + n.z);
@@ -22,6 +26,7 @@ impl Frame {
         }
     }
 
+    /// Local coordinates (x along t, y along b, z along n) to world space (twin of `frame_to_world`).
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.t * v.x + self.b * v.y + self.n * v.z
     }

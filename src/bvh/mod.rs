@@ -14,6 +14,7 @@ use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES};
 /// A flattened BVH over a triangle list.
 #[derive(Clone, Debug)]
 pub struct Bvh {
+    /// Nodes in depth-first order with skip links.
     pub nodes: Vec<BvhNode>,
     /// `order[i]` = input index of the triangle at BVH position `i`.
     pub order: Vec<u32>,

@@ -15,10 +15,12 @@ pub struct Resources {
 }
 
 impl Resources {
+    /// The buffer named `name`.
     pub fn get(&self, name: &str) -> Option<&wgpu::Buffer> {
         self.buffers.get(name)
     }
 
+    /// Adds (or replaces) the buffer named `name`.
     pub fn insert(&mut self, name: &'static str, buffer: wgpu::Buffer) {
         self.buffers.insert(name, buffer);
     }

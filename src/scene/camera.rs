@@ -10,8 +10,11 @@ pub struct CameraDesc {
     /// Pinhole position (m).
     pub position: Vec3,
     /// Unit vectors: image right, image up, viewing direction.
+    /// Unit vector along +x of the image.
     pub right: Vec3,
+    /// Unit vector along +y of the image.
     pub up: Vec3,
+    /// Unit viewing direction.
     pub forward: Vec3,
     /// Vertical field of view (rad).
     pub yfov: f32,

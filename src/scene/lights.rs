@@ -12,6 +12,7 @@ use crate::sampling::sample_triangle_barycentrics;
 /// Lights with their selection CDF.
 #[derive(Clone, Debug, Default)]
 pub struct LightTable {
+    /// The lights, area lights first.
     pub lights: Vec<Light>,
     /// cdf[i] = P(pick a light with index <= i); the last entry is 1.
     pub cdf: Vec<f32>,
@@ -114,13 +115,19 @@ impl LightTable {
 /// A sampled point on a light (twin of WGSL `LightSample`).
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
+    /// The sampled point (m).
     pub position: Vec3,
+    /// Unit front normal of an area light; zero for point lights.
     pub normal: Vec3,
+    /// Radiance (area, W m^-2 sr^-1) or intensity (point, W sr^-1).
     pub emission: Vec3,
     /// Area pdf with selection (m^-2) for area lights; selection probability for point lights.
     pub pdf: f32,
+    /// A point light (a delta: reached by light sampling only).
     pub is_point: bool,
+    /// An area light that emits from both faces.
     pub double_sided: bool,
+    /// The emitting triangle (BVH order), or NONE.
     pub triangle: u32,
 }
 

@@ -23,6 +23,7 @@ pub struct SceneTriangle {
     pub normals: Option<[Vec3; 3]>,
     /// Texture coordinates of the base-colour texture's set (zero when absent).
     pub uvs: [Vec2; 3],
+    /// Index into `Scene::materials`.
     pub material: u32,
 }
 
@@ -37,6 +38,7 @@ impl SceneTriangle {
 /// A material as loaded (glTF metallic-roughness).
 #[derive(Clone, Debug)]
 pub struct MaterialDesc {
+    /// The glTF material's name (may be empty).
     pub name: String,
     /// Linear RGB base colour.
     pub base_color: Vec3,
@@ -44,12 +46,16 @@ pub struct MaterialDesc {
     pub base_color_texture: Option<u32>,
     /// Radiance (W m^-2 sr^-1) = emissiveFactor x emissive strength.
     pub emission: Vec3,
+    /// glTF `doubleSided`: both faces reflect and emit.
     pub double_sided: bool,
+    /// glTF metallic factor.
     pub metallic: f32,
+    /// glTF roughness factor.
     pub roughness: f32,
 }
 
 impl MaterialDesc {
+    /// True when the material emits (any emission channel above zero).
     pub fn is_emissive(&self) -> bool {
         self.emission.max_element() > 0.0
     }
@@ -58,16 +64,22 @@ impl MaterialDesc {
 /// A decoded texture: linear RGB texels, row 0 at v = 0.
 #[derive(Clone, Debug)]
 pub struct TextureData {
+    /// Width in texels.
     pub width: u32,
+    /// Height in texels.
     pub height: u32,
+    /// Linear RGB texels, row-major.
     pub texels: Vec<Vec3>,
+    /// u clamps to the edge instead of repeating.
     pub clamp_u: bool,
+    /// v clamps to the edge instead of repeating.
     pub clamp_v: bool,
 }
 
 /// A point light (KHR_lights_punctual).
 #[derive(Clone, Debug)]
 pub struct PointLight {
+    /// Position (m).
     pub position: Vec3,
     /// Intensity (W sr^-1 per channel) = colour x intensity.
     pub intensity: Vec3,
@@ -78,10 +90,15 @@ pub struct PointLight {
 pub struct Scene {
     /// Where the scene came from (for messages and metadata).
     pub source: String,
+    /// World-space triangles in load order.
     pub triangles: Vec<SceneTriangle>,
+    /// Materials, glTF's default material last.
     pub materials: Vec<MaterialDesc>,
+    /// Decoded base-colour textures.
     pub textures: Vec<TextureData>,
+    /// KHR_lights_punctual point lights.
     pub point_lights: Vec<PointLight>,
+    /// The first camera of the scene.
     pub camera: CameraDesc,
     /// Zero-area triangles dropped at load.
     pub dropped_degenerate: usize,

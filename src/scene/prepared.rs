@@ -12,19 +12,28 @@ use crate::gpu::layout::{Material, NONE, SHADING_HAS_NORMALS, TextureInfo, Trian
 /// Everything the kernels read about a scene.
 #[derive(Clone, Debug)]
 pub struct PreparedScene {
+    /// The scene as loaded.
     pub scene: Scene,
+    /// Its BVH.
     pub bvh: Bvh,
+    /// Triangles in BVH order.
     pub triangles: Vec<Triangle>,
+    /// Shading attributes in BVH order.
     pub shading: Vec<TriangleShading>,
+    /// GPU materials.
     pub materials: Vec<Material>,
+    /// Where each texture lies in `texels`.
     pub texture_infos: Vec<TextureInfo>,
+    /// All texels, two pack2x16float words each.
     pub texels: Vec<[u32; 2]>,
+    /// Lights and their selection CDF.
     pub lights: LightTable,
     /// Ray-origin offset scale (m), 1e-6 of the extent of the scene's triangles.
     pub ray_epsilon: f32,
 }
 
 impl PreparedScene {
+    /// Builds the BVH, reorders the triangles into its leaves and builds the light table.
     pub fn new(scene: Scene) -> Result<Self> {
         let positions: Vec<_> = scene.triangles.iter().map(|t| t.positions).collect();
         let bvh = Bvh::build(&positions);
@@ -68,10 +77,12 @@ impl PreparedScene {
         Ok(Self { materials: gpu_materials(&scene), scene, bvh, triangles, shading, texture_infos, texels, lights, ray_epsilon })
     }
 
+    /// True when some material has a base-colour texture.
     pub fn has_textures(&self) -> bool {
         !self.texture_infos.is_empty()
     }
 
+    /// True when the scene has point lights.
     pub fn has_point_lights(&self) -> bool {
         !self.scene.point_lights.is_empty()
     }

@@ -7,14 +7,21 @@ use crate::gpu::layout::{Hit, SHADING_HAS_NORMALS, Triangle, TriangleShading};
 /// A point on the scene's surface (twin of WGSL `Surface`).
 #[derive(Clone, Copy, Debug)]
 pub struct Surface {
+    /// The point (m).
     pub position: Vec3,
+    /// Unit normal of the triangle's front face.
     pub geometric_normal: Vec3,
+    /// Unit interpolated vertex normal.
     pub shading_normal: Vec3,
+    /// Texture coordinates.
     pub uv: Vec2,
+    /// Material index.
     pub material: u32,
+    /// Light index, or NONE.
     pub light: u32,
 }
 
+/// The surface point of `hit` (twin of `surface_at`).
 pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], hit: &Hit) -> Surface {
     let tri = &triangles[hit.triangle as usize];
     let sh = &shading[hit.triangle as usize];
