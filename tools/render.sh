@@ -5,4 +5,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . tools/setup.sh
 gatetrace_setup
-exec cargo run --release --quiet -- render "$@"
+exec cargo run --release -- render "$@"
