@@ -16,18 +16,24 @@ fn prepare(scene: &Scene, name: &str) -> PreparedScene {
     PreparedScene::new(load_gltf(&scene.write(&dir, &format!("{name}.gltf"))).unwrap()).unwrap()
 }
 
+/// An emitter of `radiance` at 1 m filling the view of a camera at the origin (yfov `yfov`),
+/// facing the camera or away from it.
+fn emitter_wall(radiance: f32, facing_camera: bool, yfov: f32, name: &str) -> PreparedScene {
+    prepare(
+        &Scene {
+            meshes: vec![quad_z(10.0, -1.0, facing_camera, 0)],
+            materials: vec![Material::emitter(radiance)],
+            camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov }),
+            point_lights: vec![],
+        },
+        name,
+    )
+}
+
 #[test]
 fn pixels_on_an_emitter_return_its_radiance() {
     // An emitter of radiance 7.5 fills the view at 1 m; every sample sees exactly 7.5.
-    let scene = prepare(
-        &Scene {
-            meshes: vec![quad_z(10.0, -1.0, true, 0)],
-            materials: vec![Material::emitter(7.5)],
-            camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: 0.9 }),
-            point_lights: vec![],
-        },
-        "emitter_radiance",
-    );
+    let scene = emitter_wall(7.5, true, 0.9, "emitter_radiance");
     let ctx = common::gpu();
     for (bounces, gate) in [(0, Gate::None), (4, Gate::None), (0, Gate::Box { start: 1.0, end: 1.5 })] {
         let settings = RenderSettings { width: 16, height: 12, max_bounces: bounces, gate, ..Default::default() };
@@ -45,15 +51,7 @@ fn pixels_on_an_emitter_return_its_radiance() {
 
 #[test]
 fn one_sided_emitters_are_dark_from_behind() {
-    let scene = prepare(
-        &Scene {
-            meshes: vec![quad_z(10.0, -1.0, false, 0)],
-            materials: vec![Material::emitter(7.5)],
-            camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: 0.9 }),
-            point_lights: vec![],
-        },
-        "emitter_back",
-    );
+    let scene = emitter_wall(7.5, false, 0.9, "emitter_back");
     let ctx = common::gpu();
     let film = common::render_films(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 4).remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
@@ -340,15 +338,7 @@ fn long_renders_do_not_drift() {
     // 2^22 samples of a pixel that sees an emitter of radiance 0.1 everywhere: every term is
     // the same f32, so the mean must be 0.1 to f32 precision. A plain f32 sum of these terms
     // is off by percents; the film's double-float sums are exact to about 2^-48.
-    let scene = prepare(
-        &Scene {
-            meshes: vec![quad_z(10.0, -1.0, true, 0)],
-            materials: vec![Material::emitter(0.1)],
-            camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: 0.5 }),
-            point_lights: vec![],
-        },
-        "long_render",
-    );
+    let scene = emitter_wall(0.1, true, 0.5, "long_render");
     let ctx = common::gpu();
     let settings = RenderSettings { width: 1, height: 2, max_bounces: 0, ..Default::default() };
     let film = common::render_films(&ctx, &scene, &settings, 1, 1 << 22).remove(0);
