@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use anyhow::Result;
 
 use crate::gpu::GpuContext;
-use crate::integrator::{PathTracer, RenderSettings};
+use crate::integrator::{RenderSettings, create_integrator};
 use crate::scene::{PreparedScene, load_gltf};
 
 /// Renders the scene with `path` (steady state) at 64x64 and 256x256 and prints pixel samples
@@ -24,7 +24,7 @@ pub fn run_bench(seconds: f64, max_bounces: u32, scene_path: &Path) -> Result<()
     println!("{:>10} {:>8} {:>10} {:>14}", "resolution", "spp", "seconds", "Msamples/s");
     for size in [64u32, 256] {
         let settings = RenderSettings { width: size, height: size, max_bounces, ..Default::default() };
-        let mut tracer = PathTracer::new(&ctx, &scene, &settings)?;
+        let mut tracer = create_integrator(&ctx, &scene, &settings)?;
         tracer.render_pass(tracer.samples_per_pass())?;
         tracer.reset_film();
         let start = Instant::now();

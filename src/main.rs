@@ -38,7 +38,9 @@ enum Command {
 struct RenderArgs {
     /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
     scene: Option<PathBuf>,
-    /// Sampling method. `direct` and `ellipsoidal` are not available yet.
+    /// Sampling method: `path` (path tracing with next-event estimation and MIS) or `direct`
+    /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
+    /// bounces). `ellipsoidal` is not available yet.
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
@@ -70,6 +72,15 @@ struct RenderArgs {
     /// image size by default). --time renders whole passes.
     #[arg(long)]
     samples_per_pass: Option<u32>,
+    /// Print, per (s, t) strategy of a bidirectional method, the connections evaluated, those
+    /// skipped because the gate weighs their length zero, and the shadow rays traced.
+    #[arg(long)]
+    stats: bool,
+    /// Write only the MIS-weighted contribution of strategy S,T (S light-subpath vertices, T
+    /// camera-subpath vertices, the pinhole included; `direct` only). The images of all
+    /// strategies of a scene sum to the full render.
+    #[arg(long, value_name = "S,T", value_parser = parse_strategy)]
+    debug_strategy: Option<(u32, u32)>,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
     /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr.
     #[arg(long, short)]
@@ -84,6 +95,12 @@ struct BenchArgs {
     /// Maximum number of scattering vertices.
     #[arg(long, default_value_t = 5)]
     max_bounces: u32,
+}
+
+fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{s}` is not S,T (two non-negative integers, e.g. 1,2)");
+    let (a, b) = s.split_once(',').ok_or_else(bad)?;
+    Ok((a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?))
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
@@ -140,9 +157,17 @@ fn run_render(args: RenderArgs) -> Result<()> {
         seed: args.seed,
         samples_per_pass: args.samples_per_pass,
         light_strategy: LightStrategy::Mis,
+        stats: args.stats,
+        debug_strategy: args.debug_strategy,
         binding_limit: None,
     };
     settings.method.ensure_available()?;
+    if settings.debug_strategy.is_some() && settings.method != Method::Direct {
+        bail!("--debug-strategy needs --method direct");
+    }
+    if settings.method == Method::Direct {
+        gatetrace::integrator::direct::check_settings(&settings)?;
+    }
     film_elements(&settings)?;
     check_writable(&out)?;
 
@@ -161,7 +186,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
     let film = &output.film;
     let secs = output.elapsed.as_secs_f64();
-    let metadata: Metadata = vec![
+    let mut metadata: Metadata = vec![
         ("scene".into(), scene_path.display().to_string()),
         ("method".into(), settings.method.name().into()),
         ("gate".into(), args.gate.clone()),
@@ -177,6 +202,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
         ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
         ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
     ];
+    if let Some((s, t)) = settings.debug_strategy {
+        metadata.push(("debug_strategy".into(), format!("{s},{t}")));
+    }
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
     write_film(&out, film, &metadata, &bin_ranges)?;
     let mean = film.mean_rgb();
@@ -196,6 +224,11 @@ fn run_render(args: RenderArgs) -> Result<()> {
         mean[2],
         out.display()
     );
+    if let Some(report) = &output.stats {
+        print!("{report}");
+    } else if settings.stats {
+        println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
+    }
     Ok(())
 }
 

@@ -30,6 +30,11 @@ impl Frame {
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.t * v.x + self.b * v.y + self.n * v.z
     }
+
+    /// World-space vector to local coordinates (twin of `frame_to_local`).
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.t), v.dot(self.b), v.dot(self.n))
+    }
 }
 
 /// Cosine-weighted direction about +z; pdf = z / pi (sr^-1).

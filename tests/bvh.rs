@@ -6,7 +6,7 @@ mod common;
 use gatetrace::bvh::Bvh;
 use gatetrace::bvh::traverse::{brute_force_closest, trace_any, trace_closest};
 use gatetrace::gpu::layout::{NONE, Triangle};
-use gatetrace::integrator::{PathTracer, RenderSettings};
+use gatetrace::integrator::{Integrator, PathTracer, RenderSettings};
 use gatetrace::rng::Rng;
 use glam::Vec3;
 

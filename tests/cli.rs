@@ -94,7 +94,10 @@ fn bad_input_gives_clear_errors() {
         (&["render", "--gate", "wobble:1", "--out", out], "unknown gate kind"),
         (&["render", "--gate", "box:1x..2", "--out", out], "not a length"),
         (&["render", "--gate", "table:/nonexistent.csv", "--out", out], "/nonexistent.csv"),
-        (&["render", "--method", "direct", "--out", out], "not yet available"),
+        (&["render", "--method", "direct", "--max-bounces", "30", "--out", out], "at most 24 bounces"),
+        (&["render", "--debug-strategy", "1,2", "--out", out], "needs --method direct"),
+        (&["render", "--method", "direct", "--debug-strategy", "0,1", "--out", out], "not a strategy"),
+        (&["render", "--method", "direct", "--debug-strategy", "1", "--out", out], "S,T"),
         (&["render", "--method", "ellipsoidal", "--out", out], "not yet available"),
         (&["render", "--out", "image.png"], ".exr or .npy"),
         (&["render", "--spp", "0", "--out", out], "at least 1"),
@@ -123,4 +126,21 @@ fn without_an_adapter_the_error_says_how_to_get_one() {
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(e.contains("no GPU adapter") && e.contains("mesa-vulkan-drivers"), "{e}");
+}
+
+#[test]
+fn stats_report_connections_per_strategy() {
+    let dir = common::scratch_dir("cli_stats");
+    let out = dir.join("gated.npy");
+    let o = gatetrace(&[
+        "render", "--method", "direct", "--res", "8x8", "--spp", "2", "--max-bounces", "2", "--gate", "box:3.14..3.19",
+        "--stats", "--out", out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(text.contains("skipped by gate") && text.contains("shadow rays"), "{text}");
+    // One row per strategy with at most 2 bounces, (0,2) .. (3,1), and a total.
+    for st in ["( 0, 2)", "( 1, 1)", "( 2, 2)", "( 3, 1)", "total"] {
+        assert!(text.contains(st), "row {st} missing:\n{text}");
+    }
 }

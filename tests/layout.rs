@@ -18,19 +18,22 @@ fn wgsl_structs_match_rust_structs() {
         Triangle { v0, material, e1, light, e2, source }
         TriangleShading { n0, u0, n1, v0, n2, u1, v1, u2, v2, flags }
         BvhNode { min, skip, max, leaf }
-        Material { base_color, base_color_texture, emission, flags, metallic, roughness, reserved0, reserved1 }
+        Material { base_color, base_color_texture, emission, flags, metallic, alpha, reserved0, reserved1 }
         TextureInfo { offset, width, height, wrap }
         Light { position, kind, emission, triangle, area, select_pdf, flags, reserved }
         Camera { position, tan_half_fov_y, right, aspect, up, reserved0, forward, reserved1 }
         GateParams { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }
-        RenderParams { camera, gate, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
+        RenderParams { camera, gate, light_bounds_min, image_area, light_bounds_max, reserved3, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
                        reserved0, reserved1, reserved2 }
         WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, reserved0, reserved1, reserved2 }
         PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, normal, origin_triangle, pixel, sample,
                     dimension, reserved }
         Hit { t, triangle, b1, b2 }
-        ShadowRay { origin, t_max, direction, slot, ignore0, ignore1, reserved0, reserved1 }
+        ShadowRay { origin, t_max, direction, waiting, ignore0, ignore1, reserved0, reserved1 }
         Contribution { radiance, path_length }
+        PathVertex { position, path_length, normal, material, shading_normal, triangle, throughput, flags, pdf_fwd,
+                     pdf_rev, uv }
+        Splat { radiance, path_length, pixel, reserved0, reserved1, reserved2 }
         QueueCounters { rays, next_rays, shadow_rays, truncated_traversals }
     };
     let module = naga::front::wgsl::parse_str(LAYOUT_WGSL).expect("layout.wgsl parses");

@@ -96,7 +96,7 @@ impl BvhNode {
     }
 }
 
-/// A surface material; this version shades the Lambertian lobe with albedo `base_color`.
+/// A surface material: a Lambertian lobe and a GGX conductor lobe blended by `metallic`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Material {
@@ -108,10 +108,10 @@ pub struct Material {
     pub emission: Vec3,
     /// [`MATERIAL_DOUBLE_SIDED`].
     pub flags: u32,
-    /// glTF metallic factor (reserved for the conductor lobe).
+    /// Weight of the conductor lobe (glTF metallic factor, 0..1).
     pub metallic: f32,
-    /// glTF roughness factor (reserved for the conductor lobe).
-    pub roughness: f32,
+    /// GGX alpha = roughness^2, at least [`MIN_ALPHA`].
+    pub alpha: f32,
     /// Padding.
     pub reserved0: u32,
     /// Padding.
@@ -209,6 +209,14 @@ pub struct RenderParams {
     pub camera: Camera,
     /// The pathlength importance.
     pub gate: GateParams,
+    /// Lower corner of the bounds of every light (m).
+    pub light_bounds_min: Vec3,
+    /// Area of the whole image on the image plane at unit distance (4 tan^2(yfov/2) aspect).
+    pub image_area: f32,
+    /// Upper corner of the bounds of every light (m).
+    pub light_bounds_max: Vec3,
+    /// Padding.
+    pub reserved3: u32,
     /// Image width (pixels).
     pub width: u32,
     /// Image height (pixels).
@@ -303,7 +311,7 @@ pub struct Hit {
     pub b2: f32,
 }
 
-/// A queued next-event shadow ray.
+/// A queued shadow ray of a connection.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct ShadowRay {
@@ -313,8 +321,8 @@ pub struct ShadowRay {
     pub t_max: f32,
     /// Unit direction.
     pub direction: Vec3,
-    /// The path slot whose contribution waits for this ray.
-    pub slot: u32,
+    /// Index of the contribution waiting for this ray; [`SPLAT_WAITING`] | index for a splat.
+    pub waiting: u32,
     /// Triangle to ignore (the origin's).
     pub ignore0: u32,
     /// Triangle to ignore (the light's).
@@ -324,6 +332,9 @@ pub struct ShadowRay {
     /// Padding.
     pub reserved1: u32,
 }
+
+/// Marks a shadow ray's target as an index into the splat buffer.
+pub const SPLAT_WAITING: u32 = 0x8000_0000;
 
 /// A radiance contribution and the optical path length it belongs to.
 #[repr(C)]
@@ -348,6 +359,55 @@ pub struct QueueCounters {
     /// Traversals the device cut short (lavapipe's loop limit); never reset during a render.
     pub truncated_traversals: u32,
 }
+
+/// One vertex of a bidirectional subpath (see `PathVertex` in layout.wesl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct PathVertex {
+    /// Position (m).
+    pub position: Vec3,
+    /// Optical path length from the subpath's start (m).
+    pub path_length: f32,
+    /// Unit geometric normal on the arrival side (m).
+    pub normal: Vec3,
+    /// Material index (surface) or light index (light vertex).
+    pub material: u32,
+    /// Unit shading normal on the arrival side.
+    pub shading_normal: Vec3,
+    /// Triangle (BVH order) or [`NONE`].
+    pub triangle: u32,
+    /// Subpath throughput up to the vertex.
+    pub throughput: Vec3,
+    /// Vertex kind and flags.
+    pub flags: u32,
+    /// Forward area density (m^-2).
+    pub pdf_fwd: f32,
+    /// Reverse area density (m^-2).
+    pub pdf_rev: f32,
+    /// Texture coordinates.
+    pub uv: glam::Vec2,
+}
+
+/// A light-tracing contribution waiting for its shadow ray.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct Splat {
+    /// Radiance estimate (W m^-2 sr^-1) before the gate's weight.
+    pub radiance: Vec3,
+    /// Optical path length (m).
+    pub path_length: f32,
+    /// Row-major pixel index.
+    pub pixel: u32,
+    /// Padding.
+    pub reserved0: u32,
+    /// Padding.
+    pub reserved1: u32,
+    /// Padding.
+    pub reserved2: u32,
+}
+
+/// Smallest GGX alpha: rougher than this keeps every density finite in f32.
+pub const MIN_ALPHA: f32 = 1e-3;
 
 /// `shaders/lib/layout.wesl` composed to WGSL by the build script (for the layout test).
 pub const LAYOUT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/layout.wgsl"));

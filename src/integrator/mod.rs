@@ -1,6 +1,9 @@
-//! Integrators and the render loop. `path` is the wavefront path tracer (DESIGN.md section 4.1);
-//! `direct` and `ellipsoidal` (bidirectional methods) are not available yet.
+//! Integrators and the render loop: `path` is the wavefront path tracer (DESIGN.md section
+//! 4.1), `direct` bidirectional path tracing with direct connections (section 4.2); `mis` is
+//! the CPU twin of the bidirectional MIS weights. `ellipsoidal` is not available yet.
 
+pub mod direct;
+pub mod mis;
 pub mod path;
 
 use std::time::{Duration, Instant};
@@ -9,7 +12,11 @@ use anyhow::{Result, bail};
 
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
+use crate::gpu::layout::{NONE, RenderParams, WaveParams};
+use crate::gpu::resources::ChunkLayout;
+use crate::gpu::Resources;
 use crate::scene::PreparedScene;
+pub use direct::{DirectTracer, StrategyStats};
 pub use path::{PathTracer, film_elements};
 
 /// Sampling strategy (`--method`).
@@ -27,10 +34,9 @@ impl Method {
     /// An error for the methods this version does not implement yet.
     pub fn ensure_available(self) -> Result<()> {
         match self {
-            Method::Path => Ok(()),
+            Method::Path | Method::Direct => Ok(()),
             m => bail!(
-                "--method {} is not yet available: this version implements `path` \
-                 (bidirectional methods arrive in a later version)",
+                "--method {} is not yet available: this version implements `path` and `direct`",
                 m.name()
             ),
         }
@@ -79,6 +85,10 @@ pub struct RenderSettings {
     pub samples_per_pass: Option<u32>,
     /// How area lights are reached (MIS by default; the single strategies are for tests).
     pub light_strategy: LightStrategy,
+    /// Count connections per (s, t) strategy (`--stats`; bidirectional methods).
+    pub stats: bool,
+    /// Only this (s, t) strategy contributes, MIS-weighted (`--debug-strategy`; `direct`).
+    pub debug_strategy: Option<(u32, u32)>,
     /// Largest storage binding to use (bytes); None: the device's limit. Smaller values force
     /// the split-array layout (used by tests to check it against the unsplit one).
     pub binding_limit: Option<u64>,
@@ -96,9 +106,62 @@ impl Default for RenderSettings {
             seed: 0,
             samples_per_pass: None,
             light_strategy: LightStrategy::Mis,
+            stats: false,
+            debug_strategy: None,
             binding_limit: None,
         }
     }
+}
+
+/// A renderer bound to one scene and one set of settings, accumulating into its film.
+pub trait Integrator {
+    /// The named buffers the kernels bind (scene, wavefront state, film).
+    fn resources(&self) -> &Resources;
+    /// The specialisation constants every kernel of this render gets.
+    fn constants(&self) -> &[(&'static str, f64)];
+    /// Samples per pixel of a full pass.
+    fn samples_per_pass(&self) -> u32;
+    /// Samples per pixel accumulated in the film since the last reset.
+    fn samples_done(&self) -> u64;
+    /// Traces `samples` (1 ..= `samples_per_pass`) more samples of every pixel and adds them to
+    /// the film; returns when the GPU has finished.
+    fn render_pass(&mut self, samples: u32) -> Result<()>;
+    /// The film's current estimate (sums divided by the samples per pixel).
+    fn film(&self) -> Result<Film>;
+    /// Ray traversals the device cut short so far (lavapipe ends a shader invocation's loops
+    /// after 65535 iterations in total); nonzero means the image may miss geometry.
+    fn truncated_traversals(&self) -> Result<u64>;
+    /// Clears the film; later samples continue the random sequence, so the next estimate is
+    /// independent of the previous one (for batch statistics).
+    fn reset_film(&mut self);
+    /// What `--stats` prints about the work done so far, if the method keeps statistics.
+    fn stats_report(&self) -> Result<Option<String>> {
+        Ok(None)
+    }
+    /// Traces `spp` more samples of every pixel, in as few passes as possible.
+    fn render_samples(&mut self, spp: u64) -> Result<()> {
+        let mut left = spp;
+        while left > 0 {
+            let n = left.min(self.samples_per_pass() as u64) as u32;
+            self.render_pass(n)?;
+            left -= n as u64;
+        }
+        Ok(())
+    }
+}
+
+/// The integrator of `settings.method`, with the scene uploaded and its kernels built.
+pub fn create_integrator<'a>(
+    ctx: &'a GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+) -> Result<Box<dyn Integrator + 'a>> {
+    settings.method.ensure_available()?;
+    Ok(match settings.method {
+        Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
+        Method::Direct => Box::new(DirectTracer::new(ctx, scene, settings)?),
+        Method::Ellipsoidal => unreachable!("checked by ensure_available"),
+    })
 }
 
 /// How long to render.
@@ -127,8 +190,10 @@ pub struct RenderOutput {
     pub film: Film,
     /// Wall time of the whole render: upload, kernel builds and passes.
     pub elapsed: Duration,
-    /// Ray traversals the device cut short (see `PathTracer::truncated_traversals`).
+    /// Ray traversals the device cut short (see [`Integrator::truncated_traversals`]).
     pub truncated_traversals: u64,
+    /// The method's `--stats` report, when asked for.
+    pub stats: Option<String>,
 }
 
 /// Why no path of the scene can reach the gate, if none can (checked before any work).
@@ -154,6 +219,67 @@ pub fn unreachable_gate(scene: &PreparedScene, settings: &RenderSettings) -> Opt
     None
 }
 
+/// The render-wide parameters of `settings` on `scene`, shared by every method's kernels.
+pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> RenderParams {
+    let (light_bounds_min, light_bounds_max) = scene.scene.light_bounds();
+    RenderParams {
+        camera: scene.scene.camera.to_gpu(settings.width, settings.height),
+        gate: settings.gate.to_gpu(),
+        light_bounds_min,
+        image_area: scene.scene.camera.image_area(settings.width, settings.height),
+        light_bounds_max,
+        width: settings.width,
+        height: settings.height,
+        seed: settings.seed,
+        max_bounces: settings.max_bounces,
+        rr_depth: settings.rr_depth.unwrap_or(NONE),
+        light_count: scene.lights.lights.len() as u32,
+        node_count: scene.bvh.nodes.len() as u32,
+        ray_epsilon: scene.ray_epsilon,
+        one: 1.0,
+        ..Default::default()
+    }
+}
+
+/// Uploads what every method's kernels read (params, scene, lights, gate table) and creates the
+/// film; returns the resources, the specialisation constants of the scene and the gate, and the
+/// film's chunk layout.
+pub fn upload_scene(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    params: &RenderParams,
+    limit: u64,
+) -> Result<(Resources, Vec<(&'static str, f64)>, ChunkLayout)> {
+    let gate = &settings.gate;
+    let mut r = Resources::default();
+    r.uniform_init(ctx, "params", params);
+    r.uniform_init(ctx, "wave", &WaveParams::default());
+    let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
+    let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
+    let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
+    r.storage_init(ctx, "materials", &scene.materials)?;
+    r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
+    r.storage_init(ctx, "texels", &scene.texels)?;
+    r.storage_init(ctx, "lights", &scene.lights.lights)?;
+    r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
+    r.storage_init(ctx, "gate_table", &gate.table())?;
+    let film_len = film_elements(settings)?;
+    let film = r.storage_chunked_zeroed(ctx, "film", film_len, 8, limit)?;
+    let flag = |b: bool| b as u32 as f64;
+    let constants = vec![
+        ("GATE_KIND", gate.kind() as u32 as f64),
+        ("HAS_TEXTURES", flag(scene.has_textures())),
+        ("HAS_POINT_LIGHTS", flag(scene.has_point_lights())),
+        ("HAS_GLOSSY", flag(scene.has_glossy())),
+        ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),
+        ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),
+        ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
+        ("FILM_CHUNK_BITS", film.bits as f64),
+    ];
+    Ok((r, constants, film))
+}
+
 /// Renders `scene` with `settings` until `budget` is spent, calling `progress` after each wave.
 pub fn render(
     ctx: &GpuContext,
@@ -169,9 +295,9 @@ pub fn render(
         eprintln!("warning: {reason}: the image is black; no samples were traced");
         let g = &settings.gate;
         let film = Film::zeroed(settings.width, settings.height, g.bins());
-        return Ok(RenderOutput { film, elapsed: start.elapsed(), truncated_traversals: 0 });
+        return Ok(RenderOutput { film, elapsed: start.elapsed(), truncated_traversals: 0, stats: None });
     }
-    let mut tracer = PathTracer::new(ctx, scene, settings)?;
+    let mut tracer = create_integrator(ctx, scene, settings)?;
     let mut passes = 0;
     loop {
         let spp = tracer.samples_done();
@@ -193,5 +319,6 @@ pub fn render(
              loops after 65535 iterations); the image may miss geometry. Use a GPU for this scene."
         );
     }
-    Ok(RenderOutput { film, elapsed: start.elapsed(), truncated_traversals })
+    let stats = if settings.stats { tracer.stats_report()? } else { None };
+    Ok(RenderOutput { film, elapsed: start.elapsed(), truncated_traversals, stats })
 }

@@ -15,9 +15,9 @@
 
 use anyhow::{Result, ensure};
 
-use super::RenderSettings;
+use super::{Integrator, RenderSettings};
 use crate::film::Film;
-use crate::gpu::layout::{Contribution, Hit, NONE, PathState, QueueCounters, RenderParams, ShadowRay, WaveParams};
+use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::{ChunkLayout, MAX_CHUNKS, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::scene::PreparedScene;
@@ -25,13 +25,13 @@ use crate::scene::PreparedScene;
 /// Path slots a wave aims for when the caller does not fix the samples per pass.
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 18;
 /// Most slots one dispatch can cover (64 invocations x 65535 workgroups).
-const MAX_SLOTS_PER_DISPATCH: u64 = 64 * 65535;
+pub(super) const MAX_SLOTS_PER_DISPATCH: u64 = 64 * 65535;
 /// Most samples per pass: `accumulate` loops over a pixel's samples, and lavapipe (gallivm)
 /// silently ends any loop after 65535 iterations.
 const MAX_SAMPLES_PER_PASS: u32 = 4096;
 /// Rounds encoded per submission; between submissions the host checks whether any path is
 /// still alive, so huge --max-bounces values cost nothing once the paths have ended.
-const ROUNDS_PER_SUBMISSION: u32 = 16;
+pub(super) const ROUNDS_PER_SUBMISSION: u32 = 16;
 /// Pipelines of the path tracer, one per stage.
 struct Stages {
     generate_camera_rays: Kernel,
@@ -76,61 +76,15 @@ pub struct PathTracer<'a> {
 impl<'a> PathTracer<'a> {
     /// Uploads the scene, creates the wavefront state and builds the specialised kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
-        let (width, height) = (settings.width, settings.height);
-        ensure!(width > 0 && height > 0, "the resolution must be at least 1x1");
-        let pixels = width as u64 * height as u64;
-        ensure!(pixels <= u32::MAX as u64, "{width}x{height} has more than 2^32 pixels");
-        let gate = &settings.gate;
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
-
-        // Slots per wave: as many as the target (or the requested samples per pass) asks for,
-        // within one dispatch and within the largest per-slot buffer's binding.
+        // Slots per wave: within the largest per-slot buffer's binding.
         let largest_per_slot = size_of::<PathState>().max(size_of::<ShadowRay>()) as u64;
-        let fit = (limit / largest_per_slot).clamp(1, MAX_SLOTS_PER_DISPATCH);
-        let samples_per_pass = match settings.samples_per_pass {
-            Some(k) => {
-                ensure!(k <= MAX_SAMPLES_PER_PASS, "at most {MAX_SAMPLES_PER_PASS} samples per pass (got {k})");
-                ensure!(
-                    k <= 1 || pixels * k as u64 <= fit,
-                    "{k} samples per pass of {width}x{height} need {} path slots, more than the {fit} one wave \
-                     can hold on this device; ask for fewer samples per pass",
-                    pixels * k as u64
-                );
-                k.max(1)
-            }
-            None => (TARGET_SLOTS_PER_WAVE.min(fit) / pixels).clamp(1, MAX_SAMPLES_PER_PASS as u64) as u32,
-        };
-        // One wave per pass when it fits; otherwise a pass of one sample runs as several waves.
-        let slots_per_wave = (pixels * samples_per_pass as u64).min(fit);
+        let (samples_per_pass, slots_per_wave) = plan_waves(settings, limit / largest_per_slot, TARGET_SLOTS_PER_WAVE)?;
         let slots = slots_per_wave;
 
-        let params = RenderParams {
-            camera: scene.scene.camera.to_gpu(width, height),
-            gate: gate.to_gpu(),
-            width,
-            height,
-            seed: settings.seed,
-            max_bounces: settings.max_bounces,
-            rr_depth: settings.rr_depth.unwrap_or(NONE),
-            light_count: scene.lights.lights.len() as u32,
-            node_count: scene.bvh.nodes.len() as u32,
-            ray_epsilon: scene.ray_epsilon,
-            one: 1.0,
-            ..Default::default()
-        };
+        let params = super::render_params(scene, settings);
 
-        let mut r = Resources::default();
-        r.uniform_init(ctx, "params", &params);
-        r.uniform_init(ctx, "wave", &WaveParams::default());
-        let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
-        let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
-        let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
-        r.storage_init(ctx, "materials", &scene.materials)?;
-        r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
-        r.storage_init(ctx, "texels", &scene.texels)?;
-        r.storage_init(ctx, "lights", &scene.lights.lights)?;
-        r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
-        r.storage_init(ctx, "gate_table", &gate.table())?;
+        let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         let none = wgpu::BufferUsages::empty();
         r.storage_zeroed(ctx, "paths", size_of::<PathState>() as u64 * slots, none)?;
         r.storage_zeroed(ctx, "hits", size_of::<Hit>() as u64 * slots, none)?;
@@ -140,19 +94,10 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "contributions", 2 * size_of::<Contribution>() as u64 * slots, none)?;
-        let film_len = film_elements(settings)?;
-        let film = r.storage_chunked_zeroed(ctx, "film", film_len, 8, limit)?;
-
-        let constants = vec![
-            ("GATE_KIND", gate.kind() as u32 as f64),
-            ("HAS_TEXTURES", scene.has_textures() as u32 as f64),
-            ("HAS_POINT_LIGHTS", scene.has_point_lights() as u32 as f64),
-            ("LIGHT_STRATEGY", settings.light_strategy as u32 as f64),
-            ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),
-            ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),
-            ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
-            ("FILM_CHUNK_BITS", film.bits as f64),
-        ];
+        // trace_shadow_rays can clear light-tracing splats; the path tracer has none.
+        r.storage_zeroed(ctx, "splats", size_of::<Splat>() as u64, none)?;
+        constants.push(("LIGHT_STRATEGY", settings.light_strategy as u32 as f64));
+        constants.push(("CONTRIBUTIONS_PER_SLOT", 2.0));
         let with = |queue: f64| {
             let mut c = constants.clone();
             c.push(("QUEUE", queue));
@@ -196,70 +141,11 @@ impl<'a> PathTracer<'a> {
         })
     }
 
-    /// The named buffers the kernels bind (scene, wavefront state, film).
-    pub fn resources(&self) -> &Resources {
-        &self.resources
-    }
-
-    /// The specialisation constants every kernel of this render gets.
-    pub fn constants(&self) -> &[(&'static str, f64)] {
-        &self.constants
-    }
-
-    /// Samples per pixel of a full pass.
-    pub fn samples_per_pass(&self) -> u32 {
-        self.samples_per_pass
-    }
-
     /// Waves a full pass takes (more than one when the image does not fit one wave).
     pub fn waves_per_pass(&self) -> u64 {
         let pixels = self.params.width as u64 * self.params.height as u64;
         let pixels_per_wave = (self.slots_per_wave / self.samples_per_pass as u64).min(pixels);
         pixels.div_ceil(pixels_per_wave)
-    }
-
-    /// Samples per pixel accumulated in the film since the last reset.
-    pub fn samples_done(&self) -> u64 {
-        self.samples_in_film
-    }
-
-    /// Traces `samples` (at most `samples_per_pass`) more samples of every pixel and adds them
-    /// to the film; returns when the GPU has finished.
-    pub fn render_pass(&mut self, samples: u32) -> Result<()> {
-        assert!(samples >= 1 && samples <= self.samples_per_pass);
-        let sample_base = u32::try_from(self.next_sample + samples as u64 - 1)
-            .map(|_| self.next_sample as u32)
-            .map_err(|_| anyhow::anyhow!("more than 2^32 samples per pixel"))?;
-        let pixels = self.params.width * self.params.height;
-        // A wave holds `samples` samples of a block of pixels (all pixels when they fit).
-        let pixels_per_wave = (self.slots_per_wave / samples as u64).min(pixels as u64) as u32;
-        let mut pixel_base = 0;
-        while pixel_base < pixels {
-            let pixel_count = pixels_per_wave.min(pixels - pixel_base);
-            self.render_wave(WaveParams {
-                sample_base,
-                samples,
-                pixel_base,
-                pixel_count,
-                slot_count: pixel_count * samples,
-                ..Default::default()
-            })?;
-            pixel_base += pixel_count;
-        }
-        self.samples_in_film += samples as u64;
-        self.next_sample += samples as u64;
-        Ok(())
-    }
-
-    /// Traces `spp` more samples of every pixel, in as few passes as possible.
-    pub fn render_samples(&mut self, spp: u64) -> Result<()> {
-        let mut left = spp;
-        while left > 0 {
-            let n = left.min(self.samples_per_pass as u64) as u32;
-            self.render_pass(n)?;
-            left -= n as u64;
-        }
-        Ok(())
     }
 
     fn render_wave(&self, wave: WaveParams) -> Result<()> {
@@ -299,8 +185,44 @@ impl<'a> PathTracer<'a> {
         ctx.wait_idle()
     }
 
+}
+
+impl Integrator for PathTracer<'_> {
+    /// The named buffers the kernels bind (scene, wavefront state, film).
+    fn resources(&self) -> &Resources {
+        &self.resources
+    }
+
+    /// The specialisation constants every kernel of this render gets.
+    fn constants(&self) -> &[(&'static str, f64)] {
+        &self.constants
+    }
+
+    /// Samples per pixel of a full pass.
+    fn samples_per_pass(&self) -> u32 {
+        self.samples_per_pass
+    }
+
+    /// Samples per pixel accumulated in the film since the last reset.
+    fn samples_done(&self) -> u64 {
+        self.samples_in_film
+    }
+
+    /// Traces `samples` (at most `samples_per_pass`) more samples of every pixel and adds them
+    /// to the film; returns when the GPU has finished.
+    fn render_pass(&mut self, samples: u32) -> Result<()> {
+        assert!(samples >= 1 && samples <= self.samples_per_pass);
+        for wave in waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)? {
+            self.render_wave(wave)?;
+        }
+        self.samples_in_film += samples as u64;
+        self.next_sample += samples as u64;
+        Ok(())
+    }
+
+
     /// The film's current estimate (compensated sums divided by the samples per pixel).
-    pub fn film(&self) -> Result<Film> {
+    fn film(&self) -> Result<Film> {
         let bins = self.params.gate.bins;
         let mut film = Film::zeroed(self.params.width, self.params.height, bins);
         let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, film.data.len() as u64)?;
@@ -312,19 +234,70 @@ impl<'a> PathTracer<'a> {
 
     /// Ray traversals the device cut short so far (lavapipe ends a shader invocation's loops
     /// after 65535 iterations in total); nonzero means the image may miss geometry.
-    pub fn truncated_traversals(&self) -> Result<u64> {
+    fn truncated_traversals(&self) -> Result<u64> {
         let counters: Vec<QueueCounters> = read_buffer(self.ctx, self.resources.get("counters").unwrap(), 1)?;
         Ok(counters[0].truncated_traversals as u64)
     }
 
     /// Clears the film; later samples continue the random sequence, so the next estimate is
     /// independent of the previous one (for batch statistics).
-    pub fn reset_film(&mut self) {
+    fn reset_film(&mut self) {
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
         self.resources.clear_chunked(&mut encoder, "film");
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;
     }
+}
+
+/// Samples per pass and slots per wave of a render: as many slots as `target` (or the requested
+/// samples per pass) asks for, within one dispatch and within `fit` slots (what the device's
+/// bindings hold).
+pub(super) fn plan_waves(settings: &RenderSettings, fit: u64, target: u64) -> Result<(u32, u64)> {
+    let (width, height) = (settings.width, settings.height);
+    ensure!(width > 0 && height > 0, "the resolution must be at least 1x1");
+    let pixels = width as u64 * height as u64;
+    ensure!(pixels <= u32::MAX as u64, "{width}x{height} has more than 2^32 pixels");
+    let fit = fit.clamp(1, MAX_SLOTS_PER_DISPATCH);
+    let samples_per_pass = match settings.samples_per_pass {
+        Some(k) => {
+            ensure!(k <= MAX_SAMPLES_PER_PASS, "at most {MAX_SAMPLES_PER_PASS} samples per pass (got {k})");
+            ensure!(
+                k <= 1 || pixels * k as u64 <= fit,
+                "{k} samples per pass of {width}x{height} need {} path slots, more than the {fit} one wave \
+                 can hold on this device; ask for fewer samples per pass",
+                pixels * k as u64
+            );
+            k.max(1)
+        }
+        None => (target.min(fit) / pixels).clamp(1, MAX_SAMPLES_PER_PASS as u64) as u32,
+    };
+    // One wave per pass when it fits; otherwise a pass of one sample runs as several waves.
+    Ok((samples_per_pass, (pixels * samples_per_pass as u64).min(fit)))
+}
+
+/// The waves of a pass of `samples` samples per pixel starting at sample `next_sample`: each
+/// holds `samples` samples of a block of pixels (all pixels when they fit `slots_per_wave`).
+pub(super) fn waves_of_pass(params: &RenderParams, slots_per_wave: u64, next_sample: u64, samples: u32) -> Result<Vec<WaveParams>> {
+    let sample_base = u32::try_from(next_sample + samples as u64 - 1)
+        .map(|_| next_sample as u32)
+        .map_err(|_| anyhow::anyhow!("more than 2^32 samples per pixel"))?;
+    let pixels = params.width * params.height;
+    let pixels_per_wave = (slots_per_wave / samples as u64).min(pixels as u64) as u32;
+    let mut waves = Vec::new();
+    let mut pixel_base = 0;
+    while pixel_base < pixels {
+        let pixel_count = pixels_per_wave.min(pixels - pixel_base);
+        waves.push(WaveParams {
+            sample_base,
+            samples,
+            pixel_base,
+            pixel_count,
+            slot_count: pixel_count * samples,
+            ..Default::default()
+        });
+        pixel_base += pixel_count;
+    }
+    Ok(waves)
 }
 
 /// Elements (pixel, bin, channel) of the film of `settings`, checked against what the device can

@@ -34,6 +34,13 @@ impl CameraDesc {
             reserved1: 0,
         }
     }
+
+    /// Area of the whole image on the image plane at unit distance from the pinhole
+    /// (4 tan^2(yfov/2) width/height): the pinhole's importance is 1 / (area cos^4).
+    pub fn image_area(&self, width: u32, height: u32) -> f32 {
+        let t = (0.5 * self.yfov).tan();
+        4.0 * t * t * width as f32 / height as f32
+    }
 }
 
 /// Unit direction through film position `film` (pixels from the top-left corner, y down).

@@ -273,8 +273,19 @@ impl Loader<'_> {
             eprintln!("warning: {name}: {label}: emissiveTexture is ignored (uniform emission only)");
         }
         let metallic = pbr.metallic_factor();
-        if metallic > 0.0 {
-            eprintln!("warning: {name}: {label}: metallic {metallic} is rendered as Lambertian in this version");
+        let roughness = pbr.roughness_factor();
+        if !(0.0..=1.0).contains(&metallic) || !(0.0..=1.0).contains(&roughness) {
+            bail!("{name}: {label}: metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]");
+        }
+        if metallic > 0.0 && roughness * roughness < crate::gpu::layout::MIN_ALPHA {
+            eprintln!(
+                "warning: {name}: {label}: roughness {roughness} is rendered as {} (GGX alpha at least {})",
+                crate::gpu::layout::MIN_ALPHA.sqrt(),
+                crate::gpu::layout::MIN_ALPHA
+            );
+        }
+        if pbr.metallic_roughness_texture().is_some() {
+            eprintln!("warning: {name}: {label}: metallicRoughnessTexture is ignored (factors only)");
         }
         let base_color_texture = match pbr.base_color_texture() {
             None => None,
@@ -306,7 +317,7 @@ impl Loader<'_> {
             emission,
             double_sided: m.double_sided(),
             metallic,
-            roughness: pbr.roughness_factor(),
+            roughness,
         })
     }
 }

@@ -4,7 +4,7 @@ use glam::{Vec2, Vec3};
 
 use super::Scene;
 use crate::gpu::layout::{
-    MATERIAL_DOUBLE_SIDED, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TextureInfo,
+    MATERIAL_DOUBLE_SIDED, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TextureInfo,
 };
 
 /// GPU materials of a scene.
@@ -18,7 +18,7 @@ pub fn gpu_materials(scene: &Scene) -> Vec<Material> {
             emission: m.emission,
             flags: if m.double_sided { MATERIAL_DOUBLE_SIDED } else { 0 },
             metallic: m.metallic,
-            roughness: m.roughness,
+            alpha: (m.roughness * m.roughness).max(MIN_ALPHA),
             reserved0: 0,
             reserved1: 0,
         })

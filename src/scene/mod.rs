@@ -1,6 +1,7 @@
 //! Scenes: loading (glTF 2.0, DESIGN.md section 3), the baked world-space description, and the
 //! CPU twins of the kernels' scene functions (camera, lights, surfaces, materials).
 
+pub mod bsdf;
 pub mod camera;
 pub mod gltf_loader;
 pub mod lights;
@@ -113,6 +114,26 @@ impl Scene {
             for p in t.positions {
                 lo = lo.min(p);
                 hi = hi.max(p);
+            }
+        }
+        for l in &self.point_lights {
+            lo = lo.min(l.position);
+            hi = hi.max(l.position);
+        }
+        (lo, hi)
+    }
+
+    /// Axis-aligned bounds of every emitting triangle and point light (m); an empty box
+    /// (min > max) when the scene has no light.
+    pub fn light_bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for t in &self.triangles {
+            if self.materials[t.material as usize].is_emissive() {
+                for p in t.positions {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
             }
         }
         for l in &self.point_lights {

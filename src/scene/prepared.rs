@@ -82,6 +82,11 @@ impl PreparedScene {
         !self.texture_infos.is_empty()
     }
 
+    /// True when some material has a conductor lobe (metallic > 0).
+    pub fn has_glossy(&self) -> bool {
+        self.materials.iter().any(|m| m.metallic > 0.0)
+    }
+
     /// True when the scene has point lights.
     pub fn has_point_lights(&self) -> bool {
         !self.scene.point_lights.is_empty()

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use gatetrace::film::Film;
 use gatetrace::gpu::GpuContext;
-use gatetrace::integrator::{PathTracer, RenderSettings};
+use gatetrace::integrator::{Integrator, RenderSettings, create_integrator};
 use gatetrace::scene::{PreparedScene, load_gltf};
 use stats::BatchStats;
 
@@ -53,7 +53,7 @@ pub fn render_films(
     batches: usize,
     spp: u32,
 ) -> Vec<Film> {
-    let mut tracer = PathTracer::new(ctx, scene, settings).unwrap();
+    let mut tracer = create_integrator(ctx, scene, settings).unwrap();
     (0..batches)
         .map(|_| {
             tracer.render_samples(spp as u64).unwrap();
@@ -94,7 +94,7 @@ pub fn scratch_dir(name: &str) -> PathBuf {
 /// specialisation of `tracer` (plus `extra` constants) and returns `outputs` output records.
 pub fn run_probe(
     ctx: &GpuContext,
-    tracer: &PathTracer,
+    tracer: &dyn Integrator,
     kernel: &str,
     extra: &[(&'static str, f64)],
     input: &[[f32; 4]],
@@ -115,4 +115,71 @@ pub fn run_probe(
     }
     ctx.queue.submit([encoder.finish()]);
     read_buffer(ctx, resources.get("probe_output").unwrap(), outputs).unwrap()
+}
+
+/// Per-group statistics of two sets of independent films: for each group of elements
+/// (`group(i)` of element i, None: left out), the mean over films of the group's mean, for
+/// `a` and `b`, and the z-score of their difference with the variance measured over the films
+/// of each side (so correlations between pixels are included).
+pub fn compare_films(a: &[Film], b: &[Film], groups: usize, group: impl Fn(usize) -> Option<usize>) -> Vec<(f64, f64, f64)> {
+    let means = |films: &[Film]| -> Vec<Vec<f64>> {
+        films
+            .iter()
+            .map(|f| {
+                let mut sums = vec![0.0; groups];
+                let mut counts = vec![0.0; groups];
+                for (i, &v) in f.data.iter().enumerate() {
+                    if let Some(g) = group(i) {
+                        sums[g] += v as f64;
+                        counts[g] += 1.0;
+                    }
+                }
+                sums.iter().zip(&counts).map(|(s, c)| s / c).collect()
+            })
+            .collect()
+    };
+    let stat = |m: &Vec<Vec<f64>>, g: usize| {
+        let n = m.len() as f64;
+        let mean = m.iter().map(|v| v[g]).sum::<f64>() / n;
+        let var = m.iter().map(|v| (v[g] - mean).powi(2)).sum::<f64>() / (n - 1.0) / n;
+        (mean, var)
+    };
+    let (ma, mb) = (means(a), means(b));
+    (0..groups)
+        .map(|g| {
+            let ((xa, va), (xb, vb)) = (stat(&ma, g), stat(&mb, g));
+            (xa, xb, (xa - xb) / (va + vb).sqrt().max(1e-300))
+        })
+        .collect()
+}
+
+/// Asserts that two estimators' films ([H, W, bins, 3]) agree: the image mean of every bin and
+/// channel with |z| < 4, and every block of `block` x `block` pixels per bin and channel within
+/// the Sidak-corrected t-limit at family-wise rate `alpha`. Prints the figures.
+pub fn assert_films_agree(label: &str, a: &[Film], b: &[Film], block: u32, alpha: f64) {
+    let (w, h, bins) = (a[0].width, a[0].height, a[0].bins);
+    let per_pixel = (bins * 3) as usize;
+    let images = compare_films(a, b, per_pixel, |i| Some(i % per_pixel));
+    for (g, (xa, xb, z)) in images.iter().enumerate() {
+        println!("{label}: bin {} channel {}: {xa:.6} vs {xb:.6}, z {z:+.2}", g / 3, g % 3);
+        assert!(z.abs() < 4.0, "{label}: image mean of bin {} channel {}: {xa} vs {xb} (z = {z:.2})", g / 3, g % 3);
+    }
+    let (bx, by) = (w.div_ceil(block), h.div_ceil(block));
+    let blocks = (bx * by) as usize * per_pixel;
+    let result = compare_films(a, b, blocks, |i| {
+        let (p, k) = (i / per_pixel, i % per_pixel);
+        let (x, y) = (p as u32 % w, p as u32 / w);
+        Some(((y / block) * bx + x / block) as usize * per_pixel + k)
+    });
+    let limit = stats::t_critical(stats::sidak(alpha, blocks), (a.len().min(b.len()) - 1) as f64);
+    let worst = result.iter().enumerate().max_by(|p, q| p.1.2.abs().total_cmp(&q.1.2.abs())).unwrap();
+    println!("{label}: worst of {blocks} blocks |z| {:.2} (limit {limit:.2})", worst.1.2.abs());
+    assert!(
+        worst.1.2.abs() < limit,
+        "{label}: block {} differs: {} vs {} (|z| = {:.2} >= {limit:.2})",
+        worst.0,
+        worst.1.0,
+        worst.1.1,
+        worst.1.2.abs()
+    );
 }

@@ -1,0 +1,369 @@
+//! Bidirectional path tracing with direct connections (`--method direct`; Veach 1997, PBRT's
+//! BDPT), aware of path length: every connection's optical length is known before its shadow
+//! ray, so connections the gate weighs zero cost no ray. A pass runs as waves of slots (one
+//! camera subpath and one light subpath per pixel and sample), like the path tracer. The stages
+//! of a wave, in order:
+//!
+//! ```text
+//! generate_subpaths                     pinhole + light vertices; both rays -> next_ray_queue
+//! for round in 0..=max_bounces:         (stops early once every subpath has ended)
+//!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
+//!     intersect_closest                 closest hits of ray_queue
+//!     extend_subpaths                   store the vertex, sample the BSDF, next ray
+//! connect_direct                        every (s, t): gate, contribution, MIS, shadow_queue
+//! setup_dispatch(shadow_rays)
+//! trace_shadow_rays                     occluded connections are cleared
+//! accumulate                            t >= 2 contributions -> film, per pixel, in order
+//! splat_light_paths                     t = 1 contributions -> splat_film (atomics)
+//! ```
+//!
+//! Slot `slot` keeps its camera subpath in queue entry `slot` and its light subpath in entry
+//! `slot_count + slot` of the path, hit and queue buffers; its vertices lie in
+//! `subpath_vertices[slot * stride ..]`, camera vertices first (see shaders/lib/subpath.wesl).
+
+use anyhow::{Result, ensure};
+
+use super::path::{MAX_SLOTS_PER_DISPATCH, ROUNDS_PER_SUBMISSION, plan_waves, waves_of_pass};
+use super::{Integrator, RenderSettings};
+use crate::film::Film;
+use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
+use crate::gpu::resources::{ChunkLayout, read_buffer};
+use crate::gpu::{GpuContext, Kernel, Resources};
+use crate::scene::PreparedScene;
+
+/// Slots a wave aims for: each slot holds two subpaths and all their connections (a few KiB).
+const TARGET_SLOTS_PER_WAVE: u64 = 1 << 16;
+/// Most scattering vertices `direct` supports: the strategies of a slot grow as B^2 and
+/// lavapipe ends a shader invocation's loops after 65535 iterations in total.
+pub const MAX_BOUNCES: u32 = 24;
+
+/// Connections of one (s, t) strategy (`--stats`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StrategyStats {
+    /// Light-subpath vertices.
+    pub s: u32,
+    /// Camera-subpath vertices (the pinhole included).
+    pub t: u32,
+    /// Connections whose vertices both existed and could contribute.
+    pub evaluated: u64,
+    /// Of those, connections dropped before any shading because W(length) = 0.
+    pub skipped_by_gate: u64,
+    /// Shadow rays traced.
+    pub shadow_rays: u64,
+}
+
+/// The (s, t) strategies with at most `max_bounces` scattering vertices and t >= 1, in the
+/// order of `strategy_stats` (depth d = s + t - 2, then s).
+pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
+    (0..=max_bounces).flat_map(|d| (0..=d + 1).map(move |s| (s, d + 2 - s))).collect()
+}
+
+/// Errors for settings `direct` cannot render (checked before any work).
+pub fn check_settings(settings: &RenderSettings) -> Result<()> {
+    let b = settings.max_bounces;
+    ensure!(
+        b <= MAX_BOUNCES,
+        "--method direct supports at most {MAX_BOUNCES} bounces (got {b}); use --method path for longer paths"
+    );
+    if let Some((s, t)) = settings.debug_strategy {
+        ensure!(
+            t >= 1 && s + t >= 2 && s + t <= b + 2,
+            "--debug-strategy {s},{t} is not a strategy of paths with at most {b} bounces: \
+             need t >= 1 and 2 <= s + t <= max_bounces + 2"
+        );
+    }
+    Ok(())
+}
+
+/// Pipelines of the stages.
+struct Stages {
+    generate_subpaths: Kernel,
+    setup_dispatch_rays: Kernel,
+    intersect_closest: Kernel,
+    extend_subpaths: Kernel,
+    connect_direct: Kernel,
+    setup_dispatch_shadow_rays: Kernel,
+    trace_shadow_rays: Kernel,
+    accumulate: Kernel,
+    splat_light_paths: Kernel,
+}
+
+/// Bind groups; `[even, odd]` rounds swap ray_queue and next_ray_queue.
+struct Bindings {
+    generate_subpaths: wgpu::BindGroup,
+    setup_dispatch_rays: [wgpu::BindGroup; 2],
+    intersect_closest: [wgpu::BindGroup; 2],
+    extend_subpaths: [wgpu::BindGroup; 2],
+    connect_direct: wgpu::BindGroup,
+    setup_dispatch_shadow_rays: wgpu::BindGroup,
+    trace_shadow_rays: wgpu::BindGroup,
+    accumulate: wgpu::BindGroup,
+    splat_light_paths: wgpu::BindGroup,
+}
+
+/// Bidirectional path tracing with direct connections, bound to one scene and one set of
+/// settings, accumulating into its film (camera-side sums) and splat film (light tracing).
+pub struct DirectTracer<'a> {
+    ctx: &'a GpuContext,
+    params: RenderParams,
+    stages: Stages,
+    bindings: Bindings,
+    resources: Resources,
+    film_layout: ChunkLayout,
+    constants: Vec<(&'static str, f64)>,
+    slots_per_wave: u64,
+    samples_per_pass: u32,
+    samples_in_film: u64,
+    next_sample: u64,
+    /// Strategy counters summed over the waves so far (when `stats` is on).
+    stats: Option<Vec<StrategyStats>>,
+}
+
+impl<'a> DirectTracer<'a> {
+    /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
+    pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
+        check_settings(settings)?;
+        let b = settings.max_bounces;
+        let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
+        let camera_vertices = b as u64 + 2;
+        let light_vertices = b as u64 + 1;
+        let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
+        let strategy_count = strategies(b).len() as u64;
+        // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
+        let per_slot = [
+            (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
+            contributions_per_slot * size_of::<Contribution>() as u64,
+            light_vertices * size_of::<Splat>() as u64,
+            (contributions_per_slot + light_vertices) * size_of::<ShadowRay>() as u64,
+            2 * size_of::<PathState>() as u64,
+        ];
+        let fit = per_slot.iter().map(|&bytes| limit / bytes).min().unwrap().min(MAX_SLOTS_PER_DISPATCH / 2);
+        let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, TARGET_SLOTS_PER_WAVE)?;
+        let slots = slots_per_wave;
+
+        let params = super::render_params(scene, settings);
+        let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
+        let splat_film_bytes = super::film_elements(settings)? * 4;
+        ensure!(
+            splat_film_bytes <= limit,
+            "--method direct keeps its light-tracing image in one binding of at most {limit} bytes; {}x{} pixels x {} \
+             bins need {splat_film_bytes}: reduce the resolution or the bins",
+            settings.width,
+            settings.height,
+            settings.gate.bins()
+        );
+        let none = wgpu::BufferUsages::empty();
+        r.storage_zeroed(ctx, "paths", 2 * slots * size_of::<PathState>() as u64, none)?;
+        r.storage_zeroed(ctx, "hits", 2 * slots * size_of::<Hit>() as u64, none)?;
+        r.storage_zeroed(ctx, "ray_queue", 2 * slots * 4, none)?;
+        r.storage_zeroed(ctx, "next_ray_queue", 2 * slots * 4, none)?;
+        r.storage_zeroed(ctx, "subpath_vertices", slots * per_slot[0], none)?;
+        r.storage_zeroed(ctx, "subpath_lengths", 2 * slots * 4, none)?;
+        r.storage_zeroed(ctx, "contributions", slots * per_slot[1], none)?;
+        r.storage_zeroed(ctx, "splats", slots * per_slot[2], none)?;
+        r.storage_zeroed(ctx, "shadow_queue", slots * per_slot[3], none)?;
+        r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
+        r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
+        r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
+        r.storage_zeroed(ctx, "strategy_stats", 3 * 4 * strategy_count, none)?;
+
+        constants.push(("CAMERA_VERTICES", camera_vertices as f64));
+        constants.push(("LIGHT_VERTICES", light_vertices as f64));
+        constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
+        constants.push(("STATS", settings.stats as u32 as f64));
+        if let Some((s, t)) = settings.debug_strategy {
+            constants.push(("DEBUG_S", s as f64));
+            constants.push(("DEBUG_T", t as f64));
+        }
+        let with = |queue: f64| {
+            let mut c = constants.clone();
+            c.push(("QUEUE", queue));
+            c
+        };
+        let stages = Stages {
+            generate_subpaths: Kernel::new(ctx, "generate_subpaths", None, &constants),
+            setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
+            intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
+            extend_subpaths: Kernel::new(ctx, "extend_subpaths", None, &constants),
+            connect_direct: Kernel::new(ctx, "connect_direct", None, &constants),
+            setup_dispatch_shadow_rays: Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with(1.0)),
+            trace_shadow_rays: Kernel::new(ctx, "trace_shadow_rays", None, &constants),
+            accumulate: Kernel::new(ctx, "accumulate", None, &constants),
+            splat_light_paths: Kernel::new(ctx, "splat_light_paths", None, &constants),
+        };
+        let even = r.clone();
+        let odd = r.swapped("ray_queue", "next_ray_queue");
+        let both = |k: &Kernel| [k.bind(ctx, &even), k.bind(ctx, &odd)];
+        let bindings = Bindings {
+            generate_subpaths: stages.generate_subpaths.bind(ctx, &odd),
+            setup_dispatch_rays: both(&stages.setup_dispatch_rays),
+            intersect_closest: both(&stages.intersect_closest),
+            extend_subpaths: both(&stages.extend_subpaths),
+            connect_direct: stages.connect_direct.bind(ctx, &even),
+            setup_dispatch_shadow_rays: stages.setup_dispatch_shadow_rays.bind(ctx, &even),
+            trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
+            accumulate: stages.accumulate.bind(ctx, &even),
+            splat_light_paths: stages.splat_light_paths.bind(ctx, &even),
+        };
+        let stats = settings.stats.then(|| {
+            strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
+        });
+        Ok(Self {
+            ctx,
+            params,
+            stages,
+            bindings,
+            resources: r,
+            film_layout: film,
+            constants,
+            slots_per_wave,
+            samples_per_pass,
+            samples_in_film: 0,
+            next_sample: 0,
+            stats,
+        })
+    }
+
+    /// Strategy counters so far (None unless the settings asked for statistics).
+    pub fn strategy_stats(&self) -> Option<&[StrategyStats]> {
+        self.stats.as_deref()
+    }
+
+    fn render_wave(&mut self, wave: WaveParams) -> Result<()> {
+        let ctx = self.ctx;
+        ctx.queue.write_buffer(self.resources.get("wave").unwrap(), 0, bytemuck::bytes_of(&wave));
+        let args = self.resources.get("dispatch_args").unwrap();
+        let (s, b) = (&self.stages, &self.bindings);
+        let rounds = self.params.max_bounces + 1;
+        let mut round = 0;
+        // ---- trace the subpaths ----
+        while round < rounds {
+            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
+                if round == 0 {
+                    s.generate_subpaths.dispatch(&mut pass, &b.generate_subpaths, wave.slot_count);
+                }
+                let end = rounds.min(round + ROUNDS_PER_SUBMISSION);
+                for r in round..end {
+                    let parity = (r % 2) as usize;
+                    s.setup_dispatch_rays.dispatch(&mut pass, &b.setup_dispatch_rays[parity], 1);
+                    s.intersect_closest.dispatch_indirect(&mut pass, &b.intersect_closest[parity], args, 0);
+                    s.extend_subpaths.dispatch_indirect(&mut pass, &b.extend_subpaths[parity], args, 0);
+                }
+                round = end;
+            }
+            ctx.queue.submit([encoder.finish()]);
+            if round < rounds {
+                let counters: Vec<QueueCounters> = read_buffer(ctx, self.resources.get("counters").unwrap(), 1)?;
+                if counters[0].next_rays == 0 {
+                    break;
+                }
+            }
+        }
+        // ---- connect, test visibility, accumulate ----
+        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("connect") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("connect"), timestamp_writes: None });
+            s.connect_direct.dispatch(&mut pass, &b.connect_direct, wave.slot_count);
+            s.setup_dispatch_shadow_rays.dispatch(&mut pass, &b.setup_dispatch_shadow_rays, 1);
+            s.trace_shadow_rays.dispatch_indirect(&mut pass, &b.trace_shadow_rays, args, 12);
+            s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);
+            s.splat_light_paths.dispatch(&mut pass, &b.splat_light_paths, wave.slot_count);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle()?;
+        if let Some(stats) = &mut self.stats {
+            // Per-wave u32 counters cannot overflow (one connection per slot and strategy).
+            let buffer = self.resources.get("strategy_stats").unwrap();
+            let counts: Vec<u32> = read_buffer(ctx, buffer, 3 * stats.len())?;
+            for (st, c) in stats.iter_mut().zip(counts.chunks(3)) {
+                st.evaluated += c[0] as u64;
+                st.skipped_by_gate += c[1] as u64;
+                st.shadow_rays += c[2] as u64;
+            }
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            encoder.clear_buffer(buffer, 0, None);
+            ctx.queue.submit([encoder.finish()]);
+        }
+        Ok(())
+    }
+}
+
+impl Integrator for DirectTracer<'_> {
+    fn resources(&self) -> &Resources {
+        &self.resources
+    }
+
+    fn constants(&self) -> &[(&'static str, f64)] {
+        &self.constants
+    }
+
+    fn samples_per_pass(&self) -> u32 {
+        self.samples_per_pass
+    }
+
+    fn samples_done(&self) -> u64 {
+        self.samples_in_film
+    }
+
+    fn render_pass(&mut self, samples: u32) -> Result<()> {
+        assert!(samples >= 1 && samples <= self.samples_per_pass);
+        for wave in waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)? {
+            self.render_wave(wave)?;
+        }
+        self.samples_in_film += samples as u64;
+        self.next_sample += samples as u64;
+        Ok(())
+    }
+
+    /// Camera-side sums (double-float) plus the light-tracing splats, over the samples per pixel.
+    fn film(&self) -> Result<Film> {
+        let bins = self.params.gate.bins;
+        let mut film = Film::zeroed(self.params.width, self.params.height, bins);
+        let n = film.data.len();
+        let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, n as u64)?;
+        let splats: Vec<f32> = read_buffer(self.ctx, self.resources.get("splat_film").unwrap(), n)?;
+        let spp = self.samples_in_film.max(1) as f64;
+        film.data = sums
+            .iter()
+            .zip(&splats)
+            .map(|(s, &splat)| ((s[0] as f64 + s[1] as f64 + splat as f64) / spp) as f32)
+            .collect();
+        film.spp = self.samples_in_film;
+        Ok(film)
+    }
+
+    fn truncated_traversals(&self) -> Result<u64> {
+        let counters: Vec<QueueCounters> = read_buffer(self.ctx, self.resources.get("counters").unwrap(), 1)?;
+        Ok(counters[0].truncated_traversals as u64)
+    }
+
+    fn reset_film(&mut self) {
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
+        self.resources.clear_chunked(&mut encoder, "film");
+        encoder.clear_buffer(self.resources.get("splat_film").unwrap(), 0, None);
+        self.ctx.queue.submit([encoder.finish()]);
+        self.samples_in_film = 0;
+    }
+
+    fn stats_report(&self) -> Result<Option<String>> {
+        let Some(stats) = &self.stats else { return Ok(None) };
+        let mut out = String::from("strategy (s,t)  connections  skipped by gate  shadow rays\n");
+        let mut total = StrategyStats::default();
+        for st in stats {
+            out += &format!(
+                "({:>2},{:>2})        {:>12}  {:>15}  {:>11}\n",
+                st.s, st.t, st.evaluated, st.skipped_by_gate, st.shadow_rays
+            );
+            total.evaluated += st.evaluated;
+            total.skipped_by_gate += st.skipped_by_gate;
+            total.shadow_rays += st.shadow_rays;
+        }
+        out += &format!(
+            "total          {:>12}  {:>15}  {:>11}\n",
+            total.evaluated, total.skipped_by_gate, total.shadow_rays
+        );
+        Ok(Some(out))
+    }
+}

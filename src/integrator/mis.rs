@@ -1,0 +1,199 @@
+//! CPU twin of the multiple-importance weights of bidirectional path tracing
+//! (`mis_weight` in shaders/kernels/connect_direct.wesl, the densities of
+//! shaders/lib/subpath.wesl, and the forward/reverse densities extend_subpaths stores).
+//!
+//! A full path x_0 (on a light) ... x_{k-1} (the pinhole) can be sampled by k - 1 strategies
+//! (s, t) with s + t = k (t >= 1; s = 0 impossible for point lights). The weight of one of them
+//! is computed from the subpaths as the kernels store them: each vertex keeps the area density
+//! of its own subpath's step (pdf_fwd) and of the opposite direction (pdf_rev), and the four
+//! vertices next to the connection get the densities the connection implies.
+
+use std::f32::consts::FRAC_1_PI;
+
+use glam::Vec3;
+
+use crate::sampling::Frame;
+use crate::scene::bsdf::Bsdf;
+
+/// What a path vertex is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VertexKind {
+    /// The pinhole; `image_area` is the image's area at unit distance (the camera samples
+    /// directions with density 1 / (image_area cos^3) about `normal`, its viewing direction).
+    Camera {
+        /// Image area on the plane at unit distance.
+        image_area: f32,
+    },
+    /// A point on a one-sided area light (emits cos-weighted about `normal`), chosen with area
+    /// density `origin_pdf` (m^-2, selection included).
+    AreaLight {
+        /// Selection x position density (m^-2).
+        origin_pdf: f32,
+    },
+    /// A point light chosen with probability `select_pdf`; emits uniformly over the sphere.
+    PointLight {
+        /// Selection probability.
+        select_pdf: f32,
+    },
+    /// A surface point with a material.
+    Surface(Bsdf),
+}
+
+/// One vertex of a full path. Normals are unit and face the side the path lies on.
+#[derive(Clone, Copy, Debug)]
+pub struct Vertex {
+    /// What the vertex is.
+    pub kind: VertexKind,
+    /// Position (m).
+    pub position: Vec3,
+    /// Unit normal (geometric = shading here); the viewing direction for the camera.
+    pub normal: Vec3,
+}
+
+impl Vertex {
+    fn has_area_measure(&self) -> bool {
+        matches!(self.kind, VertexKind::Surface(_) | VertexKind::AreaLight { .. })
+    }
+
+    fn is_delta_light(&self) -> bool {
+        matches!(self.kind, VertexKind::PointLight { .. })
+    }
+
+    /// Area density (m^-2) of the point itself when a light sampler picks it.
+    pub fn light_origin_pdf(&self) -> f32 {
+        match self.kind {
+            VertexKind::AreaLight { origin_pdf } => origin_pdf,
+            VertexKind::PointLight { select_pdf } => select_pdf,
+            _ => 0.0,
+        }
+    }
+}
+
+/// `solid_angle_to_area` of subpath.wesl.
+fn solid_angle_to_area(pdf_dir: f32, origin: Vec3, to: &Vertex) -> f32 {
+    let d = to.position - origin;
+    let dist2 = d.length_squared();
+    if dist2 <= 0.0 {
+        return 0.0;
+    }
+    let mut pdf = pdf_dir / dist2;
+    if to.has_area_measure() {
+        pdf *= to.normal.dot(d).abs() / dist2.sqrt();
+    }
+    pdf
+}
+
+/// `vertex_pdf` of subpath.wesl: the area density at `next` with which `v` samples it, having
+/// been reached from `prev` (ignored by the camera and lights).
+pub fn vertex_pdf(v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+    let w = (next.position - v.position).normalize();
+    let pdf_dir = match v.kind {
+        VertexKind::Camera { image_area } => {
+            let c = w.dot(v.normal);
+            if c <= 0.0 { 0.0 } else { 1.0 / (image_area * c * c * c) }
+        }
+        VertexKind::AreaLight { .. } => w.dot(v.normal).max(0.0) * FRAC_1_PI,
+        VertexKind::PointLight { .. } => 0.25 * FRAC_1_PI,
+        VertexKind::Surface(bsdf) => {
+            if w.dot(v.normal) <= 0.0 {
+                return 0.0;
+            }
+            let prev = prev.expect("a surface vertex has a predecessor");
+            let frame = Frame::from_normal(v.normal);
+            let wo = frame.to_local((prev.position - v.position).normalize());
+            bsdf.pdf(wo, frame.to_local(w))
+        }
+    };
+    solid_angle_to_area(pdf_dir, v.position, next)
+}
+
+/// A subpath vertex as the kernels store it: the vertex and its two area densities.
+#[derive(Clone, Copy, Debug)]
+struct Stored {
+    vertex: Vertex,
+    pdf_fwd: f32,
+    pdf_rev: f32,
+}
+
+/// The subpath `vertices` (in sampling order, vertex 0 the pinhole or the light) with the
+/// densities generate_subpaths and extend_subpaths store: pdf_fwd of each step, and pdf_rev of
+/// vertex i set when vertex i + 1 samples its continuation (so the last two have none).
+fn stored_subpath(vertices: &[Vertex]) -> Vec<Stored> {
+    let mut out: Vec<Stored> = Vec::with_capacity(vertices.len());
+    for (i, v) in vertices.iter().enumerate() {
+        let pdf_fwd = match i {
+            0 => match v.kind {
+                VertexKind::Camera { .. } => 1.0,
+                _ => v.light_origin_pdf(),
+            },
+            _ => vertex_pdf(&vertices[i - 1], i.checked_sub(2).map(|j| &vertices[j]), v),
+        };
+        out.push(Stored { vertex: *v, pdf_fwd, pdf_rev: 0.0 });
+        if i >= 2 {
+            // Vertex i - 1 sampled vertex i: it also sets the reverse density of vertex i - 2.
+            out[i - 2].pdf_rev = vertex_pdf(&vertices[i - 1], Some(v), &vertices[i - 2]);
+        }
+    }
+    out
+}
+
+fn remap0(x: f32) -> f32 {
+    if x != 0.0 { x } else { 1.0 }
+}
+
+/// The power-heuristic weight of strategy (s, t = path.len() - s) for `path` (x_0 on a light,
+/// the last vertex the pinhole), computed as `connect_direct` does.
+pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
+    let k = path.len();
+    let t = k - s;
+    assert!(t >= 1 && k >= 2);
+    let light = stored_subpath(&path[..s]);
+    let camera_order: Vec<Vertex> = path[s..].iter().rev().copied().collect();
+    let camera = stored_subpath(&camera_order);
+    let pt = &camera[t - 1].vertex;
+    let ptm = (t >= 2).then(|| camera[t - 2].vertex);
+    let qs = (s >= 1).then(|| light[s - 1].vertex);
+    let qsm = (s >= 2).then(|| light[s - 2].vertex);
+    // The densities the connection implies for its four neighbours.
+    let (pt_rev, ptm_rev, qs_rev, qsm_rev) = match qs {
+        None => {
+            // s = 0: pt lies on a light; it and ptm are reached from the light's side.
+            let ptm = ptm.expect("s = 0 needs t >= 2");
+            (pt.light_origin_pdf(), vertex_pdf(pt, None, &ptm), 0.0, 0.0)
+        }
+        Some(qs) => (
+            vertex_pdf(&qs, qsm.as_ref(), pt),
+            ptm.map_or(0.0, |m| vertex_pdf(pt, Some(&qs), &m)),
+            vertex_pdf(pt, ptm.as_ref(), &qs),
+            qsm.map_or(0.0, |m| vertex_pdf(&qs, Some(pt), &m)),
+        ),
+    };
+    let mut sum = 0.0;
+    let mut ri = 1.0;
+    for i in (1..t).rev() {
+        let rev = if i == t - 1 {
+            pt_rev
+        } else if i + 2 == t {
+            ptm_rev
+        } else {
+            camera[i].pdf_rev
+        };
+        ri *= remap0(rev) / remap0(camera[i].pdf_fwd);
+        sum += ri * ri;
+    }
+    ri = 1.0;
+    for i in (0..s).rev() {
+        let rev = if i + 1 == s {
+            qs_rev
+        } else if i + 2 == s {
+            qsm_rev
+        } else {
+            light[i].pdf_rev
+        };
+        ri *= remap0(rev) / remap0(light[i].pdf_fwd);
+        if !(i == 0 && light[0].vertex.is_delta_light()) {
+            sum += ri * ri;
+        }
+    }
+    1.0 / (1.0 + sum)
+}

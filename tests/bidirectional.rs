@@ -1,0 +1,162 @@
+//! `--method direct` (bidirectional path tracing) against `--method path`, an independent
+//! estimator of the same images: the Cornell box at the steady state, at box, Gaussian and CW
+//! gates, its glossy variant, a mix of area and point lights, and double-sided materials; the
+//! transient cube against the box gate over the same range; the per-strategy debug images
+//! against the full render; and the gate-before-ray statistics.
+//! Both sides' variances are measured over independent batches.
+
+mod common;
+
+use gatetrace::film::{Film, Gate};
+use gatetrace::integrator::{DirectTracer, Integrator, Method, RenderSettings};
+use gatetrace::scene::{PointLight, PreparedScene, load_gltf};
+
+/// Family-wise false-alarm rate of each comparison's block tests.
+const ALPHA: f64 = 0.01;
+const BATCHES: usize = 16;
+
+fn settings(method: Method, gate: Gate, seed: u32) -> RenderSettings {
+    RenderSettings { width: 32, height: 32, max_bounces: 5, method, gate, seed, ..Default::default() }
+}
+
+/// Renders `scene` with `path` and with `direct` (BATCHES x spp each) and asserts agreement.
+fn assert_direct_matches_path(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {
+    let ctx = common::gpu();
+    let path = common::render_films(&ctx, scene, &settings(Method::Path, gate.clone(), seed), BATCHES, spp);
+    let direct = common::render_films(&ctx, scene, &settings(Method::Direct, gate, seed + 1), BATCHES, spp);
+    assert!(direct.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: direct renders black");
+    common::assert_films_agree(label, &direct, &path, 8, ALPHA);
+}
+
+fn glossy_cornell_box() -> PreparedScene {
+    let scene = load_gltf(&common::repo_path("assets/scenes/cornell_box_glossy.gltf")).unwrap();
+    PreparedScene::new(scene).unwrap()
+}
+
+#[test]
+fn direct_matches_path_at_the_steady_state() {
+    assert_direct_matches_path("steady", &common::cornell_box(), Gate::None, 32, 100);
+}
+
+#[test]
+fn direct_matches_path_at_two_box_gates() {
+    let scene = common::cornell_box();
+    assert_direct_matches_path("box [3.14, 3.19)", &scene, Gate::Box { start: 3.14, end: 3.19 }, 32, 110);
+    assert_direct_matches_path("box [2.2, 2.6)", &scene, Gate::Box { start: 2.2, end: 2.6 }, 32, 120);
+}
+
+#[test]
+fn direct_matches_path_on_the_glossy_cornell_box() {
+    let scene = glossy_cornell_box();
+    assert_direct_matches_path("glossy steady", &scene, Gate::None, 32, 130);
+    assert_direct_matches_path("glossy box [3.0, 3.3)", &scene, Gate::Box { start: 3.0, end: 3.3 }, 32, 140);
+}
+
+#[test]
+fn direct_matches_path_at_gaussian_and_cw_gates() {
+    let scene = common::cornell_box();
+    assert_direct_matches_path("gaussian 3.2, 0.05", &scene, Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 150);
+    // 100 MHz: signed weights over the box's path lengths.
+    let cw = Gate::Cw { frequency_hz: 1e8, phase_deg: 30.0 };
+    assert_direct_matches_path("cw 100 MHz", &scene, cw, 32, 160);
+}
+
+/// The Cornell box with a point light added near the floor (`point`) and every material
+/// made double-sided (`double_sided`): the ceiling light then also shines upwards, and the
+/// walls reflect on both faces.
+fn modified_cornell_box(point: bool, double_sided: bool) -> PreparedScene {
+    let mut scene = load_gltf(&common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
+    if point {
+        scene.point_lights.push(PointLight { position: glam::Vec3::new(0.2, -0.3, -0.1), intensity: glam::Vec3::new(0.3, 0.2, 0.1) });
+    }
+    for m in &mut scene.materials {
+        m.double_sided |= double_sided;
+    }
+    PreparedScene::new(scene).unwrap()
+}
+
+#[test]
+fn direct_matches_path_with_a_point_light() {
+    // Delta lights have no s = 0 strategy; area and point lights share the light CDF.
+    assert_direct_matches_path("point + area lights", &modified_cornell_box(true, false), Gate::None, 32, 170);
+}
+
+#[test]
+fn direct_matches_path_with_double_sided_materials() {
+    assert_direct_matches_path("double-sided", &modified_cornell_box(false, true), Gate::None, 32, 180);
+}
+
+#[test]
+fn transient_bins_sum_to_the_box_gate_over_their_range() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let transient = Gate::Transient { start: 1.94, width: 0.1, bins: 12 };
+    let cube = common::render_films(&ctx, &scene, &settings(Method::Direct, transient, 200), BATCHES, 32);
+    let summed: Vec<Film> = cube.iter().map(Film::sum_bins).collect();
+    let gate = Gate::Box { start: 1.94, end: 1.94 + 12.0 * 0.1 };
+    let boxed = common::render_films(&ctx, &scene, &settings(Method::Direct, gate, 201), BATCHES, 32);
+    common::assert_films_agree("sum of 12 bins vs box [1.94, 3.14)", &summed, &boxed, 8, ALPHA);
+}
+
+#[test]
+fn debug_strategy_images_sum_to_the_full_render() {
+    // With the same seed every strategy sees the same subpaths, so the single-strategy images
+    // (each MIS-weighted) add up to the full render up to f32 rounding.
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 7, ..Default::default() };
+    let render = |s: &RenderSettings| {
+        let mut tracer = DirectTracer::new(&ctx, &scene, s).unwrap();
+        tracer.render_samples(16).unwrap();
+        tracer.film().unwrap()
+    };
+    let full = render(&base);
+    let mut sum = vec![0.0f64; full.data.len()];
+    for (s, t) in gatetrace::integrator::direct::strategies(base.max_bounces) {
+        let single = render(&RenderSettings { debug_strategy: Some((s, t)), ..base.clone() });
+        for (acc, v) in sum.iter_mut().zip(&single.data) {
+            *acc += *v as f64;
+        }
+    }
+    let total: f64 = full.data.iter().map(|&v| v as f64).sum();
+    assert!(total > 0.0);
+    for (i, (a, b)) in sum.iter().zip(&full.data).enumerate() {
+        let tolerance = 1e-4 * (*b as f64).abs() + 1e-7;
+        assert!((a - *b as f64).abs() <= tolerance, "element {i}: strategies sum to {a}, full render {b}");
+    }
+}
+
+#[test]
+fn zero_weight_connections_trace_no_shadow_ray() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let render = |gate: Gate| {
+        let s = RenderSettings { stats: true, ..settings(Method::Direct, gate, 300) };
+        let mut tracer = DirectTracer::new(&ctx, &scene, &s).unwrap();
+        tracer.render_samples(4).unwrap();
+        tracer.strategy_stats().unwrap().to_vec()
+    };
+    let steady = render(Gate::None);
+    let gated = render(Gate::Box { start: 3.14, end: 3.19 });
+    let total = |st: &[gatetrace::integrator::StrategyStats], f: fn(&gatetrace::integrator::StrategyStats) -> u64| -> u64 {
+        st.iter().map(f).sum()
+    };
+    // Steady state: nothing is skipped; every shadow ray belongs to an evaluated connection.
+    assert_eq!(total(&steady, |s| s.skipped_by_gate), 0);
+    for st in steady.iter().chain(&gated) {
+        assert!(st.shadow_rays + st.skipped_by_gate <= st.evaluated, "{st:?}");
+        if st.s == 0 {
+            assert_eq!(st.shadow_rays, 0, "s = 0 needs no shadow ray: {st:?}");
+        }
+    }
+    // A 5 cm gate drops most connections before their shadow rays; the direct light (1,1) and
+    // (0,2) paths (at most ~2.1 m long) are all dropped.
+    let (evaluated, skipped, rays) =
+        (total(&gated, |s| s.evaluated), total(&gated, |s| s.skipped_by_gate), total(&gated, |s| s.shadow_rays));
+    println!("gate [3.14, 3.19): {evaluated} connections, {skipped} skipped by the gate, {rays} shadow rays");
+    assert!(skipped as f64 > 0.8 * evaluated as f64, "{skipped} of {evaluated} skipped");
+    assert!(rays < total(&steady, |s| s.shadow_rays) / 5);
+    for st in gated.iter().filter(|st| st.s + st.t == 2) {
+        assert_eq!(st.skipped_by_gate, st.evaluated, "{st:?}");
+    }
+}

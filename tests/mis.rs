@@ -1,0 +1,124 @@
+//! The multiple-importance weights of bidirectional path tracing (CPU twin of the kernels'
+//! code): on random paths with Lambertian and glossy vertices, area and point lights, the weights
+//! of all strategies sum to one, and each equals the power heuristic computed independently from
+//! the full path densities p_s = prod(light-side densities of x_0..x_{s-1}) x prod(camera-side
+//! densities of x_s..x_{k-2}).
+
+use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
+use gatetrace::scene::bsdf::Bsdf;
+use glam::Vec3;
+
+/// xorshift64*: a small deterministic generator for test inputs.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    fn vec3(&mut self) -> Vec3 {
+        Vec3::new(self.next(), self.next(), self.next()) * 2.0 - Vec3::ONE
+    }
+}
+
+/// A random path of `k` vertices: a light (area or point), k - 2 surfaces whose normals face
+/// both neighbours, and a pinhole looking roughly at its neighbour.
+fn random_path(rng: &mut Rng, k: usize, point_light: bool) -> Vec<Vertex> {
+    let positions: Vec<Vec3> = (0..k).map(|_| rng.vec3() * 2.0).collect();
+    let mut path = Vec::with_capacity(k);
+    for i in 0..k {
+        let p = positions[i];
+        let toward = |j: usize| (positions[j] - p).normalize();
+        let vertex = if i == 0 {
+            let kind = if point_light {
+                VertexKind::PointLight { select_pdf: 0.3 + 0.7 * rng.next() }
+            } else {
+                VertexKind::AreaLight { origin_pdf: 0.5 + 3.0 * rng.next() }
+            };
+            Vertex { kind, position: p, normal: (toward(1) + 0.5 * rng.vec3()).normalize() }
+        } else if i == k - 1 {
+            let image_area = 0.5 + rng.next();
+            Vertex { kind: VertexKind::Camera { image_area }, position: p, normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize() }
+        } else {
+            let bsdf = Bsdf {
+                base_color: Vec3::new(0.8, 0.5, 0.2),
+                metallic: if rng.next() < 0.4 { 0.0 } else { rng.next() },
+                alpha: 0.05 + 0.9 * rng.next() * rng.next(),
+            };
+            let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.vec3()).normalize();
+            Vertex { kind: VertexKind::Surface(bsdf), position: p, normal: n }
+        };
+        path.push(vertex);
+    }
+    path
+}
+
+/// Whether every direction the path takes leaves each vertex on its normal's side (so every
+/// density is nonzero and every strategy can sample it).
+fn is_valid(path: &[Vertex]) -> bool {
+    let k = path.len();
+    (0..k).all(|i| {
+        let p = path[i].position;
+        let ok = |j: usize| (path[j].position - p).dot(path[i].normal) > 1e-3 * (path[j].position - p).length();
+        (i == 0 || ok(i - 1)) && (i == k - 1 || ok(i + 1))
+    })
+}
+
+/// p_s of the full path, computed directly: the light side generates x_0..x_{s-1} forwards, the
+/// camera side x_{k-2}..x_s backwards (the pinhole x_{k-1} is not sampled).
+fn strategy_pdf(path: &[Vertex], s: usize) -> f64 {
+    let k = path.len();
+    if s == 0 && matches!(path[0].kind, VertexKind::PointLight { .. }) {
+        return 0.0;
+    }
+    let mut p = 1.0f64;
+    for i in 0..s {
+        p *= if i == 0 {
+            path[0].light_origin_pdf() as f64
+        } else {
+            vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]) as f64
+        };
+    }
+    for i in s..k - 1 {
+        let prev = (i + 2 < k).then(|| &path[i + 2]);
+        p *= vertex_pdf(&path[i + 1], prev, &path[i]) as f64;
+    }
+    p
+}
+
+#[test]
+fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
+    let mut rng = Rng(0x9E3779B97F4A7C15);
+    let mut checked = 0;
+    for trial in 0..4000 {
+        let k = 2 + trial % 6;
+        let point_light = trial % 3 == 0;
+        let path = random_path(&mut rng, k, point_light);
+        if !is_valid(&path) {
+            continue;
+        }
+        let strategies = if point_light { 1..k } else { 0..k };
+        let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
+        let norm: f64 = pdfs.iter().map(|p| p * p).sum();
+        if !(norm.is_finite() && norm > 0.0) {
+            continue;
+        }
+        let mut sum = 0.0f64;
+        for s in strategies {
+            let w = mis_weight(&path, s) as f64;
+            let expected = pdfs[s] * pdfs[s] / norm;
+            assert!(
+                (w - expected).abs() <= 1e-3 * expected.max(1e-3),
+                "path of {k} vertices, strategy s = {s}: weight {w}, power heuristic {expected} (pdfs {pdfs:?})"
+            );
+            sum += w;
+        }
+        assert!((sum - 1.0).abs() < 1e-4, "path of {k} vertices: weights sum to {sum}");
+        checked += 1;
+    }
+    assert!(checked > 1000, "only {checked} valid random paths");
+    println!("{checked} random paths checked");
+}
