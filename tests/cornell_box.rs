@@ -7,7 +7,7 @@ mod common;
 
 use common::stats::{sidak, t_critical};
 use gatetrace::film::{Film, Gate};
-use gatetrace::integrator::RenderSettings;
+use gatetrace::integrator::{Method, RenderSettings};
 
 /// Family-wise false-alarm rate of every multi-comparison in this file.
 const ALPHA: f64 = 0.01;
@@ -113,6 +113,24 @@ fn box_gate_matches_peer() {
     let scene = common::cornell_box();
     let films = common::render_films(&ctx, &scene, &settings(Gate::Box { start: 3.14, end: 3.19 }, 2), BATCHES, 64);
     check_image("cornell_box_gate_3_14_3_19", &films, "gate_3_14_3_19");
+}
+
+#[test]
+fn direct_steady_image_matches_peer() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let settings = RenderSettings { method: Method::Direct, ..settings(Gate::None, 21) };
+    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 64);
+    check_image("cornell_box_direct_steady", &films, "steady");
+}
+
+#[test]
+fn direct_box_gate_matches_peer() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let settings = RenderSettings { method: Method::Direct, ..settings(Gate::Box { start: 3.14, end: 3.19 }, 22) };
+    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 64);
+    check_image("cornell_box_direct_gate_3_14_3_19", &films, "gate_3_14_3_19");
 }
 
 #[test]
