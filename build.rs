@@ -18,17 +18,23 @@ fn main() {
     for dir in ["kernels", "probes"] {
         for file in wesl_files(&Path::new("shaders").join(dir)) {
             let name = file.file_stem().unwrap().to_str().unwrap().to_owned();
-            match build_kernel(dir, &name, &out_dir) {
+            match build_kernel(dir, &name, None, &out_dir) {
                 Ok(entry) => generated.push_str(&entry),
                 Err(e) => errors.push(format!("shaders/{dir}/{name}.wesl:\n{e}")),
             }
         }
     }
+    for (name, feature) in FEATURE_VARIANTS {
+        match build_kernel("kernels", name, Some(feature), &out_dir) {
+            Ok(entry) => generated.push_str(&entry),
+            Err(e) => errors.push(format!("shaders/kernels/{name}.wesl with @if({feature}):\n{e}")),
+        }
+    }
     generated.push_str("];\n");
 
-    match compose("package::lib::layout", true) {
+    match compose("package::lib::layout", true, None) {
         Ok(wgsl) => {
-            if let Err(e) = validate(&wgsl) {
+            if let Err(e) = validate(&wgsl, None) {
                 errors.push(format!("shaders/lib/layout.wesl:\n{e}"));
             }
             std::fs::write(out_dir.join("layout.wgsl"), wgsl).unwrap();
@@ -45,6 +51,20 @@ fn main() {
     std::fs::write(out_dir.join("kernels.rs"), generated).unwrap();
 }
 
+/// Kernels also built with a WESL feature flag on, for adapters with the device feature it
+/// needs: (kernel, feature). Every kernel is built with all flags off as well.
+const FEATURE_VARIANTS: [(&str, &str); 1] = [("splat_light_paths", "float_atomics")];
+
+/// The naga capabilities a WESL feature flag needs (validation of its variants).
+fn capabilities_of(feature: Option<&str>) -> naga::valid::Capabilities {
+    let baseline = naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32;
+    match feature {
+        None => baseline,
+        Some("float_atomics") => baseline | naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC,
+        Some(other) => panic!("unknown WESL feature `{other}`"),
+    }
+}
+
 fn wesl_files(dir: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()))
@@ -55,31 +75,38 @@ fn wesl_files(dir: &Path) -> Vec<PathBuf> {
     files
 }
 
-fn compose(module: &str, keep_all: bool) -> Result<String, String> {
+fn compose(module: &str, keep_all: bool, feature: Option<&str>) -> Result<String, String> {
     let mut compiler = wesl::Wesl::new("shaders");
     compiler.set_mangler(wesl::ManglerKind::None);
     if keep_all {
         compiler.set_options(wesl::CompileOptions { keep_root: true, ..Default::default() });
+    }
+    for (_, f) in FEATURE_VARIANTS {
+        compiler.set_feature(f, feature == Some(f));
     }
     let path = module.parse().map_err(|e| format!("{e:?}"))?;
     compiler.compile(&path).map(|r| r.to_string()).map_err(|e| e.to_string())
 }
 
 /// Validates with only the capabilities every full-WebGPU adapter has (16-bit float packing in
-/// f32), so a kernel needing an optional device feature fails the build, not a user's run.
-fn validate(wgsl: &str) -> Result<naga::Module, String> {
+/// f32), plus those the variant's feature flag needs, so a kernel needing an optional device
+/// feature fails the build, not a user's run.
+fn validate(wgsl: &str, feature: Option<&str>) -> Result<naga::Module, String> {
     let module = naga::front::wgsl::parse_str(wgsl).map_err(|e| e.emit_to_string(wgsl))?;
-    let capabilities = naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32;
+    let capabilities = capabilities_of(feature);
     let mut validator = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities);
     validator.validate(&module).map_err(|e| e.emit_to_string(wgsl))?;
     Ok(module)
 }
 
 /// Composes, validates and reflects one kernel; returns its `KernelSource` entry.
-fn build_kernel(dir: &str, name: &str, out_dir: &Path) -> Result<String, String> {
-    let wgsl = compose(&format!("package::{dir}::{name}"), false)?;
-    let module = validate(&wgsl)?;
-    let path = out_dir.join(format!("{name}.wgsl"));
+fn build_kernel(dir: &str, name: &str, feature: Option<&str>, out_dir: &Path) -> Result<String, String> {
+    let wgsl = compose(&format!("package::{dir}::{name}"), false, feature)?;
+    let module = validate(&wgsl, feature)?;
+    let path = match feature {
+        None => out_dir.join(format!("{name}.wgsl")),
+        Some(f) => out_dir.join(format!("{name}.{f}.wgsl")),
+    };
     std::fs::write(&path, &wgsl).unwrap();
 
     let entry = match module.entry_points.as_slice() {
@@ -108,6 +135,7 @@ fn build_kernel(dir: &str, name: &str, out_dir: &Path) -> Result<String, String>
     let mut s = String::new();
     writeln!(s, "    KernelSource {{").unwrap();
     writeln!(s, "        name: {name:?},").unwrap();
+    writeln!(s, "        feature: {feature:?},").unwrap();
     writeln!(s, "        wgsl: include_str!({:?}),", path.display().to_string()).unwrap();
     writeln!(s, "        workgroup_size: {:?},", entry.workgroup_size).unwrap();
     writeln!(s, "        bindings: &[").unwrap();

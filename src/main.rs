@@ -159,6 +159,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         light_strategy: LightStrategy::Mis,
         stats: args.stats,
         debug_strategy: args.debug_strategy,
+        portable_atomics: false,
         binding_limit: None,
     };
     settings.method.ensure_available()?;

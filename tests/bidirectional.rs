@@ -160,3 +160,24 @@ fn zero_weight_connections_trace_no_shadow_ray() {
         assert_eq!(st.skipped_by_gate, st.evaluated, "{st:?}");
     }
 }
+
+#[test]
+fn float_atomic_and_compare_exchange_splats_agree() {
+    // Both splat with exact f32 additions; only their order differs, so the images agree to
+    // rounding. Lavapipe has float atomics, so CI runs both kernels.
+    let ctx = common::gpu();
+    assert!(ctx.has_float_atomics(), "the test device should have SHADER_FLOAT32_ATOMIC (lavapipe has it)");
+    let scene = common::cornell_box();
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 9, ..Default::default() };
+    let render = |s: &RenderSettings| {
+        let mut tracer = DirectTracer::new(&ctx, &scene, s).unwrap();
+        tracer.render_samples(16).unwrap();
+        tracer.film().unwrap()
+    };
+    let float = render(&base);
+    let portable = render(&RenderSettings { portable_atomics: true, ..base.clone() });
+    for (i, (a, b)) in float.data.iter().zip(&portable.data).enumerate() {
+        assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "element {i}: {a} vs {b}");
+    }
+    assert!(float.mean_rgb()[0] > 0.0);
+}

@@ -17,6 +17,8 @@ pub struct GpuContext {
     pub adapter_info: wgpu::AdapterInfo,
     /// The device's limits.
     pub limits: wgpu::Limits,
+    /// The optional features the device was opened with.
+    pub features: wgpu::Features,
 }
 
 impl GpuContext {
@@ -33,22 +35,30 @@ impl GpuContext {
         let adapter = choose_adapter(adapters)?;
         let adapter_info = adapter.get_info();
         let limits = adapter.limits();
+        // Optional features the kernels have variants for.
+        let features = adapter.features() & wgpu::Features::SHADER_FLOAT32_ATOMIC;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("gatetrace"),
-            required_features: wgpu::Features::empty(),
+            required_features: features,
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter `{}`", adapter_info.name))?;
-        Ok(Self { device, queue, adapter_info, limits })
+        Ok(Self { device, queue, adapter_info, limits, features })
     }
 
     /// "name (backend, device type)", as recorded with every output.
     pub fn adapter_description(&self) -> String {
         let i = &self.adapter_info;
         format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
+    }
+
+    /// True when kernels may add floats atomically in storage buffers (SHADER_FLOAT32_ATOMIC;
+    /// lavapipe has it).
+    pub fn has_float_atomics(&self) -> bool {
+        self.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
     }
 
     /// Largest storage-buffer binding the device allows (bytes).

@@ -33,6 +33,8 @@ pub struct BindingInfo {
 pub struct KernelSource {
     /// The file name = entry point name.
     pub name: &'static str,
+    /// The WESL feature flag this variant was composed with (`@if(feature)`), if any.
+    pub feature: Option<&'static str>,
     /// The composed WGSL.
     pub wgsl: &'static str,
     /// `@workgroup_size`.
@@ -47,10 +49,16 @@ include!(concat!(env!("OUT_DIR"), "/kernels.rs"));
 
 /// The kernel source named `name` (panics on an unknown name: that is a programming error).
 pub fn kernel_source(name: &str) -> &'static KernelSource {
+    kernel_variant(name, None)
+}
+
+/// The source of kernel `name` composed with WESL feature flag `feature` on (build.rs lists the
+/// variants it builds).
+pub fn kernel_variant(name: &str, feature: Option<&str>) -> &'static KernelSource {
     KERNEL_SOURCES
         .iter()
-        .find(|k| k.name == name)
-        .unwrap_or_else(|| panic!("no kernel named `{name}` in shaders/"))
+        .find(|k| k.name == name && k.feature == feature)
+        .unwrap_or_else(|| panic!("no kernel named `{name}` with feature {feature:?} in shaders/"))
 }
 
 /// A compute pipeline with its bind-group layout.
@@ -69,7 +77,17 @@ impl Kernel {
     /// The pipeline label is the kernel's name, with `variant` in parentheses when one kernel
     /// serves several stages (e.g. `setup_dispatch(rays)`).
     pub fn new(ctx: &GpuContext, name: &str, variant: Option<&str>, constants: &[(&str, f64)]) -> Self {
-        let source = kernel_source(name);
+        Self::from_source(ctx, kernel_source(name), variant, constants)
+    }
+
+    /// Like [`Kernel::new`], from the variant composed with WESL feature flag `feature`; the
+    /// label is `name(feature)`.
+    pub fn with_feature(ctx: &GpuContext, name: &str, feature: &str, constants: &[(&str, f64)]) -> Self {
+        Self::from_source(ctx, kernel_variant(name, Some(feature)), Some(feature), constants)
+    }
+
+    fn from_source(ctx: &GpuContext, source: &'static KernelSource, variant: Option<&str>, constants: &[(&str, f64)]) -> Self {
+        let name = source.name;
         let used: Vec<(&str, f64)> =
             constants.iter().filter(|(k, _)| source.overrides.contains(k)).copied().collect();
         let label = match variant {

@@ -14,7 +14,8 @@
 //! setup_dispatch(shadow_rays)
 //! trace_shadow_rays                     occluded connections are cleared
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
-//! splat_light_paths                     t = 1 contributions -> splat_film (atomics)
+//! splat_light_paths                     t = 1 contributions -> splat_film (float atomics
+//!                                       where the device has them, else compare-exchange)
 //! ```
 //!
 //! Slot `slot` keeps its camera subpath in queue entry `slot` and its light subpath in entry
@@ -189,7 +190,11 @@ impl<'a> DirectTracer<'a> {
             setup_dispatch_shadow_rays: Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with(1.0)),
             trace_shadow_rays: Kernel::new(ctx, "trace_shadow_rays", None, &constants),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
-            splat_light_paths: Kernel::new(ctx, "splat_light_paths", None, &constants),
+            splat_light_paths: if ctx.has_float_atomics() && !settings.portable_atomics {
+                Kernel::with_feature(ctx, "splat_light_paths", "float_atomics", &constants)
+            } else {
+                Kernel::new(ctx, "splat_light_paths", None, &constants)
+            },
         };
         let even = r.clone();
         let odd = r.swapped("ray_queue", "next_ray_queue");

@@ -89,6 +89,9 @@ pub struct RenderSettings {
     pub stats: bool,
     /// Only this (s, t) strategy contributes, MIS-weighted (`--debug-strategy`; `direct`).
     pub debug_strategy: Option<(u32, u32)>,
+    /// Splat light tracing with the portable compare-exchange loop even where the device has
+    /// float atomics (tests compare the two).
+    pub portable_atomics: bool,
     /// Largest storage binding to use (bytes); None: the device's limit. Smaller values force
     /// the split-array layout (used by tests to check it against the unsplit one).
     pub binding_limit: Option<u64>,
@@ -108,6 +111,7 @@ impl Default for RenderSettings {
             light_strategy: LightStrategy::Mis,
             stats: false,
             debug_strategy: None,
+            portable_atomics: false,
             binding_limit: None,
         }
     }
