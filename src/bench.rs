@@ -3,7 +3,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use crate::gpu::GpuContext;
 use crate::integrator::{RenderSettings, create_integrator};
@@ -40,6 +40,122 @@ pub fn run_bench(seconds: f64, max_bounces: u32, scene_path: &Path) -> Result<()
             elapsed,
             samples / elapsed / 1e6
         );
+    }
+    Ok(())
+}
+
+/// Settings of an equal-time comparison (`gatetrace equal-time`).
+pub struct EqualTimeSettings {
+    /// Methods compared, each rendered for the same wall time.
+    pub methods: Vec<crate::integrator::Method>,
+    /// Gates, each compared separately.
+    pub gates: Vec<(String, crate::film::Gate)>,
+    /// Rendering time per method, gate and repeat (s), setup excluded.
+    pub seconds: f64,
+    /// Independent renders per method and gate (the MSE is their mean).
+    pub repeats: u32,
+    /// Method of the reference images.
+    pub reference_method: crate::integrator::Method,
+    /// Rendering time of each gate's reference (s), in 8 independent batches.
+    pub reference_seconds: f64,
+    /// Image size and bounces shared by all renders.
+    pub base: RenderSettings,
+    /// CSV file for the results.
+    pub csv: Option<std::path::PathBuf>,
+}
+
+/// A film rendered for `seconds` of whole passes after a warm-up pass (kernel builds and upload
+/// excluded); returns the film and the seconds actually spent.
+fn render_for(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings, seconds: f64) -> Result<(crate::film::Film, f64)> {
+    let mut tracer = create_integrator(ctx, scene, settings)?;
+    tracer.render_pass(1)?;
+    tracer.reset_film();
+    let start = Instant::now();
+    // Passes of one sample first, so short budgets are not overshot by one big pass.
+    while start.elapsed().as_secs_f64() < seconds {
+        let n = if tracer.samples_done() < 4 { 1 } else { tracer.samples_per_pass() };
+        tracer.render_pass(n)?;
+    }
+    Ok((tracer.film()?, start.elapsed().as_secs_f64()))
+}
+
+/// Renders every gate with every method for equal wall time and prints, per method, the mean
+/// squared error against a reference rendered much longer (its own estimated noise variance is
+/// subtracted), with the ratio of MSEs to the first method. Writes the rows to a CSV.
+pub fn run_equal_time(scene_path: &Path, s: &EqualTimeSettings) -> Result<()> {
+    use std::fmt::Write as _;
+    let scene = PreparedScene::new(load_gltf(scene_path)?)?;
+    let ctx = GpuContext::new()?;
+    let b = &s.base;
+    println!("adapter: {}", ctx.adapter_description());
+    println!(
+        "scene: {}, {}x{}, max bounces {}, {} s per render, {} repeats, reference: {} for {} s",
+        scene_path.display(),
+        b.width,
+        b.height,
+        b.max_bounces,
+        s.seconds,
+        s.repeats,
+        s.reference_method.name(),
+        s.reference_seconds
+    );
+    let mut csv = String::from("gate,method,repeat,seconds,spp,mse,relative_mse,reference_noise\n");
+    let mut seed = 1000;
+    for (spec, gate) in &s.gates {
+        // Reference: 8 batches, mean and variance of the mean per element.
+        let batches = 8;
+        let mut stats: Option<(Vec<f64>, Vec<f64>)> = None;
+        let mut ref_spp = 0;
+        for _ in 0..batches {
+            seed += 1;
+            let settings = RenderSettings { method: s.reference_method, gate: gate.clone(), seed, ..b.clone() };
+            let (film, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
+            ref_spp += film.spp;
+            let (sum, sq) = stats.get_or_insert_with(|| (vec![0.0; film.data.len()], vec![0.0; film.data.len()]));
+            for (i, &v) in film.data.iter().enumerate() {
+                sum[i] += v as f64;
+                sq[i] += (v as f64) * (v as f64);
+            }
+        }
+        let (sum, sq) = stats.unwrap();
+        let n = batches as f64;
+        let reference: Vec<f64> = sum.iter().map(|x| x / n).collect();
+        let ref_var: Vec<f64> = sq.iter().zip(&reference).map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n).collect();
+        let elements = reference.len() as f64;
+        let ref_noise = ref_var.iter().sum::<f64>() / elements;
+        let ref_power = reference.iter().map(|x| x * x).sum::<f64>() / elements;
+        println!("\ngate {spec}: reference {ref_spp} spp, mean {:.6}, its noise variance {ref_noise:.3e}", sum.iter().sum::<f64>() / n / elements);
+        println!("{:>12} {:>8} {:>12} {:>12} {:>14}", "method", "spp", "MSE", "rel. MSE", "MSE / first");
+        let mut first = None;
+        for &method in &s.methods {
+            let mut mses = Vec::new();
+            let mut spps = Vec::new();
+            for repeat in 0..s.repeats {
+                seed += 1;
+                let settings = RenderSettings { method, gate: gate.clone(), seed, ..b.clone() };
+                let (film, secs) = render_for(&ctx, &scene, &settings, s.seconds)?;
+                let se: f64 = film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
+                let mse = se - ref_noise;
+                writeln!(csv, "{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e}", method.name(), film.spp, mse / ref_power)
+                    .unwrap();
+                mses.push(mse);
+                spps.push(film.spp);
+            }
+            let mse = mses.iter().sum::<f64>() / mses.len() as f64;
+            let first_mse = *first.get_or_insert(mse);
+            println!(
+                "{:>12} {:>8} {:>12.4e} {:>12.4e} {:>14.3}",
+                method.name(),
+                spps.iter().sum::<u64>() / spps.len() as u64,
+                mse,
+                mse / ref_power,
+                mse / first_mse
+            );
+        }
+    }
+    if let Some(path) = &s.csv {
+        std::fs::write(path, csv).with_context(|| format!("cannot write {}", path.display()))?;
+        println!("\nrows written to {}", path.display());
     }
     Ok(())
 }

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use anyhow::{Context as _, Result, bail};
+use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
 use gatetrace::film::output::{Metadata, OutputFormat, check_writable, write_film};
@@ -32,6 +32,9 @@ enum Command {
     Render(RenderArgs),
     /// Measure samples per second of `path` on the Cornell box at 64x64 and 256x256.
     Bench(BenchArgs),
+    /// Render a scene with several methods for the same wall time each and report their mean
+    /// squared error against a long reference render (error at equal time).
+    EqualTime(EqualTimeArgs),
 }
 
 #[derive(Args)]
@@ -97,6 +100,64 @@ struct BenchArgs {
     max_bounces: u32,
 }
 
+#[derive(Args)]
+struct EqualTimeArgs {
+    /// glTF 2.0 scene; the Cornell box when omitted.
+    scene: Option<PathBuf>,
+    /// Methods to compare, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "path,direct")]
+    methods: Vec<Method>,
+    /// Gates to compare at, separated by `;` (same syntax as `render --gate`).
+    #[arg(long, default_value = "none;box:3.14..3.1425")]
+    gates: String,
+    /// Seconds of rendering per method, gate and repeat (kernel builds excluded).
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Independent renders per method and gate.
+    #[arg(long, default_value_t = 3)]
+    repeats: u32,
+    /// Method of the reference images.
+    #[arg(long, value_enum, default_value_t = Method::Direct)]
+    reference_method: Method,
+    /// Seconds of rendering of each gate's reference.
+    #[arg(long, default_value_t = 120.0)]
+    reference_seconds: f64,
+    /// Image size in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "64x64", value_parser = parse_resolution)]
+    res: (u32, u32),
+    /// Maximum number of scattering vertices.
+    #[arg(long, default_value_t = 5)]
+    max_bounces: u32,
+    /// Write one row per render to this CSV file.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+}
+
+fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
+    let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let gates = args
+        .gates
+        .split(';')
+        .map(|g| Ok((g.trim().to_owned(), Gate::parse(g.trim())?)))
+        .collect::<Result<Vec<_>>>()?;
+    ensure!(args.seconds > 0.0 && args.reference_seconds > 0.0, "--seconds and --reference-seconds must be positive");
+    ensure!(args.repeats >= 1, "--repeats must be at least 1");
+    for &m in args.methods.iter().chain([&args.reference_method]) {
+        m.ensure_available()?;
+    }
+    let settings = gatetrace::bench::EqualTimeSettings {
+        methods: args.methods,
+        gates,
+        seconds: args.seconds,
+        repeats: args.repeats,
+        reference_method: args.reference_method,
+        reference_seconds: args.reference_seconds,
+        base: RenderSettings { width: args.res.0, height: args.res.1, max_bounces: args.max_bounces, ..Default::default() },
+        csv: args.csv,
+    };
+    gatetrace::bench::run_equal_time(&scene, &settings)
+}
+
 fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
     let bad = || format!("`{s}` is not S,T (two non-negative integers, e.g. 1,2)");
     let (a, b) = s.split_once(',').ok_or_else(bad)?;
@@ -123,6 +184,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
+        Command::EqualTime(args) => run_equal_time(args),
         Command::Bench(args) => gatetrace::bench::run_bench(args.seconds, args.max_bounces, Path::new(DEFAULT_SCENE)),
     };
     if let Err(e) = result {

@@ -24,12 +24,12 @@
 
 use anyhow::{Result, ensure};
 
-use super::path::{MAX_SLOTS_PER_DISPATCH, ROUNDS_PER_SUBMISSION, plan_waves, waves_of_pass};
-use super::{Integrator, RenderSettings};
+use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
+use super::{Integrator, RenderSettings, Wavefront};
 use crate::film::Film;
-use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
-use crate::gpu::resources::{ChunkLayout, read_buffer};
-use crate::gpu::{GpuContext, Kernel, Resources};
+use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
+use crate::gpu::resources::read_buffer;
+use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 
 /// Slots a wave aims for: each slot holds two subpaths and all their connections (a few KiB).
@@ -105,17 +105,9 @@ struct Bindings {
 /// Bidirectional path tracing with direct connections, bound to one scene and one set of
 /// settings, accumulating into its film (camera-side sums) and splat film (light tracing).
 pub struct DirectTracer<'a> {
-    ctx: &'a GpuContext,
-    params: RenderParams,
+    wf: Wavefront<'a>,
     stages: Stages,
     bindings: Bindings,
-    resources: Resources,
-    film_layout: ChunkLayout,
-    constants: Vec<(&'static str, f64)>,
-    slots_per_wave: u64,
-    samples_per_pass: u32,
-    samples_in_film: u64,
-    next_sample: u64,
     /// Strategy counters summed over the waves so far (when `stats` is on).
     stats: Option<Vec<StrategyStats>>,
 }
@@ -213,20 +205,8 @@ impl<'a> DirectTracer<'a> {
         let stats = settings.stats.then(|| {
             strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
         });
-        Ok(Self {
-            ctx,
-            params,
-            stages,
-            bindings,
-            resources: r,
-            film_layout: film,
-            constants,
-            slots_per_wave,
-            samples_per_pass,
-            samples_in_film: 0,
-            next_sample: 0,
-            stats,
-        })
+        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
+        Ok(Self { wf, stages, bindings, stats })
     }
 
     /// Strategy counters so far (None unless the settings asked for statistics).
@@ -235,37 +215,20 @@ impl<'a> DirectTracer<'a> {
     }
 
     fn render_wave(&mut self, wave: WaveParams) -> Result<()> {
-        let ctx = self.ctx;
-        ctx.queue.write_buffer(self.resources.get("wave").unwrap(), 0, bytemuck::bytes_of(&wave));
-        let args = self.resources.get("dispatch_args").unwrap();
+        let ctx = self.wf.ctx;
+        self.wf.write_wave(&wave);
+        let args = self.wf.resources.get("dispatch_args").unwrap();
         let (s, b) = (&self.stages, &self.bindings);
-        let rounds = self.params.max_bounces + 1;
-        let mut round = 0;
         // ---- trace the subpaths ----
-        while round < rounds {
-            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
-                if round == 0 {
-                    s.generate_subpaths.dispatch(&mut pass, &b.generate_subpaths, wave.slot_count);
-                }
-                let end = rounds.min(round + ROUNDS_PER_SUBMISSION);
-                for r in round..end {
-                    let parity = (r % 2) as usize;
-                    s.setup_dispatch_rays.dispatch(&mut pass, &b.setup_dispatch_rays[parity], 1);
-                    s.intersect_closest.dispatch_indirect(&mut pass, &b.intersect_closest[parity], args, 0);
-                    s.extend_subpaths.dispatch_indirect(&mut pass, &b.extend_subpaths[parity], args, 0);
-                }
-                round = end;
-            }
-            ctx.queue.submit([encoder.finish()]);
-            if round < rounds {
-                let counters: Vec<QueueCounters> = read_buffer(ctx, self.resources.get("counters").unwrap(), 1)?;
-                if counters[0].next_rays == 0 {
-                    break;
-                }
-            }
-        }
+        self.wf.trace_rounds(
+            |pass| s.generate_subpaths.dispatch(pass, &b.generate_subpaths, wave.slot_count),
+            |pass, r| {
+                let parity = (r % 2) as usize;
+                s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
+                s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
+                s.extend_subpaths.dispatch_indirect(pass, &b.extend_subpaths[parity], args, 0);
+            },
+        )?;
         // ---- connect, test visibility, accumulate ----
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("connect") });
         {
@@ -280,7 +243,7 @@ impl<'a> DirectTracer<'a> {
         ctx.wait_idle()?;
         if let Some(stats) = &mut self.stats {
             // Per-wave u32 counters cannot overflow (one connection per slot and strategy).
-            let buffer = self.resources.get("strategy_stats").unwrap();
+            let buffer = self.wf.resources.get("strategy_stats").unwrap();
             let counts: Vec<u32> = read_buffer(ctx, buffer, 3 * stats.len())?;
             for (st, c) in stats.iter_mut().zip(counts.chunks(3)) {
                 st.evaluated += c[0] as u64;
@@ -296,60 +259,31 @@ impl<'a> DirectTracer<'a> {
 }
 
 impl Integrator for DirectTracer<'_> {
-    fn resources(&self) -> &Resources {
-        &self.resources
-    }
-
-    fn constants(&self) -> &[(&'static str, f64)] {
-        &self.constants
-    }
-
-    fn samples_per_pass(&self) -> u32 {
-        self.samples_per_pass
-    }
-
-    fn samples_done(&self) -> u64 {
-        self.samples_in_film
+    fn wavefront(&self) -> &Wavefront<'_> {
+        &self.wf
     }
 
     fn render_pass(&mut self, samples: u32) -> Result<()> {
-        assert!(samples >= 1 && samples <= self.samples_per_pass);
-        for wave in waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)? {
+        for wave in self.wf.pass_waves(samples)? {
             self.render_wave(wave)?;
         }
-        self.samples_in_film += samples as u64;
-        self.next_sample += samples as u64;
+        self.wf.pass_done(samples);
         Ok(())
     }
 
     /// Camera-side sums (double-float) plus the light-tracing splats, over the samples per pixel.
     fn film(&self) -> Result<Film> {
-        let bins = self.params.gate.bins;
-        let mut film = Film::zeroed(self.params.width, self.params.height, bins);
-        let n = film.data.len();
-        let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, n as u64)?;
-        let splats: Vec<f32> = read_buffer(self.ctx, self.resources.get("splat_film").unwrap(), n)?;
-        let spp = self.samples_in_film.max(1) as f64;
-        film.data = sums
-            .iter()
-            .zip(&splats)
-            .map(|(s, &splat)| ((s[0] as f64 + s[1] as f64 + splat as f64) / spp) as f32)
-            .collect();
-        film.spp = self.samples_in_film;
+        let mut film = self.wf.film()?;
+        let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), film.data.len())?;
+        let spp = self.wf.samples_in_film.max(1) as f64;
+        for (v, &splat) in film.data.iter_mut().zip(&splats) {
+            *v = (*v as f64 + splat as f64 / spp) as f32;
+        }
         Ok(film)
     }
 
-    fn truncated_traversals(&self) -> Result<u64> {
-        let counters: Vec<QueueCounters> = read_buffer(self.ctx, self.resources.get("counters").unwrap(), 1)?;
-        Ok(counters[0].truncated_traversals as u64)
-    }
-
     fn reset_film(&mut self) {
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
-        self.resources.clear_chunked(&mut encoder, "film");
-        encoder.clear_buffer(self.resources.get("splat_film").unwrap(), 0, None);
-        self.ctx.queue.submit([encoder.finish()]);
-        self.samples_in_film = 0;
+        self.wf.reset_film(&["splat_film"]);
     }
 
     fn stats_report(&self) -> Result<Option<String>> {

@@ -5,6 +5,7 @@
 pub mod direct;
 pub mod mis;
 pub mod path;
+pub mod wavefront;
 
 use std::time::{Duration, Instant};
 
@@ -18,6 +19,7 @@ use crate::gpu::Resources;
 use crate::scene::PreparedScene;
 pub use direct::{DirectTracer, StrategyStats};
 pub use path::{PathTracer, film_elements};
+pub use wavefront::Wavefront;
 
 /// Sampling strategy (`--method`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -119,25 +121,39 @@ impl Default for RenderSettings {
 
 /// A renderer bound to one scene and one set of settings, accumulating into its film.
 pub trait Integrator {
-    /// The named buffers the kernels bind (scene, wavefront state, film).
-    fn resources(&self) -> &Resources;
-    /// The specialisation constants every kernel of this render gets.
-    fn constants(&self) -> &[(&'static str, f64)];
-    /// Samples per pixel of a full pass.
-    fn samples_per_pass(&self) -> u32;
-    /// Samples per pixel accumulated in the film since the last reset.
-    fn samples_done(&self) -> u64;
+    /// The state every wavefront method keeps.
+    fn wavefront(&self) -> &Wavefront<'_>;
     /// Traces `samples` (1 ..= `samples_per_pass`) more samples of every pixel and adds them to
     /// the film; returns when the GPU has finished.
     fn render_pass(&mut self, samples: u32) -> Result<()>;
-    /// The film's current estimate (sums divided by the samples per pixel).
-    fn film(&self) -> Result<Film>;
-    /// Ray traversals the device cut short so far (lavapipe ends a shader invocation's loops
-    /// after 65535 iterations in total); nonzero means the image may miss geometry.
-    fn truncated_traversals(&self) -> Result<u64>;
     /// Clears the film; later samples continue the random sequence, so the next estimate is
     /// independent of the previous one (for batch statistics).
     fn reset_film(&mut self);
+    /// The film's current estimate (sums divided by the samples per pixel).
+    fn film(&self) -> Result<Film> {
+        self.wavefront().film()
+    }
+    /// The named buffers the kernels bind (scene, wavefront state, film).
+    fn resources(&self) -> &Resources {
+        &self.wavefront().resources
+    }
+    /// The specialisation constants every kernel of this render gets.
+    fn constants(&self) -> &[(&'static str, f64)] {
+        &self.wavefront().constants
+    }
+    /// Samples per pixel of a full pass.
+    fn samples_per_pass(&self) -> u32 {
+        self.wavefront().samples_per_pass
+    }
+    /// Samples per pixel accumulated in the film since the last reset.
+    fn samples_done(&self) -> u64 {
+        self.wavefront().samples_in_film
+    }
+    /// Ray traversals the device cut short so far (lavapipe ends a shader invocation's loops
+    /// after 65535 iterations in total); nonzero means the image may miss geometry.
+    fn truncated_traversals(&self) -> Result<u64> {
+        Ok(self.wavefront().counters()?.truncated_traversals as u64)
+    }
     /// What `--stats` prints about the work done so far, if the method keeps statistics.
     fn stats_report(&self) -> Result<Option<String>> {
         Ok(None)

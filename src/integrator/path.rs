@@ -15,11 +15,10 @@
 
 use anyhow::{Result, ensure};
 
-use super::{Integrator, RenderSettings};
-use crate::film::Film;
+use super::{Integrator, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
-use crate::gpu::resources::{ChunkLayout, MAX_CHUNKS, read_buffer};
-use crate::gpu::{GpuContext, Kernel, Resources};
+use crate::gpu::resources::MAX_CHUNKS;
+use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 
 /// Path slots a wave aims for when the caller does not fix the samples per pass.
@@ -56,21 +55,9 @@ struct Bindings {
 
 /// A path tracer bound to one scene and one set of settings, accumulating into its film.
 pub struct PathTracer<'a> {
-    ctx: &'a GpuContext,
-    params: RenderParams,
+    wf: Wavefront<'a>,
     stages: Stages,
     bindings: Bindings,
-    resources: Resources,
-    film_layout: ChunkLayout,
-    /// Specialisation constants of the kernels (the scene's and the gate's).
-    constants: Vec<(&'static str, f64)>,
-    /// Most path slots of one wave.
-    slots_per_wave: u64,
-    samples_per_pass: u32,
-    /// Samples per pixel accumulated in the film.
-    samples_in_film: u64,
-    /// Index of the next sample to trace (never reused, so batches are independent).
-    next_sample: u64,
 }
 
 impl<'a> PathTracer<'a> {
@@ -126,126 +113,51 @@ impl<'a> PathTracer<'a> {
             trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
             accumulate: stages.accumulate.bind(ctx, &even),
         };
-        Ok(Self {
-            ctx,
-            params,
-            stages,
-            bindings,
-            resources: r,
-            film_layout: film,
-            constants,
-            slots_per_wave,
-            samples_per_pass,
-            samples_in_film: 0,
-            next_sample: 0,
-        })
+        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
+        Ok(Self { wf, stages, bindings })
     }
 
     /// Waves a full pass takes (more than one when the image does not fit one wave).
     pub fn waves_per_pass(&self) -> u64 {
-        let pixels = self.params.width as u64 * self.params.height as u64;
-        let pixels_per_wave = (self.slots_per_wave / self.samples_per_pass as u64).min(pixels);
-        pixels.div_ceil(pixels_per_wave)
+        self.wf.waves_per_pass()
     }
 
     fn render_wave(&self, wave: WaveParams) -> Result<()> {
-        let ctx = self.ctx;
-        ctx.queue.write_buffer(self.resources.get("wave").unwrap(), 0, bytemuck::bytes_of(&wave));
-        let args = self.resources.get("dispatch_args").unwrap();
+        self.wf.write_wave(&wave);
+        let args = self.wf.resources.get("dispatch_args").unwrap();
         let (s, b) = (&self.stages, &self.bindings);
-        let rounds = self.params.max_bounces + 1;
-        let mut round = 0;
-        while round < rounds {
-            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
-                if round == 0 {
-                    s.generate_camera_rays.dispatch(&mut pass, &b.generate_camera_rays, wave.slot_count);
-                }
-                let end = rounds.min(round + ROUNDS_PER_SUBMISSION);
-                for r in round..end {
-                    let parity = (r % 2) as usize;
-                    s.setup_dispatch_rays.dispatch(&mut pass, &b.setup_dispatch_rays[parity], 1);
-                    s.intersect_closest.dispatch_indirect(&mut pass, &b.intersect_closest[parity], args, 0);
-                    s.shade.dispatch_indirect(&mut pass, &b.shade[parity], args, 0);
-                    s.setup_dispatch_shadow_rays.dispatch(&mut pass, &b.setup_dispatch_shadow_rays, 1);
-                    s.trace_shadow_rays.dispatch_indirect(&mut pass, &b.trace_shadow_rays, args, 12);
-                    s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);
-                }
-                round = end;
-            }
-            ctx.queue.submit([encoder.finish()]);
-            if round < rounds {
-                let counters: Vec<QueueCounters> = read_buffer(ctx, self.resources.get("counters").unwrap(), 1)?;
-                if counters[0].next_rays == 0 {
-                    break;
-                }
-            }
-        }
-        ctx.wait_idle()
+        self.wf.trace_rounds(
+            |pass| s.generate_camera_rays.dispatch(pass, &b.generate_camera_rays, wave.slot_count),
+            |pass, r| {
+                let parity = (r % 2) as usize;
+                s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
+                s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
+                s.shade.dispatch_indirect(pass, &b.shade[parity], args, 0);
+                s.setup_dispatch_shadow_rays.dispatch(pass, &b.setup_dispatch_shadow_rays, 1);
+                s.trace_shadow_rays.dispatch_indirect(pass, &b.trace_shadow_rays, args, 12);
+                s.accumulate.dispatch(pass, &b.accumulate, wave.pixel_count);
+            },
+        )?;
+        self.wf.ctx.wait_idle()
     }
 
 }
 
 impl Integrator for PathTracer<'_> {
-    /// The named buffers the kernels bind (scene, wavefront state, film).
-    fn resources(&self) -> &Resources {
-        &self.resources
+    fn wavefront(&self) -> &Wavefront<'_> {
+        &self.wf
     }
 
-    /// The specialisation constants every kernel of this render gets.
-    fn constants(&self) -> &[(&'static str, f64)] {
-        &self.constants
-    }
-
-    /// Samples per pixel of a full pass.
-    fn samples_per_pass(&self) -> u32 {
-        self.samples_per_pass
-    }
-
-    /// Samples per pixel accumulated in the film since the last reset.
-    fn samples_done(&self) -> u64 {
-        self.samples_in_film
-    }
-
-    /// Traces `samples` (at most `samples_per_pass`) more samples of every pixel and adds them
-    /// to the film; returns when the GPU has finished.
     fn render_pass(&mut self, samples: u32) -> Result<()> {
-        assert!(samples >= 1 && samples <= self.samples_per_pass);
-        for wave in waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)? {
+        for wave in self.wf.pass_waves(samples)? {
             self.render_wave(wave)?;
         }
-        self.samples_in_film += samples as u64;
-        self.next_sample += samples as u64;
+        self.wf.pass_done(samples);
         Ok(())
     }
 
-
-    /// The film's current estimate (compensated sums divided by the samples per pixel).
-    fn film(&self) -> Result<Film> {
-        let bins = self.params.gate.bins;
-        let mut film = Film::zeroed(self.params.width, self.params.height, bins);
-        let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, film.data.len() as u64)?;
-        let n = self.samples_in_film.max(1) as f64;
-        film.data = sums.iter().map(|s| ((s[0] as f64 + s[1] as f64) / n) as f32).collect();
-        film.spp = self.samples_in_film;
-        Ok(film)
-    }
-
-    /// Ray traversals the device cut short so far (lavapipe ends a shader invocation's loops
-    /// after 65535 iterations in total); nonzero means the image may miss geometry.
-    fn truncated_traversals(&self) -> Result<u64> {
-        let counters: Vec<QueueCounters> = read_buffer(self.ctx, self.resources.get("counters").unwrap(), 1)?;
-        Ok(counters[0].truncated_traversals as u64)
-    }
-
-    /// Clears the film; later samples continue the random sequence, so the next estimate is
-    /// independent of the previous one (for batch statistics).
     fn reset_film(&mut self) {
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
-        self.resources.clear_chunked(&mut encoder, "film");
-        self.ctx.queue.submit([encoder.finish()]);
-        self.samples_in_film = 0;
+        self.wf.reset_film(&[]);
     }
 }
 

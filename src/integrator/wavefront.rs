@@ -1,0 +1,129 @@
+//! What every wavefront method keeps between passes: the device, the render's parameters, the
+//! named buffers, the specialisation constants and the bookkeeping of passes, waves and samples.
+
+use anyhow::Result;
+
+use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
+use crate::film::Film;
+use crate::gpu::layout::{QueueCounters, RenderParams, WaveParams};
+use crate::gpu::resources::{ChunkLayout, read_buffer};
+use crate::gpu::{GpuContext, Resources};
+
+/// The state a wavefront method shares with the others.
+pub struct Wavefront<'a> {
+    /// The device.
+    pub ctx: &'a GpuContext,
+    /// Render-wide parameters (the `params` uniform).
+    pub params: RenderParams,
+    /// The named buffers the kernels bind (scene, wavefront state, film).
+    pub resources: Resources,
+    /// How the film is split over bindings.
+    pub film_layout: ChunkLayout,
+    /// Specialisation constants every kernel of the render gets.
+    pub constants: Vec<(&'static str, f64)>,
+    /// Most slots of one wave.
+    pub slots_per_wave: u64,
+    /// Samples per pixel of a full pass.
+    pub samples_per_pass: u32,
+    /// Samples per pixel accumulated in the film since the last reset.
+    pub samples_in_film: u64,
+    /// Index of the next sample to trace (never reused, so batches are independent).
+    pub next_sample: u64,
+}
+
+impl<'a> Wavefront<'a> {
+    /// Bookkeeping for a render whose buffers are `resources`.
+    pub fn new(
+        ctx: &'a GpuContext,
+        params: RenderParams,
+        resources: Resources,
+        film_layout: ChunkLayout,
+        constants: Vec<(&'static str, f64)>,
+        (samples_per_pass, slots_per_wave): (u32, u64),
+    ) -> Self {
+        Self { ctx, params, resources, film_layout, constants, slots_per_wave, samples_per_pass, samples_in_film: 0, next_sample: 0 }
+    }
+
+    /// The waves of the next pass of `samples` (1 ..= samples_per_pass) samples per pixel.
+    pub fn pass_waves(&self, samples: u32) -> Result<Vec<WaveParams>> {
+        assert!(samples >= 1 && samples <= self.samples_per_pass);
+        waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)
+    }
+
+    /// Records that a pass of `samples` samples per pixel has been added to the film.
+    pub fn pass_done(&mut self, samples: u32) {
+        self.samples_in_film += samples as u64;
+        self.next_sample += samples as u64;
+    }
+
+    /// Waves a full pass takes (more than one when the image does not fit one wave).
+    pub fn waves_per_pass(&self) -> u64 {
+        let pixels = self.params.width as u64 * self.params.height as u64;
+        let pixels_per_wave = (self.slots_per_wave / self.samples_per_pass as u64).min(pixels);
+        pixels.div_ceil(pixels_per_wave)
+    }
+
+    /// Uploads the wave's parameters (before its kernels are encoded).
+    pub fn write_wave(&self, wave: &WaveParams) {
+        self.ctx.queue.write_buffer(self.resources.get("wave").unwrap(), 0, bytemuck::bytes_of(wave));
+    }
+
+    /// Encodes `start` and then `round(pass, r)` for the rounds r = 0 ..= max_bounces, in
+    /// submissions of ROUNDS_PER_SUBMISSION rounds; between submissions it stops early once no
+    /// path is queued (so huge --max-bounces values cost nothing after the paths have ended).
+    /// Returns without waiting for the last submission.
+    pub fn trace_rounds(
+        &self,
+        start: impl Fn(&mut wgpu::ComputePass),
+        round: impl Fn(&mut wgpu::ComputePass, u32),
+    ) -> Result<()> {
+        let ctx = self.ctx;
+        let rounds = self.params.max_bounces + 1;
+        let mut first = 0;
+        while first < rounds {
+            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
+                if first == 0 {
+                    start(&mut pass);
+                }
+                let end = rounds.min(first + ROUNDS_PER_SUBMISSION);
+                for r in first..end {
+                    round(&mut pass, r);
+                }
+                first = end;
+            }
+            ctx.queue.submit([encoder.finish()]);
+            if first < rounds && self.counters()?.next_rays == 0 {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// The queue counters as the last submission left them.
+    pub fn counters(&self) -> Result<QueueCounters> {
+        Ok(read_buffer::<QueueCounters>(self.ctx, self.resources.get("counters").unwrap(), 1)?[0])
+    }
+
+    /// The per-pixel film (compensated sums divided by the samples per pixel).
+    pub fn film(&self) -> Result<Film> {
+        let mut film = Film::zeroed(self.params.width, self.params.height, self.params.gate.bins);
+        let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, film.data.len() as u64)?;
+        let n = self.samples_in_film.max(1) as f64;
+        film.data = sums.iter().map(|s| ((s[0] as f64 + s[1] as f64) / n) as f32).collect();
+        film.spp = self.samples_in_film;
+        Ok(film)
+    }
+
+    /// Clears the film and the further buffers `also` (e.g. a splat film).
+    pub fn reset_film(&mut self, also: &[&str]) {
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
+        self.resources.clear_chunked(&mut encoder, "film");
+        for name in also {
+            encoder.clear_buffer(self.resources.get(name).unwrap(), 0, None);
+        }
+        self.ctx.queue.submit([encoder.finish()]);
+        self.samples_in_film = 0;
+    }
+}
