@@ -15,7 +15,8 @@
 //! trace_shadow_rays                     occluded connections are cleared
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
 //! splat_light_paths                     t = 1 contributions -> splat_film (float atomics
-//!                                       where the device has them, else compare-exchange)
+//!                                       where the device has them, else compare-exchange),
+//!                                       folded into f64 host sums every few passes
 //! ```
 //!
 //! Slot `slot` keeps its camera subpath in queue entry `slot` and its light subpath in entry
@@ -110,6 +111,13 @@ pub struct DirectTracer<'a> {
     bindings: Bindings,
     /// Strategy counters summed over the waves so far (when `stats` is on).
     stats: Option<Vec<StrategyStats>>,
+    /// Light-tracing sums moved off the device's f32 splat film (see `fold_splats`).
+    splat_sums: Vec<f64>,
+    /// Passes since the splat film was last folded into `splat_sums`.
+    passes_since_fold: u32,
+    /// Fold after this many passes: few enough that no f32 splat sum takes more than about 2^16
+    /// additions (on average over pixels), so long renders do not drift.
+    fold_interval: u32,
 }
 
 impl<'a> DirectTracer<'a> {
@@ -206,12 +214,29 @@ impl<'a> DirectTracer<'a> {
             strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
         });
         let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
-        Ok(Self { wf, stages, bindings, stats })
+        let additions_per_pass = samples_per_pass as u64 * light_vertices;
+        let fold_interval = (65536 / additions_per_pass).clamp(1, 4096) as u32;
+        let splat_sums = vec![0.0; super::film_elements(settings)? as usize];
+        Ok(Self { wf, stages, bindings, stats, splat_sums, passes_since_fold: 0, fold_interval })
     }
 
     /// Strategy counters so far (None unless the settings asked for statistics).
     pub fn strategy_stats(&self) -> Option<&[StrategyStats]> {
         self.stats.as_deref()
+    }
+
+    /// Adds the device's f32 splat film to the host's f64 sums and clears it.
+    fn fold_splats(&mut self) -> Result<()> {
+        let buffer = self.wf.resources.get("splat_film").unwrap();
+        let splats: Vec<f32> = read_buffer(self.wf.ctx, buffer, self.splat_sums.len())?;
+        for (sum, &x) in self.splat_sums.iter_mut().zip(&splats) {
+            *sum += x as f64;
+        }
+        let mut encoder = self.wf.ctx.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(buffer, 0, None);
+        self.wf.ctx.queue.submit([encoder.finish()]);
+        self.passes_since_fold = 0;
+        Ok(())
     }
 
     fn render_wave(&mut self, wave: WaveParams) -> Result<()> {
@@ -268,22 +293,29 @@ impl Integrator for DirectTracer<'_> {
             self.render_wave(wave)?;
         }
         self.wf.pass_done(samples);
+        self.passes_since_fold += 1;
+        if self.passes_since_fold >= self.fold_interval {
+            self.fold_splats()?;
+        }
         Ok(())
     }
 
-    /// Camera-side sums (double-float) plus the light-tracing splats, over the samples per pixel.
+    /// Camera-side sums (double-float) plus the light-tracing splats (host f64 sums and the
+    /// device's f32 sums since the last fold), over the samples per pixel.
     fn film(&self) -> Result<Film> {
         let mut film = self.wf.film()?;
         let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), film.data.len())?;
         let spp = self.wf.samples_in_film.max(1) as f64;
-        for (v, &splat) in film.data.iter_mut().zip(&splats) {
-            *v = (*v as f64 + splat as f64 / spp) as f32;
+        for ((v, &splat), sum) in film.data.iter_mut().zip(&splats).zip(&self.splat_sums) {
+            *v = (*v as f64 + (sum + splat as f64) / spp) as f32;
         }
         Ok(film)
     }
 
     fn reset_film(&mut self) {
         self.wf.reset_film(&["splat_film"]);
+        self.splat_sums.iter_mut().for_each(|s| *s = 0.0);
+        self.passes_since_fold = 0;
     }
 
     fn stats_report(&self) -> Result<Option<String>> {
