@@ -7,6 +7,7 @@
 
 pub mod bench;
 pub mod bvh;
+pub mod ellipsoid;
 pub mod film;
 pub mod gpu;
 pub mod integrator;
