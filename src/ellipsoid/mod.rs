@@ -9,6 +9,8 @@
 
 use glam::DVec3;
 
+pub mod stress;
+
 /// A prolate spheroid: the points x with |x - focus_s| + |x - focus_c| = length.
 #[derive(Clone, Copy, Debug)]
 pub struct Spheroid {
