@@ -35,6 +35,19 @@ enum Command {
     /// Render a scene with several methods for the same wall time each and report their mean
     /// squared error against a long reference render (error at equal time).
     EqualTime(EqualTimeArgs),
+    /// Compare the kernels' f32 ellipsoid code with the f64 oracle on many random and
+    /// adversarial configurations and print the error distributions per family.
+    StressEllipsoid(StressArgs),
+}
+
+#[derive(Args)]
+struct StressArgs {
+    /// Configurations of the random family; each adversarial family gets a quarter as many.
+    #[arg(long, default_value_t = 1_000_000)]
+    configs: usize,
+    /// Seed of the configurations.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 #[derive(Args)]
@@ -133,6 +146,23 @@ struct EqualTimeArgs {
     csv: Option<PathBuf>,
 }
 
+fn run_stress(args: StressArgs) -> Result<()> {
+    use gatetrace::ellipsoid::stress::{Family, Report, compare, generate, run_on_device};
+    ensure!(args.configs >= 1, "--configs must be at least 1");
+    let ctx = GpuContext::new()?;
+    println!("adapter: {}", ctx.adapter_description());
+    println!("errors of the device's f32 results against the f64 oracle on the same inputs; \
+              guard: fraction of samples with |L(x) - tau_e| > 1e-5 tau_e");
+    println!("{}", Report::header());
+    for family in Family::all() {
+        let count = if family == Family::Random { args.configs } else { args.configs.div_ceil(4) };
+        let configs = generate(family, count, args.seed);
+        let device = run_on_device(&ctx, &configs)?;
+        println!("{}", compare(&family.name(), &configs, &device).row());
+    }
+    Ok(())
+}
+
 fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
     let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let gates = args
@@ -185,6 +215,7 @@ fn main() {
     let result = match cli.command {
         Command::Render(args) => run_render(args),
         Command::EqualTime(args) => run_equal_time(args),
+        Command::StressEllipsoid(args) => run_stress(args),
         Command::Bench(args) => gatetrace::bench::run_bench(args.seconds, args.max_bounces, Path::new(DEFAULT_SCENE)),
     };
     if let Err(e) = result {

@@ -53,12 +53,16 @@ fn direct_matches_path_on_the_glossy_cornell_box() {
 }
 
 #[test]
-fn direct_matches_path_at_gaussian_and_cw_gates() {
+fn direct_matches_path_at_gaussian_cw_and_table_gates() {
     let scene = common::cornell_box();
     assert_direct_matches_path("gaussian 3.2, 0.05", &scene, Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 150);
     // 100 MHz: signed weights over the box's path lengths.
     let cw = Gate::Cw { frequency_hz: 1e8, phase_deg: 30.0 };
     assert_direct_matches_path("cw 100 MHz", &scene, cw, 32, 160);
+    // A trapezoid with a negative lobe (signed table weights).
+    let points = vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)];
+    let table = Gate::Table { points, source: "trapezoid.csv".into() };
+    assert_direct_matches_path("table trapezoid", &scene, table, 32, 165);
 }
 
 /// The Cornell box with a point light added near the floor (`point`) and every material
