@@ -10,19 +10,6 @@ use gatetrace::integrator::{Integrator, PathTracer, RenderSettings};
 use gatetrace::rng::Rng;
 use glam::Vec3;
 
-/// A soup of `n` random triangles in [-1, 1]^3 with sizes spread over two orders of magnitude.
-fn random_soup(n: usize, seed: u32) -> Vec<[Vec3; 3]> {
-    let mut rng = Rng::new(seed, 0, 0);
-    let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-    (0..n)
-        .map(|i| {
-            let centre = v() * 2.0 - 1.0;
-            let size = 0.01 + 0.3 * (i % 7) as f32 / 7.0;
-            [centre + (v() - 0.5) * size, centre + (v() - 0.5) * size, centre + (v() - 0.5) * size]
-        })
-        .collect()
-}
-
 fn bvh_triangles(soup: &[[Vec3; 3]], bvh: &Bvh) -> Vec<Triangle> {
     bvh.order
         .iter()
@@ -47,30 +34,9 @@ fn random_rays(n: usize, triangles: usize, seed: u32) -> Vec<(Vec3, Vec3, f32, u
         .collect()
 }
 
-/// A soup of `n` random triangles (half-size 0.5) in front of an emitter, seen from +z.
-fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::PreparedScene {
-    use common::gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
-    use gatetrace::scene::{PreparedScene, load_gltf};
-    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
-    for t in &random_soup(n, seed) {
-        for p in t {
-            mesh.indices.push(mesh.positions.len() as u32);
-            mesh.positions.push((*p * 0.5).to_array());
-        }
-    }
-    let gltf = Scene {
-        meshes: vec![mesh, quad_z(1.0, -1.0, true, 1)],
-        materials: vec![Material { double_sided: true, ..Material::diffuse([0.7, 0.6, 0.5]) }, Material::emitter(3.0)],
-        camera: Some(Camera { position: [0.0, 0.0, 3.0], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.8 }),
-        point_lights: vec![],
-    };
-    let dir = common::scratch_dir(name);
-    PreparedScene::new(load_gltf(&gltf.write(&dir, "soup.gltf")).unwrap()).unwrap()
-}
-
 #[test]
 fn bvh_layout_is_a_valid_stackless_tree() {
-    let soup = random_soup(3000, 7);
+    let soup = common::random_soup(3000, 7);
     let bvh = Bvh::build(&soup);
     // Every triangle appears exactly once.
     let mut seen = vec![false; soup.len()];
@@ -102,7 +68,7 @@ fn bvh_layout_is_a_valid_stackless_tree() {
 
 #[test]
 fn cpu_traversal_matches_brute_force() {
-    let soup = random_soup(2000, 11);
+    let soup = common::random_soup(2000, 11);
     let bvh = Bvh::build(&soup);
     let tris = bvh_triangles(&soup, &bvh);
     let mut hits = 0;
@@ -128,7 +94,7 @@ fn gpu_traversal_matches_cpu_twin() {
     // f32; the device may fuse multiply-adds, which changes t by a few ulps (allowed: 1e-5
     // relative, about 80 ulps) and can flip a hit only for rays grazing an edge or a tie.
     let ctx = common::gpu();
-    for (name, scene, scale) in [("cornell box", common::cornell_box(), 0.6f32), ("soup", soup_scene(2000, 11, "gpu_soup"), 0.4)] {
+    for (name, scene, scale) in [("cornell box", common::cornell_box(), 0.6f32), ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4)] {
         let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
         let rays = random_rays(4096, scene.triangles.len(), 5);
         let mut input = Vec::new();
@@ -166,7 +132,7 @@ fn gpu_traversal_matches_cpu_twin() {
 fn split_buffers_render_identically() {
     use gatetrace::film::Gate;
     use gatetrace::gpu::resources::ChunkLayout;
-    let scene = soup_scene(60, 3, "split_buffers");
+    let scene = common::soup_scene(60, 3, "split_buffers");
     // Find a binding limit that splits every array into 2-4 chunks; the transient film's size
     // is tuned with its bin count.
     let (t, n) = (scene.triangles.len() as u64, scene.bvh.nodes.len() as u64);

@@ -183,3 +183,39 @@ pub fn assert_films_agree(label: &str, a: &[Film], b: &[Film], block: u32, alpha
         worst.1.2.abs()
     );
 }
+
+/// A soup of `n` random triangles in [-1, 1]^3 with sizes spread over two orders of magnitude.
+pub fn random_soup(n: usize, seed: u32) -> Vec<[glam::Vec3; 3]> {
+    let mut rng = gatetrace::rng::Rng::new(seed, 0, 0);
+    let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+    (0..n)
+        .map(|i| {
+            let centre = v() * 2.0 - 1.0;
+            let size = 0.01 + 0.3 * (i % 7) as f32 / 7.0;
+            [centre + (v() - 0.5) * size, centre + (v() - 0.5) * size, centre + (v() - 0.5) * size]
+        })
+        .collect()
+}
+
+
+/// A soup of `n` random triangles (half-size 0.5) in front of an emitter, seen from +z.
+pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::PreparedScene {
+    use gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
+    use gatetrace::scene::{PreparedScene, load_gltf};
+    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
+    for t in &random_soup(n, seed) {
+        for p in t {
+            mesh.indices.push(mesh.positions.len() as u32);
+            mesh.positions.push((*p * 0.5).to_array());
+        }
+    }
+    let gltf = Scene {
+        meshes: vec![mesh, quad_z(1.0, -1.0, true, 1)],
+        materials: vec![Material { double_sided: true, ..Material::diffuse([0.7, 0.6, 0.5]) }, Material::emitter(3.0)],
+        camera: Some(Camera { position: [0.0, 0.0, 3.0], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.8 }),
+        point_lights: vec![],
+    };
+    let dir = scratch_dir(name);
+    PreparedScene::new(load_gltf(&gltf.write(&dir, "soup.gltf")).unwrap()).unwrap()
+}
+
