@@ -3,6 +3,7 @@
 
 pub mod gate;
 pub mod output;
+pub mod target;
 
 pub use gate::{Gate, GateKind};
 

@@ -201,6 +201,20 @@ pub struct GateParams {
     pub reserved2: f32,
 }
 
+/// How target path lengths are drawn from the gate (see `TargetParams` in layout.wesl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct TargetParams {
+    /// Shortest target length (m).
+    pub lo: f32,
+    /// Longest target length (m).
+    pub hi: f32,
+    /// Cells of the target CDF (0: none).
+    pub cells: u32,
+    /// Padding.
+    pub reserved: u32,
+}
+
 /// Settings that hold for a whole render.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
@@ -209,6 +223,8 @@ pub struct RenderParams {
     pub camera: Camera,
     /// The pathlength importance.
     pub gate: GateParams,
+    /// Target-length sampling (ellipsoidal connections).
+    pub target_length: TargetParams,
     /// Lower corner of the bounds of every light (m).
     pub light_bounds_min: Vec3,
     /// Area of the whole image on the image plane at unit distance (4 tan^2(yfov/2) aspect).

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Result, bail};
 
+use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
 use crate::gpu::layout::{NONE, RenderParams, WaveParams};
@@ -245,6 +246,7 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
     RenderParams {
         camera: scene.scene.camera.to_gpu(settings.width, settings.height),
         gate: settings.gate.to_gpu(),
+        target_length: target_sampler(scene, settings).map(|t| t.params).unwrap_or_default(),
         light_bounds_min,
         image_area: scene.scene.camera.image_area(settings.width, settings.height),
         light_bounds_max,
@@ -259,6 +261,13 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         one: 1.0,
         ..Default::default()
     }
+}
+
+/// Target-length sampling of the settings' gate over the path lengths the scene allows with
+/// its bounces (None for `none`, or when no path can reach the gate).
+pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Option<TargetSampler> {
+    let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
+    TargetSampler::new(&settings.gate, (shortest as f64, longest as f64))
 }
 
 /// Uploads what every method's kernels read (params, scene, lights, gate table) and creates the
@@ -284,6 +293,8 @@ pub fn upload_scene(
     r.storage_init(ctx, "lights", &scene.lights.lights)?;
     r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
     r.storage_init(ctx, "gate_table", &gate.table())?;
+    let cdf = target_sampler(scene, settings).map_or(vec![0.0, 1.0], |t| t.cdf);
+    r.storage_init(ctx, "target_cdf", &cdf)?;
     let film_len = film_elements(settings)?;
     let film = r.storage_chunked_zeroed(ctx, "film", film_len, 8, limit)?;
     let flag = |b: bool| b as u32 as f64;
