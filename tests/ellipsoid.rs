@@ -149,3 +149,139 @@ fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
     assert!(cut > 20, "the test spheroid should cut many triangles ({cut})");
     assert!(p > 0.01, "picks do not follow Theta_i / sum Theta: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
 }
+
+/// The integrand of the quad test: the geometry terms of a one-bounce path x_s -> x -> x_c over
+/// the quad z = 0 facing +z, f(x) = cos_s cos_c / (|x - x_s|^2 |x - x_c|^2) (point light at x_s,
+/// pinhole at x_c, Lambertian constants left out).
+fn quad_integrand(x: glam::DVec3, fs: glam::DVec3, fc: glam::DVec3) -> f64 {
+    let (ds, dc) = (fs - x, fc - x);
+    ds.z.max(0.0) * dc.z.max(0.0) / (ds.length().powi(3) * dc.length().powi(3))
+}
+
+/// Integral of f over the part of the quad [-0.5, 0.5]^2 with path length in [a, b), by area
+/// sampling: 8 independent jittered 1000 x 1000 grids; returns the mean and its standard error.
+fn quad_area_integral(fs: glam::DVec3, fc: glam::DVec3, a: f64, b: f64) -> (f64, f64) {
+    let n = 1000;
+    let h = 1.0 / n as f64;
+    let mut rng = gatetrace::rng::Rng::new(77, 1, 2);
+    let estimates: Vec<f64> = (0..8)
+        .map(|_| {
+            let mut sum = 0.0;
+            for i in 0..n {
+                for j in 0..n {
+                    let (u, v) = (rng.next_f32() as f64, rng.next_f32() as f64);
+                    let x = glam::DVec3::new(-0.5 + (i as f64 + u) * h, -0.5 + (j as f64 + v) * h, 0.0);
+                    let l = x.distance(fs) + x.distance(fc);
+                    if l >= a && l < b {
+                        sum += quad_integrand(x, fs, fc);
+                    }
+                }
+            }
+            sum * h * h
+        })
+        .collect();
+    mean_and_error(&estimates)
+}
+
+/// Mean and standard error of `values`.
+fn mean_and_error(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+#[test]
+fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
+    // A quad lit by a point light at x_s, seen from a pinhole at x_c, behind a box gate [a, b):
+    // sampling tau uniformly in [a, b), then a point on the spheroid's intersection with the quad
+    // (triangle by Theta, theta uniform), the estimate f(x) J sum(Theta) (b - a) is unbiased for
+    // the integral of f over the quad's points with path length in [a, b). Checked with the f64
+    // oracle and with the device's query (f32), against area sampling.
+    use common::gltf_builder::{Camera, Material, Scene, quad_z};
+    use gatetrace::ellipsoid::{Spheroid, Triangle, clip_arcs};
+    use gatetrace::integrator::{PathTracer, RenderSettings};
+    use glam::DVec3;
+    let (fs, fc) = (DVec3::new(0.1, 0.2, 0.6), DVec3::new(-0.2, 0.1, 0.8));
+    let shortest = (0..=200)
+        .flat_map(|i| (0..=200).map(move |j| DVec3::new(-0.5 + i as f64 / 200.0, -0.5 + j as f64 / 200.0, 0.0)))
+        .map(|x| x.distance(fs) + x.distance(fc))
+        .fold(f64::INFINITY, f64::min);
+    let ctx = common::gpu();
+    let gltf = Scene {
+        meshes: vec![quad_z(0.5, 0.0, true, 0), quad_z(0.05, 5.0, false, 1)],
+        materials: vec![Material::diffuse([0.5; 3]), Material::emitter(1.0)],
+        camera: Some(Camera { position: [-0.2, 0.1, 0.8], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.8 }),
+        point_lights: vec![],
+    };
+    let scene = gatetrace::scene::PreparedScene::new(
+        gatetrace::scene::load_gltf(&gltf.write(&common::scratch_dir("ellipsoid_quad"), "quad.gltf")).unwrap(),
+    )
+    .unwrap();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    // The quad's two triangles (the emitter far above is never reached by these spheroids).
+    let quad: Vec<Triangle> = scene.triangles[..]
+        .iter()
+        .filter(|t| t.v0.z == 0.0)
+        .map(|t| {
+            let v0 = t.v0.as_dvec3();
+            Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
+        })
+        .collect();
+    assert_eq!(quad.len(), 2);
+    let mut rng = gatetrace::rng::Rng::new(5, 0, 0);
+    for (a, b) in [(shortest + 0.05, shortest + 0.0575), (shortest + 0.1, shortest + 0.6)] {
+        let (reference, reference_error) = quad_area_integral(fs, fc, a, b);
+        let n = 40_000;
+        let taus: Vec<f64> = (0..n).map(|_| a + (b - a) * rng.next_f32() as f64).collect();
+        let us: Vec<(f64, f64)> = (0..n).map(|_| (rng.next_f32() as f64, rng.next_f32() as f64)).collect();
+        // f64 oracle: brute force over the quad's triangles.
+        let oracle: Vec<f64> = taus
+            .iter()
+            .zip(&us)
+            .map(|(&tau, &(u_pick, _))| {
+                let sp = Spheroid { focus_s: fs, focus_c: fc, length: tau };
+                let found: Vec<_> = quad
+                    .iter()
+                    .filter_map(|t| sp.section(t.vertices[0], t.normal()).map(|s| (s, clip_arcs(&s, t))))
+                    .filter(|(_, arcs)| arcs.total > 0.0)
+                    .collect();
+                let total: f64 = found.iter().map(|(_, arcs)| arcs.total).sum();
+                let mut pick = u_pick * total;
+                for (sec, arcs) in &found {
+                    if pick < arcs.total {
+                        let theta = arcs.sample(pick / arcs.total);
+                        let x = sec.point(theta);
+                        return quad_integrand(x, fs, fc) * sec.jacobian(theta) * total * (b - a);
+                    }
+                    pick -= arcs.total;
+                }
+                0.0
+            })
+            .collect();
+        // The device's query.
+        let queries: Vec<_> = taus
+            .iter()
+            .zip(&us)
+            .enumerate()
+            .map(|(i, (&tau, &(_, u_theta)))| (fs.as_vec3(), fc.as_vec3(), tau as f32, u_theta as f32, [i as u32, 5, 6]))
+            .collect();
+        let device: Vec<f64> = run_queries(&ctx, &tracer, &queries)
+            .iter()
+            .map(|&(tri, total, _, j, x, _)| {
+                if tri == gatetrace::gpu::layout::NONE {
+                    return 0.0;
+                }
+                quad_integrand(x.as_dvec3(), fs, fc) * j as f64 * total as f64 * (b - a)
+            })
+            .collect();
+        for (name, values) in [("oracle", &oracle), ("device", &device)] {
+            let (mean, error) = mean_and_error(values);
+            let z = (mean - reference) / (error * error + reference_error * reference_error).sqrt();
+            println!(
+                "gate [{a:.4}, {b:.4}): {name} {mean:.6e} +- {error:.1e}, area sampling {reference:.6e} +- {reference_error:.1e}, z {z:+.2}"
+            );
+            assert!(z.abs() < 4.0, "{name}: {mean} +- {error} vs area sampling {reference} (z = {z:.2})");
+        }
+    }
+}
