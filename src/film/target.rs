@@ -76,8 +76,8 @@ impl TargetSampler {
         Some(Self { params, cdf, gate: g, kind, table })
     }
 
-    /// Target length (m) and weight W(tau) / p(tau) (m) for u in [0, 1) (twin of
-    /// `sample_target_length`).
+    /// Target length tau (m) and 1 / p(tau) (m) for u in [0, 1) (twin of `sample_target_length`);
+    /// the estimate's weight is W(tau) / p(tau).
     pub fn sample(&self, u: f32) -> (f32, f32) {
         let n = self.params.cells as usize;
         // The cell i with cdf[i] <= u < cdf[i + 1].
@@ -96,8 +96,12 @@ impl TargetSampler {
         let h = (self.params.hi - self.params.lo) / n as f32;
         let length = self.params.lo + (i as f32 + frac) * h;
         // p(tau) = mass / h.
-        let weight = gate_weight(self.kind, &self.gate, &self.table, length) * (h / mass);
-        (length, weight)
+        (length, h / mass)
+    }
+
+    /// W(tau) of the sampler's gate (m^0; signed for CW and table gates).
+    pub fn weight(&self, length: f32) -> f32 {
+        gate_weight(self.kind, &self.gate, &self.table, length)
     }
 }
 
