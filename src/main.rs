@@ -54,9 +54,11 @@ struct StressArgs {
 struct RenderArgs {
     /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
     scene: Option<PathBuf>,
-    /// Sampling method: `path` (path tracing with next-event estimation and MIS) or `direct`
+    /// Sampling method: `path` (path tracing with next-event estimation and MIS); `direct`
     /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
-    /// bounces). `ellipsoidal` is not available yet.
+    /// bounces); `ellipsoidal` (bidirectional path tracing whose subpaths are joined through a
+    /// vertex on the spheroid of a target length drawn from the gate, so every path has a
+    /// length the gate weighs; needs a gate; at most 24 bounces).
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
@@ -89,7 +91,9 @@ struct RenderArgs {
     #[arg(long)]
     samples_per_pass: Option<u32>,
     /// Print, per (s, t) strategy of a bidirectional method, the connections evaluated, those
-    /// skipped because the gate weighs their length zero, and the shadow rays traced.
+    /// skipped (direct: the gate weighs their length zero; ellipsoidal: the spheroid met no
+    /// surface) and the shadow rays traced (ellipsoidal: pairs), and for ellipsoidal the BVH
+    /// nodes visited and triangles tested and intersected per ellipsoid query.
     #[arg(long)]
     stats: bool,
     /// Write only the MIS-weighted contribution of strategy S,T (S light-subpath vertices, T
@@ -172,9 +176,6 @@ fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
         .collect::<Result<Vec<_>>>()?;
     ensure!(args.seconds > 0.0 && args.reference_seconds > 0.0, "--seconds and --reference-seconds must be positive");
     ensure!(args.repeats >= 1, "--repeats must be at least 1");
-    for &m in args.methods.iter().chain([&args.reference_method]) {
-        m.ensure_available()?;
-    }
     let settings = gatetrace::bench::EqualTimeSettings {
         methods: args.methods,
         gates,
@@ -255,12 +256,11 @@ fn run_render(args: RenderArgs) -> Result<()> {
         portable_atomics: false,
         binding_limit: None,
     };
-    settings.method.ensure_available()?;
     if settings.debug_strategy.is_some() && settings.method != Method::Direct {
         bail!("--debug-strategy needs --method direct");
     }
-    if settings.method == Method::Direct {
-        gatetrace::integrator::direct::check_settings(&settings)?;
+    if settings.method != Method::Path {
+        gatetrace::integrator::bidirectional::check_settings(&settings)?;
     }
     film_elements(&settings)?;
     check_writable(&out)?;

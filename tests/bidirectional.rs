@@ -8,7 +8,7 @@
 mod common;
 
 use gatetrace::film::{Film, Gate};
-use gatetrace::integrator::{DirectTracer, Integrator, Method, RenderSettings};
+use gatetrace::integrator::{BidirectionalTracer, Integrator, Method, RenderSettings};
 use gatetrace::scene::{PointLight, PreparedScene, load_gltf};
 
 /// Family-wise false-alarm rate of each comparison's block tests.
@@ -110,13 +110,13 @@ fn debug_strategy_images_sum_to_the_full_render() {
     let scene = common::cornell_box();
     let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 7, ..Default::default() };
     let render = |s: &RenderSettings| {
-        let mut tracer = DirectTracer::new(&ctx, &scene, s).unwrap();
+        let mut tracer = BidirectionalTracer::new(&ctx, &scene, s).unwrap();
         tracer.render_samples(16).unwrap();
         tracer.film().unwrap()
     };
     let full = render(&base);
     let mut sum = vec![0.0f64; full.data.len()];
-    for (s, t) in gatetrace::integrator::direct::strategies(base.max_bounces) {
+    for (s, t) in gatetrace::integrator::bidirectional::strategies(base.max_bounces) {
         let single = render(&RenderSettings { debug_strategy: Some((s, t)), ..base.clone() });
         for (acc, v) in sum.iter_mut().zip(&single.data) {
             *acc += *v as f64;
@@ -136,7 +136,7 @@ fn zero_weight_connections_trace_no_shadow_ray() {
     let scene = common::cornell_box();
     let render = |gate: Gate| {
         let s = RenderSettings { stats: true, ..settings(Method::Direct, gate, 300) };
-        let mut tracer = DirectTracer::new(&ctx, &scene, &s).unwrap();
+        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
         tracer.render_samples(4).unwrap();
         tracer.strategy_stats().unwrap().to_vec()
     };
@@ -174,7 +174,7 @@ fn float_atomic_and_compare_exchange_splats_agree() {
     let scene = common::cornell_box();
     let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 9, ..Default::default() };
     let render = |s: &RenderSettings| {
-        let mut tracer = DirectTracer::new(&ctx, &scene, s).unwrap();
+        let mut tracer = BidirectionalTracer::new(&ctx, &scene, s).unwrap();
         tracer.render_samples(16).unwrap();
         tracer.film().unwrap()
     };
@@ -196,7 +196,7 @@ fn splat_sums_fold_to_the_host_without_changing_the_image() {
     let base = RenderSettings { width: 4, height: 4, max_bounces: 3, method: Method::Direct, seed: 5, ..Default::default() };
     let render = |per_pass: u32| {
         let s = RenderSettings { samples_per_pass: Some(per_pass), ..base.clone() };
-        let mut tracer = DirectTracer::new(&ctx, &scene, &s).unwrap();
+        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
         tracer.render_samples(6 * 4096 + 512).unwrap();
         tracer.film().unwrap()
     };
@@ -205,4 +205,27 @@ fn splat_sums_fold_to_the_host_without_changing_the_image() {
     for (i, (a, b)) in large.data.iter().zip(&small.data).enumerate() {
         assert!((a - b).abs() <= 1e-4 * a.abs().max(1e-2), "element {i}: {a} vs {b}");
     }
+}
+
+/// Renders `scene` with `direct` and with `ellipsoidal` (BATCHES x spp each) and asserts
+/// agreement.
+fn assert_ellipsoidal_matches_direct(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {
+    let ctx = common::gpu();
+    let direct = common::render_films(&ctx, scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, spp);
+    let ellipsoidal = common::render_films(&ctx, scene, &settings(Method::Ellipsoidal, gate, seed + 1), BATCHES, spp);
+    assert!(ellipsoidal.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: ellipsoidal renders black");
+    common::assert_films_agree(label, &ellipsoidal, &direct, 8, ALPHA);
+}
+
+#[test]
+fn ellipsoidal_matches_direct_at_box_gates() {
+    let scene = common::cornell_box();
+    assert_ellipsoidal_matches_direct("ellipsoidal box [3.14, 3.19)", &scene, Gate::Box { start: 3.14, end: 3.19 }, 32, 400);
+    assert_ellipsoidal_matches_direct("ellipsoidal box [2.0, 2.6)", &scene, Gate::Box { start: 2.0, end: 2.6 }, 32, 410);
+}
+
+#[test]
+fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
+    assert_ellipsoidal_matches_direct("ellipsoidal gaussian 3.2, 0.05", &common::cornell_box(), Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 420);
+    assert_ellipsoidal_matches_direct("ellipsoidal glossy box [3.0, 3.3)", &glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 32, 430);
 }

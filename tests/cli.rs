@@ -98,7 +98,7 @@ fn bad_input_gives_clear_errors() {
         (&["render", "--debug-strategy", "1,2", "--out", out], "needs --method direct"),
         (&["render", "--method", "direct", "--debug-strategy", "0,1", "--out", out], "not a strategy"),
         (&["render", "--method", "direct", "--debug-strategy", "1", "--out", out], "S,T"),
-        (&["render", "--method", "ellipsoidal", "--out", out], "not yet available"),
+        (&["render", "--method", "ellipsoidal", "--out", out], "draws target path lengths from the gate"),
         (&["render", "--out", "image.png"], ".exr or .npy"),
         (&["render", "--spp", "0", "--out", out], "at least 1"),
         (&["render", "--res", "0x4", "--out", out], "resolution"),

@@ -1,15 +1,16 @@
 //! Integrators and the render loop: `path` is the wavefront path tracer (DESIGN.md section
-//! 4.1), `direct` bidirectional path tracing with direct connections (section 4.2); `mis` is
-//! the CPU twin of the bidirectional MIS weights. `ellipsoidal` is not available yet.
+//! 4.1); `bidirectional` serves `direct` and `ellipsoidal` (bidirectional path tracing with
+//! direct or ellipsoidal connections, sections 4.2 and 4.3); `mis` is the CPU twin of the
+//! direct connections' MIS weights.
 
-pub mod direct;
+pub mod bidirectional;
 pub mod mis;
 pub mod path;
 pub mod wavefront;
 
 use std::time::{Duration, Instant};
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 
 use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
@@ -18,7 +19,7 @@ use crate::gpu::layout::{NONE, RenderParams, WaveParams};
 use crate::gpu::resources::ChunkLayout;
 use crate::gpu::Resources;
 use crate::scene::PreparedScene;
-pub use direct::{DirectTracer, StrategyStats};
+pub use bidirectional::{BidirectionalTracer, StrategyStats};
 pub use path::{PathTracer, film_elements};
 pub use wavefront::Wavefront;
 
@@ -34,17 +35,6 @@ pub enum Method {
 }
 
 impl Method {
-    /// An error for the methods this version does not implement yet.
-    pub fn ensure_available(self) -> Result<()> {
-        match self {
-            Method::Path | Method::Direct => Ok(()),
-            m => bail!(
-                "--method {} is not yet available: this version implements `path` and `direct`",
-                m.name()
-            ),
-        }
-    }
-
     /// The name used on the command line and in metadata.
     pub fn name(self) -> &'static str {
         match self {
@@ -177,11 +167,9 @@ pub fn create_integrator<'a>(
     scene: &PreparedScene,
     settings: &RenderSettings,
 ) -> Result<Box<dyn Integrator + 'a>> {
-    settings.method.ensure_available()?;
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
-        Method::Direct => Box::new(DirectTracer::new(ctx, scene, settings)?),
-        Method::Ellipsoidal => unreachable!("checked by ensure_available"),
+        Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
     })
 }
 
@@ -319,7 +307,6 @@ pub fn render(
     budget: Budget,
     mut progress: impl FnMut(Progress),
 ) -> Result<RenderOutput> {
-    settings.method.ensure_available()?;
     film_elements(settings)?;
     let start = Instant::now();
     if let Some(reason) = unreachable_gate(scene, settings) {

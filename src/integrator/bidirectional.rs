@@ -1,16 +1,19 @@
-//! Bidirectional path tracing with direct connections (`--method direct`; Veach 1997, PBRT's
-//! BDPT), aware of path length: every connection's optical length is known before its shadow
-//! ray, so connections the gate weighs zero cost no ray. A pass runs as waves of slots (one
-//! camera subpath and one light subpath per pixel and sample), like the path tracer. The stages
-//! of a wave, in order:
+//! Bidirectional path tracing, aware of path length: with direct connections (`--method
+//! direct`; Veach 1997, PBRT's BDPT) every connection's optical length is known before its
+//! shadow ray, so connections the gate weighs zero cost no ray; with ellipsoidal connections
+//! (`--method ellipsoidal`; Pediredla et al. 2019) every slot draws a target length from the
+//! gate and joins its subpaths through a vertex on the spheroid of that length. A pass runs as
+//! waves of slots (one camera subpath and one light subpath per pixel and sample), like the
+//! path tracer. The stages of a wave, in order:
 //!
 //! ```text
-//! generate_subpaths                     pinhole + light vertices; both rays -> next_ray_queue
+//! generate_subpaths                     pinhole + light vertices; both rays -> next_ray_queue;
+//!                                       (ellipsoidal) the slot's target length
 //! for round in 0..=max_bounces:         (stops early once every subpath has ended)
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
 //!     intersect_closest                 closest hits of ray_queue
 //!     extend_subpaths                   store the vertex, sample the BSDF, next ray
-//! connect_direct                        every (s, t): gate, contribution, MIS, shadow_queue
+//! connect_direct | connect_ellipsoidal  every (s, t): contribution, MIS, shadow_queue
 //! setup_dispatch(shadow_rays)
 //! trace_shadow_rays                     occluded connections are cleared
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
@@ -26,7 +29,7 @@
 use anyhow::{Result, ensure};
 
 use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
-use super::{Integrator, RenderSettings, Wavefront};
+use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::film::Film;
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
@@ -60,13 +63,23 @@ pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
     (0..=max_bounces).flat_map(|d| (0..=d + 1).map(move |s| (s, d + 2 - s))).collect()
 }
 
-/// Errors for settings `direct` cannot render (checked before any work).
+/// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
 pub fn check_settings(settings: &RenderSettings) -> Result<()> {
     let b = settings.max_bounces;
+    let method = settings.method.name();
     ensure!(
         b <= MAX_BOUNCES,
-        "--method direct supports at most {MAX_BOUNCES} bounces (got {b}); use --method path for longer paths"
+        "--method {method} supports at most {MAX_BOUNCES} bounces (got {b}); use --method path for longer paths"
     );
+    if settings.method == Method::Ellipsoidal {
+        ensure!(
+            !matches!(settings.gate, crate::film::Gate::None),
+            "--method ellipsoidal draws target path lengths from the gate: give a gate (box, gaussian, cw, table or \
+             transient), not `{}`",
+            settings.gate.describe()
+        );
+        ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
+    }
     if let Some((s, t)) = settings.debug_strategy {
         ensure!(
             t >= 1 && s + t >= 2 && s + t <= b + 2,
@@ -83,7 +96,7 @@ struct Stages {
     setup_dispatch_rays: Kernel,
     intersect_closest: Kernel,
     extend_subpaths: Kernel,
-    connect_direct: Kernel,
+    connect: Kernel,
     setup_dispatch_shadow_rays: Kernel,
     trace_shadow_rays: Kernel,
     accumulate: Kernel,
@@ -96,7 +109,7 @@ struct Bindings {
     setup_dispatch_rays: [wgpu::BindGroup; 2],
     intersect_closest: [wgpu::BindGroup; 2],
     extend_subpaths: [wgpu::BindGroup; 2],
-    connect_direct: wgpu::BindGroup,
+    connect: wgpu::BindGroup,
     setup_dispatch_shadow_rays: wgpu::BindGroup,
     trace_shadow_rays: wgpu::BindGroup,
     accumulate: wgpu::BindGroup,
@@ -105,12 +118,16 @@ struct Bindings {
 
 /// Bidirectional path tracing with direct connections, bound to one scene and one set of
 /// settings, accumulating into its film (camera-side sums) and splat film (light tracing).
-pub struct DirectTracer<'a> {
+pub struct BidirectionalTracer<'a> {
     wf: Wavefront<'a>,
     stages: Stages,
     bindings: Bindings,
     /// Strategy counters summed over the waves so far (when `stats` is on).
     stats: Option<Vec<StrategyStats>>,
+    /// Ellipsoid queries' nodes visited, triangles tested and triangles intersected, summed.
+    query_work: [u64; 3],
+    /// Which connections join the subpaths.
+    method: Method,
     /// Light-tracing sums moved off the device's f32 splat film (see `fold_splats`).
     splat_sums: Vec<f64>,
     /// Passes since the splat film was last folded into `splat_sums`.
@@ -120,7 +137,7 @@ pub struct DirectTracer<'a> {
     fold_interval: u32,
 }
 
-impl<'a> DirectTracer<'a> {
+impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
@@ -130,12 +147,15 @@ impl<'a> DirectTracer<'a> {
         let light_vertices = b as u64 + 1;
         let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
         let strategy_count = strategies(b).len() as u64;
+        let ellipsoidal = settings.method == Method::Ellipsoidal;
+        // Ellipsoidal connections need two shadow rays each.
+        let rays_per_connection = if ellipsoidal { 2 } else { 1 };
         // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
         let per_slot = [
             (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
             contributions_per_slot * size_of::<Contribution>() as u64,
             light_vertices * size_of::<Splat>() as u64,
-            (contributions_per_slot + light_vertices) * size_of::<ShadowRay>() as u64,
+            rays_per_connection * (contributions_per_slot + light_vertices) * size_of::<ShadowRay>() as u64,
             2 * size_of::<PathState>() as u64,
         ];
         let fit = per_slot.iter().map(|&bytes| limit / bytes).min().unwrap().min(MAX_SLOTS_PER_DISPATCH / 2);
@@ -144,11 +164,19 @@ impl<'a> DirectTracer<'a> {
 
         let params = super::render_params(scene, settings);
         let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
+        if ellipsoidal {
+            ensure!(
+                params.target_length.cells > 0,
+                "--method ellipsoidal: no path of this scene with at most {b} bounces can reach gate {}",
+                settings.gate.describe()
+            );
+        }
         let splat_film_bytes = super::film_elements(settings)? * 4;
         ensure!(
             splat_film_bytes <= limit,
-            "--method direct keeps its light-tracing image in one binding of at most {limit} bytes; {}x{} pixels x {} \
+            "--method {} keeps its light-tracing image in one binding of at most {limit} bytes; {}x{} pixels x {} \
              bins need {splat_film_bytes}: reduce the resolution or the bins",
+            settings.method.name(),
             settings.width,
             settings.height,
             settings.gate.bins()
@@ -166,12 +194,15 @@ impl<'a> DirectTracer<'a> {
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
-        r.storage_zeroed(ctx, "strategy_stats", 3 * 4 * strategy_count, none)?;
+        // Three counters per strategy, then three for the ellipsoid queries' work.
+        r.storage_zeroed(ctx, "strategy_stats", 3 * 4 * (strategy_count + 1), none)?;
+        r.storage_zeroed(ctx, "targets", 8 * slots, none)?;
 
         constants.push(("CAMERA_VERTICES", camera_vertices as f64));
         constants.push(("LIGHT_VERTICES", light_vertices as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("STATS", settings.stats as u32 as f64));
+        constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));
         if let Some((s, t)) = settings.debug_strategy {
             constants.push(("DEBUG_S", s as f64));
             constants.push(("DEBUG_T", t as f64));
@@ -186,7 +217,7 @@ impl<'a> DirectTracer<'a> {
             setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
             intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
             extend_subpaths: Kernel::new(ctx, "extend_subpaths", None, &constants),
-            connect_direct: Kernel::new(ctx, "connect_direct", None, &constants),
+            connect: Kernel::new(ctx, if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }, None, &constants),
             setup_dispatch_shadow_rays: Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with(1.0)),
             trace_shadow_rays: Kernel::new(ctx, "trace_shadow_rays", None, &constants),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
@@ -204,7 +235,7 @@ impl<'a> DirectTracer<'a> {
             setup_dispatch_rays: both(&stages.setup_dispatch_rays),
             intersect_closest: both(&stages.intersect_closest),
             extend_subpaths: both(&stages.extend_subpaths),
-            connect_direct: stages.connect_direct.bind(ctx, &even),
+            connect: stages.connect.bind(ctx, &even),
             setup_dispatch_shadow_rays: stages.setup_dispatch_shadow_rays.bind(ctx, &even),
             trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
             accumulate: stages.accumulate.bind(ctx, &even),
@@ -217,7 +248,17 @@ impl<'a> DirectTracer<'a> {
         let additions_per_pass = samples_per_pass as u64 * light_vertices;
         let fold_interval = (65536 / additions_per_pass).clamp(1, 4096) as u32;
         let splat_sums = vec![0.0; super::film_elements(settings)? as usize];
-        Ok(Self { wf, stages, bindings, stats, splat_sums, passes_since_fold: 0, fold_interval })
+        Ok(Self {
+            wf,
+            stages,
+            bindings,
+            stats,
+            query_work: [0; 3],
+            method: settings.method,
+            splat_sums,
+            passes_since_fold: 0,
+            fold_interval,
+        })
     }
 
     /// Strategy counters so far (None unless the settings asked for statistics).
@@ -258,7 +299,7 @@ impl<'a> DirectTracer<'a> {
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("connect") });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("connect"), timestamp_writes: None });
-            s.connect_direct.dispatch(&mut pass, &b.connect_direct, wave.slot_count);
+            s.connect.dispatch(&mut pass, &b.connect, wave.slot_count);
             s.setup_dispatch_shadow_rays.dispatch(&mut pass, &b.setup_dispatch_shadow_rays, 1);
             s.trace_shadow_rays.dispatch_indirect(&mut pass, &b.trace_shadow_rays, args, 12);
             s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);
@@ -269,11 +310,14 @@ impl<'a> DirectTracer<'a> {
         if let Some(stats) = &mut self.stats {
             // Per-wave u32 counters cannot overflow (one connection per slot and strategy).
             let buffer = self.wf.resources.get("strategy_stats").unwrap();
-            let counts: Vec<u32> = read_buffer(ctx, buffer, 3 * stats.len())?;
+            let counts: Vec<u32> = read_buffer(ctx, buffer, 3 * stats.len() + 3)?;
             for (st, c) in stats.iter_mut().zip(counts.chunks(3)) {
                 st.evaluated += c[0] as u64;
                 st.skipped_by_gate += c[1] as u64;
                 st.shadow_rays += c[2] as u64;
+            }
+            for (w, &c) in self.query_work.iter_mut().zip(&counts[3 * stats.len()..]) {
+                *w += c as u64;
             }
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             encoder.clear_buffer(buffer, 0, None);
@@ -283,7 +327,7 @@ impl<'a> DirectTracer<'a> {
     }
 }
 
-impl Integrator for DirectTracer<'_> {
+impl Integrator for BidirectionalTracer<'_> {
     fn wavefront(&self) -> &Wavefront<'_> {
         &self.wf
     }
@@ -320,7 +364,16 @@ impl Integrator for DirectTracer<'_> {
 
     fn stats_report(&self) -> Result<Option<String>> {
         let Some(stats) = &self.stats else { return Ok(None) };
-        let mut out = String::from("strategy (s,t)  connections  skipped by gate  shadow rays\n");
+        let ellipsoidal = self.method == Method::Ellipsoidal;
+        let mut out = if ellipsoidal {
+            String::from(
+                "(s,t) of the full path: s light-subpath vertices, the ellipsoidal vertex and t - 1 camera-subpath \
+                 vertices; (1,1): spherical connections to lights seen directly\n\
+                 strategy (s,t)      queries  no intersection  shadow rays\n",
+            )
+        } else {
+            String::from("strategy (s,t)  connections  skipped by gate  shadow rays\n")
+        };
         let mut total = StrategyStats::default();
         for st in stats {
             out += &format!(
@@ -335,6 +388,16 @@ impl Integrator for DirectTracer<'_> {
             "total          {:>12}  {:>15}  {:>11}\n",
             total.evaluated, total.skipped_by_gate, total.shadow_rays
         );
+        if ellipsoidal {
+            let q = total.evaluated.max(1) as f64;
+            let [nodes, tested, intersected] = self.query_work;
+            out += &format!(
+                "per ellipsoid query: {:.1} BVH nodes visited, {:.2} triangles tested, {:.2} triangles intersected\n",
+                nodes as f64 / q,
+                tested as f64 / q,
+                intersected as f64 / q
+            );
+        }
         Ok(Some(out))
     }
 }
