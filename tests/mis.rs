@@ -122,3 +122,38 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
     assert!(checked > 1000, "only {checked} valid random paths");
     println!("{checked} random paths checked");
 }
+
+/// p_j of the full path for a direct connection across edge j (j light-side vertices): the
+/// explicit product, as `strategy_pdf`.
+#[test]
+fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
+    use gatetrace::integrator::mis::ellipsoidal_mis_weight;
+    let mut rng = Rng(0x1234_5678_9ABC_DEF1);
+    let mut checked = 0;
+    for trial in 0..4000 {
+        let k = 3 + trial % 5;
+        let path = random_path(&mut rng, k, trial % 3 == 0);
+        if !is_valid(&path) {
+            continue;
+        }
+        let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
+        let c = |j: usize| if j == 1 || j == k - 1 { 0.5 } else { 1.0 };
+        let norm: f64 = (1..k).map(|j| c(j) * pdfs[j]).sum();
+        if !(norm.is_finite() && norm > 0.0) {
+            continue;
+        }
+        let mut sum = 0.0f64;
+        for e in 1..=k - 2 {
+            let w = ellipsoidal_mis_weight(&path, e) as f64;
+            let expected = 0.5 * (pdfs[e] + pdfs[e + 1]) / norm;
+            assert!(
+                (w - expected).abs() <= 1e-3 * expected.max(1e-3),
+                "path of {k} vertices, ellipsoidal vertex {e}: weight {w}, definition {expected}"
+            );
+            sum += w;
+        }
+        assert!((sum - 1.0).abs() < 1e-4, "path of {k} vertices: weights sum to {sum}");
+        checked += 1;
+    }
+    assert!(checked > 1000, "only {checked} valid random paths");
+}

@@ -197,3 +197,51 @@ pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
     }
     1.0 / (1.0 + sum)
 }
+
+/// The paper's approximate MIS weight of an ellipsoidal vertex at x_e = path[e] (1 <= e <=
+/// k - 2), computed as `ellipsoidal_mis_weight` in connect_ellipsoidal.wesl does: with p_j the
+/// density of the path sampled by a direct connection across edge (x_{j-1}, x_j),
+/// w_e = (p_e + p_{e+1}) / 2 / sum_{j=1}^{k-1} c_j p_j (c_1 = c_{k-1} = 1/2, else 1), from ratios
+/// to p_e of each vertex's light-side and camera-side densities, using the densities the
+/// subpaths store and those the connection computes next to x_e.
+pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
+    let k = path.len();
+    assert!(e >= 1 && e + 2 <= k);
+    let (s, t) = (e, k - 1 - e);
+    let light = stored_subpath(&path[..s]);
+    let camera_order: Vec<Vertex> = path[e + 1..].iter().rev().copied().collect();
+    let camera = stored_subpath(&camera_order);
+    let (qs, pt, xe) = (&path[s - 1], &path[e + 1], &path[e]);
+    let qsm = (s >= 2).then(|| path[s - 2]);
+    let ptm = (t >= 2).then(|| path[e + 2]);
+    let c = |j: usize| if j == 1 || j == k - 1 { 0.5 } else { 1.0 };
+    let mut sum = c(s);
+    let mut r = 1.0f32;
+    for j in (1..s).rev() {
+        let pc = if j == s - 1 {
+            vertex_pdf(xe, Some(pt), qs)
+        } else if j + 2 == s {
+            vertex_pdf(qs, Some(xe), qsm.as_ref().unwrap())
+        } else {
+            light[j].pdf_rev
+        };
+        r *= pc / light[j].pdf_fwd.max(1e-30);
+        sum += c(j) * r;
+    }
+    r = vertex_pdf(qs, qsm.as_ref(), xe) / vertex_pdf(pt, ptm.as_ref(), xe).max(1e-30);
+    let r_next = r;
+    sum += c(s + 1) * r;
+    for j in s + 1..=k - 2 {
+        let i = t + s - j;
+        let pl = if i == t - 1 {
+            vertex_pdf(xe, Some(qs), pt)
+        } else if i + 2 == t {
+            vertex_pdf(pt, Some(xe), ptm.as_ref().unwrap())
+        } else {
+            camera[i].pdf_rev
+        };
+        r *= pl / camera[i].pdf_fwd.max(1e-30);
+        sum += c(j + 1) * r;
+    }
+    0.5 * (1.0 + r_next) / sum
+}
