@@ -44,10 +44,49 @@ pub fn run_bench(seconds: f64, max_bounces: u32, scene_path: &Path) -> Result<()
     Ok(())
 }
 
+/// A method with its own settings, as named in `equal-time --methods`: `path`, `direct`,
+/// `ellipsoidal` or `ellipsoidal:K` (K connections per ellipsoid query).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Variant {
+    /// Sampling method.
+    pub method: crate::integrator::Method,
+    /// Connections drawn from one ellipsoid query (1 for the other methods).
+    pub connections_per_query: u32,
+}
+
+impl Variant {
+    /// Parses `METHOD` or `ellipsoidal:K`.
+    pub fn parse(s: &str) -> Result<Self> {
+        use clap::ValueEnum;
+        let (name, k) = match s.split_once(':') {
+            Some((name, k)) => {
+                let k = k.trim().parse::<u32>().map_err(|_| anyhow::anyhow!("`{s}`: K in METHOD:K must be a whole number"))?;
+                (name.trim(), k)
+            }
+            None => (s.trim(), 1),
+        };
+        let method = crate::integrator::Method::from_str(name, true)
+            .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:K"))?;
+        anyhow::ensure!(
+            k == 1 || method == crate::integrator::Method::Ellipsoidal,
+            "`{s}`: only ellipsoidal takes connections per query (ellipsoidal:K)"
+        );
+        Ok(Self { method, connections_per_query: k })
+    }
+
+    /// The name it was given by.
+    pub fn name(&self) -> String {
+        match self.connections_per_query {
+            1 => self.method.name().to_owned(),
+            k => format!("{}:{k}", self.method.name()),
+        }
+    }
+}
+
 /// Settings of an equal-time comparison (`gatetrace equal-time`).
 pub struct EqualTimeSettings {
     /// Methods compared, each rendered for the same wall time.
-    pub methods: Vec<crate::integrator::Method>,
+    pub methods: Vec<Variant>,
     /// Gates, each compared separately.
     pub gates: Vec<(String, crate::film::Gate)>,
     /// Rendering time per method, gate and repeat (s), setup excluded.
@@ -125,18 +164,24 @@ pub fn run_equal_time(scene_path: &Path, s: &EqualTimeSettings) -> Result<()> {
         let ref_noise = ref_var.iter().sum::<f64>() / elements;
         let ref_power = reference.iter().map(|x| x * x).sum::<f64>() / elements;
         println!("\ngate {spec}: reference {ref_spp} spp, mean {:.6}, its noise variance {ref_noise:.3e}", sum.iter().sum::<f64>() / n / elements);
-        println!("{:>12} {:>8} {:>12} {:>12} {:>14}", "method", "spp", "MSE", "rel. MSE", "MSE / first");
+        println!("{:>14} {:>8} {:>12} {:>12} {:>14}", "method", "spp", "MSE", "rel. MSE", "MSE / first");
         let mut first = None;
-        for &method in &s.methods {
+        for variant in &s.methods {
             let mut mses = Vec::new();
             let mut spps = Vec::new();
             for repeat in 0..s.repeats {
                 seed += 1;
-                let settings = RenderSettings { method, gate: gate.clone(), seed, ..b.clone() };
+                let settings = RenderSettings {
+                    method: variant.method,
+                    connections_per_query: variant.connections_per_query,
+                    gate: gate.clone(),
+                    seed,
+                    ..b.clone()
+                };
                 let (film, secs) = render_for(&ctx, &scene, &settings, s.seconds)?;
                 let se: f64 = film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
                 let mse = se - ref_noise;
-                writeln!(csv, "{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e}", method.name(), film.spp, mse / ref_power)
+                writeln!(csv, "{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e}", variant.name(), film.spp, mse / ref_power)
                     .unwrap();
                 mses.push(mse);
                 spps.push(film.spp);
@@ -144,8 +189,8 @@ pub fn run_equal_time(scene_path: &Path, s: &EqualTimeSettings) -> Result<()> {
             let mse = mses.iter().sum::<f64>() / mses.len() as f64;
             let first_mse = *first.get_or_insert(mse);
             println!(
-                "{:>12} {:>8} {:>12.4e} {:>12.4e} {:>14.3}",
-                method.name(),
+                "{:>14} {:>8} {:>12.4e} {:>12.4e} {:>14.3}",
+                variant.name(),
                 spps.iter().sum::<u64>() / spps.len() as u64,
                 mse,
                 mse / ref_power,

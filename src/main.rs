@@ -101,6 +101,19 @@ struct RenderArgs {
     /// strategies of a scene sum to the full render.
     #[arg(long, value_name = "S,T", value_parser = parse_strategy)]
     debug_strategy: Option<(u32, u32)>,
+    /// `ellipsoidal`: connections drawn from each ellipsoid query (1 to 8). One BVH traversal
+    /// serves K independent points on the spheroid, each weighted 1/K; every point still costs
+    /// its shading and two shadow rays.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    connections_per_query: u32,
+    /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
+    /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
+    #[arg(long, default_value_t = 1e-6, value_name = "REL")]
+    needle_guard: f32,
+    /// `ellipsoidal`, for numerical studies: drop sampled points whose path length misses the
+    /// target tau_e by more than REL x tau_e (dimensionless).
+    #[arg(long, default_value_t = 1e-5, value_name = "REL")]
+    length_guard: f32,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
     /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr.
     #[arg(long, short)]
@@ -121,9 +134,10 @@ struct BenchArgs {
 struct EqualTimeArgs {
     /// glTF 2.0 scene; the Cornell box when omitted.
     scene: Option<PathBuf>,
-    /// Methods to compare, comma-separated.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "path,direct")]
-    methods: Vec<Method>,
+    /// Methods to compare, comma-separated: path, direct, ellipsoidal, or ellipsoidal:K (K
+    /// connections per ellipsoid query, see render --connections-per-query).
+    #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
+    methods: Vec<gatetrace::bench::Variant>,
     /// Gates to compare at, separated by `;` (same syntax as `render --gate`).
     #[arg(long, default_value = "none;box:3.14..3.1425")]
     gates: String,
@@ -187,6 +201,10 @@ fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
         csv: args.csv,
     };
     gatetrace::bench::run_equal_time(&scene, &settings)
+}
+
+fn parse_variant(s: &str) -> Result<gatetrace::bench::Variant, String> {
+    gatetrace::bench::Variant::parse(s).map_err(|e| e.to_string())
 }
 
 fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
@@ -255,12 +273,16 @@ fn run_render(args: RenderArgs) -> Result<()> {
         debug_strategy: args.debug_strategy,
         portable_atomics: false,
         binding_limit: None,
+        connections_per_query: args.connections_per_query,
+        ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
     };
     if settings.debug_strategy.is_some() && settings.method != Method::Direct {
         bail!("--debug-strategy needs --method direct");
     }
     if settings.method != Method::Path {
         gatetrace::integrator::bidirectional::check_settings(&settings)?;
+    } else if settings.connections_per_query != 1 {
+        bail!("--connections-per-query applies to --method ellipsoidal only");
     }
     film_elements(&settings)?;
     check_writable(&out)?;
@@ -298,6 +320,11 @@ fn run_render(args: RenderArgs) -> Result<()> {
     ];
     if let Some((s, t)) = settings.debug_strategy {
         metadata.push(("debug_strategy".into(), format!("{s},{t}")));
+    }
+    if settings.method == Method::Ellipsoidal {
+        let g = settings.ellipsoid_guards;
+        metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
+        metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
     }
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
     write_film(&out, film, &metadata, &bin_ranges)?;

@@ -229,3 +229,52 @@ fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
     assert_ellipsoidal_matches_direct("ellipsoidal gaussian 3.2, 0.05", &common::cornell_box(), Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 420);
     assert_ellipsoidal_matches_direct("ellipsoidal glossy box [3.0, 3.3)", &glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 32, 430);
 }
+
+#[test]
+fn ellipsoidal_with_four_connections_per_query_matches_direct() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let gate = Gate::Box { start: 3.14, end: 3.19 };
+    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), 440), BATCHES, 32);
+    let four = RenderSettings { connections_per_query: 4, ..settings(Method::Ellipsoidal, gate, 441) };
+    let ellipsoidal = common::render_films(&ctx, &scene, &four, BATCHES, 16);
+    common::assert_films_agree("ellipsoidal K = 4 box [3.14, 3.19)", &ellipsoidal, &direct, 8, ALPHA);
+}
+
+/// The needle guard leaves out a set of connections that grows with the guard, and every
+/// contribution of a box gate is non-negative: so the bias of the default guard (1e-6) is at
+/// most that of a guard 10^4 times wider, which this bounds by the noise of the comparison with
+/// `direct`. The length guard (1e-5) drops points whose f32 section failed; on the Cornell box
+/// it should drop (almost) none. (At 1e-7, below f32 resolution, it drops 3% of the points and
+/// the image is 3% dark: a guard must stay well above the measured errors of the stress test.)
+#[test]
+fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
+    use gatetrace::integrator::EllipsoidGuards;
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let gate = Gate::Box { start: 3.14, end: 3.19 };
+    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), 450), BATCHES, 32);
+    let wide = RenderSettings {
+        ellipsoid_guards: EllipsoidGuards { needle: 1e-2, ..Default::default() },
+        stats: true,
+        ..settings(Method::Ellipsoidal, gate, 451)
+    };
+    let mut tracer = BidirectionalTracer::new(&ctx, &scene, &wide).unwrap();
+    let films: Vec<Film> = (0..BATCHES)
+        .map(|_| {
+            tracer.render_samples(32).unwrap();
+            let film = tracer.film().unwrap();
+            tracer.reset_film();
+            film
+        })
+        .collect();
+    println!("{}", tracer.stats_report().unwrap().unwrap());
+    let queries: u64 = tracer.strategy_stats().unwrap().iter().map(|s| s.evaluated).sum();
+    let (needles, off_length) = tracer.guarded();
+    assert!(needles > 0, "the needle guard of 1e-2 left nothing out");
+    assert!(
+        (off_length as f64) < 1e-6 * queries as f64,
+        "the length guard dropped {off_length} of {queries} connections"
+    );
+    common::assert_films_agree("ellipsoidal needle guard 1e-2 box [3.14, 3.19)", &films, &direct, 8, ALPHA);
+}

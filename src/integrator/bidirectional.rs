@@ -41,6 +41,11 @@ const TARGET_SLOTS_PER_WAVE: u64 = 1 << 16;
 /// Most scattering vertices `direct` supports: the strategies of a slot grow as B^2 and
 /// lavapipe ends a shader invocation's loops after 65535 iterations in total.
 pub const MAX_BOUNCES: u32 = 24;
+/// Most connections one ellipsoid query can draw (two reservoirs of four lanes each).
+pub const MAX_CONNECTIONS_PER_QUERY: u32 = 8;
+
+/// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
+const QUERY_COUNTERS: usize = 5;
 
 /// Connections of one (s, t) strategy (`--stats`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -79,6 +84,23 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
             settings.gate.describe()
         );
         ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
+        let k = settings.connections_per_query;
+        ensure!(
+            (1..=MAX_CONNECTIONS_PER_QUERY).contains(&k),
+            "--connections-per-query {k}: give 1 to {MAX_CONNECTIONS_PER_QUERY}"
+        );
+        let g = settings.ellipsoid_guards;
+        ensure!(
+            g.needle >= 0.0 && g.needle.is_finite() && g.length > 0.0,
+            "ellipsoid guards (needle {}, length {}) must be non-negative and finite (length positive)",
+            g.needle,
+            g.length
+        );
+    } else {
+        ensure!(
+            settings.connections_per_query == 1,
+            "--connections-per-query applies to --method ellipsoidal only"
+        );
     }
     if let Some((s, t)) = settings.debug_strategy {
         ensure!(
@@ -124,8 +146,9 @@ pub struct BidirectionalTracer<'a> {
     bindings: Bindings,
     /// Strategy counters summed over the waves so far (when `stats` is on).
     stats: Option<Vec<StrategyStats>>,
-    /// Ellipsoid queries' nodes visited, triangles tested and triangles intersected, summed.
-    query_work: [u64; 3],
+    /// Ellipsoid queries' nodes visited, triangles tested and triangles intersected, spheroids
+    /// left out by the needle guard and points dropped by the length guard, summed.
+    query_work: [u64; QUERY_COUNTERS],
     /// Which connections join the subpaths.
     method: Method,
     /// Light-tracing sums moved off the device's f32 splat film (see `fold_splats`).
@@ -148,14 +171,17 @@ impl<'a> BidirectionalTracer<'a> {
         let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
         let strategy_count = strategies(b).len() as u64;
         let ellipsoidal = settings.method == Method::Ellipsoidal;
-        // Ellipsoidal connections need two shadow rays each.
+        // Ellipsoidal connections need two shadow rays each, and K slots per strategy.
         let rays_per_connection = if ellipsoidal { 2 } else { 1 };
+        let k = settings.connections_per_query as u64;
+        let contributions_per_slot = contributions_per_slot * k;
+        let splats_per_slot = light_vertices * k;
         // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
         let per_slot = [
             (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
             contributions_per_slot * size_of::<Contribution>() as u64,
-            light_vertices * size_of::<Splat>() as u64,
-            rays_per_connection * (contributions_per_slot + light_vertices) * size_of::<ShadowRay>() as u64,
+            splats_per_slot * size_of::<Splat>() as u64,
+            rays_per_connection * (contributions_per_slot + splats_per_slot) * size_of::<ShadowRay>() as u64,
             2 * size_of::<PathState>() as u64,
         ];
         let fit = per_slot.iter().map(|&bytes| limit / bytes).min().unwrap().min(MAX_SLOTS_PER_DISPATCH / 2);
@@ -194,13 +220,19 @@ impl<'a> BidirectionalTracer<'a> {
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
-        // Three counters per strategy, then three for the ellipsoid queries' work.
-        r.storage_zeroed(ctx, "strategy_stats", 3 * 4 * (strategy_count + 1), none)?;
+        // Three counters per strategy, then five for the ellipsoid queries' work and guards.
+        r.storage_zeroed(ctx, "strategy_stats", 4 * (3 * strategy_count + QUERY_COUNTERS as u64), none)?;
         r.storage_zeroed(ctx, "targets", 8 * slots, none)?;
 
         constants.push(("CAMERA_VERTICES", camera_vertices as f64));
         constants.push(("LIGHT_VERTICES", light_vertices as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
+        constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
+        if ellipsoidal {
+            constants.push(("CONNECTIONS_PER_QUERY", k as f64));
+            constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
+            constants.push(("LENGTH_GUARD", settings.ellipsoid_guards.length as f64));
+        }
         constants.push(("STATS", settings.stats as u32 as f64));
         constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));
         if let Some((s, t)) = settings.debug_strategy {
@@ -245,7 +277,7 @@ impl<'a> BidirectionalTracer<'a> {
             strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
         });
         let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
-        let additions_per_pass = samples_per_pass as u64 * light_vertices;
+        let additions_per_pass = samples_per_pass as u64 * splats_per_slot;
         let fold_interval = (65536 / additions_per_pass).clamp(1, 4096) as u32;
         let splat_sums = vec![0.0; super::film_elements(settings)? as usize];
         Ok(Self {
@@ -253,7 +285,7 @@ impl<'a> BidirectionalTracer<'a> {
             stages,
             bindings,
             stats,
-            query_work: [0; 3],
+            query_work: [0; QUERY_COUNTERS],
             method: settings.method,
             splat_sums,
             passes_since_fold: 0,
@@ -264,6 +296,12 @@ impl<'a> BidirectionalTracer<'a> {
     /// Strategy counters so far (None unless the settings asked for statistics).
     pub fn strategy_stats(&self) -> Option<&[StrategyStats]> {
         self.stats.as_deref()
+    }
+
+    /// Connections the ellipsoid guards left out so far (with `stats` on): spheroids thinner
+    /// than the needle guard, and sampled points off the target length.
+    pub fn guarded(&self) -> (u64, u64) {
+        (self.query_work[3], self.query_work[4])
     }
 
     /// Adds the device's f32 splat film to the host's f64 sums and clears it.
@@ -310,7 +348,7 @@ impl<'a> BidirectionalTracer<'a> {
         if let Some(stats) = &mut self.stats {
             // Per-wave u32 counters cannot overflow (one connection per slot and strategy).
             let buffer = self.wf.resources.get("strategy_stats").unwrap();
-            let counts: Vec<u32> = read_buffer(ctx, buffer, 3 * stats.len() + 3)?;
+            let counts: Vec<u32> = read_buffer(ctx, buffer, 3 * stats.len() + QUERY_COUNTERS)?;
             for (st, c) in stats.iter_mut().zip(counts.chunks(3)) {
                 st.evaluated += c[0] as u64;
                 st.skipped_by_gate += c[1] as u64;
@@ -390,9 +428,11 @@ impl Integrator for BidirectionalTracer<'_> {
         );
         if ellipsoidal {
             let q = total.evaluated.max(1) as f64;
-            let [nodes, tested, intersected] = self.query_work;
+            let [nodes, tested, intersected, needles, off_length] = self.query_work;
             out += &format!(
-                "per ellipsoid query: {:.1} BVH nodes visited, {:.2} triangles tested, {:.2} triangles intersected\n",
+                "per ellipsoid query: {:.1} BVH nodes visited, {:.2} triangles tested, {:.2} triangles intersected\n\
+                 guards: {needles} spheroids thinner than the needle guard skipped, {off_length} sampled points off \
+                 the target length dropped\n",
                 nodes as f64 / q,
                 tested as f64 / q,
                 intersected as f64 / q

@@ -88,6 +88,29 @@ pub struct RenderSettings {
     /// Largest storage binding to use (bytes); None: the device's limit. Smaller values force
     /// the split-array layout (used by tests to check it against the unsplit one).
     pub binding_limit: Option<u64>,
+    /// K, the connections drawn from one ellipsoid query (`--connections-per-query`, 1 ..=
+    /// [`bidirectional::MAX_CONNECTIONS_PER_QUERY`]; `ellipsoidal` only): K independent picks
+    /// share one BVH traversal, each weighted 1/K.
+    pub connections_per_query: u32,
+    /// Where `ellipsoidal` leaves out connections f32 cannot place (numerical studies).
+    pub ellipsoid_guards: EllipsoidGuards,
+}
+
+/// The two numerical guards of ellipsoidal connections, relative (dimensionless). Each leaves
+/// out a set of connections that only grows with the guard, so rendering with a larger guard
+/// bounds the bias of a smaller one from above (the `needle_guard` and `length_guard` tests).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EllipsoidGuards {
+    /// Spheroids with tau_e <= d (1 + needle) are skipped, d the distance between the foci.
+    pub needle: f32,
+    /// Sampled points whose path length misses tau_e by more than length x tau_e are dropped.
+    pub length: f32,
+}
+
+impl Default for EllipsoidGuards {
+    fn default() -> Self {
+        Self { needle: 1e-6, length: 1e-5 }
+    }
 }
 
 impl Default for RenderSettings {
@@ -106,6 +129,8 @@ impl Default for RenderSettings {
             debug_strategy: None,
             portable_atomics: false,
             binding_limit: None,
+            connections_per_query: 1,
+            ellipsoid_guards: EllipsoidGuards::default(),
         }
     }
 }
