@@ -53,7 +53,7 @@ fn main() {
 
 /// Kernels also built with a WESL feature flag on, for adapters with the device feature it
 /// needs: (kernel, feature). Every kernel is built with all flags off as well.
-const FEATURE_VARIANTS: [(&str, &str); 1] = [("splat_light_paths", "float_atomics")];
+const FEATURE_VARIANTS: [(&str, &str); 2] = [("splat_light_paths", "float_atomics"), ("resolve_display", "splats")];
 
 /// The naga capabilities a WESL feature flag needs (validation of its variants).
 fn capabilities_of(feature: Option<&str>) -> naga::valid::Capabilities {
@@ -61,6 +61,7 @@ fn capabilities_of(feature: Option<&str>) -> naga::valid::Capabilities {
     match feature {
         None => baseline,
         Some("float_atomics") => baseline | naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC,
+        Some("splats") => baseline,
         Some(other) => panic!("unknown WESL feature `{other}`"),
     }
 }

@@ -7,9 +7,10 @@ use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
 use gatetrace::film::output::{Metadata, OutputFormat, check_writable, write_film};
+use gatetrace::frames::{FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render};
-use gatetrace::scene::{PreparedScene, load_gltf};
+use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at};
 
 /// The scene rendered when none is given.
 const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
@@ -28,8 +29,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render an image (or a transient cube) to EXR or NPY.
+    /// Render an image (or a transient cube, or a sequence of frames) to EXR or NPY.
     Render(RenderArgs),
+    /// Open the interactive viewer: scrub the gate through time and watch light move; click a
+    /// pixel for its transient response.
+    View(ViewArgs),
     /// Measure samples per second of `path` on the Cornell box at 64x64 and 256x256.
     Bench(BenchArgs),
     /// Render a scene with several methods for the same wall time each and report their mean
@@ -114,10 +118,77 @@ struct RenderArgs {
     /// target tau_e by more than REL x tau_e (dimensionless).
     #[arg(long, default_value_t = 1e-5, value_name = "REL")]
     length_guard: f32,
+    /// Render a sequence of N frames (see --gate-step); --out then names each frame with
+    /// {frame} or {frame:04}. Frame i renders with seed S + i x 0x9E3779B9 (mod 2^32), so frame
+    /// 0 is the single image of seed S.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    frames: u32,
+    /// Move the gate by D per frame: metres of optical path, or with a mm/ps/ns suffix
+    /// (negative: earlier). A CW gate's phase moves by -360 f D / c degrees.
+    #[arg(long, default_value = "0", value_name = "D", allow_hyphen_values = true)]
+    gate_step: String,
+    /// Sample the scene's glTF animations (node translation, rotation, scale; all animations on
+    /// one clock) at --frames evenly spaced times from T0 to T1 (seconds of the animation
+    /// clock; T0 alone for one frame), rebuilding the BVH for every frame.
+    #[arg(long, value_name = "T0..T1")]
+    anim_time: Option<String>,
+    /// Render only frames A..B (0-based, inclusive; or one frame A) of the --frames sequence,
+    /// exactly as a full run renders them: split a sequence across processes or machines.
+    #[arg(long, value_name = "A..B")]
+    frame_range: Option<String>,
+    /// Render frames whose output file exists already (by default they are skipped, so an
+    /// interrupted sequence resumes where it stopped).
+    #[arg(long)]
+    force: bool,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
-    /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr.
+    /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr, or
+    /// SCENE_NAME_{frame:04}.exr for a sequence.
     #[arg(long, short)]
     out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct ViewArgs {
+    /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
+    scene: Option<PathBuf>,
+    /// Sampling method at start (path, direct, ellipsoidal); switchable in the window.
+    #[arg(long, value_enum, default_value_t = Method::Path)]
+    method: Method,
+    /// Gate at start: `none`, `box:A..B` or `gaussian:MU,SIGMA` (lengths in metres of optical
+    /// path, or with mm/ps/ns suffixes). The window moves its centre tau.
+    #[arg(long, default_value = "box:3.14..3.19", value_name = "SPEC")]
+    gate: String,
+    /// Image size in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "128x128", value_parser = parse_resolution)]
+    res: (u32, u32),
+    /// Maximum number of scattering vertices.
+    #[arg(long, default_value_t = 5)]
+    max_bounces: u32,
+    /// Exposure in stops (the radiance is multiplied by 2^EV before the tone curve); by default
+    /// set from the first image (its 99th percentile shows as white).
+    #[arg(long, allow_hyphen_values = true, value_name = "EV")]
+    exposure: Option<f32>,
+    /// Start with the logarithmic tone curve (4 decades) instead of the linear one.
+    #[arg(long)]
+    log: bool,
+    /// Show the time profile of pixel X,Y (0-based, row 0 at the top) from the start, as if
+    /// clicked.
+    #[arg(long, value_name = "X,Y", value_parser = parse_pixel)]
+    profile_pixel: Option<(u32, u32)>,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Save the window's pixels to this PNG after --after-frames frames and exit (with FILE.json
+    /// beside it: the image's rectangle, samples per pixel, timings). For tests and figures.
+    #[arg(long, value_name = "FILE.png")]
+    screenshot: Option<PathBuf>,
+    /// Frames to render before --screenshot.
+    #[arg(long, default_value_t = 30, value_name = "N")]
+    after_frames: u32,
+    /// With --screenshot: move the gate centre by D every 10 frames (metres, or mm/ps/ns), and
+    /// record the time from each move to its first image.
+    #[arg(long, value_name = "D", allow_hyphen_values = true)]
+    scrub_step: Option<String>,
 }
 
 #[derive(Args)]
@@ -208,7 +279,15 @@ fn parse_variant(s: &str) -> Result<gatetrace::bench::Variant, String> {
 }
 
 fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
-    let bad = || format!("`{s}` is not S,T (two non-negative integers, e.g. 1,2)");
+    parse_pair(s, "S,T")
+}
+
+fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
+    parse_pair(s, "X,Y")
+}
+
+fn parse_pair(s: &str, what: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{s}` is not {what} (two non-negative integers, e.g. 1,2)");
     let (a, b) = s.split_once(',').ok_or_else(bad)?;
     Ok((a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?))
 }
@@ -233,6 +312,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
+        Command::View(args) => run_view(args),
         Command::EqualTime(args) => run_equal_time(args),
         Command::StressEllipsoid(args) => run_stress(args),
         Command::Bench(args) => gatetrace::bench::run_bench(args.seconds, args.max_bounces, Path::new(DEFAULT_SCENE)),
@@ -241,6 +321,40 @@ fn main() {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
+}
+
+fn run_view(args: ViewArgs) -> Result<()> {
+    use gatetrace::viewer::{GateChoice, ViewOptions, run_viewer};
+    let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let (gate, tau, gate_width) = match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
+        Gate::None => (GateChoice::None, 3.165, 0.05),
+        Gate::Box { start, end } => (GateChoice::Box, 0.5 * (start + end), end - start),
+        Gate::Gaussian { mean, sigma } => (GateChoice::Gaussian, mean, sigma),
+        other => bail!("--gate {}: the viewer shows none, box or gaussian gates (got {})", args.gate, other.describe()),
+    };
+    if args.screenshot.is_some() {
+        ensure!(args.after_frames >= 1, "--after-frames must be at least 1");
+    }
+    let scrub_step = args.scrub_step.as_deref().map(gatetrace::units::parse_length).transpose().context("--scrub-step")?;
+    ensure!(scrub_step.is_none() || args.screenshot.is_some(), "--scrub-step needs --screenshot");
+    run_viewer(ViewOptions {
+        scene,
+        width: args.res.0,
+        height: args.res.1,
+        method: args.method,
+        gate,
+        tau,
+        gate_width,
+        max_bounces: args.max_bounces,
+        exposure_ev: args.exposure.unwrap_or(0.0),
+        auto_exposure: args.exposure.is_none(),
+        log_curve: args.log,
+        screenshot: args.screenshot,
+        after_frames: args.after_frames,
+        scrub_step,
+        profile_pixel: args.profile_pixel,
+        seed: args.seed,
+    })
 }
 
 fn run_render(args: RenderArgs) -> Result<()> {
@@ -255,10 +369,21 @@ fn run_render(args: RenderArgs) -> Result<()> {
         (Some(n), None) => Budget::Samples(n),
         (None, None) => Budget::Samples(64),
     };
+    let range = args.frame_range.as_deref().map(parse_frame_range).transpose().context("--frame-range")?;
+    let gate_step = gatetrace::units::parse_length(&args.gate_step).context("--gate-step")?;
+    let anim_time = args.anim_time.as_deref().map(parse_time_range).transpose().context("--anim-time")?;
+    let plan = FramePlan::new(args.frames, gate_step, anim_time, range)?;
+    let sequence = args.frames > 1 || args.frame_range.is_some();
+    let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render").to_owned();
     let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from(format!("{}.exr", scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render")))
+        PathBuf::from(if sequence { format!("{stem}_{{frame:04}}.exr") } else { format!("{stem}.exr") })
     });
-    OutputFormat::of(&out)?;
+    let pattern = out.to_string_lossy().into_owned();
+    ensure!(
+        !sequence || is_frame_pattern(&pattern),
+        "--out {pattern}: a sequence of frames needs {{frame}} or {{frame:04}} in the output name, e.g. \
+         frames/f_{{frame:04}}.npy"
+    );
     let settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
@@ -275,37 +400,103 @@ fn run_render(args: RenderArgs) -> Result<()> {
         binding_limit: None,
         connections_per_query: args.connections_per_query,
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
+        keep_splats_on_device: false,
     };
-    if settings.debug_strategy.is_some() && settings.method != Method::Direct {
-        bail!("--debug-strategy needs --method direct");
+    // Every frame's settings and output, checked before any work.
+    let mut frames = Vec::new();
+    for frame in plan.frames() {
+        let path = if is_frame_pattern(&pattern) { frame_path(&pattern, frame)? } else { out.clone() };
+        OutputFormat::of(&path)?;
+        let settings = RenderSettings { gate: plan.gate(&gate, frame)?, seed: frame_seed(args.seed, frame), ..settings.clone() };
+        if settings.debug_strategy.is_some() && settings.method != Method::Direct {
+            bail!("--debug-strategy needs --method direct");
+        }
+        if settings.method != Method::Path {
+            gatetrace::integrator::bidirectional::check_settings(&settings)?;
+        } else if settings.connections_per_query != 1 {
+            bail!("--connections-per-query applies to --method ellipsoidal only");
+        }
+        film_elements(&settings)?;
+        check_writable(&path)?;
+        frames.push((frame, path, settings));
     }
-    if settings.method != Method::Path {
-        gatetrace::integrator::bidirectional::check_settings(&settings)?;
-    } else if settings.connections_per_query != 1 {
-        bail!("--connections-per-query applies to --method ellipsoidal only");
-    }
-    film_elements(&settings)?;
-    check_writable(&out)?;
 
-    let scene = PreparedScene::new(load_gltf(&scene_path)?)?;
+    // A static scene is loaded once; an animated one at every frame's time (checked first).
+    let static_scene = match plan.anim_time {
+        None => Some(PreparedScene::new(load_gltf(&scene_path)?)?),
+        Some(_) => {
+            load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?;
+            None
+        }
+    };
     let ctx = GpuContext::new()?;
-    let bar = progress_bar(budget);
-    let output = render(&ctx, &scene, &settings, budget, |p| {
+    // A sequence shows a bar over its frames above each frame's bar over passes.
+    let bars = indicatif::MultiProgress::new();
+    let frames_bar = sequence.then(|| {
+        let bar = bars.add(indicatif::ProgressBar::new(frames.len() as u64));
+        let style = indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames (ETA {eta})");
+        bar.set_style(style.unwrap().progress_chars("=> "));
+        bar
+    });
+    for (frame, path, settings) in &frames {
+        if sequence && path.exists() && !args.force {
+            say(&bars, format!("frame {frame}: {} exists, skipped (--force renders it again)", path.display()))?;
+        } else {
+            let animated;
+            let scene = match &static_scene {
+                Some(scene) => scene,
+                None => {
+                    animated = PreparedScene::new(load_gltf_at(&scene_path, plan.anim_time(*frame))?)?;
+                    &animated
+                }
+            };
+            let label = sequence.then(|| format!("frame {frame}/{}", plan.count - 1));
+            let frame_info = sequence.then_some((*frame, &plan));
+            render_one(&ctx, scene, &scene_path, &args.gate, settings, budget, path, label, frame_info, &bars)?;
+        }
+        if let Some(bar) = &frames_bar {
+            bar.inc(1);
+        }
+    }
+    if let Some(bar) = frames_bar {
+        bar.finish_and_clear();
+    }
+    Ok(())
+}
+
+/// Renders one image (or frame) and writes it with its metadata.
+#[allow(clippy::too_many_arguments)]
+fn render_one(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    scene_path: &Path,
+    gate_spec: &str,
+    settings: &RenderSettings,
+    budget: Budget,
+    out: &Path,
+    label: Option<String>,
+    frame: Option<(u32, &FramePlan)>,
+    bars: &indicatif::MultiProgress,
+) -> Result<()> {
+    let bar = bars.add(progress_bar(budget));
+    let prefix = label.as_deref().map(|l| format!("{l}: ")).unwrap_or_default();
+    let output = render(ctx, scene, settings, budget, |p| {
         match budget {
             Budget::Samples(_) => bar.set_position(p.spp),
             Budget::Time(_) => bar.set_position(p.elapsed.as_millis() as u64),
         }
         let rate = (p.spp * (settings.width * settings.height) as u64) as f64 / p.elapsed.as_secs_f64().max(1e-9);
-        bar.set_message(format!("{} passes, {} spp, {:.2} Msamples/s", p.passes, p.spp, rate / 1e6));
+        bar.set_message(format!("{prefix}{} passes, {} spp, {:.2} Msamples/s", p.passes, p.spp, rate / 1e6));
     })?;
     bar.finish_and_clear();
 
+    let gate = &settings.gate;
     let film = &output.film;
     let secs = output.elapsed.as_secs_f64();
     let mut metadata: Metadata = vec![
         ("scene".into(), scene_path.display().to_string()),
         ("method".into(), settings.method.name().into()),
-        ("gate".into(), args.gate.clone()),
+        ("gate".into(), gate_spec.to_owned()),
         ("gate_description".into(), gate.describe()),
         ("spp".into(), film.spp.to_string()),
         ("seed".into(), settings.seed.to_string()),
@@ -326,16 +517,25 @@ fn run_render(args: RenderArgs) -> Result<()> {
         metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
         metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
     }
+    if let Some((index, plan)) = frame {
+        metadata.push(("frame".into(), index.to_string()));
+        metadata.push(("frames".into(), plan.count.to_string()));
+        metadata.push(("gate_shift_m".into(), (plan.gate_step * index as f64).to_string()));
+        if let Some(t) = plan.anim_time(index) {
+            metadata.push(("anim_time_s".into(), t.to_string()));
+        }
+    }
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
-    write_film(&out, film, &metadata, &bin_ranges)?;
+    write_film(out, film, &metadata, &bin_ranges)?;
     let mean = film.mean_rgb();
-    println!(
-        "{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+    say(bars, format!(
+        "{}{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+        label.map(|l| format!("{l} ")).unwrap_or_default(),
         scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
         settings.width,
         settings.height,
         settings.method.name(),
-        args.gate,
+        if frame.is_some_and(|(i, p)| p.gate_step != 0.0 && i > 0) { gate.describe() } else { gate_spec.to_owned() },
         film.spp,
         secs,
         (film.spp * (settings.width * settings.height) as u64) as f64 / secs / 1e6,
@@ -344,11 +544,21 @@ fn run_render(args: RenderArgs) -> Result<()> {
         mean[1],
         mean[2],
         out.display()
-    );
+    ))?;
     if let Some(report) = &output.stats {
         print!("{report}");
     } else if settings.stats {
         println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
+    }
+    Ok(())
+}
+
+/// Prints a line to stdout, above the progress bars when they are shown.
+fn say(bars: &indicatif::MultiProgress, line: String) -> Result<()> {
+    if bars.is_hidden() {
+        println!("{line}");
+    } else {
+        bars.println(line)?;
     }
     Ok(())
 }

@@ -3,7 +3,8 @@
 #   - a Vulkan driver: when none is installed, Mesa's CPU implementation lavapipe
 #     (mesa-vulkan-drivers) is installed with apt-get (through sudo when not root);
 #   - a C toolchain (build-essential: cargo needs a linker) and curl;
-#   - a Rust toolchain (1.95 or newer), with rustup, when cargo is missing.
+#   - a Rust toolchain (1.95 or newer), with rustup, when cargo is missing;
+#   - for the viewer's test (tools/test.sh): xvfb-run and the X11 libraries a window needs.
 # tools/render.sh and tools/test.sh source this file, so cargo is on PATH for them afterwards.
 # Running it directly does the same installs. Safe to repeat: it does nothing when all is there.
 
@@ -45,6 +46,21 @@ gatetrace_setup() {
         echo "setup: no Rust toolchain; installing one with rustup" >&2
         curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal || return 1
         . "$HOME/.cargo/env"
+    fi
+}
+
+# What the viewer needs in a window, and the viewer's test under a virtual X server: xvfb-run
+# and the X11 client libraries winit loads at run time.
+gatetrace_setup_display() {
+    local missing=()
+    command -v xvfb-run >/dev/null 2>&1 || missing+=(xvfb xauth)
+    local pair
+    for pair in libX11.so.6:libx11-6 libX11-xcb.so.1:libx11-xcb1 libXcursor.so.1:libxcursor1 libXrandr.so.2:libxrandr2 \
+                libXi.so.6:libxi6 libxkbcommon-x11.so.0:libxkbcommon-x11-0; do
+        ldconfig -p 2>/dev/null | grep -q "${pair%%:*}" || missing+=("${pair#*:}")
+    done
+    if [ ${#missing[@]} -gt 0 ]; then
+        gatetrace_apt_install "${missing[@]}" || return 1
     fi
 }
 

@@ -5,4 +5,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 . tools/setup.sh
 gatetrace_setup
+gatetrace_setup_display
 exec cargo test "$@"

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, Result, bail};
+use anyhow::{Context as _, Result, bail, ensure};
 
 use crate::gpu::layout;
 use crate::units::{SPEED_OF_LIGHT, parse_length};
@@ -135,6 +135,29 @@ impl Gate {
             Gate::Transient { start, .. } if start < 0.0 => bail!("transient gate: start {start} m is negative"),
             _ => Ok(()),
         }
+    }
+
+    /// The same gate moved later by `d` metres of optical path (earlier when negative): W'(l) =
+    /// W(l - d). For a CW gate this is a phase change of -360 f d / c degrees. The steady state
+    /// has nothing to move; a shift that pushes a gate below zero length is an error.
+    pub fn shifted(&self, d: f64) -> Result<Self> {
+        let gate = match self.clone() {
+            Gate::None if d == 0.0 => Gate::None,
+            Gate::None => bail!("the `none` gate (steady state) cannot be shifted; give a gate to step"),
+            Gate::Box { start, end } => Gate::Box { start: start + d, end: end + d },
+            Gate::Gaussian { mean, sigma } => Gate::Gaussian { mean: mean + d, sigma },
+            Gate::Cw { frequency_hz, phase_deg } => {
+                Gate::Cw { frequency_hz, phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT }
+            }
+            Gate::Table { points, source } => {
+                let points: Vec<(f64, f64)> = points.iter().map(|&(l, w)| (l + d, w)).collect();
+                ensure!(points[0].0 >= 0.0, "table gate {} shifted by {d} m starts below zero length", source.display());
+                Gate::Table { points, source }
+            }
+            Gate::Transient { start, width, bins } => Gate::Transient { start: start + d, width, bins },
+        };
+        gate.validate().with_context(|| format!("{} shifted by {d} m", self.describe()))?;
+        Ok(gate)
     }
 
     /// The kernels' specialisation for this gate.

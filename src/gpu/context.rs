@@ -9,6 +9,10 @@ install Mesa's CPU implementation lavapipe: `sudo apt-get install -y mesa-vulkan
 /// A device and queue with the adapter's name and limits (the device gets all of the adapter's
 /// limits, e.g. storage bindings per stage).
 pub struct GpuContext {
+    /// The instance the adapter came from (the viewer creates its window surface with it).
+    pub instance: wgpu::Instance,
+    /// The adapter the device was opened on.
+    pub adapter: wgpu::Adapter,
     /// The device.
     pub device: wgpu::Device,
     /// Its queue.
@@ -46,7 +50,7 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter `{}`", adapter_info.name))?;
-        Ok(Self { device, queue, adapter_info, limits, features })
+        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features })
     }
 
     /// "name (backend, device type)", as recorded with every output.

@@ -427,3 +427,30 @@ pub const MIN_ALPHA: f32 = 1e-3;
 
 /// `shaders/lib/layout.wesl` composed to WGSL by the build script (for the layout test).
 pub const LAYOUT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/layout.wgsl"));
+
+/// How `resolve_display` maps the film to the viewer's pixels.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct DisplayParams {
+    /// 1 / samples per pixel of the film.
+    pub inverse_spp: f32,
+    /// Multiplier of the mean radiance before the tone curve (2^EV).
+    pub exposure: f32,
+    /// [`DISPLAY_LINEAR`] or [`DISPLAY_LOG`].
+    pub curve: u32,
+    /// Film bin shown (0 unless transient).
+    pub bin: u32,
+    /// Decades below 1 that [`DISPLAY_LOG`] spans (black at 10^-decades).
+    pub decades: f32,
+    /// Pixels per row of `display` (rows padded for texture copies).
+    pub stride: u32,
+    /// Padding.
+    pub reserved1: u32,
+    /// Padding.
+    pub reserved2: u32,
+}
+
+/// Tone curve: clamp to [0, 1], then sRGB encoding.
+pub const DISPLAY_LINEAR: u32 = 0;
+/// Tone curve: log10 of the value mapped from [-decades, 0] to [0, 1].
+pub const DISPLAY_LOG: u32 = 1;

@@ -278,7 +278,8 @@ impl<'a> BidirectionalTracer<'a> {
         });
         let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
         let additions_per_pass = samples_per_pass as u64 * splats_per_slot;
-        let fold_interval = (65536 / additions_per_pass).clamp(1, 4096) as u32;
+        let fold_interval =
+            if settings.keep_splats_on_device { u32::MAX } else { (65536 / additions_per_pass).clamp(1, 4096) as u32 };
         let splat_sums = vec![0.0; super::film_elements(settings)? as usize];
         Ok(Self {
             wf,
@@ -398,6 +399,14 @@ impl Integrator for BidirectionalTracer<'_> {
         self.wf.reset_film(&["splat_film"]);
         self.splat_sums.iter_mut().for_each(|s| *s = 0.0);
         self.passes_since_fold = 0;
+    }
+
+    fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
+        let moved = self.wf.set_gate(scene, settings)?;
+        if moved {
+            self.reset_film();
+        }
+        Ok(moved)
     }
 
     fn stats_report(&self) -> Result<Option<String>> {

@@ -57,7 +57,7 @@ pub enum LightStrategy {
 }
 
 /// Everything that defines a render besides the scene and the sample budget.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RenderSettings {
     /// Image width (pixels).
     pub width: u32,
@@ -94,6 +94,9 @@ pub struct RenderSettings {
     pub connections_per_query: u32,
     /// Where `ellipsoidal` leaves out connections f32 cannot place (numerical studies).
     pub ellipsoid_guards: EllipsoidGuards,
+    /// Bidirectional methods: keep the light-tracing sums on the device (f32) instead of
+    /// folding them into host f64 sums every few passes; the viewer resolves them there.
+    pub keep_splats_on_device: bool,
 }
 
 /// The two numerical guards of ellipsoidal connections, relative (dimensionless). Each leaves
@@ -131,6 +134,7 @@ impl Default for RenderSettings {
             binding_limit: None,
             connections_per_query: 1,
             ellipsoid_guards: EllipsoidGuards::default(),
+            keep_splats_on_device: false,
         }
     }
 }
@@ -145,6 +149,11 @@ pub trait Integrator {
     /// Clears the film; later samples continue the random sequence, so the next estimate is
     /// independent of the previous one (for batch statistics).
     fn reset_film(&mut self);
+    /// Moves to `settings.gate` (everything else as when built) and clears the film, without
+    /// rebuilding kernels or buffers when the gate has the same kind, bins and table length
+    /// (the viewer scrubbing tau). Returns false, changing nothing, when a new integrator is
+    /// needed instead.
+    fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool>;
     /// The film's current estimate (sums divided by the samples per pixel).
     fn film(&self) -> Result<Film> {
         self.wavefront().film()

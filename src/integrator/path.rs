@@ -159,6 +159,14 @@ impl Integrator for PathTracer<'_> {
     fn reset_film(&mut self) {
         self.wf.reset_film(&[]);
     }
+
+    fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &RenderSettings) -> Result<bool> {
+        let moved = self.wf.set_gate(scene, settings)?;
+        if moved {
+            self.reset_film();
+        }
+        Ok(moved)
+    }
 }
 
 /// Samples per pass and slots per wave of a render: as many slots as `target` (or the requested

@@ -44,6 +44,36 @@ impl<'a> Wavefront<'a> {
         Self { ctx, params, resources, film_layout, constants, slots_per_wave, samples_per_pass, samples_in_film: 0, next_sample: 0 }
     }
 
+    /// Moves the render to `settings.gate` without rebuilding anything when the kernels'
+    /// specialisation and the buffers' sizes allow it (same gate kind, bins and table length):
+    /// rewrites the params uniform (gate, target-length sampling), the gate table and the
+    /// target-length CDF. Returns false, changing nothing, when the integrator must be rebuilt.
+    /// The film is not cleared (see `Integrator::set_gate`).
+    pub fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &super::RenderSettings) -> Result<bool> {
+        let gate = &settings.gate;
+        let kind = self.constants.iter().find(|(n, _)| *n == "GATE_KIND").map(|c| c.1);
+        let new = gate.to_gpu();
+        if kind != Some(gate.kind() as u32 as f64) || new.bins != self.params.gate.bins || new.table_len != self.params.gate.table_len {
+            return Ok(false);
+        }
+        let sampler = super::target_sampler(scene, settings);
+        let cdf = sampler.as_ref().map_or(vec![0.0, 1.0], |t| t.cdf.clone());
+        let cdf_buffer = self.resources.get("target_cdf").unwrap();
+        if (cdf.len() * 4) as u64 != cdf_buffer.size() {
+            return Ok(false);
+        }
+        let queue = &self.ctx.queue;
+        queue.write_buffer(cdf_buffer, 0, bytemuck::cast_slice(&cdf));
+        let table = gate.table();
+        if !table.is_empty() {
+            queue.write_buffer(self.resources.get("gate_table").unwrap(), 0, bytemuck::cast_slice(&table));
+        }
+        self.params.gate = new;
+        self.params.target_length = sampler.map(|t| t.params).unwrap_or_default();
+        queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
+        Ok(true)
+    }
+
     /// The waves of the next pass of `samples` (1 ..= samples_per_pass) samples per pixel.
     pub fn pass_waves(&self, samples: u32) -> Result<Vec<WaveParams>> {
         assert!(samples >= 1 && samples <= self.samples_per_pass);

@@ -9,8 +9,14 @@ use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use super::{CameraDesc, MaterialDesc, PointLight, Scene, SceneTriangle, TextureData};
 
-/// Loads a `.gltf` or `.glb` file.
+/// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
+    load_gltf_at(path, None)
+}
+
+/// Loads a `.gltf` or `.glb` file; with `time` (s of the animation clock), its node animations
+/// are sampled at that time and baked in like static transforms (see `animation`).
+pub fn load_gltf_at(path: &Path, time: Option<f64>) -> Result<Scene> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
@@ -19,13 +25,19 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         .map_err(|e| anyhow!("{name}: cannot load a buffer: {e}"))?;
     let images = gltf::import_images(&gltf.document, Some(base), &buffers)
         .map_err(|e| anyhow!("{name}: cannot load an image: {e}"))?;
-    Loader { name: &name, buffers: &buffers, images: &images }.load(&gltf.document)
+    let pose = match time {
+        Some(t) => super::animation::sample_animations(&name, &gltf.document, &buffers, t)?,
+        None => Default::default(),
+    };
+    Loader { name: &name, buffers: &buffers, images: &images, pose }.load(&gltf.document)
 }
 
 struct Loader<'a> {
     name: &'a str,
     buffers: &'a [gltf::buffer::Data],
     images: &'a [gltf::image::Data],
+    /// Local transforms of animated nodes at the requested time (node index -> matrix).
+    pose: std::collections::HashMap<usize, Mat4>,
 }
 
 /// What the scene-graph walk collects.
@@ -106,7 +118,10 @@ impl Loader<'_> {
     ) -> Result<()> {
         let name = self.name;
         let node_name = node.name().map(|n| format!("node `{n}`")).unwrap_or(format!("node {}", node.index()));
-        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let local = match self.pose.get(&node.index()) {
+            Some(&m) => m,
+            None => Mat4::from_cols_array_2d(&node.transform().matrix()),
+        };
         let world = parent * local;
         if !world.is_finite() {
             bail!("{name}: {node_name} has a non-finite transform");

@@ -1,6 +1,7 @@
 //! Scenes: loading (glTF 2.0, DESIGN.md section 3), the baked world-space description, and the
 //! CPU twins of the kernels' scene functions (camera, lights, surfaces, materials).
 
+pub mod animation;
 pub mod bsdf;
 pub mod camera;
 pub mod gltf_loader;
@@ -12,7 +13,7 @@ pub mod surface;
 use glam::{Vec2, Vec3};
 
 pub use camera::CameraDesc;
-pub use gltf_loader::load_gltf;
+pub use gltf_loader::{load_gltf, load_gltf_at};
 pub use prepared::PreparedScene;
 
 /// A triangle in world space with its shading attributes, in load order.
