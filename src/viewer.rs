@@ -125,6 +125,8 @@ struct Display {
 /// The transient response of one pixel, accumulated by a transient `path` render.
 struct Profile<'a> {
     pixel: (u32, u32),
+    /// Bounces of its render (it follows the main one's).
+    max_bounces: u32,
     tracer: Box<dyn Integrator + 'a>,
     /// Bin range (m).
     range: (f64, f64),
@@ -397,10 +399,11 @@ impl<'a> Viewer<'a> {
     }
 
     fn select_pixel(&mut self, pixel: (u32, u32)) -> Result<()> {
-        if self.profile.as_ref().is_some_and(|p| p.pixel == pixel && p.tracer.resources().get("film").is_some()) {
+        let bounces = self.options.max_bounces;
+        if self.profile.as_ref().is_some_and(|p| p.pixel == pixel && p.max_bounces == bounces) {
             return Ok(());
         }
-        if let Some(p) = &mut self.profile {
+        if let Some(p) = self.profile.as_mut().filter(|p| p.max_bounces == bounces) {
             p.pixel = pixel;
             p.tracer.reset_film();
             p.values.clear();
@@ -430,7 +433,7 @@ impl<'a> Viewer<'a> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        self.profile = Some(Profile { pixel, tracer, range, bins, values: Vec::new(), staging });
+        self.profile = Some(Profile { pixel, max_bounces: bounces, tracer, range, bins, values: Vec::new(), staging });
         Ok(())
     }
 
@@ -611,6 +614,13 @@ impl<'a> Viewer<'a> {
             if let Some(ev) = self.auto_exposure()? {
                 self.options.exposure_ev = (ev * 4.0).round() / 4.0;
             }
+        }
+        if let Some(p) = &self.profile
+            && p.max_bounces != self.options.max_bounces
+        {
+            let pixel = p.pixel;
+            self.profile = None;
+            self.select_pixel(pixel)?;
         }
         if self.screenshot_rx.is_none() {
             self.render(Duration::from_millis(25))?;

@@ -240,18 +240,27 @@ impl Gate {
     /// A short human-readable description, with times alongside lengths.
     pub fn describe(&self) -> String {
         let ps = crate::units::metres_to_ps;
+        // At most 9 decimals (nanometres), trailing zeros dropped: shifted gates print cleanly.
+        let short = |x: f64| {
+            let s = format!("{x:.9}");
+            s.trim_end_matches('0').trim_end_matches('.').to_owned()
+        };
         match self {
             Gate::None => "none (steady state)".into(),
             Gate::Box { start, end } => format!(
-                "box [{start} m, {end} m) (width {:.4} m = {:.2} ps)",
+                "box [{} m, {} m) (width {:.4} m = {:.2} ps)",
+                short(*start),
+                short(*end),
                 end - start,
                 ps(end - start)
             ),
-            Gate::Gaussian { mean, sigma } => format!("gaussian mean {mean} m, sigma {sigma} m ({:.2} ps)", ps(*sigma)),
-            Gate::Cw { frequency_hz, phase_deg } => format!("cw {frequency_hz} Hz, phase {phase_deg} deg"),
+            Gate::Gaussian { mean, sigma } => {
+                format!("gaussian mean {} m, sigma {} m ({:.2} ps)", short(*mean), short(*sigma), ps(*sigma))
+            }
+            Gate::Cw { frequency_hz, phase_deg } => format!("cw {frequency_hz} Hz, phase {} deg", short(*phase_deg)),
             Gate::Table { points, source } => format!("table {} ({} points)", source.display(), points.len()),
             Gate::Transient { start, width, bins } => {
-                format!("transient {bins} bins of {width} m ({:.2} ps) from {start} m", ps(*width))
+                format!("transient {bins} bins of {} m ({:.2} ps) from {} m", short(*width), ps(*width), short(*start))
             }
         }
     }
