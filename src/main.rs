@@ -118,6 +118,10 @@ struct RenderArgs {
     /// target tau_e by more than REL x tau_e (dimensionless).
     #[arg(long, default_value_t = 1e-5, value_name = "REL")]
     length_guard: f32,
+    /// Print the GPU time of every stage (kernel) at the end, measured with timestamp queries
+    /// around each dispatch (ms, share, dispatches, mean us per dispatch).
+    #[arg(long)]
+    profile: bool,
     /// Render a sequence of N frames (see --gate-step); --out then names each frame with
     /// {frame} or {frame:04}. Frame i renders with seed S + i x 0x9E3779B9 (mod 2^32), so frame
     /// 0 is the single image of seed S.
@@ -429,7 +433,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
             None
         }
     };
-    let ctx = GpuContext::new()?;
+    let mut ctx = GpuContext::new()?;
+    if args.profile {
+        ctx.enable_profiling()?;
+    }
     // A sequence shows a bar over its frames above each frame's bar over passes.
     let bars = indicatif::MultiProgress::new();
     let frames_bar = sequence.then(|| {
@@ -460,6 +467,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
     }
     if let Some(bar) = frames_bar {
         bar.finish_and_clear();
+    }
+    if let Some(report) = ctx.profile_report()? {
+        print!("{report}");
     }
     Ok(())
 }

@@ -144,3 +144,27 @@ fn stats_report_connections_per_strategy() {
         assert!(text.contains(st), "row {st} missing:\n{text}");
     }
 }
+
+#[test]
+fn profile_reports_gpu_time_per_stage() {
+    let dir = common::scratch_dir("cli_profile");
+    let out = dir.join("p.npy");
+    let o = gatetrace(&["render", "--res", "16x16", "--spp", "8", "--max-bounces", "3", "--gate", "box:3.14..3.19", "--profile", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let elapsed: f64 = {
+        let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
+        meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
+    };
+    let mut total_ms = 0.0;
+    for stage in ["generate_camera_rays", "intersect_closest", "shade", "trace_shadow_rays", "accumulate", "setup_dispatch(rays)"] {
+        let row = text.lines().find(|l| l.split_whitespace().next() == Some(stage)).unwrap_or_else(|| panic!("no row for {stage}:\n{text}"));
+        let cols: Vec<&str> = row.split_whitespace().collect();
+        let ms: f64 = cols[1].parse().unwrap();
+        let dispatches: u64 = cols[3].parse().unwrap();
+        assert!(ms > 0.0 && dispatches > 0, "{row}");
+        total_ms += ms;
+    }
+    // The stages ran within the render (plus the warm-up of the first pass).
+    assert!(total_ms / 1e3 <= elapsed + 1.0, "{total_ms} ms of stages in a {elapsed} s render");
+}

@@ -23,6 +23,9 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// The optional features the device was opened with.
     pub features: wgpu::Features,
+    /// GPU time per stage, when enabled (`enable_profiling`); kernels built afterwards record
+    /// their dispatches into it.
+    pub profiler: Option<super::profiler::SharedProfiler>,
 }
 
 impl GpuContext {
@@ -39,8 +42,11 @@ impl GpuContext {
         let adapter = choose_adapter(adapters)?;
         let adapter_info = adapter.get_info();
         let limits = adapter.limits();
-        // Optional features the kernels have variants for.
-        let features = adapter.features() & wgpu::Features::SHADER_FLOAT32_ATOMIC;
+        // Optional features the kernels have variants for, and timestamps for --profile.
+        let features = adapter.features()
+            & (wgpu::Features::SHADER_FLOAT32_ATOMIC
+                | wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("gatetrace"),
             required_features: features,
@@ -50,7 +56,7 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter `{}`", adapter_info.name))?;
-        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features })
+        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None })
     }
 
     /// "name (backend, device type)", as recorded with every output.
@@ -70,10 +76,28 @@ impl GpuContext {
         self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size)
     }
 
-    /// Blocks until all submitted work has finished.
+    /// Blocks until all submitted work has finished (and adds the finished dispatches' times to
+    /// the profiler, when there is one).
     pub fn wait_idle(&self) -> Result<()> {
         self.device.poll(wgpu::PollType::wait_indefinitely()).context("GPU device lost while waiting")?;
+        if let Some(profiler) = &self.profiler {
+            profiler.lock().unwrap().collect(&self.device, &self.queue)?;
+        }
         Ok(())
+    }
+
+    /// Times every dispatch of kernels built from now on (`render --profile`).
+    pub fn enable_profiling(&mut self) -> Result<()> {
+        let profiler = super::profiler::Profiler::new(&self.device, &self.queue)?;
+        self.profiler = Some(std::sync::Arc::new(std::sync::Mutex::new(profiler)));
+        Ok(())
+    }
+
+    /// The per-stage table of the profiler (None unless profiling).
+    pub fn profile_report(&self) -> Result<Option<String>> {
+        let Some(profiler) = &self.profiler else { return Ok(None) };
+        self.wait_idle()?;
+        Ok(Some(profiler.lock().unwrap().report(&self.adapter_description())))
     }
 }
 

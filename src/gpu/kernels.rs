@@ -69,6 +69,8 @@ pub struct Kernel {
     pub source: &'static KernelSource,
     pipeline: wgpu::ComputePipeline,
     bind_group_layout: wgpu::BindGroupLayout,
+    /// The context's profiler when it was on at build time: every dispatch is timed.
+    profiler: Option<super::profiler::SharedProfiler>,
 }
 
 impl Kernel {
@@ -135,7 +137,7 @@ impl Kernel {
             },
             cache: None,
         });
-        Self { label, source, pipeline, bind_group_layout }
+        Self { label, source, pipeline, bind_group_layout, profiler: ctx.profiler.clone() }
     }
 
     /// A bind group with every binding of the kernel taken from `resources` by name.
@@ -160,9 +162,13 @@ impl Kernel {
 
     /// Records a dispatch of `invocations` invocations along x.
     pub fn dispatch(&self, pass: &mut wgpu::ComputePass, bind_group: &wgpu::BindGroup, invocations: u32) {
+        let pair = self.profiler.as_ref().and_then(|p| p.lock().unwrap().begin(pass, &self.label));
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(invocations.div_ceil(self.source.workgroup_size[0]), 1, 1);
+        if let (Some(p), Some(pair)) = (&self.profiler, pair) {
+            p.lock().unwrap().end(pass, pair);
+        }
     }
 
     /// Records an indirect dispatch whose workgroup counts are at `offset` (bytes) in `args`.
@@ -173,8 +179,12 @@ impl Kernel {
         args: &wgpu::Buffer,
         offset: u64,
     ) {
+        let pair = self.profiler.as_ref().and_then(|p| p.lock().unwrap().begin(pass, &self.label));
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups_indirect(args, offset);
+        if let (Some(p), Some(pair)) = (&self.profiler, pair) {
+            p.lock().unwrap().end(pass, pair);
+        }
     }
 }

@@ -4,6 +4,7 @@
 pub mod context;
 pub mod kernels;
 pub mod layout;
+pub mod profiler;
 pub mod resources;
 
 pub use context::GpuContext;
