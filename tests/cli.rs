@@ -152,7 +152,7 @@ fn profile_reports_gpu_time_per_stage() {
     let o = gatetrace(&["render", "--res", "16x16", "--spp", "8", "--max-bounces", "3", "--gate", "box:3.14..3.19", "--profile", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
-    let elapsed: f64 = {
+    let wall_seconds: f64 = {
         let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
         meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
     };
@@ -165,6 +165,7 @@ fn profile_reports_gpu_time_per_stage() {
         assert!(ms > 0.0 && dispatches > 0, "{row}");
         total_ms += ms;
     }
-    // The stages ran within the render (plus the warm-up of the first pass).
-    assert!(total_ms / 1e3 <= elapsed + 1.0, "{total_ms} ms of stages in a {elapsed} s render");
+    // A check of the timestamp units, not of speed: the stages ran inside the render's wall
+    // time (a wrong tick period would put them orders of magnitude off).
+    assert!(total_ms > 0.0 && total_ms / 1e3 <= wall_seconds + 1.0, "{total_ms} ms of stages in a {wall_seconds} s render");
 }
