@@ -458,7 +458,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 }
             };
             let label = sequence.then(|| format!("frame {frame}/{}", plan.count - 1));
-            let frame_info = sequence.then_some((*frame, &plan));
+            let frame_info = (sequence || plan.anim_time.is_some()).then_some((*frame, &plan));
             render_one(&ctx, scene, &scene_path, &args.gate, settings, budget, path, label, frame_info, &bars)?;
         }
         if let Some(bar) = &frames_bar {
