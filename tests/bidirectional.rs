@@ -260,14 +260,7 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
         ..settings(Method::Ellipsoidal, gate, 451)
     };
     let mut tracer = BidirectionalTracer::new(&ctx, &scene, &wide).unwrap();
-    let films: Vec<Film> = (0..BATCHES)
-        .map(|_| {
-            tracer.render_samples(32).unwrap();
-            let film = tracer.film().unwrap();
-            tracer.reset_film();
-            film
-        })
-        .collect();
+    let films = common::films_of(&mut tracer, BATCHES, 32);
     println!("{}", tracer.stats_report().unwrap().unwrap());
     let queries: u64 = tracer.strategy_stats().unwrap().iter().map(|s| s.evaluated).sum();
     let (needles, off_length) = tracer.guarded();

@@ -54,6 +54,11 @@ pub fn render_films(
     spp: u32,
 ) -> Vec<Film> {
     let mut tracer = create_integrator(ctx, scene, settings).unwrap();
+    films_of(tracer.as_mut(), batches, spp)
+}
+
+/// `batches` independent films of `spp` samples per pixel from an existing integrator.
+pub fn films_of(tracer: &mut dyn gatetrace::integrator::Integrator, batches: usize, spp: u32) -> Vec<Film> {
     (0..batches)
         .map(|_| {
             tracer.render_samples(spp as u64).unwrap();
