@@ -45,40 +45,77 @@ pub fn run_bench(seconds: f64, max_bounces: u32, scene_path: &Path) -> Result<()
 }
 
 /// A method with its own settings, as named in `equal-time --methods`: `path`, `direct`,
-/// `ellipsoidal` or `ellipsoidal:K` (K connections per ellipsoid query).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// `ellipsoidal`, and for ellipsoidal options after colons: a number K (connections per query),
+/// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
+/// descent's settings, see `QuerySettings`), e.g. `ellipsoidal:4:exhaustive`.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Variant {
     /// Sampling method.
     pub method: crate::integrator::Method,
     /// Connections drawn from one ellipsoid query (1 for the other methods).
     pub connections_per_query: u32,
+    /// How ellipsoid queries traverse the BVH (ellipsoidal only).
+    pub query: crate::integrator::QuerySettings,
 }
 
 impl Variant {
-    /// Parses `METHOD` or `ellipsoidal:K`.
+    /// Parses `METHOD` or `ellipsoidal[:OPTION]...`.
     pub fn parse(s: &str) -> Result<Self> {
         use clap::ValueEnum;
-        let (name, k) = match s.split_once(':') {
-            Some((name, k)) => {
-                let k = k.trim().parse::<u32>().map_err(|_| anyhow::anyhow!("`{s}`: K in METHOD:K must be a whole number"))?;
-                (name.trim(), k)
-            }
-            None => (s.trim(), 1),
-        };
+        let mut parts = s.split(':').map(str::trim);
+        let name = parts.next().unwrap_or_default();
         let method = crate::integrator::Method::from_str(name, true)
-            .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:K"))?;
-        anyhow::ensure!(
-            k == 1 || method == crate::integrator::Method::Ellipsoidal,
-            "`{s}`: only ellipsoidal takes connections per query (ellipsoidal:K)"
-        );
-        Ok(Self { method, connections_per_query: k })
+            .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"))?;
+        let mut variant = Self { method, connections_per_query: 1, query: Default::default() };
+        for option in parts {
+            anyhow::ensure!(
+                method == crate::integrator::Method::Ellipsoidal,
+                "`{s}`: only ellipsoidal takes options (K, exhaustive, split=R, bottom=N)"
+            );
+            if option == "exhaustive" {
+                variant.query.split = 0.0;
+            } else if let Some(r) = option.strip_prefix("split=") {
+                variant.query.split =
+                    r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
+            } else if let Some(n) = option.strip_prefix("bottom=") {
+                variant.query.bottom_nodes =
+                    n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
+            } else {
+                variant.connections_per_query = option.parse().map_err(|_| {
+                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N)")
+                })?;
+            }
+        }
+        Ok(variant)
     }
 
-    /// The name it was given by.
+    /// The name it was given by (options in a fixed order).
     pub fn name(&self) -> String {
-        match self.connections_per_query {
-            1 => self.method.name().to_owned(),
-            k => format!("{}:{k}", self.method.name()),
+        let mut name = self.method.name().to_owned();
+        if self.connections_per_query != 1 {
+            name += &format!(":{}", self.connections_per_query);
+        }
+        if self.method == crate::integrator::Method::Ellipsoidal {
+            let default = crate::integrator::QuerySettings::default();
+            if self.query.split == 0.0 {
+                name += ":exhaustive";
+            } else if self.query.split != default.split {
+                name += &format!(":split={}", self.query.split);
+            }
+            if self.query.bottom_nodes != default.bottom_nodes {
+                name += &format!(":bottom={}", self.query.bottom_nodes);
+            }
+        }
+        name
+    }
+
+    /// `base` with this variant's method and options.
+    pub fn settings(&self, base: &RenderSettings) -> RenderSettings {
+        RenderSettings {
+            method: self.method,
+            connections_per_query: self.connections_per_query,
+            query: self.query,
+            ..base.clone()
         }
     }
 }
@@ -94,7 +131,7 @@ pub struct EqualTimeSettings {
     /// Independent renders per method and gate (the MSE is their mean).
     pub repeats: u32,
     /// Method of the reference images.
-    pub reference_method: crate::integrator::Method,
+    pub reference: Variant,
     /// Rendering time of each gate's reference (s), in 8 independent batches.
     pub reference_seconds: f64,
     /// Image size and bounces shared by all renders.
@@ -118,84 +155,118 @@ fn render_for(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
     Ok((tracer.film()?, start.elapsed().as_secs_f64()))
 }
 
-/// Renders every gate with every method for equal wall time and prints, per method, the mean
-/// squared error against a reference rendered much longer (its own estimated noise variance is
-/// subtracted), with the ratio of MSEs to the first method. Writes the rows to a CSV.
-pub fn run_equal_time(scene_path: &Path, s: &EqualTimeSettings) -> Result<()> {
+/// Work of one ellipsoid query: (loop iterations, triangles tested), from a short render with
+/// `--stats` (None for methods without queries).
+fn query_cost(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Option<(f64, f64)>> {
+    if settings.method != crate::integrator::Method::Ellipsoidal {
+        return Ok(None);
+    }
+    let settings = RenderSettings { stats: true, ..settings.clone() };
+    let mut tracer = crate::integrator::BidirectionalTracer::new(ctx, scene, &settings)?;
+    use crate::integrator::Integrator;
+    tracer.render_samples(2)?;
+    Ok(tracer.query_cost())
+}
+
+/// Renders every gate of every scene with every method for equal wall time and prints, per
+/// method, the mean squared error against a reference rendered much longer (its own estimated
+/// noise variance is subtracted), with the ratio of MSEs to the first method, and the
+/// ellipsoid queries' work. Writes one CSV row per render.
+pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings) -> Result<()> {
     use std::fmt::Write as _;
-    let scene = PreparedScene::new(load_gltf(scene_path)?)?;
     let ctx = GpuContext::new()?;
     let b = &s.base;
     println!("adapter: {}", ctx.adapter_description());
     println!(
-        "scene: {}, {}x{}, max bounces {}, {} s per render, {} repeats, reference: {} for {} s",
-        scene_path.display(),
+        "{}x{}, max bounces {}, {} s per render, {} repeats, reference: {} for {} s",
         b.width,
         b.height,
         b.max_bounces,
         s.seconds,
         s.repeats,
-        s.reference_method.name(),
+        s.reference.name(),
         s.reference_seconds
     );
-    let mut csv = String::from("gate,method,repeat,seconds,spp,mse,relative_mse,reference_noise\n");
+    let mut csv = String::from(
+        "scene,triangles,gate,method,repeat,seconds,spp,mse,relative_mse,reference_noise,iterations_per_query,\
+         triangles_tested_per_query\n",
+    );
     let mut seed = 1000;
-    for (spec, gate) in &s.gates {
-        // Reference: 8 batches, mean and variance of the mean per element.
-        let batches = 8;
-        let mut stats: Option<(Vec<f64>, Vec<f64>)> = None;
-        let mut ref_spp = 0;
-        for _ in 0..batches {
-            seed += 1;
-            let settings = RenderSettings { method: s.reference_method, gate: gate.clone(), seed, ..b.clone() };
-            let (film, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
-            ref_spp += film.spp;
-            let (sum, sq) = stats.get_or_insert_with(|| (vec![0.0; film.data.len()], vec![0.0; film.data.len()]));
-            for (i, &v) in film.data.iter().enumerate() {
-                sum[i] += v as f64;
-                sq[i] += (v as f64) * (v as f64);
-            }
-        }
-        let (sum, sq) = stats.unwrap();
-        let n = batches as f64;
-        let reference: Vec<f64> = sum.iter().map(|x| x / n).collect();
-        let ref_var: Vec<f64> = sq.iter().zip(&reference).map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n).collect();
-        let elements = reference.len() as f64;
-        let ref_noise = ref_var.iter().sum::<f64>() / elements;
-        let ref_power = reference.iter().map(|x| x * x).sum::<f64>() / elements;
-        println!("\ngate {spec}: reference {ref_spp} spp, mean {:.6}, its noise variance {ref_noise:.3e}", sum.iter().sum::<f64>() / n / elements);
-        println!("{:>14} {:>8} {:>12} {:>12} {:>14}", "method", "spp", "MSE", "rel. MSE", "MSE / first");
-        let mut first = None;
-        for variant in &s.methods {
-            let mut mses = Vec::new();
-            let mut spps = Vec::new();
-            for repeat in 0..s.repeats {
+    for scene_path in scene_paths {
+        let scene = PreparedScene::new(load_gltf(scene_path)?)?;
+        let triangles = scene.triangles.len();
+        println!("\nscene {} ({triangles} triangles)", scene_path.display());
+        let scene_name = scene_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        for (spec, gate) in &s.gates {
+            // Reference: 8 batches, mean and variance of the mean per element.
+            let batches = 8;
+            let mut stats: Option<(Vec<f64>, Vec<f64>)> = None;
+            let mut ref_spp = 0;
+            for _ in 0..batches {
                 seed += 1;
-                let settings = RenderSettings {
-                    method: variant.method,
-                    connections_per_query: variant.connections_per_query,
-                    gate: gate.clone(),
-                    seed,
-                    ..b.clone()
-                };
-                let (film, secs) = render_for(&ctx, &scene, &settings, s.seconds)?;
-                let se: f64 = film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
-                let mse = se - ref_noise;
-                writeln!(csv, "{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e}", variant.name(), film.spp, mse / ref_power)
-                    .unwrap();
-                mses.push(mse);
-                spps.push(film.spp);
+                let settings = RenderSettings { gate: gate.clone(), seed, ..s.reference.settings(b) };
+                let (film, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
+                ref_spp += film.spp;
+                let (sum, sq) = stats.get_or_insert_with(|| (vec![0.0; film.data.len()], vec![0.0; film.data.len()]));
+                for (i, &v) in film.data.iter().enumerate() {
+                    sum[i] += v as f64;
+                    sq[i] += (v as f64) * (v as f64);
+                }
             }
-            let mse = mses.iter().sum::<f64>() / mses.len() as f64;
-            let first_mse = *first.get_or_insert(mse);
+            let (sum, sq) = stats.unwrap();
+            let n = batches as f64;
+            let reference: Vec<f64> = sum.iter().map(|x| x / n).collect();
+            let ref_var: Vec<f64> =
+                sq.iter().zip(&reference).map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n).collect();
+            let elements = reference.len() as f64;
+            let ref_noise = ref_var.iter().sum::<f64>() / elements;
+            let ref_power = reference.iter().map(|x| x * x).sum::<f64>() / elements;
             println!(
-                "{:>14} {:>8} {:>12.4e} {:>12.4e} {:>14.3}",
-                variant.name(),
-                spps.iter().sum::<u64>() / spps.len() as u64,
-                mse,
-                mse / ref_power,
-                mse / first_mse
+                "gate {spec}: reference {ref_spp} spp, mean {:.6}, its noise variance {ref_noise:.3e}",
+                sum.iter().sum::<f64>() / n / elements
             );
+            println!(
+                "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9}",
+                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query"
+            );
+            let mut first = None;
+            for variant in &s.methods {
+                let mut mses = Vec::new();
+                let mut spps = Vec::new();
+                let base = RenderSettings { gate: gate.clone(), ..variant.settings(b) };
+                let cost = query_cost(&ctx, &scene, &base)?;
+                let (iterations, tested) = cost.map_or((String::new(), String::new()), |(n, t)| (format!("{n:.2}"), format!("{t:.2}")));
+                for repeat in 0..s.repeats {
+                    seed += 1;
+                    let settings = RenderSettings { seed, ..base.clone() };
+                    let (film, secs) = render_for(&ctx, &scene, &settings, s.seconds)?;
+                    let se: f64 =
+                        film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
+                    let mse = se - ref_noise;
+                    writeln!(
+                        csv,
+                        "{scene_name},{triangles},{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e},{iterations},{tested}",
+                        variant.name(),
+                        film.spp,
+                        mse / ref_power
+                    )
+                    .unwrap();
+                    mses.push(mse);
+                    spps.push(film.spp);
+                }
+                let mse = mses.iter().sum::<f64>() / mses.len() as f64;
+                let first_mse = *first.get_or_insert(mse);
+                println!(
+                    "{:>24} {:>8} {:>12.4e} {:>12.4e} {:>12.3} {:>11} {:>9}",
+                    variant.name(),
+                    spps.iter().sum::<u64>() / spps.len() as u64,
+                    mse,
+                    mse / ref_power,
+                    mse / first_mse,
+                    iterations,
+                    tested
+                );
+            }
         }
     }
     if let Some(path) = &s.csv {

@@ -110,6 +110,18 @@ struct RenderArgs {
     /// its shading and two shadow rays.
     #[arg(long, default_value_t = 1, value_name = "K")]
     connections_per_query: u32,
+    /// `ellipsoidal`: BVH nodes whose box diagonal is at most R times the spheroid's semi-major
+    /// axis are entered by a stochastic descent (one child at a time, in proportion to an
+    /// estimate of the arcs below it), so a query's work grows with the tree's depth rather
+    /// than with the triangles near the spheroid (dimensionless; any R is unbiased, larger is
+    /// cheaper and noisier). 0: the exhaustive query, which visits every node the spheroid may
+    /// touch.
+    #[arg(long, default_value_t = 1.0, value_name = "R")]
+    query_split: f32,
+    /// `ellipsoidal`: a stochastic descent visits every node of a subtree once it reaches one
+    /// of at most N BVH nodes (1: descend to single leaves).
+    #[arg(long, default_value_t = 31, value_name = "N")]
+    query_bottom_nodes: u32,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
     #[arg(long, default_value_t = 1e-6, value_name = "REL")]
@@ -207,10 +219,11 @@ struct BenchArgs {
 
 #[derive(Args)]
 struct EqualTimeArgs {
-    /// glTF 2.0 scene; the Cornell box when omitted.
-    scene: Option<PathBuf>,
-    /// Methods to compare, comma-separated: path, direct, ellipsoidal, or ellipsoidal:K (K
-    /// connections per ellipsoid query, see render --connections-per-query).
+    /// glTF 2.0 scenes, each compared separately; the Cornell box when omitted.
+    scenes: Vec<PathBuf>,
+    /// Methods to compare, comma-separated: path, direct, ellipsoidal, and ellipsoidal with
+    /// options after colons: K (connections per query, see render --connections-per-query),
+    /// `exhaustive` (render --query-split 0) or `split=R`, e.g. ellipsoidal:4:exhaustive.
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<gatetrace::bench::Variant>,
     /// Gates to compare at, separated by `;` (same syntax as `render --gate`).
@@ -222,9 +235,9 @@ struct EqualTimeArgs {
     /// Independent renders per method and gate.
     #[arg(long, default_value_t = 3)]
     repeats: u32,
-    /// Method of the reference images.
-    #[arg(long, value_enum, default_value_t = Method::Direct)]
-    reference_method: Method,
+    /// Method of the reference images (same syntax as --methods).
+    #[arg(long, default_value = "direct", value_parser = parse_variant)]
+    reference_method: gatetrace::bench::Variant,
     /// Seconds of rendering of each gate's reference.
     #[arg(long, default_value_t = 120.0)]
     reference_seconds: f64,
@@ -234,7 +247,9 @@ struct EqualTimeArgs {
     /// Maximum number of scattering vertices.
     #[arg(long, default_value_t = 5)]
     max_bounces: u32,
-    /// Write one row per render to this CSV file.
+    /// Write one row per render to this CSV file (scene, triangles, gate, method, repeat,
+    /// seconds, spp, MSE, relative MSE, the reference's noise, and for ellipsoidal the loop
+    /// iterations and triangles tested per ellipsoid query).
     #[arg(long)]
     csv: Option<PathBuf>,
 }
@@ -257,7 +272,7 @@ fn run_stress(args: StressArgs) -> Result<()> {
 }
 
 fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
-    let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let scenes = if args.scenes.is_empty() { vec![PathBuf::from(DEFAULT_SCENE)] } else { args.scenes.clone() };
     let gates = args
         .gates
         .split(';')
@@ -270,12 +285,12 @@ fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
         gates,
         seconds: args.seconds,
         repeats: args.repeats,
-        reference_method: args.reference_method,
+        reference: args.reference_method,
         reference_seconds: args.reference_seconds,
         base: RenderSettings { width: args.res.0, height: args.res.1, max_bounces: args.max_bounces, ..Default::default() },
         csv: args.csv,
     };
-    gatetrace::bench::run_equal_time(&scene, &settings)
+    gatetrace::bench::run_equal_time(&scenes, &settings)
 }
 
 fn parse_variant(s: &str) -> Result<gatetrace::bench::Variant, String> {
@@ -403,6 +418,11 @@ fn run_render(args: RenderArgs) -> Result<()> {
         portable_atomics: false,
         binding_limit: None,
         connections_per_query: args.connections_per_query,
+        query: gatetrace::integrator::QuerySettings {
+            split: args.query_split,
+            bottom_nodes: args.query_bottom_nodes,
+            ..Default::default()
+        },
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
         keep_splats_on_device: false,
     };
@@ -525,6 +545,7 @@ fn render_one(
     if settings.method == Method::Ellipsoidal {
         let g = settings.ellipsoid_guards;
         metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
+        metadata.push(("query_split".into(), settings.query.split.to_string()));
         metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
     }
     if let Some((index, plan)) = frame {

@@ -63,10 +63,24 @@ fn oracle_thetas(scene: &gatetrace::scene::PreparedScene, fs: glam::Vec3, fc: gl
         .collect()
 }
 
-/// Runs `probe_ellipsoid_query`: (triangle, sum of Theta, theta, J, point, nodes visited).
+/// The exhaustive query (every node the spheroid may touch, no allowance), as probe constants.
+const EXHAUSTIVE: &[(&str, f64)] = &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64)];
+
+/// Runs `probe_ellipsoid_query` with the default query settings: (triangle, the sample's weight
+/// in (triangle, theta), theta, J, point, loop iterations).
 fn run_queries(
     ctx: &gatetrace::gpu::GpuContext,
     tracer: &gatetrace::integrator::PathTracer,
+    queries: &[(glam::Vec3, glam::Vec3, f32, f32, [u32; 3])],
+) -> Vec<(u32, f32, f32, f32, glam::Vec3, u32)> {
+    run_queries_with(ctx, tracer, &[], queries)
+}
+
+/// `run_queries` with the probe specialised by `constants` (QUERY_SPLIT, QUERY_ALLOWANCE, ...).
+fn run_queries_with(
+    ctx: &gatetrace::gpu::GpuContext,
+    tracer: &gatetrace::integrator::PathTracer,
+    constants: &[(&'static str, f64)],
     queries: &[(glam::Vec3, glam::Vec3, f32, f32, [u32; 3])],
 ) -> Vec<(u32, f32, f32, f32, glam::Vec3, u32)> {
     let input: Vec<[f32; 4]> = queries
@@ -75,7 +89,7 @@ fn run_queries(
             [[fs.x, fs.y, fs.z, *tau], [fc.x, fc.y, fc.z, *u], [f32::from_bits(key[0]), f32::from_bits(key[1]), f32::from_bits(key[2]), 0.0]]
         })
         .collect();
-    let out = common::run_probe(ctx, tracer, "probe_ellipsoid_query", &[], &input, 2 * queries.len());
+    let out = common::run_probe(ctx, tracer, "probe_ellipsoid_query", constants, &input, 2 * queries.len());
     out.chunks(2)
         .map(|o| (o[0][0].to_bits(), o[0][1], o[0][2], o[0][3], glam::Vec3::new(o[1][0], o[1][1], o[1][2]), o[1][3].to_bits()))
         .collect()
@@ -83,9 +97,9 @@ fn run_queries(
 
 #[test]
 fn bvh_queries_find_every_intersected_triangle() {
-    // The sum of Theta found by the pruned BVH traversal equals the brute-force sum over every
-    // triangle (pruning never drops a triangle the spheroid cuts), the picked triangle is cut,
-    // and the sampled point lies on the spheroid.
+    // The exhaustive query: the sum of Theta found by the pruned BVH traversal equals the
+    // brute-force sum over every triangle (pruning never drops a triangle the spheroid cuts), the
+    // picked triangle is cut, and the sampled point lies on the spheroid.
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let mut rng = gatetrace::rng::Rng::new(3, 0, 0);
@@ -99,7 +113,7 @@ fn bvh_queries_find_every_intersected_triangle() {
                 (fs, fc, fs.distance(fc) + extra, v().y + 0.5, [i, 17, 23])
             })
             .collect();
-        let results = run_queries(&ctx, &tracer, &queries);
+        let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
         let (mut cut, mut nodes) = (0, 0u64);
         for ((fs, fc, tau, _, _), &(tri, total, _, _, point, visited)) in queries.iter().zip(&results) {
             let thetas = oracle_thetas(&scene, *fs, *fc, *tau);
@@ -127,6 +141,7 @@ fn bvh_queries_find_every_intersected_triangle() {
 
 #[test]
 fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
+    // The exhaustive query picks triangle i with probability Theta_i / sum Theta.
     use common::stats::chi2_test;
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
@@ -135,7 +150,7 @@ fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
     let (fs, fc, tau) = (glam::Vec3::new(-0.2, 0.1, 0.0), glam::Vec3::new(0.25, -0.1, 0.1), 0.9f32);
     let n = 40_000u32;
     let queries: Vec<_> = (0..n).map(|i| (fs, fc, tau, 0.5, [i, 99, 7])).collect();
-    let results = run_queries(&ctx, &tracer, &queries);
+    let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
     let thetas = oracle_thetas(&scene, fs, fc, tau);
     let total: f64 = thetas.iter().sum();
     let mut observed = vec![0.0; thetas.len()];

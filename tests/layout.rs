@@ -35,7 +35,7 @@ fn wgsl_structs_match_rust_structs() {
         PathVertex { position, path_length, normal, material, shading_normal, triangle, throughput, flags, pdf_fwd,
                      pdf_rev, uv }
         Splat { radiance, path_length, pixel, reserved0, reserved1, reserved2 }
-        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals }
+        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals, ellipsoid_queries }
         DisplayParams { inverse_spp, exposure, curve, bin, decades, stride, reserved1, reserved2 }
     };
     let module = naga::front::wgsl::parse_str(LAYOUT_WGSL).expect("layout.wgsl parses");

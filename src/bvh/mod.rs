@@ -9,7 +9,7 @@ pub mod traverse;
 use glam::Vec3;
 use obvhs::{BvhBuildParams, triangle::Triangle as ObvhsTriangle};
 
-use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES};
+use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, Triangle};
 
 /// A flattened BVH over a triangle list.
 #[derive(Clone, Debug)]
@@ -52,6 +52,28 @@ impl Bvh {
             self.flatten(bvh2, node.first_index as usize + 1);
         }
         self.nodes[me].skip = self.nodes.len() as u32;
+    }
+
+    /// Per node, the total area of the triangles below it and of the emitting ones among them
+    /// (m^2), for `triangles` in BVH order: what the ellipsoid queries' stochastic descent
+    /// weighs children by (shaders/lib/ellipsoid_query.wesl, `bvh_node_areas`). Summed in f64.
+    pub fn node_areas(&self, triangles: &[Triangle]) -> Vec<[f32; 2]> {
+        let mut sums = vec![[0.0f64; 2]; self.nodes.len()];
+        // Children follow their parent in depth-first order: fill from the back.
+        for i in (0..self.nodes.len()).rev() {
+            sums[i] = match self.nodes[i].leaf_range() {
+                Some(range) => range.fold([0.0; 2], |[all, lit], k| {
+                    let t = &triangles[k as usize];
+                    let area = 0.5 * t.e1.as_dvec3().cross(t.e2.as_dvec3()).length();
+                    [all + area, lit + if t.light == NONE { 0.0 } else { area }]
+                }),
+                None => {
+                    let (a, b) = (sums[i + 1], sums[self.nodes[i + 1].skip as usize]);
+                    [a[0] + b[0], a[1] + b[1]]
+                }
+            };
+        }
+        sums.into_iter().map(|[all, lit]| [all as f32, lit as f32]).collect()
     }
 
     /// `position[i]` = BVH position of input triangle `i` (inverse of `order`).

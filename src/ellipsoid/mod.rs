@@ -9,6 +9,7 @@
 
 use glam::DVec3;
 
+pub mod query;
 pub mod stress;
 
 /// A prolate spheroid: the points x with |x - focus_s| + |x - focus_c| = length.

@@ -374,6 +374,8 @@ pub struct QueueCounters {
     pub shadow_rays: u32,
     /// Traversals the device cut short (lavapipe's loop limit); never reset during a render.
     pub truncated_traversals: u32,
+    /// Entries pushed to `ellipsoid_queries` (reset with the ray counters).
+    pub ellipsoid_queries: u32,
 }
 
 /// One vertex of a bidirectional subpath (see `PathVertex` in layout.wesl).

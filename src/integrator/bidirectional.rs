@@ -13,7 +13,11 @@
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
 //!     intersect_closest                 closest hits of ray_queue
 //!     extend_subpaths                   store the vertex, sample the BSDF, next ray
-//! connect_direct | connect_ellipsoidal  every (s, t): contribution, MIS, shadow_queue
+//! connect_direct                        every (s, t): contribution, MIS, shadow_queue
+//! | connect_spherical                   (ellipsoidal) lights seen directly: splat, shadow_queue
+//!   queue_ellipsoid_queries             every (s, t) with a spheroid -> ellipsoid_queries
+//!   setup_dispatch(ellipsoid_queries)
+//!   connect_ellipsoidal                 one query per entry: contribution, MIS, shadow_queue
 //! setup_dispatch(shadow_rays)
 //! trace_shadow_rays                     occluded connections are cleared
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
@@ -89,6 +93,12 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
             (1..=MAX_CONNECTIONS_PER_QUERY).contains(&k),
             "--connections-per-query {k}: give 1 to {MAX_CONNECTIONS_PER_QUERY}"
         );
+        let q = settings.query;
+        ensure!(
+            q.split >= 0.0 && q.split.is_finite(),
+            "--query-split {}: give a non-negative number (0: exhaustive queries)",
+            q.split
+        );
         let g = settings.ellipsoid_guards;
         ensure!(
             g.needle >= 0.0 && g.needle.is_finite() && g.length > 0.0,
@@ -119,6 +129,9 @@ struct Stages {
     intersect_closest: Kernel,
     extend_subpaths: Kernel,
     connect: Kernel,
+    /// Ellipsoidal connections: connect_spherical, queue_ellipsoid_queries and
+    /// setup_dispatch(ellipsoid_queries) (connect is then indirect).
+    ellipsoidal: Option<[Kernel; 3]>,
     setup_dispatch_shadow_rays: Kernel,
     trace_shadow_rays: Kernel,
     accumulate: Kernel,
@@ -132,6 +145,7 @@ struct Bindings {
     intersect_closest: [wgpu::BindGroup; 2],
     extend_subpaths: [wgpu::BindGroup; 2],
     connect: wgpu::BindGroup,
+    ellipsoidal: Option<[wgpu::BindGroup; 3]>,
     setup_dispatch_shadow_rays: wgpu::BindGroup,
     trace_shadow_rays: wgpu::BindGroup,
     accumulate: wgpu::BindGroup,
@@ -176,6 +190,8 @@ impl<'a> BidirectionalTracer<'a> {
         let k = settings.connections_per_query as u64;
         let contributions_per_slot = contributions_per_slot * k;
         let splats_per_slot = light_vertices * k;
+        // Ellipsoid queries of a slot: the pairs (s, t) with s, t >= 1 and s + t <= B + 1.
+        let queries_per_slot = if ellipsoidal { (b as u64 * (b as u64 + 1) / 2).max(1) } else { 1 };
         // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
         let per_slot = [
             (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
@@ -183,8 +199,15 @@ impl<'a> BidirectionalTracer<'a> {
             splats_per_slot * size_of::<Splat>() as u64,
             rays_per_connection * (contributions_per_slot + splats_per_slot) * size_of::<ShadowRay>() as u64,
             2 * size_of::<PathState>() as u64,
+            queries_per_slot * 8,
         ];
-        let fit = per_slot.iter().map(|&bytes| limit / bytes).min().unwrap().min(MAX_SLOTS_PER_DISPATCH / 2);
+        let fit = per_slot
+            .iter()
+            .map(|&bytes| limit / bytes)
+            .min()
+            .unwrap()
+            .min(MAX_SLOTS_PER_DISPATCH / 2)
+            .min(MAX_SLOTS_PER_DISPATCH / queries_per_slot);
         let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, TARGET_SLOTS_PER_WAVE)?;
         let slots = slots_per_wave;
 
@@ -218,7 +241,8 @@ impl<'a> BidirectionalTracer<'a> {
         r.storage_zeroed(ctx, "splats", slots * per_slot[2], none)?;
         r.storage_zeroed(ctx, "shadow_queue", slots * per_slot[3], none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
-        r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
+        r.storage_zeroed(ctx, "dispatch_args", 9 * 4, wgpu::BufferUsages::INDIRECT)?;
+        r.storage_zeroed(ctx, "ellipsoid_queries", if ellipsoidal { slots * per_slot[5] } else { 16 }, none)?;
         r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
         // Three counters per strategy, then five for the ellipsoid queries' work and guards.
         r.storage_zeroed(ctx, "strategy_stats", 4 * (3 * strategy_count + QUERY_COUNTERS as u64), none)?;
@@ -232,6 +256,9 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("CONNECTIONS_PER_QUERY", k as f64));
             constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
             constants.push(("LENGTH_GUARD", settings.ellipsoid_guards.length as f64));
+            constants.push(("QUERY_SPLIT", settings.query.split as f64));
+            constants.push(("QUERY_BOTTOM_NODES", settings.query.bottom_nodes as f64));
+            constants.push(("QUERY_ALLOWANCE", settings.query.allowance as f64));
         }
         constants.push(("STATS", settings.stats as u32 as f64));
         constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));
@@ -250,6 +277,13 @@ impl<'a> BidirectionalTracer<'a> {
             intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
             extend_subpaths: Kernel::new(ctx, "extend_subpaths", None, &constants),
             connect: Kernel::new(ctx, if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }, None, &constants),
+            ellipsoidal: ellipsoidal.then(|| {
+                [
+                    Kernel::new(ctx, "connect_spherical", None, &constants),
+                    Kernel::new(ctx, "queue_ellipsoid_queries", None, &constants),
+                    Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0)),
+                ]
+            }),
             setup_dispatch_shadow_rays: Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with(1.0)),
             trace_shadow_rays: Kernel::new(ctx, "trace_shadow_rays", None, &constants),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
@@ -268,6 +302,7 @@ impl<'a> BidirectionalTracer<'a> {
             intersect_closest: both(&stages.intersect_closest),
             extend_subpaths: both(&stages.extend_subpaths),
             connect: stages.connect.bind(ctx, &even),
+            ellipsoidal: stages.ellipsoidal.as_ref().map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
             setup_dispatch_shadow_rays: stages.setup_dispatch_shadow_rays.bind(ctx, &even),
             trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
             accumulate: stages.accumulate.bind(ctx, &even),
@@ -292,6 +327,13 @@ impl<'a> BidirectionalTracer<'a> {
             passes_since_fold: 0,
             fold_interval,
         })
+    }
+
+    /// Mean work of one ellipsoid query so far: loop iterations over BVH nodes and triangles,
+    /// and triangles tested (None without `stats` or before any query).
+    pub fn query_cost(&self) -> Option<(f64, f64)> {
+        let queries: u64 = self.stats.as_ref()?.iter().map(|s| s.evaluated).sum();
+        (queries > 0).then(|| (self.query_work[0] as f64 / queries as f64, self.query_work[1] as f64 / queries as f64))
     }
 
     /// Strategy counters so far (None unless the settings asked for statistics).
@@ -338,7 +380,15 @@ impl<'a> BidirectionalTracer<'a> {
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("connect") });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("connect"), timestamp_writes: None });
-            s.connect.dispatch(&mut pass, &b.connect, wave.slot_count);
+            match (&s.ellipsoidal, &b.ellipsoidal) {
+                (Some([spherical, queue, setup]), Some([spherical_group, queue_group, setup_group])) => {
+                    spherical.dispatch(&mut pass, spherical_group, wave.slot_count);
+                    queue.dispatch(&mut pass, queue_group, wave.slot_count);
+                    setup.dispatch(&mut pass, setup_group, 1);
+                    s.connect.dispatch_indirect(&mut pass, &b.connect, args, 24);
+                }
+                _ => s.connect.dispatch(&mut pass, &b.connect, wave.slot_count),
+            }
             s.setup_dispatch_shadow_rays.dispatch(&mut pass, &b.setup_dispatch_shadow_rays, 1);
             s.trace_shadow_rays.dispatch_indirect(&mut pass, &b.trace_shadow_rays, args, 12);
             s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);

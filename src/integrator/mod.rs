@@ -92,11 +92,43 @@ pub struct RenderSettings {
     /// [`bidirectional::MAX_CONNECTIONS_PER_QUERY`]; `ellipsoidal` only): K independent picks
     /// share one BVH traversal, each weighted 1/K.
     pub connections_per_query: u32,
+    /// How `ellipsoidal`'s ellipsoid queries traverse the BVH.
+    pub query: QuerySettings,
     /// Where `ellipsoidal` leaves out connections f32 cannot place (numerical studies).
     pub ellipsoid_guards: EllipsoidGuards,
     /// Bidirectional methods: keep the light-tracing sums on the device (f32) instead of
     /// folding them into host f64 sums every few passes; the viewer resolves them there.
     pub keep_splats_on_device: bool,
+}
+
+/// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
+/// the spheroid may touch near the root, a stochastic descent (one child at a time, in
+/// proportion to an estimate of the arcs below it) into nodes that are small against the
+/// spheroid, and every node of the small subtrees a descent ends in. Any setting is unbiased;
+/// they trade work per query against variance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QuerySettings {
+    /// Nodes whose box diagonal is at most `split` times the spheroid's semi-major axis are
+    /// entered by a descent (dimensionless); 0: the exhaustive query, which visits every node
+    /// the spheroid may touch (cost grows with the triangles near the spheroid).
+    pub split: f32,
+    /// A descent visits whole subtrees of at most this many BVH nodes.
+    pub bottom_nodes: u32,
+    /// Loop iterations (node boxes and triangles) after which a query finishes with one descent
+    /// over the rest of the tree: bounds every query's work, which lavapipe needs (it ends an
+    /// invocation's loops after 65535 iterations in total). Unbiased like the rest.
+    pub allowance: u32,
+}
+
+impl QuerySettings {
+    /// The exhaustive query (every node the spheroid may touch, up to the allowance).
+    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096 };
+}
+
+impl Default for QuerySettings {
+    fn default() -> Self {
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096 }
+    }
 }
 
 /// The two numerical guards of ellipsoidal connections, relative (dimensionless). Each leaves
@@ -133,6 +165,7 @@ impl Default for RenderSettings {
             portable_atomics: false,
             binding_limit: None,
             connections_per_query: 1,
+            query: QuerySettings::default(),
             ellipsoid_guards: EllipsoidGuards::default(),
             keep_splats_on_device: false,
         }
@@ -309,6 +342,7 @@ pub fn upload_scene(
     let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
+    r.storage_init(ctx, "bvh_node_areas", &scene.node_areas)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;

@@ -18,6 +18,8 @@ pub struct PreparedScene {
     pub bvh: Bvh,
     /// Triangles in BVH order.
     pub triangles: Vec<Triangle>,
+    /// Per BVH node: area of its triangles and of the emitting ones (m^2), see `Bvh::node_areas`.
+    pub node_areas: Vec<[f32; 2]>,
     /// Shading attributes in BVH order.
     pub shading: Vec<TriangleShading>,
     /// GPU materials.
@@ -74,7 +76,19 @@ impl PreparedScene {
         }
         let (texture_infos, texels) = gpu_textures(&scene);
         let ray_epsilon = 1e-6 * scene.triangle_extent();
-        Ok(Self { materials: gpu_materials(&scene), scene, bvh, triangles, shading, texture_infos, texels, lights, ray_epsilon })
+        let node_areas = bvh.node_areas(&triangles);
+        Ok(Self {
+            materials: gpu_materials(&scene),
+            scene,
+            bvh,
+            triangles,
+            node_areas,
+            shading,
+            texture_infos,
+            texels,
+            lights,
+            ray_epsilon,
+        })
     }
 
     /// True when some material has a base-colour texture.

@@ -224,3 +224,59 @@ pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::Prepared
     PreparedScene::new(load_gltf(&gltf.write(&dir, "soup.gltf")).unwrap()).unwrap()
 }
 
+
+/// The Cornell box holding a white geodesic sphere (radius 0.25 m, 5 cm above the floor) of
+/// 20 f^2 flat triangles, each vertex pushed along its radius by +-4 % bumps: the scene
+/// tools/make_sphere_scene.py writes, built in memory (f = 128: 327,680 sphere triangles).
+pub fn sphere_scene(frequency: u32) -> PreparedScene {
+    use glam::Vec3;
+    let mut scene = load_gltf(&repo_path("assets/scenes/cornell_box.gltf")).unwrap();
+    let white = scene.materials.iter().position(|m| m.name == "white").unwrap() as u32;
+    let p = (1.0 + 5f32.sqrt()) / 2.0;
+    let ico: Vec<Vec3> = [
+        (-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0), (0.0, -1.0, p), (0.0, 1.0, p),
+        (0.0, -1.0, -p), (0.0, 1.0, -p), (p, 0.0, -1.0), (p, 0.0, 1.0), (-p, 0.0, -1.0), (-p, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let faces = [
+        (0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
+        (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10),
+        (8, 6, 7), (9, 8, 1),
+    ];
+    let centre = Vec3::new(0.0, -0.5 + 0.05 + 0.25, -0.05);
+    let waves = [
+        (Vec3::new(0.36, 0.48, 0.80), 7.0, 0.3, 0.45),
+        (Vec3::new(-0.60, 0.64, 0.48), 11.0, 1.7, 0.30),
+        (Vec3::new(0.0, -0.28, 0.96), 17.0, 2.9, 0.15),
+        (Vec3::new(0.80, 0.0, -0.60), 29.0, 0.8, 0.10),
+    ];
+    let point = |d: Vec3| {
+        let d = d.normalize();
+        let bump: f32 = waves.iter().map(|&(w, k, phase, weight)| weight * (k * w.dot(d) + phase).sin()).sum();
+        centre + 0.25 * (1.0 + 0.04 * bump) * d
+    };
+    let f = frequency as f32;
+    for &(a, b, c) in &faces {
+        let (a, b, c) = (ico[a], ico[b], ico[c]);
+        let lattice = |i: u32, j: u32| point(a * (f - (i + j) as f32) + b * i as f32 + c * j as f32);
+        for i in 0..frequency {
+            for j in 0..frequency - i {
+                let mut add = |p: [Vec3; 3]| {
+                    scene.triangles.push(gatetrace::scene::SceneTriangle {
+                        positions: p,
+                        normals: None,
+                        uvs: [glam::Vec2::ZERO; 3],
+                        material: white,
+                    })
+                };
+                add([lattice(i, j), lattice(i + 1, j), lattice(i, j + 1)]);
+                if j + 1 < frequency - i {
+                    add([lattice(i + 1, j), lattice(i + 1, j + 1), lattice(i, j + 1)]);
+                }
+            }
+        }
+    }
+    PreparedScene::new(scene).unwrap()
+}

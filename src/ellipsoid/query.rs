@@ -1,0 +1,359 @@
+//! CPU twin of `shaders/lib/ellipsoid_query.wesl`: the ellipsoid query's traversal of the
+//! stackless BVH (every child near the root, stochastic descents into nodes that are small
+//! against the spheroid, whole small subtrees at the bottom, one final descent over what is
+//! left past the allowance), the node estimate that weighs a descent's children, and the
+//! triangles' reservoir weights from circular intervals. The same random numbers (pcg4d of the
+//! query's key) drive the same decisions; the arithmetic is f64 on the f64 oracle's sections
+//! (`super::Spheroid`), so decisions agree with the device's except at near-ties.
+//!
+//! It is an oracle for tests: `reached` lists what one query reaches, with each triangle's
+//! weight q_i / P_i; averaged over keys that must give q_i for every triangle (the descent is
+//! unbiased), which tests check against brute force.
+
+use glam::{DVec3, DVec4};
+
+use super::{Spheroid, Triangle as OracleTriangle};
+use crate::gpu::layout::{BvhNode, NONE, Triangle};
+use crate::integrator::QuerySettings;
+use crate::rng::pcg4d;
+
+/// The scene as the query sees it: BVH nodes, their triangle areas (total, emitting) and the
+/// triangles in BVH order.
+#[derive(Clone, Copy)]
+pub struct QueryScene<'a> {
+    /// Stackless BVH nodes (depth-first, skip links).
+    pub nodes: &'a [BvhNode],
+    /// Per node: area of its triangles and of the emitting ones (m^2).
+    pub node_areas: &'a [[f32; 2]],
+    /// Triangles in BVH order.
+    pub triangles: &'a [Triangle],
+}
+
+impl<'a> QueryScene<'a> {
+    /// The query view of a prepared scene.
+    pub fn of(scene: &'a crate::scene::PreparedScene) -> Self {
+        Self { nodes: &scene.bvh.nodes, node_areas: &scene.node_areas, triangles: &scene.triangles }
+    }
+}
+
+/// One ellipsoid query: the spheroid and what prunes it.
+#[derive(Clone, Copy, Debug)]
+pub struct Query {
+    /// Light-side focus x_s (m).
+    pub focus_s: DVec3,
+    /// Camera-side focus x_c (m).
+    pub focus_c: DVec3,
+    /// tau_e, the sum of distances to the foci (m).
+    pub tau_e: f64,
+    /// Triangles left out (the foci's own), or NONE.
+    pub ignore: [u32; 2],
+    /// Count only emitting triangles.
+    pub lights_only: bool,
+    /// Half-spaces the ends reach: points with dot(xyz, x) < w cannot be connected (xyz = 0:
+    /// none).
+    pub reach: [DVec4; 2],
+}
+
+/// What one query reached: triangles with their weights q_i / P_i, and its work.
+#[derive(Clone, Debug, Default)]
+pub struct Reached {
+    /// (triangle in BVH order, weight q / P) in the order the device tests them.
+    pub triangles: Vec<(u32, f64)>,
+    /// Traversal and triangle loop iterations.
+    pub iterations: u32,
+}
+
+impl Reached {
+    /// W, the sum of the weights (an unbiased estimate of the sum of q over the scene).
+    pub fn total(&self) -> f64 {
+        self.triangles.iter().map(|t| t.1).sum()
+    }
+}
+
+/// The tent density of `node_estimate` never falls below this fraction of its peak.
+pub const ESTIMATE_FLOOR: f64 = 0.05;
+/// Leaves the device batches before testing their triangles (ellipsoid_query.wesl LEAF_BATCH).
+const LEAF_BATCH: usize = 16;
+
+fn unit_float(h: u32) -> f64 {
+    (h >> 8) as f64 / 16_777_216.0
+}
+
+fn distance_to_box(p: DVec3, lo: DVec3, hi: DVec3) -> f64 {
+    (lo - p).max(p - hi).max(DVec3::ZERO).length()
+}
+
+fn box_behind(lo: DVec3, hi: DVec3, h: DVec4) -> bool {
+    let n = h.truncate();
+    let corner = DVec3::new(
+        if n.x > 0.0 { hi.x } else { lo.x },
+        if n.y > 0.0 { hi.y } else { lo.y },
+        if n.z > 0.0 { hi.z } else { lo.z },
+    );
+    n.dot(corner) < h.w
+}
+
+/// Bounds of L(x) = |x - x_s| + |x - x_c| over the box: (nearest points to each focus, farthest
+/// corners from each focus).
+pub fn path_length_range(lo: DVec3, hi: DVec3, fs: DVec3, fc: DVec3) -> (f64, f64) {
+    let centre = 0.5 * (lo + hi);
+    let far = |f: DVec3| {
+        DVec3::new(
+            if f.x < centre.x { hi.x } else { lo.x },
+            if f.y < centre.y { hi.y } else { lo.y },
+            if f.z < centre.z { hi.z } else { lo.z },
+        )
+        .distance(f)
+    };
+    (distance_to_box(fs, lo, hi) + distance_to_box(fc, lo, hi), far(fs) + far(fc))
+}
+
+/// The spheroid's axis-aligned bounds, widened by 1e-5 as on the device.
+fn spheroid_bounds(q: &Query) -> (DVec3, DVec3) {
+    let sp = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
+    let (lo, hi) = sp.bounds();
+    let (m, half) = (0.5 * (lo + hi), 0.5 * (hi - lo) * (1.0 + 1e-5));
+    (m - half, m + half)
+}
+
+/// Estimate of the arc measure below a node with box [lo, hi] and counted area `area` (twin of
+/// `node_estimate`): zero exactly when the box cannot hold a counted point of the spheroid.
+pub fn node_estimate(lo: DVec3, hi: DVec3, area: f64, q: &Query, bounds: (DVec3, DVec3)) -> f64 {
+    if area <= 0.0
+        || hi.cmplt(bounds.0).any()
+        || lo.cmpgt(bounds.1).any()
+        || box_behind(lo, hi, q.reach[0])
+        || box_behind(lo, hi, q.reach[1])
+    {
+        return 0.0;
+    }
+    let (shortest, longest) = path_length_range(lo, hi, q.focus_s, q.focus_c);
+    if shortest > q.tau_e || longest < q.tau_e {
+        return 0.0;
+    }
+    let c = 0.5 * (lo + hi);
+    let centre = (c.distance(q.focus_s) + c.distance(q.focus_c)).clamp(shortest, longest);
+    let rise = if q.tau_e <= centre {
+        (q.tau_e - shortest) / (centre - shortest).max(1e-30)
+    } else {
+        (longest - q.tau_e) / (longest - centre).max(1e-30)
+    };
+    let width = (longest - shortest).max(1e-6 * q.tau_e);
+    area * (2.0 / width) * rise.clamp(ESTIMATE_FLOOR, 1.0)
+}
+
+/// The circular interval of eccentric angle an edge from p along `edge` allows (twin of
+/// `edge_interval`): (centre, half width), half width pi for every angle, -1 for none.
+fn edge_interval(section: &super::Section, n: DVec3, p: DVec3, edge: DVec3) -> (f64, f64) {
+    use std::f64::consts::PI;
+    let alpha = section.m1 * edge.cross(section.u).dot(n);
+    let beta = section.m2 * edge.cross(section.v).dot(n);
+    let gamma = -edge.cross(section.centre - p).dot(n);
+    let r = alpha.hypot(beta);
+    if r <= 0.0 {
+        return (0.0, if gamma <= 0.0 { PI } else { -1.0 });
+    }
+    let ratio = gamma / r;
+    if ratio <= -1.0 {
+        (0.0, PI)
+    } else if ratio >= 1.0 {
+        (0.0, -1.0)
+    } else {
+        (beta.atan2(alpha), ratio.acos())
+    }
+}
+
+/// The total angle of the section's arcs inside the triangle, from the three edges' circular
+/// intervals (twin of `arc_weight`; equals `clip_arcs(..).total`, which tests check).
+pub fn arc_weight(spheroid: &Spheroid, triangle: &OracleTriangle) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let n = triangle.normal();
+    let Some(section) = spheroid.section(triangle.vertices[0], n) else { return 0.0 };
+    let mut intervals: Vec<(f64, f64)> = (0..3)
+        .map(|i| {
+            let p = triangle.vertices[i];
+            edge_interval(&section, n, p, triangle.vertices[(i + 1) % 3] - p)
+        })
+        .collect();
+    if intervals.iter().any(|i| i.1 < 0.0) {
+        return 0.0;
+    }
+    intervals.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let a = intervals[0];
+    if a.1 >= PI {
+        return TAU;
+    }
+    let start = a.0 - a.1;
+    let length = 2.0 * a.1;
+    let pieces = |(centre, half): (f64, f64)| -> [(f64, f64); 2] {
+        if half >= PI {
+            return [(-1.0, TAU + 1.0), (0.0, 0.0)];
+        }
+        let lo = (centre - half - start).rem_euclid(TAU);
+        [(lo, lo + 2.0 * half), (lo - TAU, lo + 2.0 * half - TAU)]
+    };
+    let mut total = 0.0;
+    for b in pieces(intervals[1]) {
+        for c in pieces(intervals[2]) {
+            total += (length.min(b.1.min(c.1)) - 0.0f64.max(b.0.max(c.0))).max(0.0);
+        }
+    }
+    total.min(length)
+}
+
+fn oracle_triangle(t: &Triangle) -> OracleTriangle {
+    let v0 = t.v0.as_dvec3();
+    OracleTriangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
+}
+
+fn is_bottom(i: usize, node: &BvhNode, settings: &QuerySettings) -> bool {
+    node.leaf != 0 || (node.skip as usize - i) as u32 <= settings.bottom_nodes
+}
+
+/// Everything one query reaches (twin of `query_ellipsoid`), in the device's order: the
+/// traversal with `settings` and at most `allowance` traversal iterations before the final
+/// descent, with the random numbers of `key`.
+pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allowance: u32, key: [u32; 3]) -> Reached {
+    let mut out = Reached::default();
+    if q.tau_e <= q.focus_s.distance(q.focus_c) {
+        return out;
+    }
+    let bounds = spheroid_bounds(q);
+    let spheroid = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
+    let nodes = scene.nodes;
+    let count = nodes.len();
+    let area = |i: usize| scene.node_areas[i][q.lights_only as usize] as f64;
+    let estimate = |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), area(i), q, bounds);
+    let step_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0]);
+    let rest_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0]);
+    let split_size = settings.split as f64 * 0.5 * q.tau_e;
+    let mut leaves: Vec<(u32, f64)> = Vec::new();
+    let flush = |leaves: &mut Vec<(u32, f64)>, out: &mut Reached| {
+        for (leaf, inv_p) in leaves.drain(..) {
+            let first = leaf & 0x0fff_ffff;
+            for t in first..first + (leaf >> 28) {
+                out.iterations += 1;
+                let tri = &scene.triangles[t as usize];
+                if q.ignore.contains(&t) || (q.lights_only && tri.light == NONE) {
+                    continue;
+                }
+                let o = oracle_triangle(tri);
+                let lo = o.vertices[0].min(o.vertices[1]).min(o.vertices[2]);
+                let hi = o.vertices[0].max(o.vertices[1]).max(o.vertices[2]);
+                if box_behind(lo, hi, q.reach[0]) || box_behind(lo, hi, q.reach[1]) {
+                    continue;
+                }
+                let weight = arc_weight(&spheroid, &o);
+                if weight > 0.0 {
+                    out.triangles.push((t, weight * inv_p));
+                }
+            }
+        }
+    };
+    // Descends from node i (inner, not bottom) with 1 / P = inv_p; returns the bottom subtree
+    // reached (its root and 1 / P) or None when the descent dies.
+    let descend = |mut i: usize, mut inv_p: f64, iterations: &mut u32| -> Option<(usize, f64)> {
+        loop {
+            let (a, b) = (i + 1, nodes[i + 1].skip as usize);
+            *iterations += 2;
+            let (wa, wb) = (estimate(a), estimate(b));
+            let total = wa + wb;
+            if total <= 0.0 {
+                return None;
+            }
+            let (chosen, weight) = if step_key(i) * total >= wa { (b, wb) } else { (a, wa) };
+            inv_p *= total / weight;
+            i = chosen;
+            if is_bottom(i, &nodes[i], settings) {
+                return Some((i, inv_p));
+            }
+        }
+    };
+    // Visits the subtree [i, end) whole with 1 / P = inv_p, batching its leaves.
+    let visit = |start: usize, end: usize, inv_p: f64, iterations: &mut u32, leaves: &mut Vec<(u32, f64)>| {
+        let mut i = start;
+        while i < end {
+            *iterations += 1;
+            if estimate(i) <= 0.0 {
+                i = nodes[i].skip as usize;
+            } else if nodes[i].leaf != 0 {
+                leaves.push((nodes[i].leaf, inv_p));
+                i = nodes[i].skip as usize;
+            } else {
+                i += 1;
+            }
+        }
+    };
+    let mut i = 0;
+    let mut iterations = 0u32;
+    while i < count {
+        while leaves.len() >= LEAF_BATCH {
+            let mut full: Vec<(u32, f64)> = leaves.drain(..LEAF_BATCH).collect();
+            flush(&mut full, &mut out);
+        }
+        iterations += 1;
+        if iterations_so_far(&out, iterations) > allowance {
+            // The rest of the tree: the subtrees at i, skip(i), ... ; one by its estimate.
+            let (mut total, mut chosen) = (0.0, None);
+            let mut j = i;
+            while j < count {
+                let w = estimate(j);
+                total += w;
+                if w > 0.0 && rest_key(j) * total < w {
+                    chosen = Some((j, w));
+                }
+                j = nodes[j].skip as usize;
+                if j < count {
+                    iterations += 1;
+                }
+            }
+            if let Some((j, w)) = chosen {
+                let inv_p = total / w;
+                let bottom = if is_bottom(j, &nodes[j], settings) { Some((j, inv_p)) } else { descend(j, inv_p, &mut iterations) };
+                if let Some((r, inv_p)) = bottom {
+                    visit(r, nodes[r].skip as usize, inv_p, &mut iterations, &mut leaves);
+                }
+            }
+            break;
+        }
+        let node = &nodes[i];
+        if estimate(i) <= 0.0 {
+            i = node.skip as usize;
+        } else if node.leaf != 0 {
+            leaves.push((node.leaf, 1.0));
+            i = node.skip as usize;
+        } else if !is_bottom(i, node, settings) && (node.max - node.min).as_dvec3().length() <= split_size {
+            if let Some((r, inv_p)) = descend(i, 1.0, &mut iterations) {
+                visit(r, nodes[r].skip as usize, inv_p, &mut iterations, &mut leaves);
+            }
+            i = node.skip as usize;
+        } else {
+            i += 1;
+        }
+    }
+    out.iterations += iterations;
+    flush(&mut leaves, &mut out);
+    out
+}
+
+/// Traversal iterations of a query so far (the device's allowance counts both loops).
+fn iterations_so_far(out: &Reached, iterations: u32) -> u32 {
+    out.iterations + iterations
+}
+
+/// The triangle reservoir lane `lane` (0..8) of the device keeps for this query (twin of the
+/// reservoirs in `query_ellipsoid`): the last reached triangle t whose number u_t (from pcg4d of
+/// the key and t) has u_t x (sum of weights so far) < its weight. None when nothing was reached.
+pub fn pick(reached: &Reached, key: [u32; 3], lane: usize) -> Option<u32> {
+    let mut sum = 0.0;
+    let mut picked = None;
+    for &(t, weight) in &reached.triangles {
+        sum += weight;
+        let h = pcg4d([key[0], key[1], key[2], t]);
+        let h = if lane < 4 { h } else { pcg4d(h) };
+        if unit_float(h[lane % 4]) * sum < weight {
+            picked = Some(t);
+        }
+    }
+    picked
+}

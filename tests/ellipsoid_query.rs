@@ -1,0 +1,266 @@
+//! The ellipsoid query's stochastic descent (shaders/lib/ellipsoid_query.wesl, CPU twin
+//! src/ellipsoid/query.rs) is unbiased: a triangle reached with probability P enters with
+//! weight q / P, so averaged over the query's random numbers every triangle's weight must come
+//! to its q (the arcs' total angle), and the picks weighted by the query's total W must come
+//! to the same. Checked on the twin against brute force, and on the device (f32) against the
+//! f64 oracle, with the default settings and with an allowance so small that most queries end
+//! in the final descent over the rest of the tree. Tolerances come from the variance measured
+//! over the keys (z-scores, Sidak-corrected at a family-wise alpha of 0.01).
+
+mod common;
+
+use gatetrace::ellipsoid::query::{QueryScene, Query, arc_weight, pick, reached};
+use gatetrace::ellipsoid::{Spheroid, Triangle, clip_arcs};
+use gatetrace::gpu::layout::NONE;
+use gatetrace::integrator::QuerySettings;
+use glam::{DVec3, DVec4, Vec3};
+
+const ALPHA: f64 = 0.01;
+/// Triangles are compared in groups of consecutive BVH positions.
+const GROUPS: usize = 12;
+
+fn oracle_triangle(t: &gatetrace::gpu::layout::Triangle) -> Triangle {
+    let v0 = t.v0.as_dvec3();
+    Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
+}
+
+/// Every triangle's exact arc total (f64 oracle, brute force).
+fn exact_arcs(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
+    let sp = Spheroid { focus_s: fs, focus_c: fc, length: tau_e };
+    scene
+        .triangles
+        .iter()
+        .map(|t| {
+            let tri = oracle_triangle(t);
+            sp.section(tri.vertices[0], tri.normal()).map_or(0.0, |s| clip_arcs(&s, &tri).total)
+        })
+        .collect()
+}
+
+/// Spheroids like a render's: foci at the light's centre, the pinhole and points on the sphere
+/// and the walls, with tau_e from 5 cm to 1.2 m beyond the foci's distance.
+fn spheroids(scene: &gatetrace::scene::PreparedScene) -> Vec<(DVec3, DVec3, f64)> {
+    let light = DVec3::new(0.0, 0.499, 0.0);
+    let camera = DVec3::new(0.0, 0.0, 2.0);
+    let sphere_top = DVec3::new(0.01, -0.2 + 0.25, -0.05);
+    let floor = DVec3::new(-0.3, -0.5, 0.2);
+    let back = DVec3::new(0.2, 0.1, -0.5);
+    let _ = scene;
+    vec![
+        (light, camera, light.distance(camera) + 1.1),
+        (light, floor, light.distance(floor) + 0.3),
+        (sphere_top, camera, sphere_top.distance(camera) + 0.6),
+        (back, sphere_top, back.distance(sphere_top) + 0.05),
+    ]
+}
+
+/// z-scores of the groups' mean weights against their exact sums: `samples[k][g]` is the
+/// weight sample k puts on group g. The error adds to the standard error of the mean the
+/// rounding `relative` x exact of the arcs themselves (groups near the root are reached with
+/// probability one, and their weights do not vary at all).
+fn group_z(samples: &[Vec<f64>], exact: &[f64], relative: f64) -> Vec<f64> {
+    let n = samples.len() as f64;
+    (0..exact.len())
+        .map(|g| {
+            let mean = samples.iter().map(|s| s[g]).sum::<f64>() / n;
+            let var = samples.iter().map(|s| (s[g] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            let error = (var / n + (relative * exact[g]).powi(2)).sqrt();
+            if error == 0.0 {
+                // Never reached: only right when nothing is there.
+                if mean == 0.0 { 0.0 } else { f64::INFINITY }
+            } else {
+                (mean - exact[g]) / error
+            }
+        })
+        .collect()
+}
+
+fn group_of(position: u32, triangles: usize) -> usize {
+    (position as usize * GROUPS / triangles).min(GROUPS - 1)
+}
+
+/// Sums of `values` (per triangle) over the groups.
+fn grouped(values: &[f64]) -> Vec<f64> {
+    let mut sums = vec![0.0; GROUPS];
+    for (i, v) in values.iter().enumerate() {
+        sums[group_of(i as u32, values.len())] += v;
+    }
+    sums
+}
+
+#[test]
+fn arc_weights_from_circular_intervals_equal_the_clipped_arcs() {
+    // The reservoir weight q (three edges' circular intervals intersected, no break points)
+    // against clip_arcs' total, in f64 on the stress test's families.
+    use gatetrace::ellipsoid::stress::{Family, generate};
+    let mut worst = 0.0f64;
+    let mut cut = 0;
+    for family in [Family::Random, Family::Sliver, Family::PlaneThroughFocus, Family::NearTangent] {
+        for c in generate(family, 20_000, 9) {
+            let sp = Spheroid { focus_s: c.focus_s.as_dvec3(), focus_c: c.focus_c.as_dvec3(), length: c.tau_e as f64 };
+            let tri = Triangle { vertices: c.triangle.map(|v| v.as_dvec3()) };
+            let arcs = sp.section(tri.vertices[0], tri.normal()).map_or(0.0, |s| clip_arcs(&s, &tri).total);
+            let q = arc_weight(&sp, &tri);
+            cut += (arcs > 0.0) as usize;
+            worst = worst.max((q - arcs).abs());
+        }
+    }
+    println!("{cut} sections with arcs; largest |q - Theta| {worst:.2e} rad");
+    assert!(cut > 20_000);
+    assert!(worst < 1e-9, "interval form differs from clip_arcs by {worst:.2e} rad");
+}
+
+/// Runs the CPU twin `keys` times on each spheroid and checks every group's mean weight, and
+/// the mean of W x [pick in group], against the brute-force sums.
+fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
+    let scene = common::sphere_scene(16);
+    let view = QueryScene::of(&scene);
+    let spheroids = spheroids(&scene);
+    let tests = spheroids.len() * 2 * GROUPS;
+    let limit = common::stats::t_critical(common::stats::sidak(ALPHA, tests), keys as f64 - 1.0);
+    let (mut rest_used, mut total_iterations) = (0, 0u64);
+    for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
+        let exact = grouped(&exact_arcs(&scene, fs, fc, tau_e));
+        let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
+        let mut weights = Vec::new();
+        let mut picks = Vec::new();
+        for k in 0..keys {
+            let key = [k, s as u32, 0x5eed];
+            let r = reached(view, &query, settings, allowance, key);
+            total_iterations += r.iterations as u64;
+            rest_used += (r.iterations > allowance) as u32;
+            let mut w = vec![0.0; GROUPS];
+            for &(t, weight) in &r.triangles {
+                w[group_of(t, scene.triangles.len())] += weight;
+            }
+            let mut p = vec![0.0; GROUPS];
+            if let Some(t) = pick(&r, key, 0) {
+                p[group_of(t, scene.triangles.len())] = r.total();
+            }
+            weights.push(w);
+            picks.push(p);
+        }
+        for (what, samples) in [("weights", &weights), ("W x pick", &picks)] {
+            // The twin's arcs equal the oracle's to 1e-9 rad (the test above).
+            let z = group_z(samples, &exact, 1e-9);
+            let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            println!("spheroid {s} {what}: worst group z {worst:.2} (limit {limit:.2})");
+            assert!(worst < limit, "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:.3?}");
+        }
+    }
+    println!("{:.1} iterations per query; {rest_used} queries went past the allowance", total_iterations as f64 / (keys as f64 * spheroids.len() as f64));
+    if allowance < 100 {
+        assert!(rest_used > keys, "the allowance of {allowance} was hardly ever reached ({rest_used} queries)");
+    }
+}
+
+#[test]
+fn the_descent_twin_is_unbiased() {
+    check_twin(&QuerySettings::default(), QuerySettings::default().allowance, 3000);
+}
+
+#[test]
+fn the_descent_twin_is_unbiased_past_the_allowance() {
+    let settings = QuerySettings { split: 0.2, ..Default::default() };
+    check_twin(&settings, 40, 3000);
+}
+
+/// Runs the device's query `keys` times on each spheroid of a 20,480-triangle sphere scene
+/// (probe_ellipsoid_query with `constants`) and checks E[weight x (pick in group)] against the
+/// oracle's arcs per group; returns the mean loop iterations per query.
+fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
+    use gatetrace::integrator::{PathTracer, RenderSettings};
+    let ctx = common::gpu();
+    let scene = common::sphere_scene(32);
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let spheroids = spheroids(&scene);
+    let limit = common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
+    let mut iterations = 0u64;
+    for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
+        let arcs = exact_arcs(&scene, fs, fc, tau_e);
+        let mut exact = grouped(&arcs);
+        exact.push(arcs.iter().sum());
+        let mut input = Vec::new();
+        for k in 0..keys {
+            let (fs, fc) = (fs.as_vec3(), fc.as_vec3());
+            input.push([fs.x, fs.y, fs.z, tau_e as f32]);
+            input.push([fc.x, fc.y, fc.z, 0.5]);
+            input.push([f32::from_bits(k), f32::from_bits(s as u32), f32::from_bits(0x5eed), 0.0]);
+        }
+        let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", constants, &input, 2 * keys as usize);
+        let samples: Vec<Vec<f64>> = out
+            .chunks(2)
+            .map(|o| {
+                let (tri, weight) = (o[0][0].to_bits(), o[0][1] as f64);
+                iterations += o[1][3].to_bits() as u64;
+                let mut v = vec![0.0; GROUPS + 1];
+                if tri != NONE {
+                    v[group_of(tri, scene.triangles.len())] = weight;
+                    v[GROUPS] = weight;
+                }
+                v
+            })
+            .collect();
+        // f32 arcs: relative error below 1e-4 (tests/ellipsoid.rs, stress-ellipsoid).
+        let z = group_z(&samples, &exact, 1e-4);
+        let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        println!("spheroid {s}: sum of arcs {:.4}, worst group z {worst:.2} (limit {limit:.2})", exact[GROUPS]);
+        assert!(worst < limit, "spheroid {s}: z-scores {z:.2?} (groups, then the total) against {exact:.3?}");
+    }
+    use gatetrace::integrator::Integrator;
+    assert_eq!(tracer.truncated_traversals().unwrap(), 0, "queries ran out of the device's loop budget");
+    iterations as f64 / (keys as f64 * spheroids.len() as f64)
+}
+
+#[test]
+fn device_queries_are_unbiased() {
+    let descent = check_device(&[], 20_000);
+    let exhaustive = check_device(&[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64)], 2_000);
+    println!("loop iterations per query: {descent:.1} with the descent, {exhaustive:.1} exhaustive");
+    assert!(descent < 0.5 * exhaustive, "the descent ({descent:.1}) should cost far less than the exhaustive query ({exhaustive:.1})");
+}
+
+#[test]
+fn device_queries_are_unbiased_past_the_allowance() {
+    let iterations = check_device(&[("QUERY_SPLIT", 0.2), ("QUERY_ALLOWANCE", 40.0)], 20_000);
+    println!("{iterations:.1} loop iterations per query");
+    // Only queries that went past the allowance take more than 40 iterations.
+    assert!(iterations > 40.0, "the allowance of 40 was hardly ever reached ({iterations:.1} iterations per query)");
+}
+
+#[test]
+fn the_twin_and_the_device_pick_alike() {
+    // Same keys, same decisions (up to f32 near-ties): the twin follows the device.
+    use gatetrace::integrator::{PathTracer, RenderSettings};
+    let ctx = common::gpu();
+    let scene = common::sphere_scene(32);
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let settings = QuerySettings::default();
+    let (fs, fc, tau_e) = spheroids(&scene)[2];
+    let keys = 2000u32;
+    let mut input = Vec::new();
+    for k in 0..keys {
+        let (a, b): (Vec3, Vec3) = (fs.as_vec3(), fc.as_vec3());
+        input.push([a.x, a.y, a.z, tau_e as f32]);
+        input.push([b.x, b.y, b.z, 0.5]);
+        input.push([f32::from_bits(k), f32::from_bits(7), f32::from_bits(9), 0.0]);
+    }
+    let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", &[], &input, 2 * keys as usize);
+    let query = Query {
+        focus_s: fs.as_vec3().as_dvec3(),
+        focus_c: fc.as_vec3().as_dvec3(),
+        tau_e: tau_e as f32 as f64,
+        ignore: [NONE; 2],
+        lights_only: false,
+        reach: [DVec4::ZERO; 2],
+    };
+    let same = (0..keys)
+        .filter(|&k| {
+            let r = reached(QueryScene::of(&scene), &query, &settings, settings.allowance, [k, 7, 9]);
+            pick(&r, [k, 7, 9], 0).unwrap_or(NONE) == out[2 * k as usize][0].to_bits()
+        })
+        .count();
+    println!("{same} of {keys} picks agree");
+    // f32 and f64 may decide differently only at near-ties of the descent's estimates.
+    assert!(same as f64 > 0.99 * keys as f64, "the twin and the device agree on only {same} of {keys} picks");
+}
