@@ -140,19 +140,15 @@ pub struct EqualTimeSettings {
     pub csv: Option<std::path::PathBuf>,
 }
 
-/// A film rendered for `seconds` of whole passes after a warm-up pass (kernel builds and upload
-/// excluded); returns the film and the seconds actually spent.
+/// A film rendered for `seconds` in passes sized to end on time, after a warm-up pass (kernel
+/// builds, upload and the device's first compilation excluded); returns the film and the
+/// seconds actually spent.
 fn render_for(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings, seconds: f64) -> Result<(crate::film::Film, f64)> {
     let mut tracer = create_integrator(ctx, scene, settings)?;
     tracer.render_pass(1)?;
     tracer.reset_film();
-    let start = Instant::now();
-    // Passes of one sample first, so short budgets are not overshot by one big pass.
-    while start.elapsed().as_secs_f64() < seconds {
-        let n = if tracer.samples_done() < 4 { 1 } else { tracer.samples_per_pass() };
-        tracer.render_pass(n)?;
-    }
-    Ok((tracer.film()?, start.elapsed().as_secs_f64()))
+    let spent = crate::integrator::PassSizer::default().render_for(tracer.as_mut(), seconds, |_, _| {})?;
+    Ok((tracer.film()?, spent))
 }
 
 /// Work of one ellipsoid query: (loop iterations, triangles tested), from a short render with

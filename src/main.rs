@@ -75,7 +75,9 @@ struct RenderArgs {
     /// Samples per pixel (default 64 unless --time is given).
     #[arg(long, conflicts_with = "time")]
     spp: Option<u64>,
-    /// Render whole passes until this many seconds have passed, instead of --spp.
+    /// Render for this many seconds instead of --spp (rendering only: scene loading, BVH build
+    /// and kernel builds come first). Passes are sized from the measured rate so the render
+    /// ends before the budget, overrunning it by at most one sample per pixel's time.
     #[arg(long, value_name = "SECONDS")]
     time: Option<f64>,
     /// Image size in pixels, WIDTHxHEIGHT.
@@ -513,7 +515,7 @@ fn render_one(
     let output = render(ctx, scene, settings, budget, |p| {
         match budget {
             Budget::Samples(_) => bar.set_position(p.spp),
-            Budget::Time(_) => bar.set_position(p.elapsed.as_millis() as u64),
+            Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
         }
         let rate = (p.spp * (settings.width * settings.height) as u64) as f64 / p.elapsed.as_secs_f64().max(1e-9);
         bar.set_message(format!("{prefix}{} passes, {} spp, {:.2} Msamples/s", p.passes, p.spp, rate / 1e6));
@@ -534,6 +536,7 @@ fn render_one(
         ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
         ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
         ("elapsed_seconds".into(), format!("{secs:.3}")),
+        ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
         ("adapter".into(), ctx.adapter_description()),
         ("truncated_traversals".into(), output.truncated_traversals.to_string()),
         ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
@@ -560,7 +563,7 @@ fn render_one(
     write_film(out, film, &metadata, &bin_ranges)?;
     let mean = film.mean_rgb();
     say(bars, format!(
-        "{}{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+        "{}{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} s rendering, {:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
         label.map(|l| format!("{l} ")).unwrap_or_default(),
         scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
         settings.width,
@@ -569,7 +572,8 @@ fn render_one(
         if frame.is_some_and(|(i, p)| p.gate_step != 0.0 && i > 0) { gate.describe() } else { gate_spec.to_owned() },
         film.spp,
         secs,
-        (film.spp * (settings.width * settings.height) as u64) as f64 / secs / 1e6,
+        output.rendering.as_secs_f64(),
+        (film.spp * (settings.width * settings.height) as u64) as f64 / output.rendering.as_secs_f64().max(1e-9) / 1e6,
         ctx.adapter_info.name,
         mean[0],
         mean[1],

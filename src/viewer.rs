@@ -18,7 +18,7 @@ use crate::film::Gate;
 use crate::film::output::{Metadata, write_film};
 use crate::gpu::layout::{DISPLAY_LINEAR, DISPLAY_LOG, DisplayParams};
 use crate::gpu::{GpuContext, Kernel, Resources};
-use crate::integrator::{Integrator, Method, RenderSettings, create_integrator};
+use crate::integrator::{Integrator, Method, PassSizer, RenderSettings, create_integrator};
 use crate::scene::{PreparedScene, load_gltf};
 use crate::units::metres_to_ps;
 
@@ -166,6 +166,8 @@ struct Viewer<'a> {
     profile: Option<Profile<'a>>,
     renderer: std::sync::Arc<egui::mutex::RwLock<eframe::egui_wgpu::Renderer>>,
     timing: Timing,
+    /// Sizes each frame's passes from the measured rate.
+    sizer: PassSizer,
     frames: u32,
     image_rect: Option<egui::Rect>,
     screenshot_rx: Option<mpsc::Receiver<std::sync::Arc<egui::ColorImage>>>,
@@ -196,6 +198,7 @@ impl<'a> Viewer<'a> {
             profile: None,
             renderer: state.renderer.clone(),
             timing: Timing::default(),
+            sizer: PassSizer::default(),
             frames: 0,
             image_rect: None,
             screenshot_rx: None,
@@ -317,16 +320,12 @@ impl<'a> Viewer<'a> {
         let start = Instant::now();
         let before = tracer.samples_done();
         let pixels = (self.options.width * self.options.height) as f64;
-        loop {
-            // Passes sized to the budget from the measured rate (one sample right after a
-            // change), so a frame never waits for a long pass.
-            let fit = (self.timing.samples_per_second * budget.as_secs_f64() / pixels) as u32;
-            let n = if tracer.samples_done() == 0 { 1 } else { fit.clamp(1, tracer.samples_per_pass()) };
-            tracer.render_pass(n)?;
-            if start.elapsed() >= budget {
-                break;
-            }
+        // Passes sized to the budget from the measured rate (one sample right after a change,
+        // when nothing is measured yet), so a frame never waits for a long pass.
+        if tracer.samples_done() == 0 {
+            self.sizer = PassSizer::default();
         }
+        self.sizer.render_for(tracer.as_mut(), budget.as_secs_f64(), |_, _| {})?;
         let done = tracer.samples_done() - before;
         let rate = done as f64 * pixels / start.elapsed().as_secs_f64().max(1e-9);
         let t = &mut self.timing;

@@ -245,8 +245,59 @@ pub fn create_integrator<'a>(
 pub enum Budget {
     /// Exactly this many samples per pixel.
     Samples(u64),
-    /// Whole waves until this much wall time has passed.
+    /// Passes sized by a [`PassSizer`] to end within this much rendering time (setup excluded).
     Time(Duration),
+}
+
+/// Sizes passes to a time budget from the measured time per sample per pixel, so a render, an
+/// equal-time measurement or a viewer frame ends close to its budget instead of up to a whole
+/// pass late (a pass of a large scene can take seconds on a CPU device).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PassSizer {
+    /// Seconds one sample per pixel took in the last pass (None before any pass).
+    seconds_per_sample: Option<f64>,
+}
+
+impl PassSizer {
+    /// Samples per pixel of the next pass, at most `max`, predicted to end within `remaining`
+    /// seconds (with 5 % to spare); one sample before anything was measured; None when even one
+    /// sample is predicted to overrun.
+    pub fn next(&self, remaining: f64, max: u32) -> Option<u32> {
+        let Some(per_sample) = self.seconds_per_sample else { return Some(1) };
+        let fit = 0.95 * remaining / per_sample.max(1e-12);
+        (fit >= 1.0).then(|| (fit.min(max as f64) as u32).max(1))
+    }
+
+    /// Records a pass of `samples` samples per pixel that took `seconds`.
+    pub fn record(&mut self, samples: u32, seconds: f64) {
+        self.seconds_per_sample = Some(seconds / samples.max(1) as f64);
+    }
+
+    /// Renders passes on `tracer` until `seconds` have passed or the next pass would overrun
+    /// them (at least one pass), calling `after_pass` after each; returns the seconds spent.
+    pub fn render_for(
+        &mut self,
+        tracer: &mut dyn Integrator,
+        seconds: f64,
+        mut after_pass: impl FnMut(&dyn Integrator, f64),
+    ) -> Result<f64> {
+        let start = Instant::now();
+        let mut passes = 0;
+        loop {
+            let remaining = seconds - start.elapsed().as_secs_f64();
+            let next = match self.next(remaining, tracer.samples_per_pass()) {
+                Some(n) => n,
+                None if passes == 0 => 1,
+                None => break,
+            };
+            let pass_start = Instant::now();
+            tracer.render_pass(next)?;
+            self.record(next, pass_start.elapsed().as_secs_f64());
+            passes += 1;
+            after_pass(tracer, start.elapsed().as_secs_f64());
+        }
+        Ok(start.elapsed().as_secs_f64())
+    }
 }
 
 /// Progress of a render, reported after every pass.
@@ -258,6 +309,8 @@ pub struct Progress {
     pub spp: u64,
     /// Time since the render started (setup included).
     pub elapsed: Duration,
+    /// Time since the first pass started (what a time budget counts).
+    pub rendering: Duration,
 }
 
 /// A finished render.
@@ -266,6 +319,8 @@ pub struct RenderOutput {
     pub film: Film,
     /// Wall time of the whole render: upload, kernel builds and passes.
     pub elapsed: Duration,
+    /// Wall time of the passes alone (what a time budget counts).
+    pub rendering: Duration,
     /// Ray traversals the device cut short (see [`Integrator::truncated_traversals`]).
     pub truncated_traversals: u64,
     /// The method's `--stats` report, when asked for.
@@ -381,22 +436,36 @@ pub fn render(
         eprintln!("warning: {reason}: the image is black; no samples were traced");
         let g = &settings.gate;
         let film = Film::zeroed(settings.width, settings.height, g.bins());
-        return Ok(RenderOutput { film, elapsed: start.elapsed(), truncated_traversals: 0, stats: None });
+        return Ok(RenderOutput { film, elapsed: start.elapsed(), rendering: Duration::ZERO, truncated_traversals: 0, stats: None });
     }
     let mut tracer = create_integrator(ctx, scene, settings)?;
-    let mut passes = 0;
-    loop {
-        let spp = tracer.samples_done();
-        let next = match budget {
-            Budget::Samples(n) if spp >= n => break,
-            Budget::Samples(n) => (n - spp).min(tracer.samples_per_pass() as u64) as u32,
-            Budget::Time(t) if start.elapsed() >= t && spp > 0 => break,
-            Budget::Time(_) => tracer.samples_per_pass(),
-        };
-        tracer.render_pass(next)?;
-        passes += 1;
-        progress(Progress { passes, spp: tracer.samples_done(), elapsed: start.elapsed() });
+    if let Budget::Time(_) = budget {
+        // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
+        // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
+        tracer.render_pass(1)?;
+        tracer.reset_film();
     }
+    let mut passes = 0;
+    let rendering = Instant::now();
+    match budget {
+        Budget::Samples(n) => {
+            while tracer.samples_done() < n {
+                let next = (n - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
+                tracer.render_pass(next)?;
+                passes += 1;
+                let (elapsed, rendering) = (start.elapsed(), rendering.elapsed());
+                progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
+            }
+        }
+        Budget::Time(t) => {
+            PassSizer::default().render_for(tracer.as_mut(), t.as_secs_f64(), |tracer, _| {
+                passes += 1;
+                let (elapsed, rendering) = (start.elapsed(), rendering.elapsed());
+                progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
+            })?;
+        }
+    }
+    let rendering = rendering.elapsed();
     let film = tracer.film()?;
     let truncated_traversals = tracer.truncated_traversals()?;
     if truncated_traversals > 0 {
@@ -406,5 +475,22 @@ pub fn render(
         );
     }
     let stats = if settings.stats { tracer.stats_report()? } else { None };
-    Ok(RenderOutput { film, elapsed: start.elapsed(), truncated_traversals, stats })
+    Ok(RenderOutput { film, elapsed: start.elapsed(), rendering, truncated_traversals, stats })
+}
+
+#[cfg(test)]
+mod pass_sizer_tests {
+    use super::PassSizer;
+
+    #[test]
+    fn passes_fit_the_time_left() {
+        let mut sizer = PassSizer::default();
+        assert_eq!(sizer.next(10.0, 64), Some(1), "one sample before anything is measured");
+        sizer.record(10, 1.0);
+        assert_eq!(sizer.next(100.0, 64), Some(64), "capped at a full pass");
+        assert_eq!(sizer.next(0.5, 64), Some(4), "0.95 x 0.5 s at 0.1 s per sample");
+        assert_eq!(sizer.next(0.1, 64), None, "one sample would overrun");
+        sizer.record(1, 0.01);
+        assert_eq!(sizer.next(0.1, 64), Some(9), "the latest pass's rate counts");
+    }
 }
