@@ -370,7 +370,7 @@ fn wgsl_surfaces_match_cpu_twin() {
     let (positions, normals) = (run(9, &input), run(10, &input));
     for (i, x) in input.iter().enumerate() {
         let hit = Hit { t: 1.0, triangle: x[0].to_bits(), b1: x[1], b2: x[2] };
-        let s = surface_at(&scene.triangles, &scene.shading, &hit);
+        let s = surface_at(&scene.triangles, &scene.shading, &scene.normals, &hit);
         let p = offset_ray_origin(s.position, s.geometric_normal, scene.ray_epsilon);
         for k in 0..3 {
             assert_close("offset surface point", i, positions[i][k], p[k], 1e-6, 1e-6);

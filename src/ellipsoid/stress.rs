@@ -215,11 +215,13 @@ pub fn run_on_device(ctx: &GpuContext, configs: &[Config]) -> Result<Vec<DeviceR
             .flat_map(|c| {
                 let [v0, v1, v2] = c.triangle;
                 let (e1, e2) = (v1 - v0, v2 - v0);
+                // The plane's normal as the scene's triangles get it (f64, octahedral).
+                let n = crate::scene::surface::triangle_normal(c.triangle);
                 [
                     [c.focus_s.x, c.focus_s.y, c.focus_s.z, c.tau_e],
                     [c.focus_c.x, c.focus_c.y, c.focus_c.z, c.u],
-                    [v0.x, v0.y, v0.z, 0.0],
-                    [e1.x, e1.y, e1.z, 0.0],
+                    [v0.x, v0.y, v0.z, n[0]],
+                    [e1.x, e1.y, e1.z, n[1]],
                     [e2.x, e2.y, e2.z, 0.0],
                 ]
             })
@@ -303,10 +305,11 @@ pub fn compare(family: &str, configs: &[Config], device: &[DeviceResult]) -> Rep
             continue;
         }
         let sp = Spheroid { focus_s: c.focus_s.as_dvec3(), focus_c: c.focus_c.as_dvec3(), length: c.tau_e as f64 };
-        let v0 = c.triangle[0].as_dvec3();
-        let (e1, e2) = ((c.triangle[1] - c.triangle[0]).as_dvec3(), (c.triangle[2] - c.triangle[0]).as_dvec3());
-        let tri = Triangle { vertices: [v0, v0 + e1, v0 + e2] };
-        let n = e1.cross(e2).normalize();
+        // The triangle its f32 vertices define, exactly (the device gets v0 and f32 edges, and the
+        // plane's normal from an f64 cross product, as the scene's triangles do).
+        let tri = Triangle { vertices: c.triangle.map(|v| v.as_dvec3()) };
+        let v0 = tri.vertices[0];
+        let n = tri.normal();
         let section = sp.section(v0, n);
         if section.is_some() {
             report.cut += 1;

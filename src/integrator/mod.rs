@@ -398,6 +398,7 @@ pub fn upload_scene(
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
     r.storage_init(ctx, "bvh_node_areas", &scene.node_areas)?;
+    r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;

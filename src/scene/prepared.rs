@@ -20,6 +20,9 @@ pub struct PreparedScene {
     pub triangles: Vec<Triangle>,
     /// Per BVH node: area of its triangles and of the emitting ones (m^2), see `Bvh::node_areas`.
     pub node_areas: Vec<[f32; 2]>,
+    /// Per triangle (BVH order): unit normal from an f64 cross product, octahedral
+    /// (`surface::triangle_normal`).
+    pub normals: Vec<[f32; 2]>,
     /// Shading attributes in BVH order.
     pub shading: Vec<TriangleShading>,
     /// GPU materials.
@@ -48,10 +51,12 @@ impl PreparedScene {
             }
         }
         let mut triangles = Vec::with_capacity(bvh.order.len());
+        let mut normals = Vec::with_capacity(bvh.order.len());
         let mut shading = Vec::with_capacity(bvh.order.len());
         for &i in &bvh.order {
             let t = &scene.triangles[i as usize];
             let [a, b, c] = t.positions;
+            normals.push(super::surface::triangle_normal(t.positions));
             triangles.push(Triangle {
                 v0: a,
                 material: t.material,
@@ -83,6 +88,7 @@ impl PreparedScene {
             bvh,
             triangles,
             node_areas,
+            normals,
             shading,
             texture_infos,
             texels,

@@ -1,6 +1,6 @@
 //! Surface points of ray hits. CPU twin of `shaders/lib/scene.wesl`.
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 use crate::gpu::layout::{Hit, SHADING_HAS_NORMALS, Triangle, TriangleShading};
 
@@ -21,13 +21,41 @@ pub struct Surface {
     pub light: u32,
 }
 
-/// The surface point of `hit` (twin of `surface_at`).
-pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], hit: &Hit) -> Surface {
+/// Octahedral coordinates of a unit vector (x, y in [-1, 1]): what `triangle_normals` stores.
+pub fn octahedral_encode(n: DVec3) -> [f32; 2] {
+    let p = n / (n.x.abs() + n.y.abs() + n.z.abs());
+    let sign = |v: f64| if v >= 0.0 { 1.0 } else { -1.0 };
+    if p.z >= 0.0 {
+        [p.x as f32, p.y as f32]
+    } else {
+        [((1.0 - p.y.abs()) * sign(p.x)) as f32, ((1.0 - p.x.abs()) * sign(p.y)) as f32]
+    }
+}
+
+/// The unit vector of octahedral coordinates `o` (twin of `octahedral_decode`).
+pub fn octahedral_decode(o: [f32; 2]) -> Vec3 {
+    let mut n = Vec3::new(o[0], o[1], 1.0 - o[0].abs() - o[1].abs());
+    if n.z < 0.0 {
+        let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
+        n = Vec3::new((1.0 - n.y.abs()) * sign(n.x), (1.0 - n.x.abs()) * sign(n.y), n.z);
+    }
+    n.normalize()
+}
+
+/// The unit normal (counter-clockwise winding) of the triangle with vertices `p`, from an f64
+/// cross product (exact to rounding for slivers too), in octahedral coordinates.
+pub fn triangle_normal(p: [Vec3; 3]) -> [f32; 2] {
+    let [a, b, c] = p.map(|v| v.as_dvec3());
+    octahedral_encode((b - a).cross(c - a).normalize())
+}
+
+/// The surface point of `hit` (twin of `surface_at`; `normals` as `triangle_normals`).
+pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], normals: &[[f32; 2]], hit: &Hit) -> Surface {
     let tri = &triangles[hit.triangle as usize];
     let sh = &shading[hit.triangle as usize];
     let b0 = 1.0 - hit.b1 - hit.b2;
     let position = tri.v0 + hit.b1 * tri.e1 + hit.b2 * tri.e2;
-    let ng = tri.e1.cross(tri.e2).normalize();
+    let ng = octahedral_decode(normals[hit.triangle as usize]);
     let mut ns = ng;
     if sh.flags & SHADING_HAS_NORMALS != 0 {
         let n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
