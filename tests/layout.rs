@@ -28,14 +28,14 @@ fn wgsl_structs_match_rust_structs() {
                        reserved0, reserved1, reserved2 }
         WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, reserved0, reserved1, reserved2 }
         PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, normal, origin_triangle, pixel, sample,
-                    dimension, reserved }
+                    dimension, traversal }
         Hit { t, triangle, b1, b2 }
-        ShadowRay { origin, t_max, direction, waiting, ignore0, ignore1, reserved0, reserved1 }
+        ShadowRay { origin, t_max, direction, waiting, ignore0, ignore1, resume, reserved }
         Contribution { radiance, path_length }
         PathVertex { position, path_length, normal, material, shading_normal, triangle, throughput, flags, pdf_fwd,
                      pdf_rev, uv }
         Splat { radiance, path_length, pixel, reserved0, reserved1, reserved2 }
-        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals, ellipsoid_queries }
+        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals, ellipsoid_queries, unfinished_shadow_rays }
         DisplayParams { inverse_spp, exposure, curve, bin, decades, stride, reserved1, reserved2 }
     };
     let module = naga::front::wgsl::parse_str(LAYOUT_WGSL).expect("layout.wgsl parses");

@@ -11,6 +11,12 @@ use obvhs::{BvhBuildParams, triangle::Triangle as ObvhsTriangle};
 
 use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, Triangle};
 
+/// Most nodes one invocation's ray traversal visits before it stops and a later dispatch
+/// resumes it (the TRAVERSAL_BUDGET override of shaders/lib/bvh.wesl, passed to every kernel):
+/// at most half of them are leaves of at most 4 triangles (`Bvh::build`), so a traversal stays
+/// below 3 x TRAVERSAL_BUDGET loop iterations, far below lavapipe's 65535 per invocation.
+pub const TRAVERSAL_BUDGET: u32 = 12_000;
+
 /// A flattened BVH over a triangle list.
 #[derive(Clone, Debug)]
 pub struct Bvh {

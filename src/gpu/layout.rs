@@ -309,8 +309,9 @@ pub struct PathState {
     pub sample: u32,
     /// Random numbers drawn so far.
     pub dimension: u32,
-    /// Padding.
-    pub reserved: u32,
+    /// BVH node at which the closest-hit traversal of the path's ray resumes in a later round;
+    /// 0 while it has not started or has finished.
+    pub traversal: u32,
 }
 
 /// Closest hit of a ray.
@@ -343,10 +344,11 @@ pub struct ShadowRay {
     pub ignore0: u32,
     /// Triangle to ignore (the light's).
     pub ignore1: u32,
+    /// BVH node at which the traversal resumes in a later pass; 0 before the first pass and
+    /// once the ray is decided.
+    pub resume: u32,
     /// Padding.
-    pub reserved0: u32,
-    /// Padding.
-    pub reserved1: u32,
+    pub reserved: u32,
 }
 
 /// Marks a shadow ray's target as an index into the splat buffer.
@@ -376,6 +378,8 @@ pub struct QueueCounters {
     pub truncated_traversals: u32,
     /// Entries pushed to `ellipsoid_queries` (reset with the ray counters).
     pub ellipsoid_queries: u32,
+    /// Shadow rays the last trace_shadow_rays pass left unfinished.
+    pub unfinished_shadow_rays: u32,
 }
 
 /// One vertex of a bidirectional subpath (see `PathVertex` in layout.wesl).

@@ -9,7 +9,8 @@
 //! ```text
 //! generate_subpaths                     pinhole + light vertices; both rays -> next_ray_queue;
 //!                                       (ellipsoidal) the slot's target length
-//! for round in 0..=max_bounces:         (stops early once every subpath has ended)
+//! for round in 0, 1, ...:               (until every subpath has ended; a traversal that
+//!                                       stops at the budget resumes one round later)
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
 //!     intersect_closest                 closest hits of ray_queue
 //!     extend_subpaths                   store the vertex, sample the BSDF, next ray
@@ -20,6 +21,8 @@
 //!   connect_ellipsoidal                 one query per entry: contribution, MIS, shadow_queue
 //! setup_dispatch(shadow_rays)
 //! trace_shadow_rays                     occluded connections are cleared
+//! [setup_dispatch(shadow_resume)        while shadow rays stopped at the traversal budget
+//!  trace_shadow_rays(resume)]           (read back after each pass)
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
 //! splat_light_paths                     t = 1 contributions -> splat_film (float atomics
 //!                                       where the device has them, else compare-exchange),
@@ -33,6 +36,7 @@
 use anyhow::{Result, ensure};
 
 use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
+use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::film::Film;
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
@@ -132,8 +136,7 @@ struct Stages {
     /// Ellipsoidal connections: connect_spherical, queue_ellipsoid_queries and
     /// setup_dispatch(ellipsoid_queries) (connect is then indirect).
     ellipsoidal: Option<[Kernel; 3]>,
-    setup_dispatch_shadow_rays: Kernel,
-    trace_shadow_rays: Kernel,
+    shadow_rays: ShadowRayStages,
     accumulate: Kernel,
     splat_light_paths: Kernel,
 }
@@ -146,8 +149,6 @@ struct Bindings {
     extend_subpaths: [wgpu::BindGroup; 2],
     connect: wgpu::BindGroup,
     ellipsoidal: Option<[wgpu::BindGroup; 3]>,
-    setup_dispatch_shadow_rays: wgpu::BindGroup,
-    trace_shadow_rays: wgpu::BindGroup,
     accumulate: wgpu::BindGroup,
     splat_light_paths: wgpu::BindGroup,
 }
@@ -241,7 +242,7 @@ impl<'a> BidirectionalTracer<'a> {
         r.storage_zeroed(ctx, "splats", slots * per_slot[2], none)?;
         r.storage_zeroed(ctx, "shadow_queue", slots * per_slot[3], none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
-        r.storage_zeroed(ctx, "dispatch_args", 9 * 4, wgpu::BufferUsages::INDIRECT)?;
+        r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "ellipsoid_queries", if ellipsoidal { slots * per_slot[5] } else { 16 }, none)?;
         r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
         // Three counters per strategy, then five for the ellipsoid queries' work and guards.
@@ -284,8 +285,7 @@ impl<'a> BidirectionalTracer<'a> {
                     Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0)),
                 ]
             }),
-            setup_dispatch_shadow_rays: Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with(1.0)),
-            trace_shadow_rays: Kernel::new(ctx, "trace_shadow_rays", None, &constants),
+            shadow_rays: ShadowRayStages::new(ctx, &constants, &r),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
             splat_light_paths: if ctx.has_float_atomics() && !settings.portable_atomics {
                 Kernel::with_feature(ctx, "splat_light_paths", "float_atomics", &constants)
@@ -303,8 +303,6 @@ impl<'a> BidirectionalTracer<'a> {
             extend_subpaths: both(&stages.extend_subpaths),
             connect: stages.connect.bind(ctx, &even),
             ellipsoidal: stages.ellipsoidal.as_ref().map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
-            setup_dispatch_shadow_rays: stages.setup_dispatch_shadow_rays.bind(ctx, &even),
-            trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
             accumulate: stages.accumulate.bind(ctx, &even),
             splat_light_paths: stages.splat_light_paths.bind(ctx, &even),
         };
@@ -389,8 +387,21 @@ impl<'a> BidirectionalTracer<'a> {
                 }
                 _ => s.connect.dispatch(&mut pass, &b.connect, wave.slot_count),
             }
-            s.setup_dispatch_shadow_rays.dispatch(&mut pass, &b.setup_dispatch_shadow_rays, 1);
-            s.trace_shadow_rays.dispatch_indirect(&mut pass, &b.trace_shadow_rays, args, 12);
+            s.shadow_rays.encode(&mut pass, args);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        // Shadow rays that stopped at the traversal budget resume until every one is decided.
+        while self.wf.counters()?.unfinished_shadow_rays > 0 {
+            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("resume") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("resume"), timestamp_writes: None });
+                s.shadow_rays.encode_resume(&mut pass, args);
+            }
+            ctx.queue.submit([encoder.finish()]);
+        }
+        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("accumulate") });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("accumulate"), timestamp_writes: None });
             s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);
             s.splat_light_paths.dispatch(&mut pass, &b.splat_light_paths, wave.slot_count);
         }
@@ -489,7 +500,8 @@ impl Integrator for BidirectionalTracer<'_> {
             let q = total.evaluated.max(1) as f64;
             let [nodes, tested, intersected, needles, off_length] = self.query_work;
             out += &format!(
-                "per ellipsoid query: {:.1} BVH nodes visited, {:.2} triangles tested, {:.2} triangles intersected\n\
+                "per ellipsoid query: {:.1} loop iterations (BVH nodes and triangles), {:.2} triangles tested, {:.2} \
+                 triangles intersected\n\
                  guards: {needles} spheroids thinner than the needle guard skipped, {off_length} sampled points off \
                  the target length dropped\n",
                 nodes as f64 / q,

@@ -419,6 +419,7 @@ pub fn upload_scene(
         ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),
         ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
         ("FILM_CHUNK_BITS", film.bits as f64),
+        ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
     ];
     Ok((r, constants, film))
 }

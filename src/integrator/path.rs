@@ -4,17 +4,22 @@
 //!
 //! ```text
 //! generate_camera_rays                  every slot -> next_ray_queue
-//! for round in 0..=max_bounces:         (stops early once every path has ended)
+//! for round in 0, 1, ...:               (until every path has ended)
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
-//!     intersect_closest                 closest hits of ray_queue
+//!     intersect_closest                 closest hits of ray_queue (a traversal that stops at
+//!                                       the budget goes back to the queue: one round later)
 //!     shade                             emission, light sample + shadow_queue, next ray
 //!     setup_dispatch(shadow_rays)
 //!     trace_shadow_rays                 occluded light samples are cleared
+//!     [setup_dispatch(shadow_resume)    resume passes for shadow rays that stopped at the
+//!      trace_shadow_rays(resume)] x R   budget (empty when none did)
+//!     [setup_dispatch(shadow_cut)]      counts any still unfinished as cut short
 //!     accumulate                        contributions -> film (W, bin), per pixel
 //! ```
 
 use anyhow::{Result, ensure};
 
+use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
 use super::{Integrator, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::MAX_CHUNKS;
@@ -37,8 +42,7 @@ struct Stages {
     setup_dispatch_rays: Kernel,
     intersect_closest: Kernel,
     shade: Kernel,
-    setup_dispatch_shadow_rays: Kernel,
-    trace_shadow_rays: Kernel,
+    shadow_rays: ShadowRayStages,
     accumulate: Kernel,
 }
 
@@ -48,8 +52,6 @@ struct Bindings {
     setup_dispatch_rays: [wgpu::BindGroup; 2],
     intersect_closest: [wgpu::BindGroup; 2],
     shade: [wgpu::BindGroup; 2],
-    setup_dispatch_shadow_rays: wgpu::BindGroup,
-    trace_shadow_rays: wgpu::BindGroup,
     accumulate: wgpu::BindGroup,
 }
 
@@ -58,7 +60,16 @@ pub struct PathTracer<'a> {
     wf: Wavefront<'a>,
     stages: Stages,
     bindings: Bindings,
+    /// Resume passes of each round's shadow rays: as many as a ray can need (each resumes at
+    /// least TRAVERSAL_BUDGET nodes further on), at most MAX_SHADOW_RESUMES.
+    shadow_resumes: u32,
 }
+
+/// Most resume passes a round of the path tracer runs for shadow rays that stopped at the
+/// traversal budget (a resume pass costs two empty dispatches when every ray was decided):
+/// shadow rays visiting more than (1 + MAX_SHADOW_RESUMES) TRAVERSAL_BUDGET nodes, which only
+/// adversarial geometry asks for, are counted as cut short.
+const MAX_SHADOW_RESUMES: u32 = 8;
 
 impl<'a> PathTracer<'a> {
     /// Uploads the scene, creates the wavefront state and builds the specialised kernels.
@@ -79,7 +90,7 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "next_ray_queue", 4 * slots, none)?;
         r.storage_zeroed(ctx, "shadow_queue", size_of::<ShadowRay>() as u64 * slots, none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
-        r.storage_zeroed(ctx, "dispatch_args", 6 * 4, wgpu::BufferUsages::INDIRECT)?;
+        r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "contributions", 2 * size_of::<Contribution>() as u64 * slots, none)?;
         // trace_shadow_rays can clear light-tracing splats; the path tracer has none.
         r.storage_zeroed(ctx, "splats", size_of::<Splat>() as u64, none)?;
@@ -95,8 +106,7 @@ impl<'a> PathTracer<'a> {
             setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
             intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
             shade: Kernel::new(ctx, "shade", None, &constants),
-            setup_dispatch_shadow_rays: Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with(1.0)),
-            trace_shadow_rays: Kernel::new(ctx, "trace_shadow_rays", None, &constants),
+            shadow_rays: ShadowRayStages::new(ctx, &constants, &r),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
         };
         // Even rounds read ray_queue and push to next_ray_queue; odd rounds the other way round.
@@ -109,12 +119,11 @@ impl<'a> PathTracer<'a> {
             setup_dispatch_rays: both(&stages.setup_dispatch_rays),
             intersect_closest: both(&stages.intersect_closest),
             shade: both(&stages.shade),
-            setup_dispatch_shadow_rays: stages.setup_dispatch_shadow_rays.bind(ctx, &even),
-            trace_shadow_rays: stages.trace_shadow_rays.bind(ctx, &even),
             accumulate: stages.accumulate.bind(ctx, &even),
         };
         let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
-        Ok(Self { wf, stages, bindings })
+        let shadow_resumes = (params.node_count / crate::bvh::TRAVERSAL_BUDGET).min(MAX_SHADOW_RESUMES);
+        Ok(Self { wf, stages, bindings, shadow_resumes })
     }
 
     /// Waves a full pass takes (more than one when the image does not fit one wave).
@@ -133,8 +142,13 @@ impl<'a> PathTracer<'a> {
                 s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
                 s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
                 s.shade.dispatch_indirect(pass, &b.shade[parity], args, 0);
-                s.setup_dispatch_shadow_rays.dispatch(pass, &b.setup_dispatch_shadow_rays, 1);
-                s.trace_shadow_rays.dispatch_indirect(pass, &b.trace_shadow_rays, args, 12);
+                s.shadow_rays.encode(pass, args);
+                if self.shadow_resumes > 0 {
+                    for _ in 0..self.shadow_resumes {
+                        s.shadow_rays.encode_resume(pass, args);
+                    }
+                    s.shadow_rays.encode_cut(pass);
+                }
                 s.accumulate.dispatch(pass, &b.accumulate, wave.pixel_count);
             },
         )?;

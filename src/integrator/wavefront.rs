@@ -3,11 +3,65 @@
 
 use anyhow::Result;
 
+use anyhow::ensure;
+
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
+use crate::bvh::TRAVERSAL_BUDGET;
 use crate::film::Film;
 use crate::gpu::layout::{QueueCounters, RenderParams, WaveParams};
 use crate::gpu::resources::{ChunkLayout, read_buffer};
-use crate::gpu::{GpuContext, Resources};
+use crate::gpu::{GpuContext, Kernel, Resources};
+
+/// Bytes of the indirect dispatch arguments: ray_queue, shadow_queue, ellipsoid_queries and
+/// the resume pass of shadow rays, three words each (see setup_dispatch.wesl).
+pub const DISPATCH_ARGS_BYTES: u64 = 12 * 4;
+
+/// The shadow-ray stages every method shares: `setup_dispatch(shadow_rays)` and
+/// `trace_shadow_rays`, then resume passes `setup_dispatch(shadow_resume)` and
+/// `trace_shadow_rays(resume)` for the rays a pass left unfinished at the traversal budget
+/// (nothing runs in a resume pass when every ray was decided), and `setup_dispatch(shadow_cut)`,
+/// which counts what is still unfinished after the last resume pass as cut short.
+pub struct ShadowRayStages {
+    kernels: [Kernel; 5],
+    groups: [wgpu::BindGroup; 5],
+}
+
+impl ShadowRayStages {
+    /// Builds the kernels with `constants` and binds them to `resources`.
+    pub fn new(ctx: &GpuContext, constants: &[(&'static str, f64)], resources: &Resources) -> Self {
+        let with = |name: &'static str, value: f64| {
+            let mut c = constants.to_vec();
+            c.push((name, value));
+            c
+        };
+        let kernels = [
+            Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with("QUEUE", 1.0)),
+            Kernel::new(ctx, "trace_shadow_rays", None, constants),
+            Kernel::new(ctx, "setup_dispatch", Some("shadow_resume"), &with("QUEUE", 3.0)),
+            Kernel::new(ctx, "trace_shadow_rays", Some("resume"), &with("RESUME", 1.0)),
+            Kernel::new(ctx, "setup_dispatch", Some("shadow_cut"), &with("QUEUE", 4.0)),
+        ];
+        let groups = kernels.each_ref().map(|k| k.bind(ctx, resources));
+        Self { kernels, groups }
+    }
+
+    /// Encodes the first pass over every queued shadow ray.
+    pub fn encode(&self, pass: &mut wgpu::ComputePass, args: &wgpu::Buffer) {
+        self.kernels[0].dispatch(pass, &self.groups[0], 1);
+        self.kernels[1].dispatch_indirect(pass, &self.groups[1], args, 12);
+    }
+
+    /// Encodes a resume pass (empty when the pass before decided every ray).
+    pub fn encode_resume(&self, pass: &mut wgpu::ComputePass, args: &wgpu::Buffer) {
+        self.kernels[2].dispatch(pass, &self.groups[2], 1);
+        self.kernels[3].dispatch_indirect(pass, &self.groups[3], args, 36);
+    }
+
+    /// Encodes the count of rays still unfinished as traversals cut short.
+    pub fn encode_cut(&self, pass: &mut wgpu::ComputePass) {
+        self.kernels[4].dispatch(pass, &self.groups[4], 1);
+    }
+}
 
 /// The state a wavefront method shares with the others.
 pub struct Wavefront<'a> {
@@ -98,35 +152,41 @@ impl<'a> Wavefront<'a> {
         self.ctx.queue.write_buffer(self.resources.get("wave").unwrap(), 0, bytemuck::bytes_of(wave));
     }
 
-    /// Encodes `start` and then `round(pass, r)` for the rounds r = 0 ..= max_bounces, in
-    /// submissions of ROUNDS_PER_SUBMISSION rounds; between submissions it stops early once no
-    /// path is queued (so huge --max-bounces values cost nothing after the paths have ended).
-    /// Returns without waiting for the last submission.
+    /// Encodes `start` and then `round(pass, r)` for rounds r = 0, 1, ... in submissions of
+    /// ROUNDS_PER_SUBMISSION rounds (the first holds max_bounces + 1 at most), until no path is
+    /// queued: paths end after max_bounces scattering vertices, and a path whose closest-hit
+    /// traversal stopped at the traversal budget takes one round more per stop (so huge
+    /// --max-bounces values cost nothing after the paths have ended, and no traversal is cut
+    /// short). Waits for each submission but the last.
     pub fn trace_rounds(
         &self,
         start: impl Fn(&mut wgpu::ComputePass),
         round: impl Fn(&mut wgpu::ComputePass, u32),
     ) -> Result<()> {
         let ctx = self.ctx;
-        let rounds = self.params.max_bounces + 1;
-        let mut first = 0;
-        while first < rounds {
+        let rounds = self.params.max_bounces as u64 + 1;
+        // Each stop resumes at least TRAVERSAL_BUDGET nodes further on: a bound that only a bug
+        // can reach.
+        let most = rounds * (self.params.node_count as u64 / TRAVERSAL_BUDGET as u64 + 2);
+        let mut first = 0u64;
+        loop {
             let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
                 if first == 0 {
                     start(&mut pass);
                 }
-                let end = rounds.min(first + ROUNDS_PER_SUBMISSION);
+                let end = if first == 0 { rounds.min(ROUNDS_PER_SUBMISSION as u64) } else { first + ROUNDS_PER_SUBMISSION as u64 };
                 for r in first..end {
-                    round(&mut pass, r);
+                    round(&mut pass, (r % 2) as u32);
                 }
                 first = end;
             }
             ctx.queue.submit([encoder.finish()]);
-            if first < rounds && self.counters()?.next_rays == 0 {
+            if self.counters()?.next_rays == 0 {
                 break;
             }
+            ensure!(first < most, "paths still queued after {first} rounds: a traversal does not end");
         }
         Ok(())
     }
