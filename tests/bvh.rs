@@ -167,32 +167,8 @@ fn deep_traversals_are_right_or_reported() {
     // triangle misses it (its edge y + z = 0.1 passes beside the axis), so a ray along the axis
     // visits every node before reaching the wall behind them. Lavapipe ends a shader's loops
     // after 65535 iterations in total; a traversal cut short must be counted, never silent.
-    use common::gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
-    use gatetrace::scene::{PreparedScene, load_gltf};
     let n = 120_000;
-    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
-    for i in 0..n {
-        let x = i as f32 * 1e-4;
-        for p in [[x, 1.0, -0.9], [x, 1.0, 1.0], [x, -0.9, 1.0]] {
-            mesh.indices.push(mesh.positions.len() as u32);
-            mesh.positions.push(p);
-        }
-    }
-    let wall = Mesh {
-        positions: vec![[20.0, -1.0, -1.0], [20.0, 1.0, -1.0], [20.0, 0.0, 1.0]],
-        normals: None,
-        uvs: None,
-        indices: vec![0, 1, 2],
-        material: Some(0),
-    };
-    let gltf = Scene {
-        meshes: vec![mesh, wall, quad_z(0.1, 50.0, true, 1)],
-        materials: vec![Material { double_sided: true, ..Material::diffuse([0.5; 3]) }, Material::emitter(1.0)],
-        camera: Some(Camera { position: [0.0, 0.0, 60.0], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.5 }),
-        point_lights: vec![],
-    };
-    let dir = common::scratch_dir("deep_traversal");
-    let scene = PreparedScene::new(load_gltf(&gltf.write(&dir, "slabs.gltf")).unwrap()).unwrap();
+    let scene = slab_field(true, "deep_traversal");
     assert!(scene.bvh.nodes.len() > 65_535, "{} nodes", scene.bvh.nodes.len());
     let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, Vec3::new(-1.0, 0.0, 0.0), Vec3::X, 1e30, NONE);
     assert_eq!(scene.triangles[cpu.triangle as usize].source, n as u32, "the CPU twin hits the wall");
