@@ -73,14 +73,18 @@ fn exr_output_has_a_layer_per_bin_and_metadata() {
 }
 
 #[test]
-fn time_budget_renders_whole_passes() {
+fn time_budget_renders_passes_sized_to_the_budget() {
+    // Passes are sized from the measured rate (PassSizer): at least one sample, the rendering
+    // time recorded apart from the setup's.
     let dir = common::scratch_dir("cli_time");
     let out = dir.join("timed.npy");
     let o = gatetrace(&["render", "--res", "8x8", "--time", "0.5", "--samples-per-pass", "3", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
-    let spp: u64 = meta["spp"].as_str().unwrap().parse().unwrap();
-    assert!(spp >= 3 && spp % 3 == 0, "whole passes of 3 samples, got {spp}");
+    let number = |key: &str| -> f64 { meta[key].as_str().unwrap().parse().unwrap() };
+    assert!(number("spp") >= 1.0, "no sample rendered");
+    let rendering = number("rendering_seconds");
+    assert!(rendering > 0.0, "no rendering time recorded: {meta}");
 }
 
 #[test]
