@@ -98,8 +98,9 @@ struct RenderArgs {
     samples_per_pass: Option<u32>,
     /// Print, per (s, t) strategy of a bidirectional method, the connections evaluated, those
     /// skipped (direct: the gate weighs their length zero; ellipsoidal: the spheroid met no
-    /// surface) and the shadow rays traced (ellipsoidal: pairs), and for ellipsoidal the BVH
-    /// nodes visited and triangles tested and intersected per ellipsoid query.
+    /// surface) and the shadow rays traced (ellipsoidal: pairs), and for ellipsoidal the loop
+    /// iterations (BVH nodes and triangles) and triangles tested and intersected per ellipsoid
+    /// query.
     #[arg(long)]
     stats: bool,
     /// Write only the MIS-weighted contribution of strategy S,T (S light-subpath vertices, T

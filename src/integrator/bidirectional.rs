@@ -161,7 +161,7 @@ pub struct BidirectionalTracer<'a> {
     bindings: Bindings,
     /// Strategy counters summed over the waves so far (when `stats` is on).
     stats: Option<Vec<StrategyStats>>,
-    /// Ellipsoid queries' nodes visited, triangles tested and triangles intersected, spheroids
+    /// Ellipsoid queries' loop iterations, triangles tested and triangles intersected, spheroids
     /// left out by the needle guard and points dropped by the length guard, summed.
     query_work: [u64; QUERY_COUNTERS],
     /// Which connections join the subpaths.
