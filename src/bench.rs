@@ -1,45 +1,68 @@
-//! `gatetrace bench`: samples per second of the path tracer on the Cornell box.
+//! `gatetrace bench`: samples per second of each method on the Cornell box, and the
+//! equal-time comparison (`gatetrace equal-time`).
 
 use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 
+use crate::film::Gate;
 use crate::gpu::GpuContext;
-use crate::integrator::{RenderSettings, create_integrator};
+use crate::integrator::{Method, RenderSettings, create_integrator};
 use crate::scene::{PreparedScene, load_gltf};
 
-/// Renders the scene with `path` (steady state) at 64x64 and 256x256 and prints pixel samples
-/// per second with the adapter's name. Each measurement builds its tracer, renders one warm-up
-/// pass, then times whole passes for at least `seconds` (upload and kernel builds excluded).
-pub fn run_bench(seconds: f64, max_bounces: u32, scene_path: &Path) -> Result<()> {
+/// What `gatetrace bench` measures.
+pub struct BenchSettings {
+    /// Seconds of rendering per measurement.
+    pub seconds: f64,
+    /// Maximum scattering vertices.
+    pub max_bounces: u32,
+    /// Methods (with their options) to measure.
+    pub methods: Vec<Variant>,
+    /// Image sizes (pixels).
+    pub resolutions: Vec<(u32, u32)>,
+    /// Gate of `path` and `direct`, and gate of `ellipsoidal` (which needs target lengths), as
+    /// `render --gate` takes them.
+    pub gates: (String, String),
+}
+
+/// Renders the scene with each method at each resolution and prints pixel samples per second
+/// with the adapter's name. Each measurement builds its tracer, renders one warm-up pass
+/// (lavapipe compiles kernels at their first dispatch), then times whole passes for at least
+/// `seconds` (upload and kernel builds excluded). Rows start with `bench:` for scripts
+/// (tools/throughput.py).
+pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     let scene = PreparedScene::new(load_gltf(scene_path)?)?;
     let ctx = GpuContext::new()?;
     println!("adapter: {}", ctx.adapter_description());
-    println!(
-        "scene: {} ({} triangles), method path, gate none, max bounces {max_bounces}",
-        scene_path.display(),
-        scene.triangles.len()
-    );
-    println!("{:>10} {:>8} {:>10} {:>14}", "resolution", "spp", "seconds", "Msamples/s");
-    for size in [64u32, 256] {
-        let settings = RenderSettings { width: size, height: size, max_bounces, ..Default::default() };
-        let mut tracer = create_integrator(&ctx, &scene, &settings)?;
-        tracer.render_pass(tracer.samples_per_pass())?;
-        tracer.reset_film();
-        let start = Instant::now();
-        while start.elapsed() < Duration::from_secs_f64(seconds) {
+    println!("scene: {} ({} triangles), max bounces {}", scene_path.display(), scene.triangles.len(), s.max_bounces);
+    println!("bench: {:<14} {:<20} {:>10} {:>8} {:>9} {:>11}", "method", "gate", "resolution", "spp", "seconds", "Msamples/s");
+    for variant in &s.methods {
+        let (spec, option) =
+            if variant.method == Method::Ellipsoidal { (&s.gates.1, "--ellipsoidal-gate") } else { (&s.gates.0, "--gate") };
+        let gate = Gate::parse(spec).with_context(|| format!("{option} {spec}"))?;
+        for &(width, height) in &s.resolutions {
+            let base = RenderSettings { width, height, max_bounces: s.max_bounces, gate: gate.clone(), ..Default::default() };
+            let settings = variant.settings(&base);
+            let mut tracer = create_integrator(&ctx, &scene, &settings)?;
             tracer.render_pass(tracer.samples_per_pass())?;
+            tracer.reset_film();
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs_f64(s.seconds) {
+                tracer.render_pass(tracer.samples_per_pass())?;
+            }
+            let elapsed = start.elapsed().as_secs_f64();
+            let samples = tracer.samples_done() as f64 * (width * height) as f64;
+            println!(
+                "bench: {:<14} {:<20} {:>10} {:>8} {:>9.2} {:>11.3}",
+                variant.name(),
+                spec,
+                format!("{width}x{height}"),
+                tracer.samples_done(),
+                elapsed,
+                samples / elapsed / 1e6
+            );
         }
-        let elapsed = start.elapsed().as_secs_f64();
-        let samples = tracer.samples_done() as f64 * (size * size) as f64;
-        println!(
-            "{:>10} {:>8} {:>10.2} {:>14.3}",
-            format!("{size}x{size}"),
-            tracer.samples_done(),
-            elapsed,
-            samples / elapsed / 1e6
-        );
     }
     Ok(())
 }

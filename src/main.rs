@@ -34,7 +34,8 @@ enum Command {
     /// Open the interactive viewer: scrub the gate through time and watch light move; click a
     /// pixel for its transient response.
     View(ViewArgs),
-    /// Measure samples per second of `path` on the Cornell box at 64x64 and 256x256.
+    /// Measure samples per second of each method on the Cornell box (tools/throughput.py adds
+    /// Mitsuba 3 + mitransient's in the same run).
     Bench(BenchArgs),
     /// Render a scene with several methods for the same wall time each and report their mean
     /// squared error against a long reference render (error at equal time).
@@ -212,12 +213,25 @@ struct ViewArgs {
 
 #[derive(Args)]
 struct BenchArgs {
-    /// Seconds of rendering per measurement.
+    /// Seconds of rendering per measurement (after a discarded warm-up pass).
     #[arg(long, default_value_t = 10.0)]
     seconds: f64,
     /// Maximum number of scattering vertices.
     #[arg(long, default_value_t = 5)]
     max_bounces: u32,
+    /// Methods to measure, comma-separated (as in equal-time --methods).
+    #[arg(long, value_delimiter = ',', default_value = "path,direct,ellipsoidal", value_parser = parse_variant)]
+    methods: Vec<gatetrace::bench::Variant>,
+    /// Image sizes, comma-separated WIDTHxHEIGHT.
+    #[arg(long, value_delimiter = ',', default_value = "64x64", value_parser = parse_resolution)]
+    res: Vec<(u32, u32)>,
+    /// Gate of `path` and `direct` (see render --gate; metres of optical path).
+    #[arg(long, default_value = "none")]
+    gate: String,
+    /// Gate of `ellipsoidal`, which needs one with target lengths: by default the 2.5 mm box of
+    /// the README's equal-time figures.
+    #[arg(long, default_value = "box:3.16..3.1625")]
+    ellipsoidal_gate: String,
 }
 
 #[derive(Args)]
@@ -337,7 +351,16 @@ fn main() {
         Command::View(args) => run_view(args),
         Command::EqualTime(args) => run_equal_time(args),
         Command::StressEllipsoid(args) => run_stress(args),
-        Command::Bench(args) => gatetrace::bench::run_bench(args.seconds, args.max_bounces, Path::new(DEFAULT_SCENE)),
+        Command::Bench(args) => {
+            let settings = gatetrace::bench::BenchSettings {
+                seconds: args.seconds,
+                max_bounces: args.max_bounces,
+                methods: args.methods,
+                resolutions: args.res,
+                gates: (args.gate, args.ellipsoidal_gate),
+            };
+            gatetrace::bench::run_bench(&settings, Path::new(DEFAULT_SCENE))
+        }
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -161,7 +161,7 @@ fn profile_reports_gpu_time_per_stage() {
         meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
     };
     let mut total_ms = 0.0;
-    for stage in ["generate_camera_rays", "intersect_closest", "shade", "trace_shadow_rays", "accumulate", "setup_dispatch(rays)"] {
+    for stage in ["generate_camera_rays", "extend_paths", "accumulate", "setup_dispatch(rays)"] {
         let row = text.lines().find(|l| l.split_whitespace().next() == Some(stage)).unwrap_or_else(|| panic!("no row for {stage}:\n{text}"));
         let cols: Vec<&str> = row.split_whitespace().collect();
         let ms: f64 = cols[1].parse().unwrap();

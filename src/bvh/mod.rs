@@ -17,6 +17,18 @@ use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, Triangle};
 /// below 3 x TRAVERSAL_BUDGET loop iterations, far below lavapipe's 65535 per invocation.
 pub const TRAVERSAL_BUDGET: u32 = 12_000;
 
+/// Scenes of at most this many triangles are not traversed: every ray tests all of them (from
+/// a uniform buffer, see shaders/lib/bvh.wesl SMALL_SCENE_TRIANGLES), which costs less than
+/// the BVH's box tests and per-ray node loads at such sizes (measured on the Cornell box, 12
+/// triangles). The length of the WGSL array `small_scene_triangles` (bindings.wesl).
+pub const MAX_SMALL_SCENE_TRIANGLES: usize = 16;
+
+/// The triangles the traversals test one by one (BVH order): all of them for a scene of at most
+/// MAX_SMALL_SCENE_TRIANGLES, else none (the BVH is traversed).
+pub fn small_scene_triangles(triangles: &[Triangle]) -> &[Triangle] {
+    if triangles.len() <= MAX_SMALL_SCENE_TRIANGLES { triangles } else { &[] }
+}
+
 /// A flattened BVH over a triangle list.
 #[derive(Clone, Debug)]
 pub struct Bvh {

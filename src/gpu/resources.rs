@@ -68,6 +68,16 @@ impl Resources {
         Ok(())
     }
 
+    /// Creates uniform buffer `name` holding the array `values`.
+    pub fn uniform_slice_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, values: &[T]) {
+        let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(name),
+            contents: bytemuck::cast_slice(values),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
+        self.insert(name, buffer);
+    }
+
     /// Creates uniform buffer `name` holding `value`.
     pub fn uniform_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, value: &T) {
         let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

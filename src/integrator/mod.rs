@@ -45,7 +45,7 @@ impl Method {
     }
 }
 
-/// How paths reach area lights (the LIGHT_STRATEGY override of `shade`).
+/// How paths reach area lights (the LIGHT_STRATEGY override of `extend_paths`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LightStrategy {
     /// Light sampling and BSDF sampling combined by the power heuristic.
@@ -398,6 +398,10 @@ pub fn upload_scene(
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
     r.storage_init(ctx, "bvh_node_areas", &scene.node_areas)?;
+    let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
+    let mut padded = small_scene.to_vec();
+    padded.resize(crate::bvh::MAX_SMALL_SCENE_TRIANGLES, Default::default());
+    r.uniform_slice_init(ctx, "small_scene_triangles", &padded);
     r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
@@ -420,6 +424,8 @@ pub fn upload_scene(
         ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
         ("FILM_CHUNK_BITS", film.bits as f64),
         ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
+        ("SMALL_SCENE_TRIANGLES", small_scene.len() as f64),
+        ("RESUMABLE", flag(scene.bvh.nodes.len() as u64 > crate::bvh::TRAVERSAL_BUDGET as u64)),
     ];
     Ok((r, constants, film))
 }

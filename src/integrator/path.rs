@@ -6,16 +6,18 @@
 //! generate_camera_rays                  every slot -> next_ray_queue
 //! for round in 0, 1, ...:               (until every path has ended)
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
-//!     intersect_closest                 closest hits of ray_queue (a traversal that stops at
+//!     extend_paths                      closest hit, emission, light sample and its shadow
+//!                                       ray, next ray (a closest-hit traversal that stops at
 //!                                       the budget goes back to the queue: one round later)
-//!     shade                             emission, light sample + shadow_queue, next ray
-//!     setup_dispatch(shadow_rays)
-//!     trace_shadow_rays                 occluded light samples are cleared
-//!     [setup_dispatch(shadow_resume)    resume passes for shadow rays that stopped at the
-//!      trace_shadow_rays(resume)] x R   budget (empty when none did)
-//!     [setup_dispatch(shadow_cut)]      counts any still unfinished as cut short
+//!     [setup_dispatch(shadow_resume)    BVHs of more than TRAVERSAL_BUDGET nodes: resume
+//!      trace_shadow_rays(resume)] x R   passes for shadow rays that stopped at the budget
+//!     [setup_dispatch(shadow_cut)]      (empty when none did); counts any still unfinished
+//!                                       as cut short
 //!     accumulate                        contributions -> film (W, bin), per pixel
 //! ```
+//!
+//! The stages of one vertex are fused into extend_paths: on CPU Vulkan a stage boundary's
+//! round trip of the path state through memory cost more than the stages' own work.
 
 use anyhow::{Result, ensure};
 
@@ -40,8 +42,7 @@ pub(super) const ROUNDS_PER_SUBMISSION: u32 = 16;
 struct Stages {
     generate_camera_rays: Kernel,
     setup_dispatch_rays: Kernel,
-    intersect_closest: Kernel,
-    shade: Kernel,
+    extend_paths: Kernel,
     shadow_rays: ShadowRayStages,
     accumulate: Kernel,
 }
@@ -50,8 +51,7 @@ struct Stages {
 struct Bindings {
     generate_camera_rays: wgpu::BindGroup,
     setup_dispatch_rays: [wgpu::BindGroup; 2],
-    intersect_closest: [wgpu::BindGroup; 2],
-    shade: [wgpu::BindGroup; 2],
+    extend_paths: [wgpu::BindGroup; 2],
     accumulate: wgpu::BindGroup,
 }
 
@@ -81,6 +81,7 @@ impl<'a> PathTracer<'a> {
         let slots = slots_per_wave;
 
         let params = super::render_params(scene, settings);
+        let shadow_resumes = (params.node_count / crate::bvh::TRAVERSAL_BUDGET).min(MAX_SHADOW_RESUMES);
 
         let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         let none = wgpu::BufferUsages::empty();
@@ -104,8 +105,7 @@ impl<'a> PathTracer<'a> {
         let stages = Stages {
             generate_camera_rays: Kernel::new(ctx, "generate_camera_rays", None, &constants),
             setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
-            intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
-            shade: Kernel::new(ctx, "shade", None, &constants),
+            extend_paths: Kernel::new(ctx, "extend_paths", None, &constants),
             shadow_rays: ShadowRayStages::new(ctx, &constants, &r),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
         };
@@ -117,12 +117,10 @@ impl<'a> PathTracer<'a> {
             // generate fills the queue that round 0 reads.
             generate_camera_rays: stages.generate_camera_rays.bind(ctx, &odd),
             setup_dispatch_rays: both(&stages.setup_dispatch_rays),
-            intersect_closest: both(&stages.intersect_closest),
-            shade: both(&stages.shade),
+            extend_paths: both(&stages.extend_paths),
             accumulate: stages.accumulate.bind(ctx, &even),
         };
         let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
-        let shadow_resumes = (params.node_count / crate::bvh::TRAVERSAL_BUDGET).min(MAX_SHADOW_RESUMES);
         Ok(Self { wf, stages, bindings, shadow_resumes })
     }
 
@@ -140,9 +138,7 @@ impl<'a> PathTracer<'a> {
             |pass, r| {
                 let parity = (r % 2) as usize;
                 s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
-                s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
-                s.shade.dispatch_indirect(pass, &b.shade[parity], args, 0);
-                s.shadow_rays.encode(pass, args);
+                s.extend_paths.dispatch_indirect(pass, &b.extend_paths[parity], args, 0);
                 if self.shadow_resumes > 0 {
                     for _ in 0..self.shadow_resumes {
                         s.shadow_rays.encode_resume(pass, args);
