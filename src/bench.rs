@@ -1,4 +1,4 @@
-//! `gatetrace bench`: samples per second of each method on the Cornell box, and the
+//! `gatetrace bench`: samples per second of each method on a scene, and the
 //! equal-time comparison (`gatetrace equal-time`).
 
 use std::path::Path;

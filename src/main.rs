@@ -34,7 +34,7 @@ enum Command {
     /// Open the interactive viewer: scrub the gate through time and watch light move; click a
     /// pixel for its transient response.
     View(ViewArgs),
-    /// Measure samples per second of each method on the Cornell box (tools/throughput.py adds
+    /// Measure samples per second of each method on a scene (tools/throughput.py adds
     /// Mitsuba 3 + mitransient's in the same run).
     Bench(BenchArgs),
     /// Render a scene with several methods for the same wall time each and report their mean
@@ -225,6 +225,9 @@ struct BenchArgs {
     /// Image sizes, comma-separated WIDTHxHEIGHT.
     #[arg(long, value_delimiter = ',', default_value = "64x64", value_parser = parse_resolution)]
     res: Vec<(u32, u32)>,
+    /// glTF 2.0 scene (default: the Cornell box).
+    #[arg(long)]
+    scene: Option<PathBuf>,
     /// Gate of `path` and `direct` (see render --gate; metres of optical path).
     #[arg(long, default_value = "none")]
     gate: String,
@@ -359,7 +362,8 @@ fn main() {
                 resolutions: args.res,
                 gates: (args.gate, args.ellipsoidal_gate),
             };
-            gatetrace::bench::run_bench(&settings, Path::new(DEFAULT_SCENE))
+            let scene = args.scene.unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+            gatetrace::bench::run_bench(&settings, &scene)
         }
     };
     if let Err(e) = result {

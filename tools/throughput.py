@@ -2,7 +2,7 @@
 """Samples per second of gatetrace's methods against Mitsuba 3 + mitransient, in one run.
 
 Measures mitransient's ``transient_path`` (one time bin covering every path
-length, i.e. the steady image) on the Cornell box at the same resolution and
+length, i.e. the steady image) on a scene (the Cornell box by default) at the same resolution and
 bounce count, then ``gatetrace bench`` (path, direct, ellipsoidal), then the
 peer again, and prints each method's samples/s and its ratio to the mean of
 the two peer measurements (the bracket shows how much the machine drifted).
@@ -10,7 +10,7 @@ the two peer measurements (the bracket shows how much the machine drifted).
 A sample is one path per pixel: samples/s = spp x pixels / seconds, warm-up
 (kernel compilation) excluded on both sides.
 
-Usage: tools/throughput.py [--seconds S] [--res N] [--max-bounces B]
+Usage: tools/throughput.py [--scene S.glb] [--seconds S] [--res N] [--max-bounces B]
 Requires: a built gatetrace (cargo build --release) and, for the peer,
 ``pip install mitsuba mitransient`` (+ ``apt-get install libllvm19``).
 """
@@ -29,7 +29,7 @@ SCENE = os.path.join(ROOT, "assets", "scenes", "cornell_box.gltf")
 sys.path.insert(0, HERE)
 
 
-def peer_samples_per_second(res, max_bounces, seconds, spp=256):
+def peer_samples_per_second(scene_path, res, max_bounces, seconds, spp=256):
     """Renders passes of `spp` with transient_path for at least `seconds` after one warm-up."""
     import mitsuba as mi
     mi.set_variant("llvm_ad_rgb")
@@ -37,7 +37,7 @@ def peer_samples_per_second(res, max_bounces, seconds, spp=256):
     import peer_reference as peer
 
     args = types.SimpleNamespace(res=(res, res), spp=spp, bins=1, start=0.0, bin_width=1000.0)
-    scene = mi.load_dict(peer.build_mitsuba_scene(mi, peer.load_gltf(SCENE), args, max_bounces + 1))
+    scene = mi.load_dict(peer.build_mitsuba_scene(mi, peer.load_gltf(scene_path), args, max_bounces + 1))
     integrator, sensor = scene.integrator(), scene.sensors()[0]
 
     def render(seed):
@@ -54,10 +54,10 @@ def peer_samples_per_second(res, max_bounces, seconds, spp=256):
     return passes * spp * res * res / elapsed
 
 
-def gatetrace_bench(res, max_bounces, seconds, methods):
+def gatetrace_bench(scene_path, res, max_bounces, seconds, methods):
     exe = os.path.join(ROOT, "target", "release", "gatetrace")
     cmd = [exe, "bench", "--seconds", str(seconds), "--max-bounces", str(max_bounces),
-           "--res", f"{res}x{res}", "--methods", methods]
+           "--res", f"{res}x{res}", "--methods", methods, "--scene", scene_path]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     rows, adapter = [], ""
     for line in out.splitlines():
@@ -71,6 +71,7 @@ def gatetrace_bench(res, max_bounces, seconds, methods):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--scene", default=SCENE, help="glTF 2.0 scene (default: the Cornell box)")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds per measurement (default 10)")
     p.add_argument("--res", type=int, default=64, help="square image size in pixels (default 64)")
     p.add_argument("--max-bounces", type=int, default=5, help="scattering vertices (default 5)")
@@ -78,14 +79,14 @@ def main():
     args = p.parse_args()
 
     try:
-        before = peer_samples_per_second(args.res, args.max_bounces, args.seconds)
+        before = peer_samples_per_second(args.scene, args.res, args.max_bounces, args.seconds)
     except ImportError as e:
         before = None
         print(f"peer not measured ({e}); pip install mitsuba mitransient", file=sys.stderr)
-    adapter, rows = gatetrace_bench(args.res, args.max_bounces, args.seconds, args.methods)
-    after = peer_samples_per_second(args.res, args.max_bounces, args.seconds) if before else None
+    adapter, rows = gatetrace_bench(args.scene, args.res, args.max_bounces, args.seconds, args.methods)
+    after = peer_samples_per_second(args.scene, args.res, args.max_bounces, args.seconds) if before else None
 
-    print(f"Cornell box, {args.res}x{args.res}, {args.max_bounces} bounces, {args.seconds:g} s per measurement")
+    print(f"{os.path.basename(args.scene)}, {args.res}x{args.res}, {args.max_bounces} bounces, {args.seconds:g} s per measurement")
     print(f"gatetrace on {adapter}")
     if before:
         print(f"peer: Mitsuba 3 + mitransient transient_path (llvm_ad_rgb), one bin: "

@@ -17,6 +17,12 @@ use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, Triangle};
 /// below 3 x TRAVERSAL_BUDGET loop iterations, far below lavapipe's 65535 per invocation.
 pub const TRAVERSAL_BUDGET: u32 = 12_000;
 
+/// Whether a traversal of a BVH of `node_count` nodes can stop at TRAVERSAL_BUDGET (each node
+/// is visited at most once, so only BVHs of more nodes need resumption; the RESUMABLE override).
+pub fn traversals_can_stop(node_count: usize) -> bool {
+    node_count > TRAVERSAL_BUDGET as usize
+}
+
 /// Scenes of at most this many triangles are not traversed: every ray tests all of them (from
 /// a uniform buffer, see shaders/lib/bvh.wesl SMALL_SCENE_TRIANGLES), which costs less than
 /// the BVH's box tests and per-ray node loads at such sizes (measured on the Cornell box, 12

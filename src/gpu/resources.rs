@@ -80,12 +80,7 @@ impl Resources {
 
     /// Creates uniform buffer `name` holding `value`.
     pub fn uniform_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, value: &T) {
-        let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(name),
-            contents: bytemuck::bytes_of(value),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        });
-        self.insert(name, buffer);
+        self.uniform_slice_init(ctx, name, std::slice::from_ref(value));
     }
 }
 

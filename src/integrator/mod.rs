@@ -425,7 +425,7 @@ pub fn upload_scene(
         ("FILM_CHUNK_BITS", film.bits as f64),
         ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
         ("SMALL_SCENE_TRIANGLES", small_scene.len() as f64),
-        ("RESUMABLE", flag(scene.bvh.nodes.len() as u64 > crate::bvh::TRAVERSAL_BUDGET as u64)),
+        ("RESUMABLE", flag(crate::bvh::traversals_can_stop(scene.bvh.nodes.len()))),
     ];
     Ok((r, constants, film))
 }

@@ -9,15 +9,18 @@
 //!     extend_paths                      closest hit, emission, light sample and its shadow
 //!                                       ray, next ray (a closest-hit traversal that stops at
 //!                                       the budget goes back to the queue: one round later)
-//!     [setup_dispatch(shadow_resume)    BVHs of more than TRAVERSAL_BUDGET nodes: resume
-//!      trace_shadow_rays(resume)] x R   passes for shadow rays that stopped at the budget
-//!     [setup_dispatch(shadow_cut)]      (empty when none did); counts any still unfinished
-//!                                       as cut short
+//!     [setup_dispatch(shadow_rays)      BVHs of more than TRAVERSAL_BUDGET nodes: the shadow
+//!      trace_shadow_rays                rays extend_paths queued (it traces them itself in
+//!      setup_dispatch(shadow_resume)    smaller BVHs), resume passes for those that stopped
+//!      trace_shadow_rays(resume)] x R   at the budget (empty when none did), and a count of
+//!      setup_dispatch(shadow_cut)]      any still unfinished as cut short
 //!     accumulate                        contributions -> film (W, bin), per pixel
 //! ```
 //!
 //! The stages of one vertex are fused into extend_paths: on CPU Vulkan a stage boundary's
-//! round trip of the path state through memory cost more than the stages' own work.
+//! round trip of the path state through memory cost more than the stages' own work. On meshes
+//! large enough for resumable traversals, shadow rays stay a compacted stage of their own:
+//! there their long traversals cost more than the round trip.
 
 use anyhow::{Result, ensure};
 
@@ -81,7 +84,11 @@ impl<'a> PathTracer<'a> {
         let slots = slots_per_wave;
 
         let params = super::render_params(scene, settings);
-        let shadow_resumes = (params.node_count / crate::bvh::TRAVERSAL_BUDGET).min(MAX_SHADOW_RESUMES);
+        let shadow_resumes = if crate::bvh::traversals_can_stop(params.node_count as usize) {
+            (params.node_count / crate::bvh::TRAVERSAL_BUDGET).min(MAX_SHADOW_RESUMES)
+        } else {
+            0
+        };
 
         let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         let none = wgpu::BufferUsages::empty();
@@ -140,6 +147,7 @@ impl<'a> PathTracer<'a> {
                 s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
                 s.extend_paths.dispatch_indirect(pass, &b.extend_paths[parity], args, 0);
                 if self.shadow_resumes > 0 {
+                    s.shadow_rays.encode(pass, args);
                     for _ in 0..self.shadow_resumes {
                         s.shadow_rays.encode_resume(pass, args);
                     }
