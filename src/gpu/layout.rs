@@ -27,6 +27,12 @@ pub const LIGHT_DOUBLE_SIDED: u32 = 1;
 pub const MAX_LEAF_TRIANGLES: u32 = 15;
 /// Largest triangle index a BVH leaf can address (28 bits of `BvhNode::leaf`).
 pub const MAX_TRIANGLES: u32 = (1 << 28) - 1;
+/// Most materials the kernels read from the uniform buffer `uniform_materials` (bindings.wesl);
+/// scenes with more read the storage buffer `materials`.
+pub const MAX_UNIFORM_MATERIALS: usize = 256;
+/// Most lights the kernels read from the uniform buffers `uniform_lights` and
+/// `uniform_light_cdf` (bindings.wesl); scenes with more read `lights` and `light_cdf`.
+pub const MAX_UNIFORM_LIGHTS: usize = 256;
 
 /// One triangle in BVH leaf order: vertex 0 and the edges to vertices 1 and 2 (m).
 #[repr(C)]

@@ -15,7 +15,7 @@ use anyhow::Result;
 use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
-use crate::gpu::layout::{NONE, RenderParams, WaveParams};
+use crate::gpu::layout::{MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, WaveParams};
 use crate::gpu::resources::ChunkLayout;
 use crate::gpu::Resources;
 use crate::scene::PreparedScene;
@@ -399,15 +399,23 @@ pub fn upload_scene(
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
     r.storage_init(ctx, "bvh_node_areas", &scene.node_areas)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
-    let mut padded = small_scene.to_vec();
-    padded.resize(crate::bvh::MAX_SMALL_SCENE_TRIANGLES, Default::default());
-    r.uniform_slice_init(ctx, "small_scene_triangles", &padded);
+    let small = small_scene.len();
+    let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();
+    let max_small = crate::bvh::MAX_SMALL_SCENE_TRIANGLES;
+    r.uniform_slice_init(ctx, "small_scene_triangles", &padded_table(small_scene, max_small));
+    r.uniform_slice_init(ctx, "small_scene_shading", &padded_table(&scene.shading[..small], max_small));
+    r.uniform_slice_init(ctx, "small_scene_normals", &padded_table(&small_normals, max_small));
     r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;
     r.storage_init(ctx, "lights", &scene.lights.lights)?;
     r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
+    let tables_in_uniforms =
+        scene.materials.len() <= MAX_UNIFORM_MATERIALS && scene.lights.lights.len() <= MAX_UNIFORM_LIGHTS;
+    r.uniform_slice_init(ctx, "uniform_materials", &padded_table(&scene.materials, MAX_UNIFORM_MATERIALS));
+    r.uniform_slice_init(ctx, "uniform_lights", &padded_table(&scene.lights.lights, MAX_UNIFORM_LIGHTS));
+    r.uniform_slice_init(ctx, "uniform_light_cdf", &padded_table(&scene.lights.cdf, MAX_UNIFORM_LIGHTS));
     r.storage_init(ctx, "gate_table", &gate.table())?;
     let cdf = target_sampler(scene, settings).map_or(vec![0.0, 1.0], |t| t.cdf);
     r.storage_init(ctx, "target_cdf", &cdf)?;
@@ -424,10 +432,20 @@ pub fn upload_scene(
         ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
         ("FILM_CHUNK_BITS", film.bits as f64),
         ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
-        ("SMALL_SCENE_TRIANGLES", small_scene.len() as f64),
+        ("SMALL_SCENE_TRIANGLES", small as f64),
+        ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
         ("RESUMABLE", flag(crate::bvh::traversals_can_stop(scene.bvh.nodes.len()))),
     ];
     Ok((r, constants, film))
+}
+
+/// The first `len` elements of `table`, zero-padded to `len`: the contents of a uniform buffer
+/// holding a fixed-length WGSL array (unused when the table is longer, see the overrides that
+/// select them).
+fn padded_table<T: bytemuck::Pod + Default>(table: &[T], len: usize) -> Vec<T> {
+    let mut padded = table[..table.len().min(len)].to_vec();
+    padded.resize(len, T::default());
+    padded
 }
 
 /// Renders `scene` with `settings` until `budget` is spent, calling `progress` after each wave.
