@@ -136,16 +136,18 @@ fn split_buffers_render_identically() {
     // Find a binding limit that splits every array into 2-4 chunks; the transient film's size
     // is tuned with its bin count.
     let (t, n) = (scene.triangles.len() as u64, scene.bvh.nodes.len() as u64);
-    let (width, height) = (4u32, 4u32);
+    let (width, height) = (8u32, 8u32);
     let splits = |limit: u64, bins: u64| {
-        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("film", 3 * 16 * bins, 4)]
+        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("film", 3 * (width * height) as u64 * bins, 4)]
             .iter()
             .all(|&(name, count, size)| ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2))
     };
+    // It must also be small enough that a wave holds fewer slots (paths) than there are pixels.
+    let splits_waves = |limit: u64| limit / (size_of::<gatetrace::gpu::layout::PathState>() as u64) < (width * height) as u64;
     let (limit, bins) = (64..4096u64)
         .flat_map(|l| (1..64u64).map(move |b| (l, b)))
-        .find(|&(l, b)| splits(l, b))
-        .expect("some binding limit splits every array");
+        .find(|&(l, b)| splits(l, b) && splits_waves(l))
+        .expect("some binding limit splits every array and every pass");
     let gate = Gate::Transient { start: 0.0, width: 10.0 / bins as f64, bins: bins as u32 };
     let base = RenderSettings { width, height, max_bounces: 3, seed: 9, gate, ..Default::default() };
     let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };

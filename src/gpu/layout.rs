@@ -305,19 +305,15 @@ pub struct PathState {
     pub throughput: Vec3,
     /// Scattering vertices so far.
     pub depth: u32,
-    /// Unit normal at `origin` on the side the ray leaves (zero at the pinhole).
-    pub normal: Vec3,
     /// Triangle under `origin`, or [`NONE`].
     pub origin_triangle: u32,
-    /// Pixel index (row-major).
-    pub pixel: u32,
-    /// Sample index within the pixel.
-    pub sample: u32,
-    /// Random numbers drawn so far.
+    /// Random numbers drawn so far (pixel and sample follow from the path's slot).
     pub dimension: u32,
     /// BVH node at which the closest-hit traversal of the path's ray resumes in a later round;
     /// 0 while it has not started or has finished.
     pub traversal: u32,
+    /// Side of `origin_triangle` the ray leaves: +1 front, -1 back, 0 at the pinhole and point lights.
+    pub side: f32,
 }
 
 /// Closest hit of a ray.
