@@ -23,10 +23,12 @@ pub fn traversals_can_stop(node_count: usize) -> bool {
     node_count > TRAVERSAL_BUDGET as usize
 }
 
-/// Scenes of at most this many triangles are not traversed: every ray tests all of them (from
-/// a uniform buffer, see shaders/lib/bvh.wesl SMALL_SCENE_TRIANGLES), which costs less than
-/// the BVH's box tests and per-ray node loads at such sizes (measured on the Cornell box, 12
-/// triangles). The length of the WGSL array `small_scene_triangles` (bindings.wesl).
+/// Scenes of at most this many triangles are not traversed: every ray tests all of them (read
+/// from a uniform buffer once per invocation, see shaders/lib/bvh.wesl `load_small_scene` and the
+/// override SMALL_SCENE_TRIANGLES in bindings.wesl), which costs less than the BVH's box tests
+/// and per-ray node loads at such sizes (measured on the Cornell box, 12 triangles). The length
+/// of the WGSL arrays `small_scene_triangles`, `small_scene_shading` and `small_scene_normals`
+/// (bindings.wesl).
 pub const MAX_SMALL_SCENE_TRIANGLES: usize = 16;
 
 /// The triangles the traversals test one by one (BVH order): all of them for a scene of at most
