@@ -34,8 +34,6 @@ import re
 import subprocess
 import sys
 import tempfile
-import time
-import types
 
 import numpy as np
 
@@ -57,35 +55,11 @@ def gatetrace_render(args, method, seconds, seed, out):
     return np.load(out).astype(np.float64).reshape(args.res, args.res, 3), float(m.group(2)), int(m.group(1))
 
 
-class Peer:
-    """mitransient's transient_path on the scene, one time bin covering the gate."""
-
-    def __init__(self, args):
-        import mitsuba as mi
-        mi.set_variant("llvm_ad_rgb")
-        import mitransient  # noqa: F401  (registers transient_path)
-        import peer_reference as peer
-
-        a, b = args.gate
-        settings = types.SimpleNamespace(res=(args.res, args.res), spp=1, bins=1, start=a, bin_width=b - a)
-        self.mi = mi
-        self.scene = mi.load_dict(peer.build_mitsuba_scene(mi, peer.load_gltf(args.scene), settings,
-                                                           args.max_bounces + 1))
-        self.integrator, self.sensor = self.scene.integrator(), self.scene.sensors()[0]
-        self.pixels = args.res * args.res
-
-    def render(self, spp, seed):
-        """(image [H, W, 3], seconds) of one render of `spp` samples per pixel."""
-        start = time.perf_counter()
-        _, transient = self.integrator.render(self.scene, self.sensor, seed=seed, spp=spp)
-        image = np.array(transient, dtype=np.float64)[:, :, 0, :3]
-        return image, time.perf_counter() - start
-
-    def spp_for(self, seconds, probe_spp=64):
-        """Samples per pixel that fit `seconds`, from the rate of a warm render."""
-        self.render(probe_spp, 0)
-        _, t = self.render(probe_spp, 1)
-        return max(1, int(probe_spp * seconds / t))
+def spp_for(peer, seconds, probe_spp=64):
+    """Samples per pixel the peer renders in `seconds`, from the rate of a warm render."""
+    peer.render(probe_spp, 0)
+    _, t = peer.render(probe_spp, 1)
+    return max(1, int(probe_spp * seconds / t))
 
 
 def main():
@@ -128,8 +102,11 @@ def main():
         mse = np.mean([((img - reference) ** 2).mean() - noise for img, _, _ in results])
         rows.append((f"gatetrace {method}", np.mean([r[2] for r in results]), np.mean([r[1] for r in results]), mse))
 
-    peer = Peer(args)
-    spp = peer.spp_for(args.seconds)
+    import peer_reference
+
+    peer = peer_reference.OneBinRenderer(args.scene, args.res, args.max_bounces, args.gate[0],
+                                         args.gate[1] - args.gate[0])
+    spp = spp_for(peer, args.seconds)
     results = [peer.render(spp, 200 + k) for k in range(args.repeats)]
     peer_mse = np.mean([((img - reference) ** 2).mean() - noise for img, _ in results])
     rows.append(("mitransient transient_path", spp, np.mean([t for _, t in results]), peer_mse))

@@ -442,6 +442,31 @@ class _RunningMoments:
         return self.mean, self.m2 / (self.n - 1) / self.n
 
 
+class OneBinRenderer:
+    """transient_path (llvm_ad_rgb) on a glTF scene with one time bin [start, start + width)
+    metres of optical path: the peer of tools/throughput.py and tools/equal_time_peer.py."""
+
+    def __init__(self, scene_path, res, max_bounces, start, width):
+        import types
+
+        import mitsuba as mi
+        mi.set_variant("llvm_ad_rgb")
+        import mitransient  # noqa: F401  (registers transient_path)
+
+        settings = types.SimpleNamespace(res=(res, res), spp=1, bins=1, start=start, bin_width=width)
+        self.scene = mi.load_dict(build_mitsuba_scene(mi, load_gltf(scene_path), settings, max_bounces + 1))
+        self.integrator, self.sensor = self.scene.integrator(), self.scene.sensors()[0]
+
+    def render(self, spp, seed):
+        """(bin image [H, W, 3] as float64, seconds) of one render of `spp` samples per pixel;
+        both of the integrator's outputs are evaluated (Dr.Jit is lazy) within the time."""
+        start = time.perf_counter()
+        steady, transient = self.integrator.render(self.scene, self.sensor, seed=seed, spp=spp)
+        np.array(steady)
+        image = np.array(transient, dtype=np.float64)[:, :, 0, :3]
+        return image, time.perf_counter() - start
+
+
 def gate_bins(args):
     """Return (first, last_exclusive) bin indices of --gate, or None."""
     if args.gate is None:

@@ -21,7 +21,6 @@ import re
 import subprocess
 import sys
 import time
-import types
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -30,26 +29,16 @@ sys.path.insert(0, HERE)
 
 
 def peer_samples_per_second(scene_path, res, max_bounces, seconds, spp=256):
-    """Renders passes of `spp` with transient_path for at least `seconds` after one warm-up."""
-    import mitsuba as mi
-    mi.set_variant("llvm_ad_rgb")
-    import mitransient  # noqa: F401  (registers transient_path)
+    """Renders passes of `spp` with transient_path (one bin over all path lengths) for at least
+    `seconds` after one warm-up."""
     import peer_reference as peer
 
-    args = types.SimpleNamespace(res=(res, res), spp=spp, bins=1, start=0.0, bin_width=1000.0)
-    scene = mi.load_dict(peer.build_mitsuba_scene(mi, peer.load_gltf(scene_path), args, max_bounces + 1))
-    integrator, sensor = scene.integrator(), scene.sensors()[0]
-
-    def render(seed):
-        steady, transient = integrator.render(scene, sensor, seed=seed, spp=spp)
-        # Force evaluation: drjit is lazy.
-        return float(mi.TensorXf(steady).numpy().mean()) + float(mi.TensorXf(transient).numpy().mean())
-
-    render(0)
+    renderer = peer.OneBinRenderer(scene_path, res, max_bounces, 0.0, 1000.0)
+    renderer.render(spp, 0)
     start, passes = time.perf_counter(), 0
     while time.perf_counter() - start < seconds:
         passes += 1
-        render(passes)
+        renderer.render(spp, passes)
     elapsed = time.perf_counter() - start
     return passes * spp * res * res / elapsed
 

@@ -1,9 +1,7 @@
 //! What every wavefront method keeps between passes: the device, the render's parameters, the
 //! named buffers, the specialisation constants and the bookkeeping of passes, waves and samples.
 
-use anyhow::Result;
-
-use anyhow::ensure;
+use anyhow::{Result, ensure};
 
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
 use crate::bvh::TRAVERSAL_BUDGET;
