@@ -239,6 +239,8 @@ impl<'a> BidirectionalTracer<'a> {
         r.storage_zeroed(ctx, "subpath_vertices", slots * per_slot[0], none)?;
         r.storage_zeroed(ctx, "subpath_lengths", 2 * slots * 4, none)?;
         r.storage_zeroed(ctx, "contributions", slots * per_slot[1], none)?;
+        // Only the path tracer sums contributions per path (accumulate SUM_PER_PATH).
+        r.storage_zeroed(ctx, "path_radiance", 4, none)?;
         r.storage_zeroed(ctx, "splats", slots * per_slot[2], none)?;
         r.storage_zeroed(ctx, "shadow_queue", slots * per_slot[3], none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
@@ -366,6 +368,7 @@ impl<'a> BidirectionalTracer<'a> {
         let (s, b) = (&self.stages, &self.bindings);
         // ---- trace the subpaths ----
         self.wf.trace_rounds(
+            1,
             |pass| s.generate_subpaths.dispatch(pass, &b.generate_subpaths, wave.slot_count),
             |pass, r| {
                 let parity = (r % 2) as usize;

@@ -151,18 +151,20 @@ impl<'a> Wavefront<'a> {
     }
 
     /// Encodes `start` and then `round(pass, r)` for rounds r = 0, 1, ... in submissions of
-    /// ROUNDS_PER_SUBMISSION rounds (the first holds max_bounces + 1 at most), until no path is
+    /// ROUNDS_PER_SUBMISSION rounds (the first holds the rounds that max_bounces + 1 vertices
+    /// take at `vertices_per_round` vertices each, at most), until no path is
     /// queued: paths end after max_bounces scattering vertices, and a path whose closest-hit
     /// traversal stopped at the traversal budget takes one round more per stop (so huge
     /// --max-bounces values cost nothing after the paths have ended, and no traversal is cut
     /// short). Waits for each submission but the last.
     pub fn trace_rounds(
         &self,
+        vertices_per_round: u32,
         start: impl Fn(&mut wgpu::ComputePass),
         round: impl Fn(&mut wgpu::ComputePass, u32),
     ) -> Result<()> {
         let ctx = self.ctx;
-        let rounds = self.params.max_bounces as u64 + 1;
+        let rounds = (self.params.max_bounces as u64 + 1).div_ceil(vertices_per_round.max(1) as u64);
         // Each stop resumes at least TRAVERSAL_BUDGET nodes further on: a bound that only a bug
         // can reach.
         let most = rounds * (self.params.node_count as u64 / TRAVERSAL_BUDGET as u64 + 2);
