@@ -68,7 +68,8 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
 }
 
 /// A method with its own settings, as named in `equal-time --methods`: `path`, `direct`,
-/// `ellipsoidal`, and for ellipsoidal options after colons: a number K (connections per query),
+/// `ellipsoidal`, and for ellipsoidal options after colons: a number K (connections per query;
+/// default `DEFAULT_CONNECTIONS_PER_QUERY`),
 /// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
 /// descent's settings, see `QuerySettings`), e.g. `ellipsoidal:4:exhaustive`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -89,7 +90,8 @@ impl Variant {
         let name = parts.next().unwrap_or_default();
         let method = crate::integrator::Method::from_str(name, true)
             .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"))?;
-        let mut variant = Self { method, connections_per_query: 1, query: Default::default() };
+        let connections_per_query = crate::integrator::bidirectional::default_connections_per_query(method);
+        let mut variant = Self { method, connections_per_query, query: Default::default() };
         for option in parts {
             anyhow::ensure!(
                 method == crate::integrator::Method::Ellipsoidal,
@@ -115,7 +117,7 @@ impl Variant {
     /// The name it was given by (options in a fixed order).
     pub fn name(&self) -> String {
         let mut name = self.method.name().to_owned();
-        if self.connections_per_query != 1 {
+        if self.connections_per_query != crate::integrator::bidirectional::default_connections_per_query(self.method) {
             name += &format!(":{}", self.connections_per_query);
         }
         if self.method == crate::integrator::Method::Ellipsoidal {

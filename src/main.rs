@@ -111,9 +111,10 @@ struct RenderArgs {
     debug_strategy: Option<(u32, u32)>,
     /// `ellipsoidal`: connections drawn from each ellipsoid query (1 to 8). One BVH traversal
     /// serves K independent points on the spheroid, each weighted 1/K; every point still costs
-    /// its shading and two shadow rays.
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    connections_per_query: u32,
+    /// its shading and two shadow rays. Default 4: it measured about half the error of 1 at
+    /// equal time, from 2.5 mm to 50 cm gates and from 12 to 327,692 triangles.
+    #[arg(long, value_name = "K")]
+    connections_per_query: Option<u32>,
     /// `ellipsoidal`: BVH nodes whose box diagonal is at most R times the spheroid's semi-major
     /// axis are entered by a stochastic descent (one child at a time, in proportion to an
     /// estimate of the arcs below it), so a query's work grows with the tree's depth rather
@@ -447,7 +448,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
         debug_strategy: args.debug_strategy,
         portable_atomics: false,
         binding_limit: None,
-        connections_per_query: args.connections_per_query,
+        connections_per_query: args
+            .connections_per_query
+            .unwrap_or(gatetrace::integrator::bidirectional::default_connections_per_query(args.method)),
         query: gatetrace::integrator::QuerySettings {
             split: args.query_split,
             bottom_nodes: args.query_bottom_nodes,

@@ -238,6 +238,7 @@ impl<'a> Viewer<'a> {
             gate: self.gate(),
             max_bounces: o.max_bounces,
             seed: o.seed,
+            connections_per_query: crate::integrator::bidirectional::default_connections_per_query(method),
             keep_splats_on_device: true,
             ..Default::default()
         }

@@ -89,8 +89,10 @@ pub struct RenderSettings {
     /// the split-array layout (used by tests to check it against the unsplit one).
     pub binding_limit: Option<u64>,
     /// K, the connections drawn from one ellipsoid query (`--connections-per-query`, 1 ..=
-    /// [`bidirectional::MAX_CONNECTIONS_PER_QUERY`]; `ellipsoidal` only): K independent picks
-    /// share one BVH traversal, each weighted 1/K.
+    /// [`bidirectional::MAX_CONNECTIONS_PER_QUERY`]; 1 for the other methods): K independent
+    /// picks share one BVH traversal, each weighted 1/K. The default, 1, is the only value
+    /// `path` and `direct` take; the command line and the viewer give `ellipsoidal`
+    /// [`bidirectional::default_connections_per_query`].
     pub connections_per_query: u32,
     /// How `ellipsoidal`'s ellipsoid queries traverse the BVH.
     pub query: QuerySettings,
