@@ -12,13 +12,17 @@
 //! for round in 0, 1, ...:               (until every subpath has ended; a traversal that
 //!                                       stops at the budget resumes one round later)
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
-//!     intersect_closest                 closest hits of ray_queue
+//!     [intersect_closest]               closest hits of ray_queue (BVHs where traversals can
+//!                                       stop; in smaller ones extend_subpaths traces them)
 //!     extend_subpaths                   store the vertex, sample the BSDF, next ray
 //! connect_direct                        every (s, t): contribution, MIS, shadow_queue
 //! | connect_spherical                   (ellipsoidal) lights seen directly: splat, shadow_queue
 //!   queue_ellipsoid_queries             every (s, t) with a spheroid -> ellipsoid_queries
 //!   setup_dispatch(ellipsoid_queries)
 //!   connect_ellipsoidal                 one query per entry: contribution, MIS, shadow_queue
+//!                                       (BVHs where traversals cannot stop: connect_spherical
+//!                                       and connect_ellipsoidal trace their shadow rays
+//!                                       themselves, and the queue stays empty)
 //! setup_dispatch(shadow_rays)
 //! trace_shadow_rays                     occluded connections are cleared
 //! [setup_dispatch(shadow_resume)        while shadow rays stopped at the traversal budget
@@ -184,6 +188,9 @@ pub struct BidirectionalTracer<'a> {
     /// Fold after this many passes: few enough that no f32 splat sum takes more than about 2^16
     /// additions (on average over pixels), so long renders do not drift.
     fold_interval: u32,
+    /// The BVH has more than TRAVERSAL_BUDGET nodes (traversals can stop and resume):
+    /// intersect_closest finds the subpaths' hits and connections queue their shadow rays.
+    resumable: bool,
 }
 
 impl<'a> BidirectionalTracer<'a> {
@@ -197,11 +204,17 @@ impl<'a> BidirectionalTracer<'a> {
         let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
         let strategy_count = strategies(b).len() as u64;
         let ellipsoidal = settings.method == Method::Ellipsoidal;
-        // Ellipsoidal connections need two shadow rays each, and K slots per strategy.
+        // Ellipsoidal connections need two shadow rays each, and K slots per strategy. In BVHs
+        // whose traversals cannot stop, connect_ellipsoidal traces its shadow rays itself and
+        // sums a query's K camera-subpath contributions into one (see connections.wesl
+        // RESUMABLE): no shadow queue, one contribution per strategy.
         let rays_per_connection = if ellipsoidal { 2 } else { 1 };
         let k = settings.connections_per_query as u64;
-        let contributions_per_slot = contributions_per_slot * k;
+        let resumable = crate::bvh::traversals_can_stop(scene.bvh.nodes.len());
+        let inline_shadow_rays = ellipsoidal && !resumable;
+        let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
         let splats_per_slot = light_vertices * k;
+        let queued_rays_per_slot = if inline_shadow_rays { 0 } else { rays_per_connection * (contributions_per_slot + splats_per_slot) };
         // Ellipsoid queries of a slot: the pairs (s, t) with s, t >= 1 and s + t <= B + 1.
         let queries_per_slot = if ellipsoidal { (b as u64 * (b as u64 + 1) / 2).max(1) } else { 1 };
         // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
@@ -209,7 +222,7 @@ impl<'a> BidirectionalTracer<'a> {
             (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
             contributions_per_slot * size_of::<Contribution>() as u64,
             splats_per_slot * size_of::<Splat>() as u64,
-            rays_per_connection * (contributions_per_slot + splats_per_slot) * size_of::<ShadowRay>() as u64,
+            queued_rays_per_slot.max(1) * size_of::<ShadowRay>() as u64,
             2 * size_of::<PathState>() as u64,
             queries_per_slot * 8,
         ];
@@ -253,7 +266,7 @@ impl<'a> BidirectionalTracer<'a> {
         // Only the path tracer sums contributions per path (accumulate SUM_PER_PATH).
         r.storage_zeroed(ctx, "path_radiance", 4, none)?;
         r.storage_zeroed(ctx, "splats", slots * per_slot[2], none)?;
-        r.storage_zeroed(ctx, "shadow_queue", slots * per_slot[3], none)?;
+        r.storage_zeroed(ctx, "shadow_queue", if inline_shadow_rays { per_slot[3] } else { slots * per_slot[3] }, none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "ellipsoid_queries", if ellipsoidal { slots * per_slot[5] } else { 16 }, none)?;
@@ -337,6 +350,7 @@ impl<'a> BidirectionalTracer<'a> {
             splat_sums,
             passes_since_fold: 0,
             fold_interval,
+            resumable,
         })
     }
 
@@ -384,7 +398,9 @@ impl<'a> BidirectionalTracer<'a> {
             |pass, r| {
                 let parity = (r % 2) as usize;
                 s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
-                s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
+                if self.resumable {
+                    s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
+                }
                 s.extend_subpaths.dispatch_indirect(pass, &b.extend_subpaths[parity], args, 0);
             },
         )?;
