@@ -22,7 +22,8 @@
 //!   connect_ellipsoidal                 one query per entry: contribution, MIS, shadow_queue
 //!                                       (BVHs where traversals cannot stop: connect_spherical
 //!                                       and connect_ellipsoidal trace their shadow rays
-//!                                       themselves, and the queue stays empty)
+//!                                       themselves, the queue stays empty, and t = 1
+//!                                       contributions go straight to splat_film)
 //! setup_dispatch(shadow_rays)
 //! trace_shadow_rays                     occluded connections are cleared
 //! [setup_dispatch(shadow_resume)        while shadow rays stopped at the traversal budget
@@ -191,6 +192,10 @@ pub struct BidirectionalTracer<'a> {
     /// The BVH has more than TRAVERSAL_BUDGET nodes (traversals can stop and resume):
     /// intersect_closest finds the subpaths' hits and connections queue their shadow rays.
     resumable: bool,
+    /// `ellipsoidal` in a BVH whose traversals cannot stop: the connection kernels trace their
+    /// shadow rays, sum a query's camera-subpath contributions and splat light-tracing ones
+    /// straight into splat_film (splat_light_paths does not run).
+    inline_shadow_rays: bool,
 }
 
 impl<'a> BidirectionalTracer<'a> {
@@ -265,7 +270,8 @@ impl<'a> BidirectionalTracer<'a> {
         r.storage_zeroed(ctx, "contributions", slots * per_slot[1], none)?;
         // Only the path tracer sums contributions per path (accumulate SUM_PER_PATH).
         r.storage_zeroed(ctx, "path_radiance", 4, none)?;
-        r.storage_zeroed(ctx, "splats", slots * per_slot[2], none)?;
+        // With shadow rays traced on the spot, light-tracing contributions go straight to splat_film.
+        r.storage_zeroed(ctx, "splats", if inline_shadow_rays { per_slot[2] } else { slots * per_slot[2] }, none)?;
         r.storage_zeroed(ctx, "shadow_queue", if inline_shadow_rays { per_slot[3] } else { slots * per_slot[3] }, none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
@@ -298,26 +304,29 @@ impl<'a> BidirectionalTracer<'a> {
             c.push(("QUEUE", queue));
             c
         };
+        // Kernels that add to splat_film: with the device's float atomics where it has them.
+        let float_atomics = ctx.has_float_atomics() && !settings.portable_atomics;
+        let splatting = |name: &str| {
+            if float_atomics { Kernel::with_feature(ctx, name, "float_atomics", &constants) } else { Kernel::new(ctx, name, None, &constants) }
+        };
+        // With shadow rays traced on the spot, the ellipsoidal kernels splat straight into splat_film.
+        let connect_kernel = |name: &str| if inline_shadow_rays { splatting(name) } else { Kernel::new(ctx, name, None, &constants) };
         let stages = Stages {
             generate_subpaths: Kernel::new(ctx, "generate_subpaths", None, &constants),
             setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
             intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
             extend_subpaths: Kernel::new(ctx, "extend_subpaths", None, &constants),
-            connect: Kernel::new(ctx, if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }, None, &constants),
+            connect: connect_kernel(if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }),
             ellipsoidal: ellipsoidal.then(|| {
                 [
-                    Kernel::new(ctx, "connect_spherical", None, &constants),
+                    connect_kernel("connect_spherical"),
                     Kernel::new(ctx, "queue_ellipsoid_queries", None, &constants),
                     Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0)),
                 ]
             }),
             shadow_rays: ShadowRayStages::new(ctx, &constants, &r),
             accumulate: Kernel::new(ctx, "accumulate", None, &constants),
-            splat_light_paths: if ctx.has_float_atomics() && !settings.portable_atomics {
-                Kernel::with_feature(ctx, "splat_light_paths", "float_atomics", &constants)
-            } else {
-                Kernel::new(ctx, "splat_light_paths", None, &constants)
-            },
+            splat_light_paths: splatting("splat_light_paths"),
         };
         let even = r.clone();
         let odd = r.swapped("ray_queue", "next_ray_queue");
@@ -351,6 +360,7 @@ impl<'a> BidirectionalTracer<'a> {
             passes_since_fold: 0,
             fold_interval,
             resumable,
+            inline_shadow_rays,
         })
     }
 
@@ -433,7 +443,9 @@ impl<'a> BidirectionalTracer<'a> {
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("accumulate"), timestamp_writes: None });
             s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);
-            s.splat_light_paths.dispatch(&mut pass, &b.splat_light_paths, wave.slot_count);
+            if !self.inline_shadow_rays {
+                s.splat_light_paths.dispatch(&mut pass, &b.splat_light_paths, wave.slot_count);
+            }
         }
         ctx.queue.submit([encoder.finish()]);
         ctx.wait_idle()?;
