@@ -62,7 +62,7 @@ pub const MAX_CONNECTIONS_PER_QUERY: u32 = 8;
 /// and 50 cm, and 0.53x on a 327,692-triangle mesh at 2.5 mm; K = 8 was no better (0.49-0.89x).
 pub const DEFAULT_CONNECTIONS_PER_QUERY: u32 = 4;
 
-/// The connections per ellipsoid query a method uses unless told otherwise: 
+/// The connections per ellipsoid query a method uses unless told otherwise:
 /// DEFAULT_CONNECTIONS_PER_QUERY for `ellipsoidal`, 1 (the only value they take) for the others.
 pub fn default_connections_per_query(method: Method) -> u32 {
     if method == Method::Ellipsoidal { DEFAULT_CONNECTIONS_PER_QUERY } else { 1 }
