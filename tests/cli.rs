@@ -151,9 +151,17 @@ fn stats_report_connections_per_strategy() {
 
 #[test]
 fn profile_reports_gpu_time_per_stage() {
+    // A gate of one bin on the Cornell box traces whole paths; a transient gate runs rounds.
+    check_profile("box:3.14..3.19", &["trace_paths", "accumulate"]);
+    check_profile("transient:3.0,0.05,8", &["generate_camera_rays", "extend_paths", "accumulate", "setup_dispatch(rays)"]);
+}
+
+/// Renders the Cornell box with `--profile` and `gate`, and checks that each of `stages` has a
+/// row with time and dispatches, all within the render's wall time.
+fn check_profile(gate: &str, stages: &[&str]) {
     let dir = common::scratch_dir("cli_profile");
     let out = dir.join("p.npy");
-    let o = gatetrace(&["render", "--res", "16x16", "--spp", "8", "--max-bounces", "3", "--gate", "box:3.14..3.19", "--profile", "--out", out.to_str().unwrap()]);
+    let o = gatetrace(&["render", "--res", "16x16", "--spp", "8", "--max-bounces", "3", "--gate", gate, "--profile", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     let wall_seconds: f64 = {
@@ -161,8 +169,8 @@ fn profile_reports_gpu_time_per_stage() {
         meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
     };
     let mut total_ms = 0.0;
-    for stage in ["generate_camera_rays", "extend_paths", "accumulate", "setup_dispatch(rays)"] {
-        let row = text.lines().find(|l| l.split_whitespace().next() == Some(stage)).unwrap_or_else(|| panic!("no row for {stage}:\n{text}"));
+    for stage in stages {
+        let row = text.lines().find(|l| l.split_whitespace().next() == Some(stage)).unwrap_or_else(|| panic!("no row for {stage} ({gate}):\n{text}"));
         let cols: Vec<&str> = row.split_whitespace().collect();
         let ms: f64 = cols[1].parse().unwrap();
         let dispatches: u64 = cols[3].parse().unwrap();

@@ -26,7 +26,7 @@ fn wgsl_structs_match_rust_structs() {
         TargetParams { lo, hi, cells, reserved }
         RenderParams { camera, gate, target_length, light_bounds_min, image_area, light_bounds_max, reserved3, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
                        reserved0, reserved1, reserved2 }
-        WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, reserved0, reserved1, reserved2 }
+        WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, tracers_per_pixel, reserved1, reserved2 }
         PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, origin_triangle, dimension, traversal,
                     side }
         Hit { t, triangle, b1, b2 }

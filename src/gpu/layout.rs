@@ -281,8 +281,9 @@ pub struct WaveParams {
     pub pixel_count: u32,
     /// `pixel_count * samples`.
     pub slot_count: u32,
-    /// Padding.
-    pub reserved0: u32,
+    /// Invocations of trace_paths per pixel, each tracing every `tracers_per_pixel`-th sample of
+    /// its pixel (path tracer, whole paths only; 0 elsewhere).
+    pub tracers_per_pixel: u32,
     /// Padding.
     pub reserved1: u32,
     /// Padding.
