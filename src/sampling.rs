@@ -57,12 +57,7 @@ pub fn power_heuristic(a: f32, b: f32) -> f32 {
     if pa <= 0.0 {
         return 0.0;
     }
-    if pa >= pb {
-        let r = pb / pa;
-        1.0 / (1.0 + r * r)
-    } else {
-        let r = pa / pb;
-        let r2 = r * r;
-        r2 / (1.0 + r2)
-    }
+    let r = pa.min(pb) / pa.max(pb);
+    let w_larger = 1.0 / (1.0 + r * r);
+    if pa >= pb { w_larger } else { r * r * w_larger }
 }

@@ -427,6 +427,7 @@ pub fn upload_scene(
     let constants = vec![
         ("GATE_KIND", gate.kind() as u32 as f64),
         ("HAS_TEXTURES", flag(scene.has_textures())),
+        ("HAS_SHADING_NORMALS", flag(scene.has_shading_normals())),
         ("HAS_POINT_LIGHTS", flag(scene.has_point_lights())),
         ("HAS_GLOSSY", flag(scene.has_glossy())),
         ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),

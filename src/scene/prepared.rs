@@ -56,7 +56,8 @@ impl PreparedScene {
         for &i in &bvh.order {
             let t = &scene.triangles[i as usize];
             let [a, b, c] = t.positions;
-            normals.push(super::surface::triangle_normal(t.positions));
+            let geometric = super::surface::triangle_normal(t.positions);
+            normals.push(geometric);
             triangles.push(Triangle {
                 v0: a,
                 material: t.material,
@@ -76,7 +77,10 @@ impl PreparedScene {
                 v1: t.uvs[1].y,
                 u2: t.uvs[2].x,
                 v2: t.uvs[2].y,
-                flags: if t.normals.is_some() { SHADING_HAS_NORMALS } else { 0 },
+                flags: match t.normals {
+                    Some(n) if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) => SHADING_HAS_NORMALS,
+                    _ => 0,
+                },
             });
         }
         let (texture_infos, texels) = gpu_textures(&scene);
@@ -97,6 +101,12 @@ impl PreparedScene {
         })
     }
 
+    /// True when some triangle has vertex normals that differ from its geometric normal
+    /// (SHADING_HAS_NORMALS): else the kernels never read the shading normals.
+    pub fn has_shading_normals(&self) -> bool {
+        self.shading.iter().any(|s| s.flags & SHADING_HAS_NORMALS != 0)
+    }
+
     /// True when some material has a base-colour texture.
     pub fn has_textures(&self) -> bool {
         !self.texture_infos.is_empty()
@@ -110,5 +120,28 @@ impl PreparedScene {
     /// True when the scene has point lights.
     pub fn has_point_lights(&self) -> bool {
         !self.scene.point_lights.is_empty()
+    }
+}
+
+/// Whether a triangle's vertex normals all equal its geometric normal to f32 precision (flat
+/// shading, as in most CAD and box scenes): interpolating them gives the geometric normal back,
+/// so the triangle is shaded without them.
+fn normals_are_flat(normals: [glam::Vec3; 3], geometric: glam::Vec3) -> bool {
+    normals.iter().all(|n| (n.normalize_or_zero() - geometric).abs().max_element() <= 4.0 * f32::EPSILON)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    /// Vertex normals equal to the geometric normal (any length) are flat; one tilted by
+    /// 1e-3 rad is not.
+    #[test]
+    fn flat_normals_are_recognised() {
+        let up = Vec3::Y;
+        assert!(super::normals_are_flat([up, 2.0 * up, up], up));
+        let tilted = Vec3::new(1e-3, 1.0, 0.0).normalize();
+        assert!(!super::normals_are_flat([up, up, tilted], up));
+        assert!(!super::normals_are_flat([-up, -up, -up], up));
     }
 }
