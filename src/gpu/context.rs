@@ -65,6 +65,12 @@ impl GpuContext {
         format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
     }
 
+    /// True when the device is a CPU (lavapipe): it runs a few SIMD groups at a time, where a
+    /// GPU wants tens of thousands of invocations in flight.
+    pub fn is_cpu(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// True when kernels may add floats atomically in storage buffers (SHADER_FLOAT32_ATOMIC;
     /// lavapipe has it).
     pub fn has_float_atomics(&self) -> bool {

@@ -197,11 +197,15 @@ impl<'a> PathTracer<'a> {
         let ctx = self.wf.ctx;
         match &self.tracing {
             Tracing::WholePaths { trace_paths, binding } => {
-                wave.tracers_per_pixel = tracers_per_pixel(&wave, self.wf.params.max_bounces);
+                let target = if ctx.is_cpu() { TARGET_TRACERS_CPU } else { TARGET_TRACERS_GPU };
+                wave.tracers_per_pixel = tracers_per_pixel(&wave, self.wf.params.max_bounces, target);
                 self.wf.write_wave(&wave);
                 self.encode_submit("trace_paths", |pass| {
                     trace_paths.dispatch(pass, binding, wave.pixel_count * wave.tracers_per_pixel);
-                    self.accumulate.dispatch(pass, &self.accumulate_binding, wave.pixel_count);
+                    // With one tracer per pixel, trace_paths adds to the film itself.
+                    if wave.tracers_per_pixel > 1 {
+                        self.accumulate.dispatch(pass, &self.accumulate_binding, wave.pixel_count);
+                    }
                 });
             }
             Tracing::Rounds(s) => {
@@ -248,21 +252,24 @@ impl<'a> PathTracer<'a> {
     }
 }
 
-/// Invocations of trace_paths a wave aims for: enough to keep a device's cores busy (on
-/// lavapipe 4096, 16384 and 65536 traced within 3% of each other on the Cornell box), few enough
-/// that each invocation traces several paths, so that its lanes rarely wait at its last one.
-const TARGET_TRACERS: u32 = 1 << 14;
+/// Invocations of trace_paths a wave aims for: enough to keep a device's cores busy, and as
+/// few as that allows, so that each invocation traces many paths (its lanes rarely wait at its
+/// last one) and, at one invocation per pixel, adds to the film itself (no accumulate, no
+/// path_radiance). On lavapipe 4096, 16384 and 65536 tracers traced within 3% of each other
+/// (Cornell box, 64x64); a GPU wants tens of thousands of threads in flight.
+const TARGET_TRACERS_CPU: u32 = 1 << 12;
+const TARGET_TRACERS_GPU: u32 = 1 << 16;
 /// Most vertices one invocation of trace_paths is given: lavapipe (gallivm) ends all loops of an
 /// invocation after 65535 iterations in total, silently (trace_paths counts a cut invocation).
 const MOST_VERTICES_PER_TRACER: u64 = 65000;
 
 /// Invocations of trace_paths per pixel of `wave` (WaveParams::tracers_per_pixel): about
-/// TARGET_TRACERS in all, and enough that none traces more than MOST_VERTICES_PER_TRACER
+/// `target_tracers` in all, and enough that none traces more than MOST_VERTICES_PER_TRACER
 /// vertices (max_bounces + 1 per path), at most one per sample.
-fn tracers_per_pixel(wave: &WaveParams, max_bounces: u32) -> u32 {
+fn tracers_per_pixel(wave: &WaveParams, max_bounces: u32, target_tracers: u32) -> u32 {
     let paths_per_tracer = (MOST_VERTICES_PER_TRACER / (max_bounces as u64 + 1)).max(1);
     let for_loop_limit = (wave.samples as u64).div_ceil(paths_per_tracer);
-    let for_parallelism = TARGET_TRACERS.div_ceil(wave.pixel_count.max(1)) as u64;
+    let for_parallelism = target_tracers.div_ceil(wave.pixel_count.max(1)) as u64;
     for_loop_limit.max(for_parallelism).clamp(1, wave.samples.max(1) as u64) as u32
 }
 
@@ -374,11 +381,11 @@ mod tests {
         for (pixels, samples) in [(1, 1), (16, 4096), (4096, 64), (65536, 4), (1 << 20, 1), (7, 3000)] {
             for max_bounces in [0, 5, 64, 1000, 70000] {
                 let w = wave(pixels, samples);
-                let k = tracers_per_pixel(&w, max_bounces);
+                let k = tracers_per_pixel(&w, max_bounces, TARGET_TRACERS_GPU);
                 assert!(k >= 1 && k <= samples, "{pixels} px, {samples} spp, {max_bounces}: {k}");
                 let vertices = samples.div_ceil(k) as u64 * (max_bounces as u64 + 1);
                 assert!(vertices <= MOST_VERTICES_PER_TRACER || k == samples, "{pixels} px, {samples} spp, {max_bounces}: {k}");
-                assert!(pixels * k >= TARGET_TRACERS.min(pixels * samples), "{pixels} px, {samples} spp: {k}");
+                assert!(pixels * k >= TARGET_TRACERS_GPU.min(pixels * samples), "{pixels} px, {samples} spp: {k}");
             }
         }
     }
