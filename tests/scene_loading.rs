@@ -227,3 +227,49 @@ fn textured_albedo_renders_like_the_equal_base_color() {
         assert!((x - y).abs() <= x * (1.0 / 2048.0 + 1e-6), "untextured {x} vs textured {y}");
     }
 }
+
+/// The example NLOS scene (tools/make_nlos_scene.py) is set up as its description says: from
+/// the sensor and laser origin every point of the relay wall is in sight and the hidden letter
+/// is not (the occluder is in the way), and the wall and the letter see each other.
+#[test]
+fn example_nlos_scene_hides_the_letter_from_the_origin() {
+    use gatetrace::bvh::traverse::trace_any;
+    use gatetrace::gpu::layout::NONE;
+    use glam::Vec3;
+
+    let path = common::repo_path("assets/scenes/nlos_letter.gltf");
+    let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let o = &doc["extras"]["nlos"]["sensor_origin"];
+    let origin = Vec3::new(o[0].as_f64().unwrap() as f32, o[1].as_f64().unwrap() as f32, o[2].as_f64().unwrap() as f32);
+    let scene = PreparedScene::new(load_gltf(&path).unwrap()).unwrap();
+    assert!((scene.scene.camera.position - origin).length() < 1e-6, "the camera sits at the origin");
+    let (nodes, triangles) = (&scene.bvh.nodes, &scene.triangles);
+    let in_plane_z = |z: f32| -> Vec<Vec3> {
+        triangles
+            .iter()
+            .filter(|t| [t.v0, t.v0 + t.e1, t.v0 + t.e2].iter().all(|v| (v.z - z).abs() < 1e-6))
+            .map(|t| t.v0 + (t.e1 + t.e2) / 3.0)
+            .collect()
+    };
+    let letter = in_plane_z(0.5);
+    assert_eq!(letter.len(), 6, "the Z is three quads");
+    assert_eq!(in_plane_z(0.0).len(), 2, "the relay wall is one quad");
+    // Segments stop 0.1 mm short of their end, so the surface they end on does not count.
+    let blocked = |from: Vec3, to: Vec3| {
+        let d = to - from;
+        let length = d.length();
+        trace_any(nodes, triangles, from, d / length, length - 1e-4, NONE, NONE)
+    };
+    let wall_points: Vec<Vec3> = (0..11)
+        .flat_map(|i| (0..11).map(move |j| Vec3::new(-0.49 + 0.098 * i as f32, -0.49 + 0.098 * j as f32, 0.0)))
+        .collect();
+    for &w in &wall_points {
+        assert!(!blocked(origin, w), "wall point {w} is hidden from the origin");
+        for &l in &letter {
+            assert!(!blocked(w + Vec3::Z * 1e-4, l), "wall point {w} does not see letter point {l}");
+        }
+    }
+    for &l in &letter {
+        assert!(blocked(origin, l), "letter point {l} is in sight of the origin");
+    }
+}
