@@ -6,8 +6,11 @@ embedded). Standard library only.
 
 Geometry (metres; +y up):
 - `relay_wall`: the visible relay wall, 1 m x 1 m in the plane z = 0 (x, y in [-0.5, 0.5]),
-  facing +z, Lambertian white (albedo 0.8). Its texture coordinates run u along +x, v along -y
-  (v = 0 at the top edge), the parameterisation a sensed-point grid is laid on.
+  facing +z, Lambertian white (albedo 0.8). Its texture coordinates run u along +x and v along
+  +y (0 at the lower left corner), the parameterisation a sensed-point grid is laid on: as
+  mitransient's nlos_capture_meter on a rectangle, whose grid row j lies at y = (j + 0.5) / M of
+  the wall's height from its lower edge (checked by rendering with it: a hidden patch at +y
+  lit the higher rows).
 - `hidden_letter`: a "Z" 0.4 m tall and 0.3 m wide, in the plane z = 0.5 facing the wall
   (double-sided), Lambertian white: the hidden object.
 - `occluder`: a dark (albedo 0.05), double-sided panel in the plane x = -0.55 spanning
@@ -49,7 +52,7 @@ def quad(a, b, c, d):
 def wall():
     h = WALL_HALF
     corners = [(-h, -h, 0.0), (h, -h, 0.0), (h, h, 0.0), (-h, h, 0.0)]  # CCW seen from +z
-    uv = lambda p: ((p[0] + h) / (2 * h), (h - p[1]) / (2 * h))
+    uv = lambda p: ((p[0] + h) / (2 * h), (p[1] + h) / (2 * h))
     tris = quad(*corners)
     return tris, [uv(p) for p in tris]
 
