@@ -415,39 +415,28 @@ impl<'a> BidirectionalTracer<'a> {
             },
         )?;
         // ---- connect, test visibility, accumulate ----
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("connect") });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("connect"), timestamp_writes: None });
+        self.wf.submit_pass("connect", |pass| {
             match (&s.ellipsoidal, &b.ellipsoidal) {
                 (Some([spherical, queue, setup]), Some([spherical_group, queue_group, setup_group])) => {
-                    spherical.dispatch(&mut pass, spherical_group, wave.slot_count);
-                    queue.dispatch(&mut pass, queue_group, wave.slot_count);
-                    setup.dispatch(&mut pass, setup_group, 1);
-                    s.connect.dispatch_indirect(&mut pass, &b.connect, args, 24);
+                    spherical.dispatch(pass, spherical_group, wave.slot_count);
+                    queue.dispatch(pass, queue_group, wave.slot_count);
+                    setup.dispatch(pass, setup_group, 1);
+                    s.connect.dispatch_indirect(pass, &b.connect, args, 24);
                 }
-                _ => s.connect.dispatch(&mut pass, &b.connect, wave.slot_count),
+                _ => s.connect.dispatch(pass, &b.connect, wave.slot_count),
             }
-            s.shadow_rays.encode(&mut pass, args);
-        }
-        ctx.queue.submit([encoder.finish()]);
+            s.shadow_rays.encode(pass, args);
+        });
         // Shadow rays that stopped at the traversal budget resume until every one is decided.
         while self.wf.counters()?.unfinished_shadow_rays > 0 {
-            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("resume") });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("resume"), timestamp_writes: None });
-                s.shadow_rays.encode_resume(&mut pass, args);
-            }
-            ctx.queue.submit([encoder.finish()]);
+            self.wf.submit_pass("resume", |pass| s.shadow_rays.encode_resume(pass, args));
         }
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("accumulate") });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("accumulate"), timestamp_writes: None });
-            s.accumulate.dispatch(&mut pass, &b.accumulate, wave.pixel_count);
+        self.wf.submit_pass("accumulate", |pass| {
+            s.accumulate.dispatch(pass, &b.accumulate, wave.pixel_count);
             if !self.inline_shadow_rays {
-                s.splat_light_paths.dispatch(&mut pass, &b.splat_light_paths, wave.slot_count);
+                s.splat_light_paths.dispatch(pass, &b.splat_light_paths, wave.slot_count);
             }
-        }
-        ctx.queue.submit([encoder.finish()]);
+        });
         ctx.wait_idle()?;
         if let Some(stats) = &mut self.stats {
             // Per-wave u32 counters cannot overflow (one connection per slot and strategy).

@@ -191,6 +191,16 @@ impl<'a> Wavefront<'a> {
         Ok(())
     }
 
+    /// Records `encode` into one compute pass labelled `label` and submits it.
+    pub fn submit_pass(&self, label: &str, encode: impl FnOnce(&mut wgpu::ComputePass)) {
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+            encode(&mut pass);
+        }
+        self.ctx.queue.submit([encoder.finish()]);
+    }
+
     /// The queue counters as the last submission left them.
     pub fn counters(&self) -> Result<QueueCounters> {
         Ok(read_buffer::<QueueCounters>(self.ctx, self.resources.get("counters").unwrap(), 1)?[0])
