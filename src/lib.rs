@@ -12,6 +12,7 @@ pub mod film;
 pub mod frames;
 pub mod gpu;
 pub mod integrator;
+pub mod nlos;
 pub mod rng;
 pub mod sampling;
 pub mod scene;

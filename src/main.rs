@@ -163,9 +163,46 @@ struct RenderArgs {
     force: bool,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
     /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr, or
-    /// SCENE_NAME_{frame:04}.exr for a sequence.
+    /// SCENE_NAME_{frame:04}.exr for a sequence, or SCENE_NAME_nlos.npy for --nlos.
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// Non-line-of-sight capture with this laser scan: `single` (one laser spot, --laser-spot),
+    /// `confocal` (each sensed point lit by a laser spot on itself, in one render) or
+    /// `exhaustive` (every spot of --laser-grid with every sensed point). --res is then the grid
+    /// of sensed points on the relay wall: cell (i, j) is sensed at the wall's texture
+    /// coordinates ((i + 0.5) / W, (j + 0.5) / H), and pixel value is the radiance (W m^-2 sr^-1
+    /// per bin) leaving that point towards the sensor origin. Path lengths run from the laser spot
+    /// to the sensed point (see --count-first-last); --max-bounces counts the spot and the sensed
+    /// point (3: the classic three-bounce paths). The scene's own lights are ignored. Output:
+    /// NPY [grid_y, grid_x, T, 3], or [laser_y, laser_x, grid_y, grid_x, T, 3] for exhaustive, with
+    /// the sensed points and laser spots in the JSON sidecar.
+    #[arg(long, value_enum, value_name = "SCAN")]
+    nlos: Option<gatetrace::nlos::Scan>,
+    /// --nlos: the relay wall's glTF node (a mesh with TEXCOORD_0 over [0, 1]^2).
+    #[arg(long, default_value = gatetrace::nlos::DEFAULT_RELAY_WALL, value_name = "NODE")]
+    relay_wall: String,
+    /// --nlos: where the sensor looks at the wall from, X,Y,Z in metres (default: the node named
+    /// `sensor_origin`, else the one named `nlos_origin`).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
+    sensor_origin: Option<glam::Vec3>,
+    /// --nlos: where the laser beam starts, X,Y,Z in metres (default: the node named
+    /// `laser_origin`, else the one named `nlos_origin`).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
+    laser_origin: Option<glam::Vec3>,
+    /// --nlos single: where the laser is aimed, as texture coordinates U,V of the relay wall.
+    #[arg(long, default_value = "0.5,0.5", value_name = "U,V", value_parser = parse_uv)]
+    laser_spot: glam::Vec2,
+    /// --nlos exhaustive: the grid of laser spots, WIDTHxHEIGHT, at cell centres like the sensed
+    /// points (default: --res).
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
+    laser_grid: Option<(u32, u32)>,
+    /// --nlos: the laser beam's power (W).
+    #[arg(long, default_value_t = 1.0, value_name = "WATTS")]
+    laser_power: f32,
+    /// --nlos: count the laser origin -> spot and sensed point -> sensor origin segments in path
+    /// lengths (mitransient's account_first_and_last_bounces; off by default, as there).
+    #[arg(long)]
+    count_first_last: bool,
 }
 
 #[derive(Args)]
@@ -318,6 +355,25 @@ fn parse_variant(s: &str) -> Result<gatetrace::bench::Variant, String> {
     gatetrace::bench::Variant::parse(s).map_err(|e| e.to_string())
 }
 
+fn parse_point(s: &str) -> Result<glam::Vec3, String> {
+    let bad = || format!("`{s}` is not X,Y,Z (three finite numbers in metres, e.g. -1.2,0,0.6)");
+    let v: Vec<f32> = s.split(',').map(|c| c.trim().parse::<f32>().map_err(|_| bad())).collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => Ok(glam::Vec3::new(x, y, z)),
+        _ => Err(bad()),
+    }
+}
+
+fn parse_uv(s: &str) -> Result<glam::Vec2, String> {
+    let bad = || format!("`{s}` is not U,V (two texture coordinates in [0, 1], e.g. 0.5,0.5)");
+    let (u, v) = s.split_once(',').ok_or_else(bad)?;
+    let (u, v) = (u.trim().parse::<f32>().map_err(|_| bad())?, v.trim().parse::<f32>().map_err(|_| bad())?);
+    if !((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)) {
+        return Err(bad());
+    }
+    Ok(glam::Vec2::new(u, v))
+}
+
 fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
     parse_pair(s, "S,T")
 }
@@ -458,7 +514,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
         },
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
         keep_splats_on_device: false,
+        nlos: None,
     };
+    if let Some(scan) = args.nlos {
+        ensure!(
+            !sequence && args.anim_time.is_none(),
+            "--nlos renders one capture: --frames, --frame-range and --anim-time do not apply to it"
+        );
+        return run_nlos(&args, scan, &scene_path, settings, budget);
+    }
     // Every frame's settings and output, checked before any work.
     let mut frames = Vec::new();
     for frame in plan.frames() {
@@ -527,6 +591,128 @@ fn run_render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// Renders an NLOS capture (`--nlos`): one render for a single or confocal scan, one per laser
+/// spot for an exhaustive one; writes the transients with the sensed points and laser spots.
+fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, base: RenderSettings, budget: Budget) -> Result<()> {
+    use gatetrace::nlos::{self, LaserAim, NlosCapture, Scan};
+    let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{stem}_nlos.npy")));
+    let format = OutputFormat::of(&out)?;
+    ensure!(
+        scan != Scan::Exhaustive || format == OutputFormat::Npy,
+        "--out {}: an exhaustive capture is written as NPY [laser_y, laser_x, grid_y, grid_x, T, 3]; name a .npy file",
+        out.display()
+    );
+    ensure!(
+        base.max_bounces >= 2,
+        "--nlos: --max-bounces {} counts the laser spot and the sensed point, so it must be at least 2 (3: the \
+         three-bounce paths spot -> hidden point -> sensed point)",
+        base.max_bounces
+    );
+    ensure!(args.laser_grid.is_none() || scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
+    film_elements(&base)?;
+    check_writable(&out)?;
+    let scene = PreparedScene::new(load_gltf(scene_path)?)?;
+    let origin = |given: Option<glam::Vec3>, node: &str, flag: &str| -> Result<glam::Vec3> {
+        given.or_else(|| nlos::origin_from_nodes(&scene.scene, node)).with_context(|| {
+            format!("{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)", scene_path.display())
+        })
+    };
+    let capture = NlosCapture {
+        relay_wall: args.relay_wall.clone(),
+        sensor_origin: origin(args.sensor_origin, "sensor_origin", "--sensor-origin")?,
+        laser_origin: origin(args.laser_origin, "laser_origin", "--laser-origin")?,
+        aim: if scan == Scan::Confocal { LaserAim::Confocal } else { LaserAim::Spot(args.laser_spot) },
+        laser_power: args.laser_power,
+        count_first_and_last: args.count_first_last,
+    };
+    nlos::check_capture(&scene.scene, &capture)?;
+    let (w, h) = (base.width, base.height);
+    let (laser_w, laser_h) = match scan {
+        Scan::Single => (1, 1),
+        Scan::Confocal => (w, h),
+        Scan::Exhaustive => args.laser_grid.unwrap_or((w, h)),
+    };
+    let aims: Vec<LaserAim> = match scan {
+        Scan::Exhaustive => (0..laser_h)
+            .flat_map(|j| (0..laser_w).map(move |i| LaserAim::Spot(nlos::cell_uv(i, j, laser_w, laser_h))))
+            .collect(),
+        _ => vec![capture.aim],
+    };
+    let ctx = GpuContext::new()?;
+    let bars = indicatif::MultiProgress::new();
+    let pixels = (w * h) as usize;
+    let (mut data, mut spots, mut sensed) = (Vec::new(), Vec::new(), Vec::new());
+    let mut last = None;
+    for (k, &aim) in aims.iter().enumerate() {
+        let capture = NlosCapture { aim, ..capture.clone() };
+        let (points, warnings) = nlos::wall_points_and_warnings(&scene, &capture, w, h)?;
+        if k == 0 {
+            for warning in warnings {
+                eprintln!("warning: {warning}");
+            }
+        }
+        sensed = points[..pixels].to_vec();
+        spots.extend_from_slice(if scan == Scan::Confocal { &points[pixels..] } else { &points[pixels..pixels + 1] });
+        let seed = if aims.len() > 1 { frame_seed(base.seed, k as u32) } else { base.seed };
+        let settings = RenderSettings { nlos: Some(capture), seed, ..base.clone() };
+        let bar = bars.add(progress_bar(budget));
+        let label = if aims.len() > 1 { format!("laser spot {}/{}: ", k + 1, aims.len()) } else { String::new() };
+        let output = render(&ctx, &scene, &settings, budget, |p| {
+            match budget {
+                Budget::Samples(_) => bar.set_position(p.spp),
+                Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
+            }
+            bar.set_message(format!("{label}{} spp", p.spp));
+        })?;
+        bar.finish_and_clear();
+        data.extend_from_slice(&output.film.data);
+        last = Some((settings, output));
+    }
+    let (settings, output) = last.expect("at least one laser spot");
+    let mut metadata = render_metadata(&ctx, scene_path, &args.gate, &settings, &output);
+    metadata.retain(|(k, _)| k != "units");
+    metadata.push((
+        "units".into(),
+        "bin-integrated radiance (W m^-2 sr^-1) leaving each sensed point towards the sensor origin; lengths are \
+         optical path in metres from the laser spot to the sensed point (plus the first and last segments when \
+         count_first_and_last)"
+            .into(),
+    ));
+    let extras = nlos::capture_record(&scene, &capture, scan, &sensed, w, &spots, laser_w);
+    let film = &output.film;
+    let bin_ranges: Vec<(f64, f64)> = (0..settings.gate.bins()).filter_map(|b| settings.gate.bin_range(b)).collect();
+    if scan == Scan::Exhaustive {
+        let bins = film.bins as usize;
+        let mut shape = vec![laser_h as usize, laser_w as usize, h as usize, w as usize];
+        if bins > 1 {
+            shape.push(bins);
+        }
+        shape.push(3);
+        ensure!(data.iter().all(|v| v.is_finite()), "refusing to write {}: the capture holds non-finite values", out.display());
+        gatetrace::film::output::write_npy_f32(&out, &shape, &data)?;
+        gatetrace::film::output::write_sidecar(&out, &metadata, &extras)?;
+    } else {
+        gatetrace::film::output::write_film_with(&out, film, &metadata, &bin_ranges, &extras)?;
+    }
+    let total: f64 = data.iter().map(|&v| v as f64).sum();
+    say(&bars, format!(
+        "{}: NLOS {} capture, {}x{} sensed points, {} laser spot(s), gate {} | {} spp, {:.2} s rendering per spot on {} | \
+         total {total:.6e} -> {}",
+        scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+        scan.name(),
+        w,
+        h,
+        spots.len(),
+        args.gate,
+        film.spp,
+        output.rendering.as_secs_f64(),
+        ctx.adapter_info.name,
+        out.display()
+    ))?;
+    Ok(())
+}
+
 /// Renders one image (or frame) and writes it with its metadata.
 #[allow(clippy::too_many_arguments)]
 fn render_one(
@@ -556,32 +742,7 @@ fn render_one(
     let gate = &settings.gate;
     let film = &output.film;
     let secs = output.elapsed.as_secs_f64();
-    let mut metadata: Metadata = vec![
-        ("scene".into(), scene_path.display().to_string()),
-        ("method".into(), settings.method.name().into()),
-        ("gate".into(), gate_spec.to_owned()),
-        ("gate_description".into(), gate.describe()),
-        ("spp".into(), film.spp.to_string()),
-        ("seed".into(), settings.seed.to_string()),
-        ("max_bounces".into(), settings.max_bounces.to_string()),
-        ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
-        ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
-        ("elapsed_seconds".into(), format!("{secs:.3}")),
-        ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
-        ("adapter".into(), ctx.adapter_description()),
-        ("truncated_traversals".into(), output.truncated_traversals.to_string()),
-        ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
-        ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
-    ];
-    if let Some((s, t)) = settings.debug_strategy {
-        metadata.push(("debug_strategy".into(), format!("{s},{t}")));
-    }
-    if settings.method == Method::Ellipsoidal {
-        let g = settings.ellipsoid_guards;
-        metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
-        metadata.push(("query_split".into(), settings.query.split.to_string()));
-        metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
-    }
+    let mut metadata = render_metadata(ctx, scene_path, gate_spec, settings, &output);
     if let Some((index, plan)) = frame {
         metadata.push(("frame".into(), index.to_string()));
         metadata.push(("frames".into(), plan.count.to_string()));
@@ -617,6 +778,46 @@ fn render_one(
         println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
     }
     Ok(())
+}
+
+/// What every output records about its render (scene, settings, timing, device).
+fn render_metadata(
+    ctx: &GpuContext,
+    scene_path: &Path,
+    gate_spec: &str,
+    settings: &RenderSettings,
+    output: &gatetrace::integrator::RenderOutput,
+) -> Metadata {
+    let film = &output.film;
+    let secs = output.elapsed.as_secs_f64();
+    let gate = &settings.gate;
+    let mut metadata: Metadata = vec![
+        ("scene".into(), scene_path.display().to_string()),
+        ("method".into(), settings.method.name().into()),
+        ("gate".into(), gate_spec.to_owned()),
+        ("gate_description".into(), gate.describe()),
+        ("spp".into(), film.spp.to_string()),
+        ("seed".into(), settings.seed.to_string()),
+        ("max_bounces".into(), settings.max_bounces.to_string()),
+        ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
+        ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
+        ("elapsed_seconds".into(), format!("{secs:.3}")),
+        ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
+        ("adapter".into(), ctx.adapter_description()),
+        ("truncated_traversals".into(), output.truncated_traversals.to_string()),
+        ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
+        ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
+    ];
+    if let Some((s, t)) = settings.debug_strategy {
+        metadata.push(("debug_strategy".into(), format!("{s},{t}")));
+    }
+    if settings.method == Method::Ellipsoidal {
+        let g = settings.ellipsoid_guards;
+        metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
+        metadata.push(("query_split".into(), settings.query.split.to_string()));
+        metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
+    }
+    metadata
 }
 
 /// Prints a line to stdout, above the progress bars when they are shown.

@@ -108,6 +108,7 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         point_lights: vec![PointLight { position: Vec3::new(0.0, 3.0, 0.0), intensity: Vec3::splat(0.2) }],
         camera: CameraDesc { position: Vec3::Z, right: Vec3::X, up: Vec3::Y, forward: -Vec3::Z, yfov: 1.0 },
         dropped_degenerate: 0,
+        nodes: Vec::new(),
     }
 }
 

@@ -250,7 +250,7 @@ def load_gltf(path):
         children = {c for n in nodes for c in n.get("children", [])}
         roots = [i for i in range(len(nodes)) if i not in children]
 
-    meshes, camera_nodes = [], []
+    meshes, camera_nodes, node_positions = [], [], {}
     stack = [(i, np.eye(4)) for i in reversed(roots)]
     while stack:  # depth-first, in document order
         ni, parent = stack.pop()
@@ -259,6 +259,8 @@ def load_gltf(path):
         stack.extend((c, world) for c in reversed(node.get("children", [])))
         if "camera" in node:
             camera_nodes.append((node["camera"], world))
+        if node.get("name"):
+            node_positions.setdefault(node["name"], world[:3, 3].copy())
         if "mesh" in node:
             mesh = doc["meshes"][node["mesh"]]
             lin = world[:3, :3]
@@ -288,8 +290,14 @@ def load_gltf(path):
                 base = node.get("name") or mesh.get("name") or "mesh"
                 base = "".join(ch if ch.isalnum() else "_" for ch in base)
                 name = f"{base}_{ni}_{pi}"  # unique scene-dict key
+                uvs = None
+                if "TEXCOORD_0" in attrs:
+                    uvs = _read_accessor(doc, buffers, attrs["TEXCOORD_0"]).astype(np.float64)
                 meshes.append({
                     "name": name,
+                    "node": node.get("name"),
+                    "node_position": world[:3, 3].copy(),
+                    "uvs": uvs,
                     "positions": pos.astype(np.float32),
                     "normals": None if nrm is None else nrm.astype(np.float32),
                     "faces": faces,
@@ -308,7 +316,7 @@ def load_gltf(path):
                   "yfov": float(p["yfov"]), "znear": float(p["znear"]),
                   "zfar": float(p["zfar"]) if "zfar" in p else None,
                   "aspect_ratio": p.get("aspectRatio")}
-    return {"meshes": meshes, "camera": camera, "doc": doc}
+    return {"meshes": meshes, "camera": camera, "doc": doc, "node_positions": node_positions}
 
 
 def _check_winding(mesh):
@@ -414,6 +422,109 @@ def _make_mesh(mi, m):
         params["vertex_normals"] = mi.Float(m["normals"].ravel())
     params.update()
     return mesh
+
+
+# --------------------------------------------------------------------------
+# NLOS captures (transient_nlos_path + nlos_capture_meter)
+# --------------------------------------------------------------------------
+
+def wall_rectangle(scene, wall_node):
+    """The relay wall as a Mitsuba rectangle: the affine map from the wall's TEXCOORD_0 to its
+    positions, checked to hold at every vertex (a planar parallelogram parameterised linearly).
+    Returns (to_world 4x4, point_at(u, v)). The rectangle's local [-1, 1]^2 maps to uv [0, 1]^2,
+    so nlos_capture_meter's grid cell (i, j) lies at uv ((i + 0.5) / W, (j + 0.5) / H), as in
+    gatetrace."""
+    walls = [m for m in scene["meshes"] if m["node"] == wall_node]
+    if not walls:
+        raise SystemExit(f"no mesh node named '{wall_node}' (the relay wall)")
+    pos = np.concatenate([m["positions"] for m in walls]).astype(np.float64)
+    if any(m["uvs"] is None for m in walls):
+        raise SystemExit(f"the relay wall '{wall_node}' has no TEXCOORD_0")
+    uv = np.concatenate([m["uvs"] for m in walls])
+    design = np.column_stack([uv, np.ones(len(uv))])
+    affine, *_ = np.linalg.lstsq(design, pos, rcond=None)  # pos = [u v 1] @ affine
+    if np.abs(design @ affine - pos).max() > 1e-5:
+        raise SystemExit(f"the relay wall '{wall_node}' is not a parallelogram with linear texture "
+                         "coordinates: Mitsuba's rectangle cannot reproduce it")
+    du, dv, p00 = affine
+    normal = np.cross(du, dv)
+    normal /= np.linalg.norm(normal)
+    f = walls[0]["faces"][0]
+    face_normal = np.cross(pos[f[1]] - pos[f[0]], pos[f[2]] - pos[f[0]])
+    if np.dot(face_normal, normal) <= 0:
+        raise SystemExit(f"the relay wall '{wall_node}' faces against its (u, v) frame: Mitsuba's "
+                         "rectangle would face the other way")
+    to_world = np.eye(4)
+    to_world[:3, 0], to_world[:3, 1], to_world[:3, 2] = du / 2, dv / 2, normal
+    to_world[:3, 3] = p00 + (du + dv) / 2
+    return to_world, lambda u, v: p00 + u * du + v * dv
+
+
+def build_nlos_scene(mi, scene, args):
+    """Mitsuba scene dict of an NLOS capture of the glTF scene: every mesh but the relay wall as
+    it is, the relay wall as a rectangle carrying an nlos_capture_meter, and a projector laser
+    of irradiance 1 at unit distance. Returns (dict, wall point_at, sensor and laser
+    origins)."""
+    to_world, point_at = wall_rectangle(scene, args.relay_wall)
+    origins = scene["node_positions"]
+    sensor_origin = np.array(args.sensor_origin if args.sensor_origin else
+                             origins.get("sensor_origin", origins.get("nlos_origin")), dtype=np.float64)
+    laser_origin = np.array(args.laser_origin if args.laser_origin else
+                            origins.get("laser_origin", origins.get("nlos_origin")), dtype=np.float64)
+    width, height = args.res
+    wall = next(m for m in scene["meshes"] if m["node"] == args.relay_wall)
+    mat = wall["material"]
+    bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": mat["albedo"]}}
+    if mat["double_sided"]:
+        bsdf = {"type": "twosided", "material": bsdf}
+    target = point_at(*args.laser_spot)
+    up = [0.0, 1.0, 0.0] if abs(np.dot(target - laser_origin, [0, 1, 0])) < 0.99 * np.linalg.norm(
+        target - laser_origin) else [1.0, 0.0, 0.0]
+    out = {
+        "type": "scene",
+        "integrator": {
+            "type": "transient_nlos_path",
+            "max_depth": args.max_bounces + 1,
+            "rr_depth": args.max_bounces + 2,
+            "capture_type": args.nlos,
+            "nlos_laser_sampling": True,
+            "nlos_hidden_geometry_sampling": args.hidden_geometry_sampling,
+            "account_first_and_last_bounces": args.count_first_last,
+            "temporal_filter": "box",
+        },
+        "laser": {"type": "projector", "irradiance": 1.0, "fov": 0.2,
+                  "to_world": mi.ScalarTransform4f().look_at(origin=laser_origin.tolist(), target=target.tolist(),
+                                                             up=up)},
+        "relay_wall": {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f(to_world.tolist()),
+            "bsdf": bsdf,
+            "nlos_sensor": {
+                "type": "nlos_capture_meter",
+                "sensor_origin": sensor_origin.tolist(),
+                "sampler": {"type": "independent", "sample_count": args.spp},
+                "film": {"type": "transient_hdr_film", "width": width, "height": height,
+                         "temporal_bins": args.bins, "bin_width_opl": args.bin_width,
+                         "start_opl": args.start, "rfilter": {"type": "box"}},
+            },
+        },
+    }
+    for m in scene["meshes"]:
+        if m["node"] != args.relay_wall:
+            out[m["name"]] = _make_mesh(mi, m)
+    return out, point_at, sensor_origin, laser_origin
+
+
+def laser_equivalent_power(point_at, laser_origin, wall_normal, targets):
+    """The beam power (W) gatetrace's laser needs, per laser spot, to match the projector.
+    mitransient treats the spot as a point of area pdf 1 lit by the projector, whose emitter sample
+    weighs pi E / d^2 on its axis (E = its `irradiance`, here 1; measured with
+    Emitter.sample_direction: pi / 4 at d = 2, whatever the fov), and the wall's BSDF evaluation
+    adds the incident cosine: P = pi cos / d^2."""
+    d = targets - laser_origin
+    dist = np.linalg.norm(d, axis=-1)
+    cos = np.abs((d / dist[..., None]) @ wall_normal)
+    return np.pi * cos / dist ** 2
 
 
 # --------------------------------------------------------------------------
@@ -523,6 +634,24 @@ def parse_args(argv=None):
                         "for a GPU); must be an RGB variant")
     p.add_argument("--threads", type=int, default=None,
                    help="CPU threads for the LLVM backend (default: all)")
+    p.add_argument("--nlos", choices=["single", "confocal"],
+                   help="render an NLOS capture with transient_nlos_path (laser and hidden-geometry "
+                        "sampling on) instead of the camera: --res is the grid of sensed points on the "
+                        "relay wall; --max-bounces counts the laser spot and the sensed point")
+    p.add_argument("--relay-wall", default="relay_wall", help="--nlos: the relay wall's node")
+    p.add_argument("--sensor-origin", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="--nlos: sensor origin (m; default: node sensor_origin, else nlos_origin)")
+    p.add_argument("--laser-origin", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="--nlos: laser origin (m; default: node laser_origin, else nlos_origin)")
+    p.add_argument("--laser-spot", nargs=2, type=float, default=[0.5, 0.5], metavar=("U", "V"),
+                   help="--nlos single: the laser's target in the wall's texture coordinates")
+    p.add_argument("--count-first-last", action="store_true",
+                   help="--nlos: account_first_and_last_bounces")
+    p.add_argument("--hidden-geometry-sampling", action="store_true",
+                   help="--nlos: turn on nlos_hidden_geometry_sampling. Off by default: with it, "
+                        "mitransient 1.3.1 misses paths through hidden geometry that faces away from "
+                        "its sampling (the example scene's occluder paths, checked against the same "
+                        "render with it off), so references are made without it")
     args = p.parse_args(argv)
     if args.max_bounces < 0 or args.spp < 1 or args.passes < 1 or args.bins < 1:
         p.error("--max-bounces must be >= 0; --spp, --passes, --bins >= 1")
@@ -535,8 +664,74 @@ def parse_args(argv=None):
     return args
 
 
+def main_nlos(args):
+    """--nlos: the capture's transient with its variance over passes, and what gatetrace needs to
+    render the same capture (laser equivalent powers, sensed points, laser spots)."""
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant(args.variant)
+    import mitransient  # noqa: F401
+    if args.threads is not None:
+        dr.set_thread_count(args.threads)
+    out_path = args.output or os.path.splitext(os.path.basename(args.scene))[0] + f"_nlos_{args.nlos}_peer.npz"
+    scene_data = load_gltf(args.scene)
+    scene_dict, point_at, sensor_origin, laser_origin = build_nlos_scene(mi, scene_data, args)
+    scene = mi.load_dict(scene_dict)
+    integrator = scene.integrator()
+    width, height = args.res
+    cells = np.array([[point_at((i + 0.5) / width, (j + 0.5) / height) for i in range(width)]
+                      for j in range(height)])
+    normal = np.cross(point_at(1, 0) - point_at(0, 0), point_at(0, 1) - point_at(0, 0))
+    normal /= np.linalg.norm(normal)
+    targets = cells if args.nlos == "confocal" else point_at(*args.laser_spot)[None, None, :]
+    power = laser_equivalent_power(point_at, laser_origin, normal, targets)
+    chunks = [args.chunk_spp] * (args.spp // args.chunk_spp)
+    if args.spp % args.chunk_spp:
+        chunks.append(args.spp % args.chunk_spp)
+    seeds = np.random.SeedSequence(args.seed).generate_state(
+        args.passes * len(chunks), dtype=np.uint32).reshape(args.passes, len(chunks))
+    moments = _RunningMoments()
+    t0 = time.time()
+    for p in range(args.passes):
+        trans = 0.0
+        for c, spp in enumerate(chunks):
+            _, t_img = integrator.render(scene, seed=int(seeds[p, c]), spp=spp)
+            trans = trans + np.array(t_img, dtype=np.float64)[..., :3] * (spp / args.spp)
+        moments.add(trans)
+        print(f"pass {p + 1}/{args.passes}: total {trans.sum():.6g}", file=sys.stderr, flush=True)
+    total = time.time() - t0
+    mean, var = moments.mean_and_var_of_mean()
+    meta = {
+        "tool": "tools/peer_reference.py",
+        "command_line": " ".join(shlex.quote(a) for a in sys.argv),
+        "scene": args.scene,
+        "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__,
+                     "mitransient": mitransient.__version__, "numpy": np.__version__},
+        "variant": args.variant,
+        "integrator": scene_dict["integrator"],
+        "laser": "projector, irradiance 1 W m^-2 at unit distance, fov 0.2 deg",
+        "scan": args.nlos, "relay_wall": args.relay_wall,
+        "sensor_origin": sensor_origin.tolist(), "laser_origin": laser_origin.tolist(),
+        "laser_spot_uv": args.laser_spot if args.nlos == "single" else None,
+        "max_bounces": args.max_bounces, "spp_per_pass": args.spp, "passes": args.passes,
+        "seed": args.seed, "start": args.start, "bin_width": args.bin_width, "bins": args.bins,
+        "time_unit": "metres of optical path from the laser spot to the sensed point"
+                     + (" plus the first and last segments" if args.count_first_last else ""),
+        "layout": "transient [grid_y, grid_x, T, 3]; *_var = variance of the mean over passes; "
+                  "laser_power_equivalent [laser_y, laser_x] in W",
+        "seconds_total": total, "threads": dr.thread_count(),
+    }
+    np.savez_compressed(out_path, transient_mean=mean.astype(np.float32), transient_var=var.astype(np.float32),
+                        laser_power_equivalent=power.astype(np.float32), sensor_grid_xyz=cells.astype(np.float32),
+                        laser_grid_xyz=np.broadcast_to(targets, power.shape + (3,)).astype(np.float32),
+                        meta=np.array(json.dumps(meta, indent=1)))
+    print(f"wrote {out_path} ({total:.1f} s)", file=sys.stderr)
+
+
 def main(argv=None):
     args = parse_args(argv)
+    if args.nlos:
+        return main_nlos(args)
     gate = gate_bins(args)
     out_path = args.output or os.path.splitext(os.path.basename(args.scene))[0] + "_peer.npz"
 

@@ -52,6 +52,18 @@ pub fn check_writable(path: &Path) -> Result<()> {
 /// Writes `film` to `path`; the format follows the extension (`.exr` or `.npy`).
 /// `bin_ranges` are the [start, end) lengths (m) of transient bins, for EXR layer attributes.
 pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, f64)]) -> Result<()> {
+    write_film_with(path, film, metadata, bin_ranges, &serde_json::Map::new())
+}
+
+/// [`write_film`] with `extras`, structured values added to an NPY file's JSON sidecar (an EXR
+/// file gets them as JSON text attributes).
+pub fn write_film_with(
+    path: &Path,
+    film: &Film,
+    metadata: &Metadata,
+    bin_ranges: &[(f64, f64)],
+    extras: &serde_json::Map<String, serde_json::Value>,
+) -> Result<()> {
     if !film.all_finite() {
         bail!("refusing to write {}: the film holds non-finite values", path.display());
     }
@@ -59,16 +71,26 @@ pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(
         std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
     }
     match OutputFormat::of(path)? {
-        OutputFormat::Exr => write_exr(path, film, metadata, bin_ranges),
+        OutputFormat::Exr => {
+            let mut metadata = metadata.clone();
+            metadata.extend(extras.iter().map(|(k, v)| (k.clone(), v.to_string())));
+            write_exr(path, film, &metadata, bin_ranges)
+        }
         OutputFormat::Npy => {
             write_npy(path, film)?;
-            let sidecar = sidecar_path(path);
-            let map: serde_json::Map<String, serde_json::Value> =
-                metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
-            std::fs::write(&sidecar, serde_json::to_string_pretty(&map)? + "\n")
-                .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
+            write_sidecar(path, metadata, extras)
         }
     }
+}
+
+/// Writes the JSON sidecar of `npy`: `metadata` as strings and `extras` as they are.
+pub fn write_sidecar(npy: &Path, metadata: &Metadata, extras: &serde_json::Map<String, serde_json::Value>) -> Result<()> {
+    let sidecar = sidecar_path(npy);
+    let mut map: serde_json::Map<String, serde_json::Value> =
+        metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
+    map.extend(extras.clone());
+    std::fs::write(&sidecar, serde_json::to_string_pretty(&map)? + "\n")
+        .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
 }
 
 /// `x.npy` -> `x.json`.

@@ -431,6 +431,37 @@ pub struct Splat {
     pub reserved2: u32,
 }
 
+/// A point of an NLOS capture's relay wall, as the kernels read it from `wall_points`: a sensed
+/// point (what the camera ray of a grid cell hits) or a laser spot (what the beam hits). Both are
+/// the first hit of a ray from `origin` (the sensor or the laser origin), found on the host.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct WallPoint {
+    /// The point (m).
+    pub position: Vec3,
+    /// Path length (m) that paths through the point start with: a sensed point's is minus its
+    /// distance from the sensor origin (the path's first segment is traced, then not counted)
+    /// or 0 when that segment counts; a laser spot's is 0, or its distance from the laser origin
+    /// when that segment counts.
+    pub length_offset: f32,
+    /// The sensor origin (sensed points) or the laser origin (laser spots) (m).
+    pub origin: Vec3,
+    /// The triangle hit (BVH order), or NONE when the ray from the origin hit nothing.
+    pub triangle: u32,
+    /// Laser spots: the beam's power per channel (W); zero for sensed points.
+    pub power: Vec3,
+    /// Barycentric coordinate of the point on its triangle (weight of vertex 1).
+    pub b1: f32,
+    /// Barycentric coordinate of the point on its triangle (weight of vertex 2).
+    pub b2: f32,
+    /// Padding.
+    pub reserved0: u32,
+    /// Padding.
+    pub reserved1: u32,
+    /// Padding.
+    pub reserved2: u32,
+}
+
 /// Smallest GGX alpha: rougher than this keeps every density finite in f32.
 pub const MIN_ALPHA: f32 = 1e-3;
 

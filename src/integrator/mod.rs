@@ -101,6 +101,9 @@ pub struct RenderSettings {
     /// Bidirectional methods: keep the light-tracing sums on the device (f32) instead of
     /// folding them into host f64 sums every few passes; the viewer resolves them there.
     pub keep_splats_on_device: bool,
+    /// An NLOS capture (`--nlos`): pixels are sensed points of a relay wall lit by a laser spot,
+    /// and the image's width x height is the grid of sensed points (see [`crate::nlos`]).
+    pub nlos: Option<crate::nlos::NlosCapture>,
 }
 
 /// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
@@ -170,6 +173,7 @@ impl Default for RenderSettings {
             query: QuerySettings::default(),
             ellipsoid_guards: EllipsoidGuards::default(),
             keep_splats_on_device: false,
+            nlos: None,
         }
     }
 }
@@ -236,6 +240,9 @@ pub fn create_integrator<'a>(
     scene: &PreparedScene,
     settings: &RenderSettings,
 ) -> Result<Box<dyn Integrator + 'a>> {
+    if settings.nlos.is_some() && settings.method != Method::Path {
+        anyhow::bail!("--nlos: NLOS captures render with --method path (direct and ellipsoidal do not take them yet)");
+    }
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
         Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
@@ -331,6 +338,10 @@ pub struct RenderOutput {
 
 /// Why no path of the scene can reach the gate, if none can (checked before any work).
 pub fn unreachable_gate(scene: &PreparedScene, settings: &RenderSettings) -> Option<String> {
+    if settings.nlos.is_some() {
+        // The bounds below run from the pinhole to the lights, which a capture does not use.
+        return None;
+    }
     let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
     let gate = &settings.gate;
     if let Some(end) = gate.max_length()
@@ -365,7 +376,8 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         width: settings.width,
         height: settings.height,
         seed: settings.seed,
-        max_bounces: settings.max_bounces,
+        // A capture's laser spot is a bounce to the user, and a light to the kernels.
+        max_bounces: if settings.nlos.is_some() { settings.max_bounces.saturating_sub(1) } else { settings.max_bounces },
         rr_depth: settings.rr_depth.unwrap_or(NONE),
         light_count: scene.lights.lights.len() as u32,
         node_count: scene.bvh.nodes.len() as u32,
@@ -419,6 +431,11 @@ pub fn upload_scene(
     r.uniform_slice_init(ctx, "uniform_lights", &padded_table(&scene.lights.lights, MAX_UNIFORM_LIGHTS));
     r.uniform_slice_init(ctx, "uniform_light_cdf", &padded_table(&scene.lights.cdf, MAX_UNIFORM_LIGHTS));
     r.storage_init(ctx, "gate_table", &gate.table())?;
+    let wall_points = match &settings.nlos {
+        Some(capture) => crate::nlos::wall_points(scene, capture, settings.width, settings.height)?,
+        None => vec![crate::gpu::layout::WallPoint::default()],
+    };
+    r.storage_init(ctx, "wall_points", &wall_points)?;
     let cdf = target_sampler(scene, settings).map_or(vec![0.0, 1.0], |t| t.cdf);
     r.storage_init(ctx, "target_cdf", &cdf)?;
     let film_len = film_elements(settings)?;
@@ -438,6 +455,7 @@ pub fn upload_scene(
         ("SMALL_SCENE_TRIANGLES", small as f64),
         ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
         ("RESUMABLE", flag(crate::bvh::traversals_can_stop(scene.bvh.nodes.len()))),
+        ("NLOS", flag(settings.nlos.is_some())),
     ];
     Ok((r, constants, film))
 }

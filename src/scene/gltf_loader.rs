@@ -47,6 +47,9 @@ struct Collected {
     point_lights: Vec<PointLight>,
     camera: Option<CameraDesc>,
     dropped_degenerate: usize,
+    nodes: Vec<super::NamedNode>,
+    /// TEXCOORD_0 of the triangles of the node being loaded, while all its primitives have them.
+    texcoords: Option<Vec<[Vec2; 3]>>,
 }
 
 impl Loader<'_> {
@@ -105,6 +108,7 @@ impl Loader<'_> {
             point_lights: c.point_lights,
             camera,
             dropped_degenerate: c.dropped_degenerate,
+            nodes: c.nodes,
         })
     }
 
@@ -134,8 +138,19 @@ impl Loader<'_> {
         if let Some(light) = node.light() {
             self.punctual_light(&light, world, &node_name, c)?;
         }
+        let first = c.triangles.len();
+        c.texcoords = Some(Vec::new());
         if let Some(mesh) = node.mesh() {
             self.mesh(&mesh, world, &node_name, default_material, materials, c)?;
+        }
+        let texcoords = c.texcoords.take();
+        if let Some(n) = node.name() {
+            c.nodes.push(super::NamedNode {
+                name: n.to_owned(),
+                position: world.transform_point3(Vec3::ZERO),
+                triangles: first..c.triangles.len(),
+                texcoords,
+            });
         }
         for child in node.children() {
             self.walk(&child, world, materials, default_material, c)?;
@@ -229,6 +244,14 @@ impl Loader<'_> {
                 .and(prim.material().pbr_metallic_roughness().base_color_texture().map(|t| t.tex_coord()));
             let uvs: Option<Vec<Vec2>> =
                 uv_set.and_then(|set| reader.read_tex_coords(set)).map(|it| it.into_f32().map(Vec2::from).collect());
+            // TEXCOORD_0, whatever the material: an NLOS capture lays its grid on the relay wall's.
+            let texcoord0: Option<Vec<Vec2>> = reader
+                .read_tex_coords(0)
+                .map(|it| it.into_f32().map(Vec2::from).collect())
+                .filter(|t: &Vec<Vec2>| t.len() == positions.len());
+            if texcoord0.is_none() {
+                c.texcoords = None;
+            }
             let indices: Vec<u32> = match reader.read_indices() {
                 Some(it) => it.into_u32().collect(),
                 None => (0..positions.len() as u32).collect(),
@@ -261,6 +284,9 @@ impl Loader<'_> {
                     continue;
                 }
                 c.triangles.push(t);
+                if let (Some(all), Some(t0)) = (c.texcoords.as_mut(), &texcoord0) {
+                    all.push([t0[a], t0[b], t0[cc]]);
+                }
             }
         }
         Ok(())

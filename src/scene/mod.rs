@@ -87,6 +87,20 @@ pub struct PointLight {
     pub intensity: Vec3,
 }
 
+/// A named node of the glTF scene: where it is and which triangles it contributed (what an NLOS
+/// capture needs to find its relay wall and its sensor and laser origins by name).
+#[derive(Clone, Debug)]
+pub struct NamedNode {
+    /// The glTF node's name.
+    pub name: String,
+    /// The node's origin in world space (m).
+    pub position: Vec3,
+    /// Its mesh's triangles: indices into `Scene::triangles` (load order); empty without a mesh.
+    pub triangles: std::ops::Range<usize>,
+    /// TEXCOORD_0 of each of those triangles, when every primitive of the mesh has them.
+    pub texcoords: Option<Vec<[Vec2; 3]>>,
+}
+
 /// A scene baked to world space, ready for BVH build and upload.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -104,9 +118,16 @@ pub struct Scene {
     pub camera: CameraDesc,
     /// Zero-area triangles dropped at load.
     pub dropped_degenerate: usize,
+    /// The scene's named nodes, in the order they were visited.
+    pub nodes: Vec<NamedNode>,
 }
 
 impl Scene {
+    /// The first node named `name`.
+    pub fn node(&self, name: &str) -> Option<&NamedNode> {
+        self.nodes.iter().find(|n| n.name == name)
+    }
+
     /// Axis-aligned bounds of all triangles and the camera (m).
     pub fn bounds(&self) -> (Vec3, Vec3) {
         let mut lo = self.camera.position;

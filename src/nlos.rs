@@ -1,0 +1,307 @@
+//! Non-line-of-sight (NLOS) capture: a laser lights a spot on a visible relay wall, light goes
+//! around the corner to hidden objects and back, and a time-resolved sensor records the light
+//! leaving a grid of points on the wall (shaders/lib/nlos.wesl).
+//!
+//! Conventions (those of Mitsuba 3 + mitransient's `nlos_capture_meter`, so that outputs compare
+//! bin for bin):
+//! - The relay wall is a mesh node of the scene, named (`relay_wall` by default). Its TEXCOORD_0
+//!   parameterises it: grid cell (i, j) of a W x H grid is sensed at the wall point of texture
+//!   coordinates ((i + 0.5) / W, (j + 0.5) / H). Pixel (i, j) of the image (row j) is that cell,
+//!   so the output's [grid_y, grid_x] is [j, i].
+//! - A pixel's value is the radiance (W m^-2 sr^-1) leaving its sensed point towards the sensor
+//!   origin, binned by path length: the ray from the sensor origin to the point is traced, and
+//!   the first surface it hits is the sensed point.
+//! - The laser is a beam of power P (W) from the laser origin towards a target on the wall; the
+//!   first surface it hits is the spot. The spot reflects the beam with the wall's BSDF, so it
+//!   acts as a point light of radiant intensity P f(to laser, w) cos(w) (W sr^-1).
+//! - Path lengths run from the laser spot to the sensed point. The laser origin -> spot and
+//!   sensed point -> sensor origin segments are added only with `count_first_and_last`
+//!   (mitransient's `account_first_and_last_bounces`, off by default there and here).
+//! - Bounces count every scattering vertex, the laser spot and the sensed point included: the
+//!   classic three-bounce path spot -> hidden point -> sensed point has 3.
+//! - The scene's own lights take no part in a capture.
+
+use anyhow::{Context as _, Result, bail, ensure};
+use glam::{Vec2, Vec3};
+
+use crate::bvh::traverse::trace_closest;
+use crate::gpu::layout::{NONE, WallPoint};
+use crate::scene::{PreparedScene, Scene};
+
+/// The relay wall's node name when none is given.
+pub const DEFAULT_RELAY_WALL: &str = "relay_wall";
+
+/// How the laser moves during a capture (`--nlos`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Scan {
+    /// One laser spot for the whole grid of sensed points.
+    Single,
+    /// The laser spot follows the sensed point: each pixel is lit at the point it senses.
+    Confocal,
+    /// Every laser spot of a laser grid with every sensed point: one single-scan capture per
+    /// laser spot.
+    Exhaustive,
+}
+
+impl Scan {
+    /// The name on the command line and in metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scan::Single => "single",
+            Scan::Confocal => "confocal",
+            Scan::Exhaustive => "exhaustive",
+        }
+    }
+}
+
+/// Where one render's laser spot lies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LaserAim {
+    /// Aimed at the wall point of texture coordinates (u, v) for every pixel.
+    Spot(Vec2),
+    /// Aimed at each pixel's sensed point (confocal).
+    Confocal,
+}
+
+/// One NLOS render: the wall, the origins, the laser (what [`crate::integrator::RenderSettings`]
+/// carries). The image's width and height are the grid of sensed points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NlosCapture {
+    /// Name of the relay wall's glTF node.
+    pub relay_wall: String,
+    /// Where the sensor looks at the wall from (m).
+    pub sensor_origin: Vec3,
+    /// Where the laser beam starts (m).
+    pub laser_origin: Vec3,
+    /// Where the beam is aimed.
+    pub aim: LaserAim,
+    /// Beam power (W).
+    pub laser_power: f32,
+    /// Count the laser origin -> spot and sensed point -> sensor origin segments in path lengths.
+    pub count_first_and_last: bool,
+}
+
+/// The origin named by node `name` of the scene, else by node `nlos_origin`: the default of the
+/// sensor and laser origins.
+pub fn origin_from_nodes(scene: &Scene, name: &str) -> Option<Vec3> {
+    scene.node(name).or_else(|| scene.node("nlos_origin")).map(|n| n.position)
+}
+
+/// Texture coordinates of the centre of cell (i, j) of a width x height grid.
+pub fn cell_uv(i: u32, j: u32, width: u32, height: u32) -> Vec2 {
+    Vec2::new((i as f32 + 0.5) / width as f32, (j as f32 + 0.5) / height as f32)
+}
+
+/// The point of the relay wall at texture coordinates `uv` (m): interpolated on the first wall
+/// triangle whose TEXCOORD_0 triangle holds uv.
+pub fn wall_point_at(scene: &Scene, wall: &str, uv: Vec2) -> Result<Vec3> {
+    let name = &scene.source;
+    let node = scene.node(wall).with_context(|| {
+        format!("{name}: no node named `{wall}`: an NLOS capture needs the relay wall's mesh node (see --relay-wall)")
+    })?;
+    ensure!(!node.triangles.is_empty(), "{name}: node `{wall}` (the relay wall) has no mesh");
+    let texcoords = node.texcoords.as_ref().with_context(|| {
+        format!(
+            "{name}: node `{wall}` (the relay wall) has no TEXCOORD_0: the sensed-point grid is laid on the wall's \
+             texture coordinates, so give its mesh a TEXCOORD_0 covering [0, 1]^2"
+        )
+    })?;
+    for (k, t) in node.triangles.clone().zip(texcoords) {
+        let [a, b, c] = *t;
+        let (e1, e2, p) = (b - a, c - a, uv - a);
+        let det = e1.perp_dot(e2);
+        if det == 0.0 {
+            continue;
+        }
+        let b1 = p.perp_dot(e2) / det;
+        let b2 = e1.perp_dot(p) / det;
+        let tol = -1e-6;
+        if b1 >= tol && b2 >= tol && b1 + b2 <= 1.0 - tol {
+            let [p0, p1, p2] = scene.triangles[k].positions;
+            return Ok(p0 + b1 * (p1 - p0) + b2 * (p2 - p0));
+        }
+    }
+    bail!("{name}: the relay wall `{wall}`'s texture coordinates do not cover ({}, {})", uv.x, uv.y)
+}
+
+/// What a ray from `origin` towards `target` hits first: a wall point with no power and no
+/// length offset yet, and whether the hit is the target itself (and not something in front).
+fn first_hit(scene: &PreparedScene, origin: Vec3, target: Vec3) -> (WallPoint, bool) {
+    let to = target - origin;
+    let distance = to.length();
+    let direction = to / distance;
+    let hit = trace_closest(&scene.bvh.nodes, &scene.triangles, origin, direction, f32::MAX, NONE);
+    if hit.triangle == NONE {
+        let point = WallPoint { position: target, origin, triangle: NONE, ..Default::default() };
+        return (point, false);
+    }
+    let tri = &scene.triangles[hit.triangle as usize];
+    let position = tri.v0 + hit.b1 * tri.e1 + hit.b2 * tri.e2;
+    let on_target = (position - target).length() <= 1e-4 * distance.max(1.0);
+    let point = WallPoint { position, origin, triangle: hit.triangle, b1: hit.b1, b2: hit.b2, ..Default::default() };
+    (point, on_target)
+}
+
+/// The `wall_points` table of a width x height capture: the sensed point of every pixel
+/// (row-major), then the laser spot of every pixel. Fails when the laser hits nothing.
+pub fn wall_points(scene: &PreparedScene, capture: &NlosCapture, width: u32, height: u32) -> Result<Vec<WallPoint>> {
+    Ok(wall_points_and_warnings(scene, capture, width, height)?.0)
+}
+
+/// [`wall_points`], and warnings about sensed points hidden from the sensor origin and a laser
+/// beam blocked before its target.
+pub fn wall_points_and_warnings(
+    scene: &PreparedScene,
+    capture: &NlosCapture,
+    width: u32,
+    height: u32,
+) -> Result<(Vec<WallPoint>, Vec<String>)> {
+    let mut warnings = Vec::new();
+    let name = &scene.scene.source;
+    let wall = &capture.relay_wall;
+    let pixels = (width * height) as usize;
+    let mut points = Vec::with_capacity(2 * pixels);
+    let mut targets = Vec::with_capacity(pixels);
+    let mut hidden = 0;
+    for j in 0..height {
+        for i in 0..width {
+            let target = wall_point_at(&scene.scene, wall, cell_uv(i, j, width, height))?;
+            let (mut p, on_target) = first_hit(scene, capture.sensor_origin, target);
+            hidden += !on_target as usize;
+            let d = (p.position - capture.sensor_origin).length();
+            p.length_offset = if capture.count_first_and_last { 0.0 } else { -d };
+            points.push(p);
+            targets.push(target);
+        }
+    }
+    if hidden > 0 {
+        warnings.push(format!(
+            "{name}: {hidden} of {pixels} sensed points of `{wall}` are hidden from the sensor origin {}: those \
+             pixels sense what is in front of them",
+            fmt_point(capture.sensor_origin)
+        ));
+    }
+    let mut blocked = Vec::new();
+    let power = Vec3::splat(capture.laser_power);
+    let mut spot = |target: Vec3| -> Result<WallPoint> {
+        let (mut p, on_target) = first_hit(scene, capture.laser_origin, target);
+        ensure!(
+            p.triangle != NONE,
+            "{name}: the laser beam from {} towards {} hits nothing",
+            fmt_point(capture.laser_origin),
+            fmt_point(target)
+        );
+        if !on_target {
+            blocked.push(format!(
+                "{name}: the laser beam from {} towards {} meets other geometry first, at {}",
+                fmt_point(capture.laser_origin),
+                fmt_point(target),
+                fmt_point(p.position)
+            ));
+        }
+        p.power = power;
+        p.length_offset = if capture.count_first_and_last { (p.position - capture.laser_origin).length() } else { 0.0 };
+        Ok(p)
+    };
+    match capture.aim {
+        LaserAim::Spot(uv) => {
+            let s = spot(wall_point_at(&scene.scene, wall, uv)?)?;
+            points.extend(std::iter::repeat_n(s, pixels));
+        }
+        LaserAim::Confocal => {
+            for &t in &targets {
+                points.push(spot(t)?);
+            }
+        }
+    }
+    if let Some(first) = blocked.first() {
+        let more = blocked.len() - 1;
+        warnings.push(if more > 0 { format!("{first} (and {more} more spots)") } else { first.clone() });
+    }
+    Ok((points, warnings))
+}
+
+/// Checks a capture's settings against the scene before any work: the wall exists and is
+/// parameterised, and the origins are finite and off the wall.
+pub fn check_capture(scene: &Scene, capture: &NlosCapture) -> Result<()> {
+    let centre = wall_point_at(scene, &capture.relay_wall, Vec2::splat(0.5))?;
+    for (what, p) in [("sensor origin", capture.sensor_origin), ("laser origin", capture.laser_origin)] {
+        ensure!(p.is_finite(), "the {what} {} is not finite", fmt_point(p));
+        ensure!((p - centre).length() > 0.0, "the {what} lies on the relay wall's centre");
+    }
+    ensure!(
+        capture.laser_power.is_finite() && capture.laser_power > 0.0,
+        "laser power {} W must be positive",
+        capture.laser_power
+    );
+    if let LaserAim::Spot(uv) = capture.aim {
+        ensure!(
+            (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y),
+            "laser spot ({}, {}) must lie in [0, 1]^2 of the relay wall's texture coordinates",
+            uv.x,
+            uv.y
+        );
+    }
+    Ok(())
+}
+
+/// Unit normal of a wall point's surface on the side of its origin (zero when it hit nothing).
+pub fn wall_normal(scene: &PreparedScene, p: &WallPoint) -> Vec3 {
+    if p.triangle == NONE {
+        return Vec3::ZERO;
+    }
+    let n = crate::scene::surface::octahedral_decode(scene.normals[p.triangle as usize]);
+    if n.dot(p.origin - p.position) < 0.0 { -n } else { n }
+}
+
+/// Positions and normals of `points` as nested JSON arrays [rows][columns][3].
+fn grid_json(scene: &PreparedScene, points: &[WallPoint], width: u32) -> (serde_json::Value, serde_json::Value) {
+    let rows = |f: &dyn Fn(&WallPoint) -> Vec3| -> serde_json::Value {
+        points.chunks(width as usize).map(|row| row.iter().map(|p| f(p).to_array().to_vec()).collect::<Vec<_>>()).collect()
+    };
+    (rows(&|p| p.position), rows(&|p| wall_normal(scene, p)))
+}
+
+/// What the JSON sidecar of a capture records: the setup, and the sensed points and laser spots
+/// with their normals as [rows][columns][3] arrays (m). `laser_spots` are the spots of a whole
+/// scan, `laser_width` per row: one for a single scan, the grid for confocal and exhaustive ones.
+pub fn capture_record(
+    scene: &PreparedScene,
+    capture: &NlosCapture,
+    scan: Scan,
+    sensed: &[WallPoint],
+    width: u32,
+    laser_spots: &[WallPoint],
+    laser_width: u32,
+) -> serde_json::Map<String, serde_json::Value> {
+    use serde_json::json;
+    let (sensor_xyz, sensor_normals) = grid_json(scene, sensed, width);
+    let (laser_xyz, laser_normals) = grid_json(scene, laser_spots, laser_width);
+    let mut map = serde_json::Map::new();
+    map.insert("nlos_scan".into(), json!(scan.name()));
+    map.insert("relay_wall".into(), json!(capture.relay_wall));
+    map.insert("sensor_origin".into(), json!(capture.sensor_origin.to_array()));
+    map.insert("laser_origin".into(), json!(capture.laser_origin.to_array()));
+    map.insert("laser_power_w".into(), json!(capture.laser_power));
+    map.insert("count_first_and_last".into(), json!(capture.count_first_and_last));
+    map.insert("sensor_grid_xyz".into(), sensor_xyz);
+    map.insert("sensor_grid_normals".into(), sensor_normals);
+    map.insert("laser_grid_xyz".into(), laser_xyz);
+    map.insert("laser_grid_normals".into(), laser_normals);
+    map
+}
+
+fn fmt_point(p: Vec3) -> String {
+    format!("({}, {}, {}) m", p.x, p.y, p.z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_are_centred() {
+        assert_eq!(cell_uv(0, 0, 4, 2), Vec2::new(0.125, 0.25));
+        assert_eq!(cell_uv(3, 1, 4, 2), Vec2::new(0.875, 0.75));
+    }
+}
