@@ -222,12 +222,11 @@ pub fn wall_points_and_warnings(
 }
 
 /// Checks a capture's settings against the scene before any work: the wall exists and is
-/// parameterised, and the origins are finite and off the wall.
+/// parameterised, the origins are finite and the laser power positive.
 pub fn check_capture(scene: &Scene, capture: &NlosCapture) -> Result<()> {
-    let centre = wall_point_at(scene, &capture.relay_wall, Vec2::splat(0.5))?;
+    wall_point_at(scene, &capture.relay_wall, Vec2::splat(0.5))?;
     for (what, p) in [("sensor origin", capture.sensor_origin), ("laser origin", capture.laser_origin)] {
         ensure!(p.is_finite(), "the {what} {} is not finite", fmt_point(p));
-        ensure!((p - centre).length() > 0.0, "the {what} lies on the relay wall's centre");
     }
     ensure!(
         capture.laser_power.is_finite() && capture.laser_power > 0.0,

@@ -48,7 +48,8 @@ struct Collected {
     camera: Option<CameraDesc>,
     dropped_degenerate: usize,
     nodes: Vec<super::NamedNode>,
-    /// TEXCOORD_0 of the triangles of the node being loaded, while all its primitives have them.
+    /// TEXCOORD_0 of the triangles of the named node being loaded, while all its primitives have
+    /// them (None for unnamed nodes: only named ones can be looked up).
     texcoords: Option<Vec<[Vec2; 3]>>,
 }
 
@@ -139,7 +140,7 @@ impl Loader<'_> {
             self.punctual_light(&light, world, &node_name, c)?;
         }
         let first = c.triangles.len();
-        c.texcoords = Some(Vec::new());
+        c.texcoords = node.name().map(|_| Vec::new());
         if let Some(mesh) = node.mesh() {
             self.mesh(&mesh, world, &node_name, default_material, materials, c)?;
         }
@@ -244,11 +245,14 @@ impl Loader<'_> {
                 .and(prim.material().pbr_metallic_roughness().base_color_texture().map(|t| t.tex_coord()));
             let uvs: Option<Vec<Vec2>> =
                 uv_set.and_then(|set| reader.read_tex_coords(set)).map(|it| it.into_f32().map(Vec2::from).collect());
-            // TEXCOORD_0, whatever the material: an NLOS capture lays its grid on the relay wall's.
-            let texcoord0: Option<Vec<Vec2>> = reader
-                .read_tex_coords(0)
-                .map(|it| it.into_f32().map(Vec2::from).collect())
-                .filter(|t: &Vec<Vec2>| t.len() == positions.len());
+            // A named node's TEXCOORD_0, whatever the material: an NLOS capture lays its grid on the
+            // relay wall's (the base-colour set again when that is set 0).
+            let texcoord0: Option<Vec<Vec2>> = match (&c.texcoords, uv_set) {
+                (None, _) => None,
+                (Some(_), Some(0)) => uvs.clone(),
+                (Some(_), _) => reader.read_tex_coords(0).map(|it| it.into_f32().map(Vec2::from).collect()),
+            }
+            .filter(|t| t.len() == positions.len());
             if texcoord0.is_none() {
                 c.texcoords = None;
             }
