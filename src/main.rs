@@ -10,7 +10,7 @@ use gatetrace::film::output::{Metadata, OutputFormat, check_writable, write_film
 use gatetrace::frames::{FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render};
-use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at};
+use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
 
 /// The scene rendered when none is given.
 const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
@@ -173,7 +173,9 @@ struct RenderArgs {
     /// coordinates ((i + 0.5) / W, (j + 0.5) / H), and pixel value is the radiance (W m^-2 sr^-1
     /// per bin) leaving that point towards the sensor origin. Path lengths run from the laser spot
     /// to the sensed point (see --count-first-last); --max-bounces counts the spot and the sensed
-    /// point (3: the classic three-bounce paths). The scene's own lights are ignored. Output:
+    /// point (3: the classic three-bounce paths). The scene's own lights and camera are ignored
+    /// (and may be absent). Every --method renders captures; ellipsoidal joins the laser spot and
+    /// the sensed point through their spheroid of each target length. Output:
     /// NPY [grid_y, grid_x, T, 3], or [laser_y, laser_x, grid_y, grid_x, T, 3] for exhaustive, with
     /// the sensed points and laser spots in the JSON sidecar.
     #[arg(long, value_enum, value_name = "SCAN")]
@@ -612,7 +614,7 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
     ensure!(args.laser_grid.is_none() || scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
     film_elements(&base)?;
     check_writable(&out)?;
-    let scene = PreparedScene::new(load_gltf(scene_path)?)?;
+    let scene = PreparedScene::new(load_gltf_for_capture(scene_path)?)?;
     let origin = |given: Option<glam::Vec3>, node: &str, flag: &str| -> Result<glam::Vec3> {
         given.or_else(|| nlos::origin_from_nodes(&scene.scene, node)).with_context(|| {
             format!("{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)", scene_path.display())
@@ -639,7 +641,10 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
             .collect(),
         _ => vec![capture.aim],
     };
-    let ctx = GpuContext::new()?;
+    let mut ctx = GpuContext::new()?;
+    if args.profile {
+        ctx.enable_profiling()?;
+    }
     let bars = indicatif::MultiProgress::new();
     let pixels = (w * h) as usize;
     let (mut data, mut spots, mut sensed) = (Vec::new(), Vec::new(), Vec::new());
@@ -697,7 +702,7 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
     }
     let total: f64 = data.iter().map(|&v| v as f64).sum();
     say(&bars, format!(
-        "{}: NLOS {} capture, {}x{} sensed points, {} laser spot(s), gate {} | {} spp, {:.2} s rendering per spot on {} | \
+        "{}: NLOS {} capture, {}x{} sensed points, {} laser spot(s), gate {} | {} spp, {:.2} s rendering{} on {} | \
          total {total:.6e} -> {}",
         scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
         scan.name(),
@@ -707,9 +712,18 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
         args.gate,
         film.spp,
         output.rendering.as_secs_f64(),
+        if aims.len() > 1 { " per laser spot" } else { "" },
         ctx.adapter_info.name,
         out.display()
     ))?;
+    if let Some(report) = &output.stats {
+        print!("{report}");
+    } else if settings.stats {
+        println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
+    }
+    if let Some(report) = ctx.profile_report()? {
+        print!("{report}");
+    }
     Ok(())
 }
 

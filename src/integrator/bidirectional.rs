@@ -94,7 +94,7 @@ pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
 
 /// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
 pub fn check_settings(settings: &RenderSettings) -> Result<()> {
-    let b = settings.max_bounces;
+    let b = super::kernel_bounces(settings);
     let method = settings.method.name();
     ensure!(
         b <= MAX_BOUNCES,
@@ -202,7 +202,7 @@ impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
-        let b = settings.max_bounces;
+        let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;
         let light_vertices = b as u64 + 1;
@@ -283,6 +283,17 @@ impl<'a> BidirectionalTracer<'a> {
 
         constants.push(("CAMERA_VERTICES", camera_vertices as f64));
         constants.push(("LIGHT_VERTICES", light_vertices as f64));
+        // Ellipsoidal queries join camera vertex t - 1 and light vertex s - 1 with s, t >= 1
+        // (t >= 2 in a capture, whose sensed point is camera vertex 1) and s + t <= b + 1:
+        // deeper vertices are never used, so their rays are not traced.
+        let (camera_traced, light_traced) = if ellipsoidal {
+            let t_min = if settings.nlos.is_some() { 2 } else { 1 };
+            ((b as u64).max(t_min), (b as u64 + 1).saturating_sub(t_min).max(1))
+        } else {
+            (camera_vertices, light_vertices)
+        };
+        constants.push(("CAMERA_VERTICES_TRACED", camera_traced as f64));
+        constants.push(("LIGHT_VERTICES_TRACED", light_traced as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
         if ellipsoidal {

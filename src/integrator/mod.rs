@@ -240,9 +240,6 @@ pub fn create_integrator<'a>(
     scene: &PreparedScene,
     settings: &RenderSettings,
 ) -> Result<Box<dyn Integrator + 'a>> {
-    if settings.nlos.is_some() && settings.method != Method::Path {
-        anyhow::bail!("--nlos: NLOS captures render with --method path (direct and ellipsoidal do not take them yet)");
-    }
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
         Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
@@ -376,8 +373,7 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         width: settings.width,
         height: settings.height,
         seed: settings.seed,
-        // A capture's laser spot is a bounce to the user, and a light to the kernels.
-        max_bounces: if settings.nlos.is_some() { settings.max_bounces.saturating_sub(1) } else { settings.max_bounces },
+        max_bounces: kernel_bounces(settings),
         rr_depth: settings.rr_depth.unwrap_or(NONE),
         light_count: scene.lights.lights.len() as u32,
         node_count: scene.bvh.nodes.len() as u32,
@@ -387,10 +383,26 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
     }
 }
 
+/// The scattering vertices the kernels' subpaths may have: `max_bounces`, less one in an NLOS
+/// capture, whose laser spot is a bounce to the user and a light to the kernels.
+pub fn kernel_bounces(settings: &RenderSettings) -> u32 {
+    if settings.nlos.is_some() { settings.max_bounces.saturating_sub(1) } else { settings.max_bounces }
+}
+
 /// Target-length sampling of the settings' gate over the path lengths the scene allows with
 /// its bounces (None for `none`, or when no path can reach the gate).
 pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Option<TargetSampler> {
-    let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
+    let (shortest, longest) = match &settings.nlos {
+        // A capture's paths run from a laser spot to a sensed point, with at most max_bounces + 1
+        // segments counting the laser's and the sensor's, none longer than the diagonal of the
+        // scene's bounds with both origins.
+        Some(capture) => {
+            let (lo, hi) = scene.scene.bounds();
+            let (lo, hi) = (lo.min(capture.sensor_origin).min(capture.laser_origin), hi.max(capture.sensor_origin).max(capture.laser_origin));
+            (0.0, (settings.max_bounces as f32 + 1.0) * (hi - lo).length())
+        }
+        None => scene.scene.path_length_bounds(settings.max_bounces),
+    };
     TargetSampler::new(&settings.gate, (shortest as f64, longest as f64))
 }
 

@@ -17,6 +17,17 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
 /// Loads a `.gltf` or `.glb` file; with `time` (s of the animation clock), its node animations
 /// are sampled at that time and baked in like static transforms (see `animation`).
 pub fn load_gltf_at(path: &Path, time: Option<f64>) -> Result<Scene> {
+    load(path, time, false)
+}
+
+/// Loads a `.gltf` or `.glb` file for an NLOS capture (`crate::nlos`), whose laser and sensor
+/// replace the scene's lights and camera: both are optional. Without a camera node, a placeholder
+/// pinhole at the centre of the triangles' bounds stands in (captures never look through it).
+pub fn load_gltf_for_capture(path: &Path) -> Result<Scene> {
+    load(path, None, true)
+}
+
+fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
@@ -29,7 +40,7 @@ pub fn load_gltf_at(path: &Path, time: Option<f64>) -> Result<Scene> {
         Some(t) => super::animation::sample_animations(&name, &gltf.document, &buffers, t)?,
         None => Default::default(),
     };
-    Loader { name: &name, buffers: &buffers, images: &images, pose }.load(&gltf.document)
+    Loader { name: &name, buffers: &buffers, images: &images, pose, capture }.load(&gltf.document)
 }
 
 struct Loader<'a> {
@@ -38,6 +49,8 @@ struct Loader<'a> {
     images: &'a [gltf::image::Data],
     /// Local transforms of animated nodes at the requested time (node index -> matrix).
     pose: std::collections::HashMap<usize, Mat4>,
+    /// Loading for an NLOS capture: no camera or light is required.
+    capture: bool,
 }
 
 /// What the scene-graph walk collects.
@@ -82,14 +95,25 @@ impl Loader<'_> {
         for node in scene.nodes() {
             self.walk(&node, Mat4::IDENTITY, &materials, default_material, &mut c)?;
         }
-        let camera = c.camera.ok_or_else(|| {
-            anyhow!("{name}: no camera: gatetrace renders from the first perspective camera node of the scene")
-        })?;
+        let camera = match c.camera {
+            Some(camera) => camera,
+            None if self.capture => {
+                let (lo, hi) = c.triangles.iter().flat_map(|t| t.positions).fold(
+                    (Vec3::INFINITY, Vec3::NEG_INFINITY),
+                    |(lo, hi), p| (lo.min(p), hi.max(p)),
+                );
+                CameraDesc { position: 0.5 * (lo + hi), right: Vec3::X, up: Vec3::Y, forward: Vec3::NEG_Z, yfov: 1.0 }
+            }
+            None => bail!(
+                "{name}: no camera: gatetrace renders from the first perspective camera node of the scene (an NLOS \
+                 capture, --nlos, needs none)"
+            ),
+        };
         let emissive = c.triangles.iter().any(|t| materials[t.material as usize].is_emissive());
-        if !emissive && c.point_lights.is_empty() {
+        if !emissive && c.point_lights.is_empty() && !self.capture {
             bail!(
                 "{name}: no light: add an emissive material (emissiveFactor, KHR_materials_emissive_strength) \
-                 or a KHR_lights_punctual point light"
+                 or a KHR_lights_punctual point light (an NLOS capture, --nlos, needs none)"
             );
         }
         if c.triangles.is_empty() {

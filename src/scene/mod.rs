@@ -13,7 +13,7 @@ pub mod surface;
 use glam::{Vec2, Vec3};
 
 pub use camera::CameraDesc;
-pub use gltf_loader::{load_gltf, load_gltf_at};
+pub use gltf_loader::{load_gltf, load_gltf_at, load_gltf_for_capture};
 pub use prepared::PreparedScene;
 
 /// A triangle in world space with its shading attributes, in load order.
