@@ -716,11 +716,7 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
         ctx.adapter_info.name,
         out.display()
     ))?;
-    if let Some(report) = &output.stats {
-        print!("{report}");
-    } else if settings.stats {
-        println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
-    }
+    print_stats(&settings, &output);
     if let Some(report) = ctx.profile_report()? {
         print!("{report}");
     }
@@ -786,12 +782,17 @@ fn render_one(
         mean[2],
         out.display()
     ))?;
+    print_stats(settings, &output);
+    Ok(())
+}
+
+/// Prints the method's `--stats` report, or says that it keeps none.
+fn print_stats(settings: &RenderSettings, output: &gatetrace::integrator::RenderOutput) {
     if let Some(report) = &output.stats {
         print!("{report}");
     } else if settings.stats {
         println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
     }
-    Ok(())
 }
 
 /// What every output records about its render (scene, settings, timing, device).
