@@ -71,7 +71,8 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
 /// `ellipsoidal`, and for ellipsoidal options after colons: a number K (connections per query;
 /// default `DEFAULT_CONNECTIONS_PER_QUERY`),
 /// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
-/// descent's settings, see `QuerySettings`), e.g. `ellipsoidal:4:exhaustive`.
+/// descent's settings, see `QuerySettings`), `arcs` (picks weighed by the arcs alone), e.g.
+/// `ellipsoidal:4:exhaustive`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Variant {
     /// Sampling method.
@@ -95,10 +96,12 @@ impl Variant {
         for option in parts {
             anyhow::ensure!(
                 method == crate::integrator::Method::Ellipsoidal,
-                "`{s}`: only ellipsoidal takes options (K, exhaustive, split=R, bottom=N)"
+                "`{s}`: only ellipsoidal takes options (K, exhaustive, split=R, bottom=N, arcs)"
             );
             if option == "exhaustive" {
                 variant.query.split = 0.0;
+            } else if option == "arcs" {
+                variant.query.reflection_weights = false;
             } else if let Some(r) = option.strip_prefix("split=") {
                 variant.query.split =
                     r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
@@ -107,7 +110,7 @@ impl Variant {
                     n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
             } else {
                 variant.connections_per_query = option.parse().map_err(|_| {
-                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N)")
+                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, arcs)")
                 })?;
             }
         }
@@ -129,6 +132,9 @@ impl Variant {
             }
             if self.query.bottom_nodes != default.bottom_nodes {
                 name += &format!(":bottom={}", self.query.bottom_nodes);
+            }
+            if !self.query.reflection_weights {
+                name += ":arcs";
             }
         }
         name

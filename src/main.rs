@@ -127,6 +127,13 @@ struct RenderArgs {
     /// of at most N BVH nodes (1: descend to single leaves).
     #[arg(long, default_value_t = 31, value_name = "N")]
     query_bottom_nodes: u32,
+    /// `ellipsoidal`, for comparisons: pick among the triangles a spheroid cuts in proportion
+    /// to their arcs' angle alone. By default the angle is multiplied by an estimate of the
+    /// contribution per radian (the material's albedo and the cosines towards both foci), which
+    /// is zero only where the contribution is (foci on opposite sides or in the triangle's
+    /// plane, the back of a one-sided surface, black): both are unbiased.
+    #[arg(long)]
+    arc_weights: bool,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
     #[arg(long, default_value_t = 1e-6, value_name = "REL")]
@@ -283,7 +290,8 @@ struct EqualTimeArgs {
     scenes: Vec<PathBuf>,
     /// Methods to compare, comma-separated: path, direct, ellipsoidal, and ellipsoidal with
     /// options after colons: K (connections per query, see render --connections-per-query),
-    /// `exhaustive` (render --query-split 0) or `split=R`, e.g. ellipsoidal:4:exhaustive.
+    /// `exhaustive` (render --query-split 0), `split=R`, `bottom=N` or `arcs` (render
+    /// --arc-weights), e.g. ellipsoidal:4:exhaustive.
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<gatetrace::bench::Variant>,
     /// Gates to compare at, separated by `;` (same syntax as `render --gate`).
@@ -512,6 +520,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         query: gatetrace::integrator::QuerySettings {
             split: args.query_split,
             bottom_nodes: args.query_bottom_nodes,
+            reflection_weights: !args.arc_weights,
             ..Default::default()
         },
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
@@ -830,6 +839,7 @@ fn render_metadata(
         let g = settings.ellipsoid_guards;
         metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
         metadata.push(("query_split".into(), settings.query.split.to_string()));
+        metadata.push(("query_weights".into(), if settings.query.reflection_weights { "reflection" } else { "arcs" }.into()));
         metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
     }
     metadata

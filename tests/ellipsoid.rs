@@ -79,6 +79,9 @@ fn oracle_thetas(scene: &gatetrace::scene::PreparedScene, fs: glam::Vec3, fc: gl
 
 /// The exhaustive query (every node the spheroid may touch, no allowance), as probe constants.
 const EXHAUSTIVE: &[(&str, f64)] = &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64)];
+/// The exhaustive query with picks weighed by the arcs alone (render --arc-weights).
+const EXHAUSTIVE_ARCS: &[(&str, f64)] =
+    &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64), ("QUERY_REFLECTION_WEIGHTS", 0.0)];
 
 /// Runs `probe_ellipsoid_query` with the default query settings: (triangle, the sample's weight
 /// in (triangle, theta), theta, J, point, loop iterations).
@@ -127,7 +130,7 @@ fn bvh_queries_find_every_intersected_triangle() {
                 (fs, fc, fs.distance(fc) + extra, v().y + 0.5, [i, 17, 23])
             })
             .collect();
-        let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
+        let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE_ARCS, &queries);
         let (mut cut, mut nodes) = (0, 0u64);
         for ((fs, fc, tau, _, _), &(tri, total, _, _, point, visited)) in queries.iter().zip(&results) {
             let thetas = oracle_thetas(&scene, *fs, *fc, *tau);
@@ -153,9 +156,10 @@ fn bvh_queries_find_every_intersected_triangle() {
     }
 }
 
-#[test]
-fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
-    // The exhaustive query picks triangle i with probability Theta_i / sum Theta.
+/// Runs 40,000 exhaustive queries (`constants`) of one spheroid on a 2000-triangle soup and
+/// checks with a chi-square test that they pick triangle i with probability q_i / sum q,
+/// q_i = Theta_i times `factor(i)`; returns the triangles with q > 0.
+fn check_picks(constants: &[(&'static str, f64)], factor: impl Fn(&gatetrace::scene::PreparedScene, usize) -> f64) -> usize {
     use common::stats::chi2_test;
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
@@ -164,19 +168,50 @@ fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
     let (fs, fc, tau) = (glam::Vec3::new(-0.2, 0.1, 0.0), glam::Vec3::new(0.25, -0.1, 0.1), 0.9f32);
     let n = 40_000u32;
     let queries: Vec<_> = (0..n).map(|i| (fs, fc, tau, 0.5, [i, 99, 7])).collect();
-    let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
-    let thetas = oracle_thetas(&scene, fs, fc, tau);
-    let total: f64 = thetas.iter().sum();
-    let mut observed = vec![0.0; thetas.len()];
+    let results = run_queries_with(&ctx, &tracer, constants, &queries);
+    let weights: Vec<f64> =
+        oracle_thetas(&scene, fs, fc, tau).iter().enumerate().map(|(i, theta)| theta * factor(&scene, i)).collect();
+    let total: f64 = weights.iter().sum();
+    let mut observed = vec![0.0; weights.len()];
     for r in &results {
         observed[r.0 as usize] += 1.0;
     }
-    let expected: Vec<f64> = thetas.iter().map(|t| n as f64 * t / total).collect();
-    let cut = thetas.iter().filter(|&&t| t > 0.0).count();
+    let expected: Vec<f64> = weights.iter().map(|w| n as f64 * w / total).collect();
+    let cut = weights.iter().filter(|&&w| w > 0.0).count();
     let (stat, dof, p) = chi2_test(&observed, &expected);
-    println!("{cut} triangles cut; chi2 {stat:.1}, dof {dof}, p {p:.3}");
+    println!("{cut} triangles with weight; chi2 {stat:.1}, dof {dof}, p {p:.3}");
+    assert!(p > 0.01, "picks do not follow q_i / sum q: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
+    cut
+}
+
+#[test]
+fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
+    // With --arc-weights the exhaustive query picks triangle i with probability Theta_i / sum Theta.
+    let cut = check_picks(EXHAUSTIVE_ARCS, |_, _| 1.0);
     assert!(cut > 20, "the test spheroid should cut many triangles ({cut})");
-    assert!(p > 0.01, "picks do not follow Theta_i / sum Theta: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
+}
+
+#[test]
+fn reservoir_picks_follow_arcs_times_the_reflection_factor() {
+    // By default the weights are Theta_i times the reflection factor (src/ellipsoid/query.rs,
+    // f64 here): zero for triangles whose plane separates the foci, so the soup's picks fall
+    // only on triangles that can reflect between them.
+    use gatetrace::ellipsoid::query::{Query, reflection_factor};
+    let query = Query {
+        focus_s: glam::DVec3::new(-0.2, 0.1, 0.0),
+        focus_c: glam::DVec3::new(0.25, -0.1, 0.1),
+        tau_e: 0.9f32 as f64,
+        ignore: [gatetrace::gpu::layout::NONE; 2],
+        lights_only: false,
+        reach: [glam::DVec4::ZERO; 2],
+    };
+    let cut = check_picks(EXHAUSTIVE, |scene, i| {
+        let t = &scene.triangles[i];
+        let v0 = t.v0.as_dvec3();
+        let tri = gatetrace::ellipsoid::Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] };
+        reflection_factor(&query, &tri, &scene.materials[t.material as usize])
+    });
+    assert!(cut > 10, "the test spheroid should cut many triangles that reflect between its foci ({cut})");
 }
 
 /// The integrand of the quad test: the geometry terms of a one-bounce path x_s -> x -> x_c over

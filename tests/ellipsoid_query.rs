@@ -1,15 +1,15 @@
 //! The ellipsoid query's stochastic descent (shaders/lib/ellipsoid_query.wesl, CPU twin
 //! src/ellipsoid/query.rs) is unbiased: a triangle reached with probability P enters with
 //! weight q / P, so averaged over the query's random numbers every triangle's weight must come
-//! to its q (the arcs' total angle), and the picks weighted by the query's total W must come
-//! to the same. Checked on the twin against brute force, and on the device (f32) against the
+//! to its q (the arcs' total angle times the reflection factor), and the picks weighted by the
+//! query's total W must come to the same. Checked on the twin against brute force, and on the device (f32) against the
 //! f64 oracle, with the default settings and with an allowance so small that most queries end
 //! in the final descent over the rest of the tree. Tolerances come from the variance measured
 //! over the keys (z-scores, Sidak-corrected at a family-wise alpha of 0.01).
 
 mod common;
 
-use gatetrace::ellipsoid::query::{QueryScene, Query, arc_weight, pick, reached};
+use gatetrace::ellipsoid::query::{QueryScene, Query, arc_weight, pick, reached, reflection_factor};
 use gatetrace::ellipsoid::{Spheroid, Triangle, clip_arcs};
 use gatetrace::gpu::layout::NONE;
 use gatetrace::integrator::QuerySettings;
@@ -24,17 +24,31 @@ fn oracle_triangle(t: &gatetrace::gpu::layout::Triangle) -> Triangle {
     Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
 }
 
-/// Every triangle's exact arc total (f64 oracle, brute force).
-fn exact_arcs(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
+/// Every triangle's exact arcs' angle and reflection factor in a query for reflecting vertices
+/// (f64 oracle, brute force): the reservoir weight is their product.
+fn exact_arcs_and_factors(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<(f64, f64)> {
     let sp = Spheroid { focus_s: fs, focus_c: fc, length: tau_e };
+    let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
     scene
         .triangles
         .iter()
         .map(|t| {
             let tri = oracle_triangle(t);
-            sp.section(tri.vertices[0], tri.normal()).map_or(0.0, |s| clip_arcs(&s, &tri).total)
+            let arcs = sp.section(tri.vertices[0], tri.normal()).map_or(0.0, |s| clip_arcs(&s, &tri).total);
+            (arcs, reflection_factor(&query, &tri, &scene.materials[t.material as usize]))
         })
         .collect()
+}
+
+/// The reservoir weights q = arcs x factor (what the twin's weights and W x pick come to).
+fn exact_weights(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
+    exact_arcs_and_factors(scene, fs, fc, tau_e).iter().map(|(arcs, factor)| arcs * factor).collect()
+}
+
+/// The arcs where the picks' density is positive (factor > 0): what a pick's weight, the
+/// inverse of its density in (triangle, theta), comes to.
+fn exact_sampled_arcs(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
+    exact_arcs_and_factors(scene, fs, fc, tau_e).iter().map(|&(arcs, factor)| if factor > 0.0 { arcs } else { 0.0 }).collect()
 }
 
 /// Spheroids like a render's: foci at the light's centre, the pinhole and points on the sphere
@@ -57,13 +71,20 @@ fn spheroids(scene: &gatetrace::scene::PreparedScene) -> Vec<(DVec3, DVec3, f64)
 /// z-scores of the groups' mean weights against their exact sums: `samples[k][g]` is the
 /// weight sample k puts on group g. The error adds to the standard error of the mean the
 /// rounding `relative` x exact of the arcs themselves (groups near the root are reached with
-/// probability one, and their weights do not vary at all).
-fn group_z(samples: &[Vec<f64>], exact: &[f64], relative: f64) -> Vec<f64> {
+/// probability one, and their weights do not vary at all). Picks are rare events where weights
+/// span orders of magnitude (a group of small weight is picked seldom, with a large weight), so
+/// their sample variance can fall far below the true one; `second_moments` (per group, when
+/// given) holds E[sample^2] from the estimator's own formula, and the variance used is the
+/// larger of the two.
+fn group_z(samples: &[Vec<f64>], exact: &[f64], relative: f64, second_moments: Option<&[f64]>) -> Vec<f64> {
     let n = samples.len() as f64;
     (0..exact.len())
         .map(|g| {
             let mean = samples.iter().map(|s| s[g]).sum::<f64>() / n;
-            let var = samples.iter().map(|s| (s[g] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            let mut var = samples.iter().map(|s| (s[g] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            if let Some(m2) = second_moments {
+                var = var.max(m2[g] - exact[g] * exact[g]);
+            }
             let error = (var / n + (relative * exact[g]).powi(2)).sqrt();
             if error == 0.0 {
                 // Never reached: only right when nothing is there.
@@ -120,7 +141,7 @@ fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
     let limit = common::stats::t_critical(common::stats::sidak(ALPHA, tests), keys as f64 - 1.0);
     let (mut rest_used, mut total_iterations) = (0, 0u64);
     for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
-        let exact = grouped(&exact_arcs(&scene, fs, fc, tau_e));
+        let exact = grouped(&exact_weights(&scene, fs, fc, tau_e));
         let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
         let mut weights = Vec::new();
         let mut picks = Vec::new();
@@ -140,12 +161,19 @@ fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
             weights.push(w);
             picks.push(p);
         }
-        for (what, samples) in [("weights", &weights), ("W x pick", &picks)] {
+        // E[(W [pick in g])^2] = E[W^2 P(pick in g)] = E[W w_g], w_g the group's weight in the
+        // key's traversal: estimated from every key, not only those whose pick fell in g.
+        let pick_moments: Vec<f64> = (0..GROUPS)
+            .map(|g| weights.iter().map(|w| w.iter().sum::<f64>() * w[g]).sum::<f64>() / keys as f64)
+            .collect();
+        for (what, samples, moments) in [("weights", &weights, None), ("W x pick", &picks, Some(&pick_moments[..]))] {
             // The twin's arcs equal the oracle's to 1e-9 rad (the test above).
-            let z = group_z(samples, &exact, 1e-9);
+            let z = group_z(samples, &exact, 1e-9, moments);
             let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
             println!("spheroid {s} {what}: worst group z {worst:.2} (limit {limit:.2})");
-            assert!(worst < limit, "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:.3?}");
+            let means: Vec<f64> = (0..GROUPS).map(|g| samples.iter().map(|x| x[g]).sum::<f64>() / samples.len() as f64).collect();
+            let hits: Vec<usize> = (0..GROUPS).map(|g| samples.iter().filter(|x| x[g] != 0.0).count()).collect();
+            assert!(worst < limit, "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:?} means {means:?} hits {hits:?}");
         }
     }
     println!("{:.1} iterations per query; {rest_used} queries went past the allowance", total_iterations as f64 / (keys as f64 * spheroids.len() as f64));
@@ -177,9 +205,18 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
     let limit = common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
     let mut iterations = 0u64;
     for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
-        let arcs = exact_arcs(&scene, fs, fc, tau_e);
+        let arcs = exact_sampled_arcs(&scene, fs, fc, tau_e);
         let mut exact = grouped(&arcs);
         exact.push(arcs.iter().sum());
+        // A pick's weight is W Theta_i / q_i with probability q_i / W (W its traversal's sum of
+        // q / P, whose mean is sum q): E[weight^2; i] = E[W] Theta_i^2 / q_i where W varies
+        // little (the exhaustive query: exactly).
+        let weights = exact_weights(&scene, fs, fc, tau_e);
+        let total_q: f64 = weights.iter().sum();
+        let per_triangle: Vec<f64> =
+            arcs.iter().zip(&weights).map(|(a, q)| if *q > 0.0 { total_q * a * a / q } else { 0.0 }).collect();
+        let mut moments = grouped(&per_triangle);
+        moments.push(per_triangle.iter().sum());
         let mut input = Vec::new();
         for k in 0..keys {
             let (fs, fc) = (fs.as_vec3(), fc.as_vec3());
@@ -202,7 +239,7 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
             })
             .collect();
         // f32 arcs: relative error below 1e-4 (tests/ellipsoid.rs, stress-ellipsoid).
-        let z = group_z(&samples, &exact, 1e-4);
+        let z = group_z(&samples, &exact, 1e-4, Some(&moments));
         let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         println!("spheroid {s}: sum of arcs {:.4}, worst group z {worst:.2} (limit {limit:.2})", exact[GROUPS]);
         assert!(worst < limit, "spheroid {s}: z-scores {z:.2?} (groups, then the total) against {exact:.3?}");

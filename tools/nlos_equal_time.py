@@ -21,7 +21,10 @@ summed, which is what rendering with the coarser bins gives (box bins on both si
 
 Prints per bin width: each renderer's MSE (mean over pixels, bins and channels) and its accuracy
 against the peer at equal time, (peer MSE x peer seconds) / (MSE x seconds); above 1: better
-than the peer. Also a JSON line with everything.
+than the peer. Also each renderer's MSE x spp over the lowest per-sample MSE that any estimator
+adding each sample to a single bin can have (bins drawn in proportion to the reference, exact
+values): how far each is from that floor, and so how much any such estimator could gain on it
+per sample. Also a JSON line with everything.
 
 Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,path]
            [--reference-seconds S] [--widths-ps 1,2,4,10,20,50,100]
@@ -47,9 +50,12 @@ sys.path.insert(0, HERE)
 C_MM_PER_PS = 0.299792458  # optical path per picosecond (mm)
 
 
-def gatetrace_render(args, method, seconds, seed, out):
-    """`render --nlos ... --time`; returns (capture [H, W, T, 3], rendering seconds, spp)."""
+def gatetrace_render(args, method, seconds, seed, out, extra=()):
+    """`render --nlos ... --time`; returns (capture [H, W, T, 3], rendering seconds, spp).
+    `method` may end in `:K`, ellipsoidal's connections per query."""
     origin = ",".join(map(str, args.origin))
+    method, _, k = method.partition(":")
+    extra = list(extra) + (["--connections-per-query", k] if k else [])
     cmd = [EXE, "render", args.scene, "--nlos", args.scan, "--method", method,
            "--res", f"{args.res}x{args.res}", "--max-bounces", str(args.max_bounces),
            "--gate", f"transient:{args.start},{args.base_width},{args.bins}",
@@ -57,6 +63,7 @@ def gatetrace_render(args, method, seconds, seed, out):
            "--time", str(seconds), "--seed", str(seed), "-o", out]
     if args.scan == "single":
         cmd += ["--laser-spot", ",".join(map(str, args.laser_spot))]
+    cmd += extra
     text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     m = re.search(r"\| (\d+) spp, ([0-9.]+) s rendering", text)
     if not m:
@@ -132,10 +139,17 @@ def main():
                    help="bin widths reported, ps, multiples of --base-ps (default 1,2,4,10,20,50,100)")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds of rendering per capture (default 10)")
     p.add_argument("--repeats", type=int, default=2, help="captures per renderer (default 2)")
-    p.add_argument("--methods", default="ellipsoidal,path", help="gatetrace methods (default ellipsoidal,path)")
+    p.add_argument("--methods", default="ellipsoidal,ellipsoidal:1,path",
+                   help="gatetrace methods; ellipsoidal:K with K connections per query (default "
+                        "ellipsoidal,ellipsoidal:1,path)")
     p.add_argument("--reference-method", default="ellipsoidal")
     p.add_argument("--reference-seconds", type=float, default=240.0,
                    help="seconds of rendering of the reference, in 8 batches (default 240)")
+    p.add_argument("--reference-cache", metavar="NPZ",
+                   help="reuse the reference stored in this file, or store it there (same capture settings)")
+    p.add_argument("--gatetrace-args", default="",
+                   help="extra options for the compared gatetrace renders (not the reference), e.g. "
+                        "'--connections-per-query 2'")
     p.add_argument("--peer-hidden-geometry", choices=["on", "off"], default="on",
                    help="mitransient's nlos_hidden_geometry_sampling (default on)")
     args = p.parse_args()
@@ -155,16 +169,26 @@ def main():
     out = os.path.join(tmp, "capture.npy")
 
     batches = 8
-    refs = [gatetrace_render(args, args.reference_method, args.reference_seconds / batches, 9000 + k, out)
-            for k in range(batches)]
-    ref_stack = [r[0] * power for r in refs]
+    if args.reference_cache and os.path.exists(args.reference_cache):
+        cached = np.load(args.reference_cache)
+        ref_stack, ref_spp, ref_seconds = list(cached["stack"]), int(cached["spp"]), float(cached["seconds"])
+        if ref_stack[0].shape != (args.res, args.res, args.bins, 3):
+            sys.exit(f"{args.reference_cache}: a reference of shape {ref_stack[0].shape}, not this capture's")
+    else:
+        refs = [gatetrace_render(args, args.reference_method, args.reference_seconds / batches, 9000 + k, out)
+                for k in range(batches)]
+        ref_stack = [r[0] * power for r in refs]
+        ref_spp, ref_seconds = sum(r[2] for r in refs), sum(r[1] for r in refs)
+        if args.reference_cache:
+            np.savez(args.reference_cache, stack=np.stack(ref_stack), spp=ref_spp, seconds=ref_seconds)
     print(f"{os.path.basename(args.scene)}: {args.scan} {args.res}x{args.res}, {args.max_bounces} bounces, "
           f"{args.bins} bins of {args.base_ps} ps from {args.start} m")
-    print(f"reference: {args.reference_method}, {sum(r[2] for r in refs)} spp in {sum(r[1] for r in refs):.0f} s")
+    print(f"reference: {args.reference_method}, {ref_spp} spp in {ref_seconds:.0f} s")
 
     runs = []
     for method in args.methods.split(","):
-        results = [gatetrace_render(args, method, args.seconds, 100 + k, out) for k in range(args.repeats)]
+        results = [gatetrace_render(args, method, args.seconds, 100 + k, out, args.gatetrace_args.split())
+                   for k in range(args.repeats)]
         runs.append((f"gatetrace {method}", [(img * power, secs, spp) for img, secs, spp in results]))
     probe = 512  # large enough that the rate is not that of per-render overheads
     peer.render(probe, 0)
@@ -186,15 +210,31 @@ def main():
         peer_cost = rows[-1]["mse"] * rows[-1]["seconds"]
         for row in rows:
             row["vs_peer_equal_time"] = peer_cost / (row["mse"] * row["seconds"])
+        # Lowest variance per sample of any estimator that adds each sample's contribution to
+        # one bin: with bin b drawn with probability P_b and value V, sum_b E[V^2; b] >=
+        # sum_b I_b^2 / P_b >= (sum_b I_b)^2 (Cauchy-Schwarz), so the summed variance is at
+        # least (sum_b I_b)^2 - sum_b I_b^2, reached by P_b proportional to I_b and exact values.
+        # As a mean over bins like the MSE: per-sample MSE can not go below this `floor`.
+        total, squares, bins = reference.sum(axis=2), (reference ** 2).sum(axis=2), reference.shape[2]
+        floor = ((total ** 2 - squares) / bins).mean()
+        # The same with bins drawn uniformly (P_b = 1 / bins), exact values otherwise.
+        uniform_floor = ((bins * squares - squares) / bins).mean()
+        for row in rows:
+            row["mse_per_sample_over_floor"] = row["mse"] * row["spp"] / floor
         table.append({"width_ps": f * args.base_ps, "reference_noise": float(noise),
-                      "mean_square": float((reference ** 2).mean()), "rows": rows})
+                      "mean_square": float((reference ** 2).mean()), "single_bin_floor": float(floor),
+                      "uniform_bins_floor": float(uniform_floor),
+                      "rows": rows})
 
-    print(f"{'width':>8} {'renderer':>34} {'spp':>8} {'seconds':>8} {'MSE':>11} {'vs peer, equal time':>20}")
+    print(f"{'width':>8} {'renderer':>34} {'spp':>8} {'seconds':>8} {'MSE':>11} {'vs peer, equal time':>20}"
+          f" {'MSE x spp / floor':>18}")
     for entry in table:
         for row in entry["rows"]:
             print(f"{entry['width_ps']:6.0f}ps {row['renderer']:>34} {row['spp']:8.0f} {row['seconds']:8.2f} "
-                  f"{row['mse']:11.3e} {row['vs_peer_equal_time']:20.2f}")
+                  f"{row['mse']:11.3e} {row['vs_peer_equal_time']:20.2f} {row['mse_per_sample_over_floor']:18.2f}")
         print(f"{'':8} {'reference noise':>34} {'':8} {'':8} {entry['reference_noise']:11.3e}")
+        print(f"{'':8} {'exact values, bins drawn uniformly':>34} {'':8} {'':8} {'':11} {'':20} "
+              f"{entry['uniform_bins_floor'] / entry['single_bin_floor']:18.2f}")
     print(json.dumps({"scene": args.scene, "scan": args.scan, "res": args.res, "seconds": args.seconds,
                       "peer_integrator": peer.integrator_dict, "widths": table}))
 

@@ -2,23 +2,24 @@
 //! stackless BVH (every child near the root, stochastic descents into nodes that are small
 //! against the spheroid, whole small subtrees at the bottom, one final descent over what is
 //! left past the allowance), the node estimate that weighs a descent's children, and the
-//! triangles' reservoir weights from circular intervals. The same random numbers (pcg4d of the
+//! triangles' reservoir weights (arcs from circular intervals, times `reflection_factor` in
+//! queries for reflecting vertices). The same random numbers (pcg4d of the
 //! query's key) drive the same decisions; the arithmetic is f64 on the f64 oracle's sections
 //! (`super::Spheroid`), so decisions agree with the device's except at near-ties.
 //!
 //! It is an oracle for tests: `reached` lists what one query reaches, with each triangle's
-//! weight q_i / P_i; averaged over keys that must give q_i for every triangle (the descent is
-//! unbiased), which tests check against brute force.
+//! weight q_i / P_i; averaged over keys that must give q_i (`pick_weight`) for every triangle
+//! (the descent is unbiased), which tests check against brute force.
 
 use glam::{DVec3, DVec4};
 
 use super::{Spheroid, Triangle as OracleTriangle};
-use crate::gpu::layout::{BvhNode, NONE, Triangle};
+use crate::gpu::layout::{BvhNode, MATERIAL_DOUBLE_SIDED, Material, NONE, Triangle};
 use crate::integrator::QuerySettings;
 use crate::rng::pcg4d;
 
-/// The scene as the query sees it: BVH nodes, their triangle areas (total, emitting) and the
-/// triangles in BVH order.
+/// The scene as the query sees it: BVH nodes, their triangle areas (total, emitting), the
+/// triangles in BVH order and the materials.
 #[derive(Clone, Copy)]
 pub struct QueryScene<'a> {
     /// Stackless BVH nodes (depth-first, skip links).
@@ -27,12 +28,19 @@ pub struct QueryScene<'a> {
     pub node_areas: &'a [[f32; 2]],
     /// Triangles in BVH order.
     pub triangles: &'a [Triangle],
+    /// The materials the triangles index (albedo and sides weigh reflecting queries' picks).
+    pub materials: &'a [Material],
 }
 
 impl<'a> QueryScene<'a> {
     /// The query view of a prepared scene.
     pub fn of(scene: &'a crate::scene::PreparedScene) -> Self {
-        Self { nodes: &scene.bvh.nodes, node_areas: &scene.node_areas, triangles: &scene.triangles }
+        Self {
+            nodes: &scene.bvh.nodes,
+            node_areas: &scene.node_areas,
+            triangles: &scene.triangles,
+            materials: &scene.materials,
+        }
     }
 }
 
@@ -201,6 +209,40 @@ pub fn arc_weight(spheroid: &Spheroid, triangle: &OracleTriangle) -> f64 {
     total.min(length)
 }
 
+/// The factor a triangle's arc weight is multiplied by in a query for reflecting vertices (twin
+/// of `reflection_factor`): the material's largest albedo channel times the cosines towards the
+/// foci with both distances taken as tau_e / 2, 4 h_s h_c / tau_e^2 (h: a focus's signed
+/// distance to the triangle's plane); 0 where every connection through the triangle is (foci on
+/// opposite sides or in its plane, within `PLANE_GUARD` tau_e, both behind a one-sided surface,
+/// a black material).
+pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Material) -> f64 {
+    let (n, v0) = (triangle.normal(), triangle.vertices[0]);
+    let (hs, hc) = (n.dot(q.focus_s - v0), n.dot(q.focus_c - v0));
+    let guard = PLANE_GUARD * q.tau_e;
+    let in_plane = hs.abs() <= guard || hc.abs() <= guard;
+    if !(hs * hc > 0.0) || in_plane || (hc < 0.0 && material.flags & MATERIAL_DOUBLE_SIDED == 0) {
+        return 0.0;
+    }
+    material.base_color.max_element() as f64 * hs * hc * 4.0 / (q.tau_e * q.tau_e)
+}
+
+/// A focus nearer a triangle's plane than this times tau_e lies in it for `reflection_factor`
+/// (twin of the device's PLANE_GUARD).
+pub const PLANE_GUARD: f64 = 1e-6;
+
+/// A triangle's reservoir weight in query `q` (twin of the device's): its arcs' total angle,
+/// times `reflection_factor` unless the query counts emitters only.
+/// (`settings.reflection_weights` false: the arcs' angle alone.)
+pub fn pick_weight(q: &Query, triangle: &OracleTriangle, material: &Material, settings: &QuerySettings) -> f64 {
+    let spheroid = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
+    let weight = arc_weight(&spheroid, triangle);
+    if q.lights_only || !settings.reflection_weights || weight <= 0.0 {
+        weight
+    } else {
+        weight * reflection_factor(q, triangle, material)
+    }
+}
+
 fn oracle_triangle(t: &Triangle) -> OracleTriangle {
     let v0 = t.v0.as_dvec3();
     OracleTriangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
@@ -219,7 +261,6 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
         return out;
     }
     let bounds = spheroid_bounds(q);
-    let spheroid = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
     let nodes = scene.nodes;
     let count = nodes.len();
     let area = |i: usize| scene.node_areas[i][q.lights_only as usize] as f64;
@@ -243,7 +284,7 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
                 if box_behind(lo, hi, q.reach[0]) || box_behind(lo, hi, q.reach[1]) {
                     continue;
                 }
-                let weight = arc_weight(&spheroid, &o);
+                let weight = pick_weight(q, &o, &scene.materials[tri.material as usize], settings);
                 if weight > 0.0 {
                     out.triangles.push((t, weight * inv_p));
                 }

@@ -303,6 +303,7 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("QUERY_SPLIT", settings.query.split as f64));
             constants.push(("QUERY_BOTTOM_NODES", settings.query.bottom_nodes as f64));
             constants.push(("QUERY_ALLOWANCE", settings.query.allowance as f64));
+            constants.push(("QUERY_REFLECTION_WEIGHTS", settings.query.reflection_weights as u32 as f64));
         }
         constants.push(("STATS", settings.stats as u32 as f64));
         constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));

@@ -123,16 +123,20 @@ pub struct QuerySettings {
     /// over the rest of the tree: bounds every query's work, which lavapipe needs (it ends an
     /// invocation's loops after 65535 iterations in total). Unbiased like the rest.
     pub allowance: u32,
+    /// Weigh a triangle's pick by its arcs' angle times the reflection factor (an estimate of
+    /// its contribution per radian, zero only where the contribution is; see
+    /// `ellipsoid::query::reflection_factor`); false: by the arcs' angle alone. Both unbiased.
+    pub reflection_weights: bool,
 }
 
 impl QuerySettings {
     /// The exhaustive query (every node the spheroid may touch, up to the allowance).
-    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096 };
+    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true };
 }
 
 impl Default for QuerySettings {
     fn default() -> Self {
-        Self { split: 1.0, bottom_nodes: 31, allowance: 4096 }
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true }
     }
 }
 
