@@ -71,7 +71,7 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
 /// `ellipsoidal`, and for ellipsoidal options after colons: a number K (connections per query;
 /// default `DEFAULT_CONNECTIONS_PER_QUERY`),
 /// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
-/// descent's settings, see `QuerySettings`), `arcs` (picks weighed by the arcs alone), e.g.
+/// descent's settings, see `QuerySettings`), `reflection` (picks weighed by arcs times the reflection factor), e.g.
 /// `ellipsoidal:4:exhaustive`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Variant {
@@ -96,12 +96,12 @@ impl Variant {
         for option in parts {
             anyhow::ensure!(
                 method == crate::integrator::Method::Ellipsoidal,
-                "`{s}`: only ellipsoidal takes options (K, exhaustive, split=R, bottom=N, arcs)"
+                "`{s}`: only ellipsoidal takes options (K, exhaustive, split=R, bottom=N, reflection)"
             );
             if option == "exhaustive" {
                 variant.query.split = 0.0;
-            } else if option == "arcs" {
-                variant.query.reflection_weights = false;
+            } else if option == "reflection" {
+                variant.query.reflection_weights = true;
             } else if let Some(r) = option.strip_prefix("split=") {
                 variant.query.split =
                     r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
@@ -110,7 +110,7 @@ impl Variant {
                     n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
             } else {
                 variant.connections_per_query = option.parse().map_err(|_| {
-                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, arcs)")
+                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, reflection)")
                 })?;
             }
         }
@@ -133,8 +133,8 @@ impl Variant {
             if self.query.bottom_nodes != default.bottom_nodes {
                 name += &format!(":bottom={}", self.query.bottom_nodes);
             }
-            if !self.query.reflection_weights {
-                name += ":arcs";
+            if self.query.reflection_weights {
+                name += ":reflection";
             }
         }
         name

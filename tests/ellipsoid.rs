@@ -79,9 +79,10 @@ fn oracle_thetas(scene: &gatetrace::scene::PreparedScene, fs: glam::Vec3, fc: gl
 
 /// The exhaustive query (every node the spheroid may touch, no allowance), as probe constants.
 const EXHAUSTIVE: &[(&str, f64)] = &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64)];
-/// The exhaustive query with picks weighed by the arcs alone (render --arc-weights).
-const EXHAUSTIVE_ARCS: &[(&str, f64)] =
-    &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64), ("QUERY_REFLECTION_WEIGHTS", 0.0)];
+/// The exhaustive query with picks weighed by arcs times the reflection factor (render
+/// --query-weights reflection).
+const EXHAUSTIVE_REFLECTION: &[(&str, f64)] =
+    &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64), ("QUERY_REFLECTION_WEIGHTS", 1.0)];
 
 /// Runs `probe_ellipsoid_query` with the default query settings: (triangle, the sample's weight
 /// in (triangle, theta), theta, J, point, loop iterations).
@@ -130,7 +131,7 @@ fn bvh_queries_find_every_intersected_triangle() {
                 (fs, fc, fs.distance(fc) + extra, v().y + 0.5, [i, 17, 23])
             })
             .collect();
-        let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE_ARCS, &queries);
+        let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
         let (mut cut, mut nodes) = (0, 0u64);
         for ((fs, fc, tau, _, _), &(tri, total, _, _, point, visited)) in queries.iter().zip(&results) {
             let thetas = oracle_thetas(&scene, *fs, *fc, *tau);
@@ -186,14 +187,14 @@ fn check_picks(constants: &[(&'static str, f64)], factor: impl Fn(&gatetrace::sc
 
 #[test]
 fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
-    // With --arc-weights the exhaustive query picks triangle i with probability Theta_i / sum Theta.
-    let cut = check_picks(EXHAUSTIVE_ARCS, |_, _| 1.0);
+    // By default the exhaustive query picks triangle i with probability Theta_i / sum Theta.
+    let cut = check_picks(EXHAUSTIVE, |_, _| 1.0);
     assert!(cut > 20, "the test spheroid should cut many triangles ({cut})");
 }
 
 #[test]
 fn reservoir_picks_follow_arcs_times_the_reflection_factor() {
-    // By default the weights are Theta_i times the reflection factor (src/ellipsoid/query.rs,
+    // With reflection weights they are Theta_i times the reflection factor (src/ellipsoid/query.rs,
     // f64 here): zero for triangles whose plane separates the foci, so the soup's picks fall
     // only on triangles that can reflect between them.
     use gatetrace::ellipsoid::query::{Query, reflection_factor};
@@ -205,7 +206,7 @@ fn reservoir_picks_follow_arcs_times_the_reflection_factor() {
         lights_only: false,
         reach: [glam::DVec4::ZERO; 2],
     };
-    let cut = check_picks(EXHAUSTIVE, |scene, i| {
+    let cut = check_picks(EXHAUSTIVE_REFLECTION, |scene, i| {
         let t = &scene.triangles[i];
         let v0 = t.v0.as_dvec3();
         let tri = gatetrace::ellipsoid::Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] };

@@ -26,7 +26,7 @@ adding each sample to a single bin can have (bins drawn in proportion to the ref
 values): how far each is from that floor, and so how much any such estimator could gain on it
 per sample. Also a JSON line with everything.
 
-Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,path]
+Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,ellipsoidal:1,path]
            [--reference-seconds S] [--widths-ps 1,2,4,10,20,50,100]
 Requires: a built gatetrace (cargo build --release), numpy, mitsuba and mitransient.
 """

@@ -210,9 +210,9 @@ pub fn arc_weight(spheroid: &Spheroid, triangle: &OracleTriangle) -> f64 {
 }
 
 /// The factor a triangle's arc weight is multiplied by in a query for reflecting vertices (twin
-/// of `reflection_factor`): the material's largest albedo channel times the cosines towards the
-/// foci with both distances taken as tau_e / 2, 4 h_s h_c / tau_e^2 (h: a focus's signed
-/// distance to the triangle's plane); 0 where every connection through the triangle is (foci on
+/// of `reflection_factor`): the material's largest albedo channel times a bound on the cosines
+/// towards the foci, min(1, |h_s| / r) min(1, |h_c| / r) (h: a focus's signed distance to the
+/// triangle's plane; r = (tau_e - d) / 2, the least distance from a focus to the spheroid); 0 where every connection through the triangle is (foci on
 /// opposite sides or in its plane, within `PLANE_GUARD` tau_e, both behind a one-sided surface,
 /// a black material).
 pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Material) -> f64 {
@@ -223,7 +223,8 @@ pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Materi
     if !(hs * hc > 0.0) || in_plane || (hc < 0.0 && material.flags & MATERIAL_DOUBLE_SIDED == 0) {
         return 0.0;
     }
-    material.base_color.max_element() as f64 * hs * hc * 4.0 / (q.tau_e * q.tau_e)
+    let nearest = 0.5 * (q.tau_e - q.focus_s.distance(q.focus_c));
+    material.base_color.max_element() as f64 * (hs.abs() / nearest).min(1.0) * (hc.abs() / nearest).min(1.0)
 }
 
 /// A focus nearer a triangle's plane than this times tau_e lies in it for `reflection_factor`

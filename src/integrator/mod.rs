@@ -125,18 +125,19 @@ pub struct QuerySettings {
     pub allowance: u32,
     /// Weigh a triangle's pick by its arcs' angle times the reflection factor (an estimate of
     /// its contribution per radian, zero only where the contribution is; see
-    /// `ellipsoid::query::reflection_factor`); false: by the arcs' angle alone. Both unbiased.
+    /// `ellipsoid::query::reflection_factor`); false (the default; `render --nlos` sets it): by
+    /// the arcs' angle alone. Both unbiased.
     pub reflection_weights: bool,
 }
 
 impl QuerySettings {
     /// The exhaustive query (every node the spheroid may touch, up to the allowance).
-    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true };
+    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false };
 }
 
 impl Default for QuerySettings {
     fn default() -> Self {
-        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true }
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false }
     }
 }
 
