@@ -71,8 +71,8 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
 /// `ellipsoidal`, and for ellipsoidal options after colons: a number K (connections per query;
 /// default `DEFAULT_CONNECTIONS_PER_QUERY`),
 /// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
-/// descent's settings, see `QuerySettings`), `reflection` (picks weighed by arcs times the reflection factor), e.g.
-/// `ellipsoidal:4:exhaustive`.
+/// descent's settings, see `QuerySettings`), `reflection` (picks weighed by arcs times the
+/// reflection factor), e.g. `ellipsoidal:4:exhaustive`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Variant {
     /// Sampling method.

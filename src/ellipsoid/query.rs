@@ -212,9 +212,9 @@ pub fn arc_weight(spheroid: &Spheroid, triangle: &OracleTriangle) -> f64 {
 /// The factor a triangle's arc weight is multiplied by in a query for reflecting vertices (twin
 /// of `reflection_factor`): the material's largest albedo channel times a bound on the cosines
 /// towards the foci, min(1, |h_s| / r) min(1, |h_c| / r) (h: a focus's signed distance to the
-/// triangle's plane; r = (tau_e - d) / 2, the least distance from a focus to the spheroid); 0 where every connection through the triangle is (foci on
-/// opposite sides or in its plane, within `PLANE_GUARD` tau_e, both behind a one-sided surface,
-/// a black material).
+/// triangle's plane; r = (tau_e - d) / 2, the least distance from a focus to the spheroid); 0
+/// where every connection through the triangle is (foci on opposite sides or in its plane,
+/// within `PLANE_GUARD` tau_e, both behind a one-sided surface, a black material).
 pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Material) -> f64 {
     let (n, v0) = (triangle.normal(), triangle.vertices[0]);
     let (hs, hc) = (n.dot(q.focus_s - v0), n.dot(q.focus_c - v0));
@@ -232,8 +232,8 @@ pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Materi
 pub const PLANE_GUARD: f64 = 1e-6;
 
 /// A triangle's reservoir weight in query `q` (twin of the device's): its arcs' total angle,
-/// times `reflection_factor` unless the query counts emitters only.
-/// (`settings.reflection_weights` false: the arcs' angle alone.)
+/// times `reflection_factor` unless the query counts emitters only or
+/// `settings.reflection_weights` is false.
 pub fn pick_weight(q: &Query, triangle: &OracleTriangle, material: &Material, settings: &QuerySettings) -> f64 {
     let spheroid = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
     let weight = arc_weight(&spheroid, triangle);
