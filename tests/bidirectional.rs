@@ -230,6 +230,16 @@ fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
     assert_ellipsoidal_matches_direct("ellipsoidal glossy box [3.0, 3.3)", &glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 32, 430);
 }
 
+/// Transient gates draw target lengths bin by bin (stratified); with at least as many samples
+/// per pixel as bins each bin is divided by its own samples (32 spp over 6 bins: 5 rounds and 2
+/// bins more), with fewer by their expected number (32 spp over 40 bins). Both are unbiased.
+#[test]
+fn ellipsoidal_matches_direct_per_bin_of_transient_gates() {
+    let scene = common::cornell_box();
+    assert_ellipsoidal_matches_direct("ellipsoidal transient 3.0 + 6 x 0.1", &scene, Gate::Transient { start: 3.0, width: 0.1, bins: 6 }, 32, 460);
+    assert_ellipsoidal_matches_direct("ellipsoidal transient 2.5 + 40 x 0.02", &scene, Gate::Transient { start: 2.5, width: 0.02, bins: 40 }, 32, 470);
+}
+
 #[test]
 fn ellipsoidal_with_four_connections_per_query_matches_direct() {
     let ctx = common::gpu();

@@ -9,9 +9,18 @@
 //! the exact W, so the estimate is unbiased however coarse the table: a box gate gets equal
 //! masses (tau uniform, weight b - a), a Gaussian a close bound of its bell (8 sigma each side),
 //! a CW gate the envelope |cos|.
+//!
+//! Transient gates are stratified instead: [lo, hi) is whole bins, and a pixel's samples visit
+//! them in a fixed order from a random start, each uniformly within its bin (`stratified_sample`),
+//! so n consecutive samples meet each of the n bins once. The film then divides each bin by the
+//! samples it actually had (`stratum_factors`) rather than by their expected number: with tau
+//! drawn uniformly (or by a low-discrepancy sequence) a bin of a few samples per pixel has a
+//! count off by one in a sizeable share of pixels, an error of 1 / count that dominates the
+//! variance of fine transients rendered by ellipsoidal connections.
 
 use super::gate::{Gate, gate_weight};
 use crate::gpu::layout::{GateParams, TargetParams};
+use crate::rng::pcg4d;
 
 /// Cells of the target table.
 pub const TARGET_CELLS: u32 = 1024;
@@ -45,6 +54,17 @@ impl TargetSampler {
         if !(hi > lo) {
             return None;
         }
+        // Transient gates: whole bins, stratified (see `stratified_sample`).
+        let mut strata = None;
+        if let Gate::Transient { start, width, bins } = *gate {
+            let first = ((lo - start) / width).floor().clamp(0.0, bins as f64 - 1.0) as u32;
+            let end = (((hi - start) / width).ceil() as u32).clamp(first + 1, bins);
+            (lo, hi) = (start + first as f64 * width, start + end as f64 * width);
+            let n = end - first;
+            if n <= MAX_STRATA {
+                strata = Some((n, first));
+            }
+        }
         let g = gate.to_gpu();
         let kind = gate.kind();
         let table = gate.table();
@@ -72,7 +92,16 @@ impl TargetSampler {
             cdf.push((acc / total) as f32);
         }
         *cdf.last_mut().unwrap() = 1.0;
-        let params = TargetParams { lo: lo as f32, hi: hi as f32, cells: TARGET_CELLS, reserved: 0 };
+        let (strata, first_bin) = strata.unwrap_or((0, 0));
+        let params = TargetParams {
+            lo: lo as f32,
+            hi: hi as f32,
+            cells: TARGET_CELLS,
+            strata,
+            first_bin,
+            stride: golden_stride(strata),
+            ..Default::default()
+        };
         Some(Self { params, cdf, gate: g, kind, table })
     }
 
@@ -103,6 +132,81 @@ impl TargetSampler {
     pub fn weight(&self, length: f32) -> f32 {
         gate_weight(self.kind, &self.gate, &self.table, length)
     }
+
+    /// Target length tau (m) and 1 / p(tau) (m) of sample `sample` of pixel `pixel` in a render
+    /// with seed `seed` when the sampler is stratified (`params.strata` > 0; twin of
+    /// `stratified_target_length`), and the bin it lies in.
+    pub fn stratified_sample(&self, seed: u32, pixel: u32, sample: u32) -> (f32, f32, u32) {
+        let t = &self.params;
+        let bin = t.first_bin + stratum(t, seed, pixel, sample);
+        let xi = (pcg4d([pixel, sample, seed, TAU_STREAM])[0] >> 8) as f32 * (1.0 / 16_777_216.0);
+        let (p0, p1) = (self.gate.p0, self.gate.p1);
+        let mut tau = p0 + (bin as f32 + xi) * p1;
+        for _ in 0..8 {
+            let x = ((tau - p0) / p1).floor();
+            if x == bin as f32 {
+                break;
+            }
+            tau = f32::from_bits(if x < bin as f32 { tau.to_bits() + 1 } else { tau.to_bits() - 1 });
+        }
+        (tau, t.strata as f32 * p1, bin)
+    }
+}
+
+/// Most bins a transient gate's target lengths are stratified over (so that a pixel's stratum
+/// fits 32-bit arithmetic); wider gates draw them from the table like the other gates.
+pub const MAX_STRATA: u32 = 65_535;
+
+/// Fourth word of the hashes of a pixel's stratum offset and of a sample's position in its bin.
+const TAU_STREAM: u32 = 0x7461_756e;
+
+/// The stride of the bin sequence over `n` strata: the integer nearest n (golden ratio - 1) that
+/// is coprime to n, so n consecutive samples meet every bin once and fewer spread evenly.
+pub fn golden_stride(n: u32) -> u32 {
+    if n <= 2 {
+        return 1;
+    }
+    let gcd = |mut a: u32, mut b: u32| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let g = (n as f64 * 0.618_033_988_749_894_8).round() as u32;
+    (0..n).flat_map(|d| [g + d, g.wrapping_sub(d)]).find(|&c| c > 0 && c < n && gcd(c, n) == 1).unwrap_or(1)
+}
+
+/// The stratum (0 .. strata, a bin after `first_bin`) of sample `sample` of pixel `pixel`:
+/// (o + (sample mod n) stride) mod n with o a hash of the pixel and the seed (twin of the
+/// kernels' `target_stratum`).
+pub fn stratum(t: &TargetParams, seed: u32, pixel: u32, sample: u32) -> u32 {
+    let n = t.strata;
+    let offset = pcg4d([pixel, seed, TAU_STREAM, 0])[0] % n;
+    (offset + (sample % n) * t.stride % n) % n
+}
+
+/// Film factors of a stratified render: `samples` samples per pixel from sample index
+/// `first_sample` gave the pixel's stratum j `count_j` samples, where the film's division by
+/// `samples` assumed samples / n; factor_j = samples / (n count_j) turns bin first_bin + j into
+/// the mean over its own samples. That mean is unbiased only when every bin has a sample, so
+/// this returns None when samples < n (the plain mean is unbiased too). Writes the factors of
+/// pixel `pixel` into `factors` (n values).
+pub fn stratum_factors(t: &TargetParams, seed: u32, pixel: u32, first_sample: u64, samples: u64, factors: &mut [f32]) -> Option<()> {
+    let n = t.strata as u64;
+    if n == 0 || samples < n {
+        return None;
+    }
+    let (rounds, extra) = (samples / n, samples % n);
+    let mut counts = vec![rounds as u32; n as usize];
+    // n consecutive samples meet every stratum once (the stride is coprime to n); the `extra`
+    // last ones meet `extra` strata once more.
+    for k in 0..extra {
+        counts[stratum(t, seed, pixel, (first_sample + rounds * n + k) as u32) as usize] += 1;
+    }
+    for (f, c) in factors.iter_mut().zip(counts) {
+        *f = (samples as f64 / (n as f64 * c as f64)) as f32;
+    }
+    Some(())
 }
 
 /// The low-discrepancy uniform number of sample `sample` of a pixel whose random offset is

@@ -217,8 +217,16 @@ pub struct TargetParams {
     pub hi: f32,
     /// Cells of the target CDF (0: none).
     pub cells: u32,
+    /// Transient gates: bins the target lengths are stratified over (0: not stratified).
+    pub strata: u32,
+    /// The first of the stratified bins.
+    pub first_bin: u32,
+    /// Stride of a pixel's sequence of bins: coprime to `strata`, near strata x 0.618.
+    pub stride: u32,
     /// Padding.
-    pub reserved: u32,
+    pub reserved0: u32,
+    /// Padding.
+    pub reserved1: u32,
 }
 
 /// Settings that hold for a whole render.

@@ -491,6 +491,9 @@ impl Integrator for BidirectionalTracer<'_> {
     /// device's f32 sums since the last fold), over the samples per pixel.
     fn film(&self) -> Result<Film> {
         let mut film = self.wf.film()?;
+        if self.method == Method::Ellipsoidal {
+            self.wf.divide_by_stratum_counts(&mut film);
+        }
         let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), film.data.len())?;
         let spp = self.wf.samples_in_film.max(1) as f64;
         for ((v, &splat), sum) in film.data.iter_mut().zip(&splats).zip(&self.splat_sums) {

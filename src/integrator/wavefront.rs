@@ -6,6 +6,7 @@ use anyhow::{Result, ensure};
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
 use crate::bvh::TRAVERSAL_BUDGET;
 use crate::film::Film;
+use crate::film::target::stratum_factors;
 use crate::gpu::layout::{QueueCounters, RenderParams, WaveParams};
 use crate::gpu::resources::{ChunkLayout, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
@@ -214,6 +215,32 @@ impl<'a> Wavefront<'a> {
         film.data = sums.iter().map(|s| ((s[0] as f64 + s[1] as f64) / n) as f32).collect();
         film.spp = self.samples_in_film;
         Ok(film)
+    }
+
+    /// Turns each bin of a film of stratified target lengths (ellipsoidal connections on a
+    /// transient gate, `TargetParams::strata` > 0) from the sum over the pixel's samples divided
+    /// by their number into the mean over the samples whose target fell in it, once every bin
+    /// has had one (see `film::target::stratum_factors`). Both are unbiased; the second is
+    /// free of the error of a bin's sample count. Only for the film of camera-subpath
+    /// contributions, whose lengths are their slot's target; light-tracing splats land in
+    /// other pixels and keep the plain mean.
+    pub fn divide_by_stratum_counts(&self, film: &mut Film) {
+        let t = &self.params.target_length;
+        if t.strata == 0 {
+            return;
+        }
+        let first_sample = self.next_sample - self.samples_in_film;
+        let mut factors = vec![0.0f32; t.strata as usize];
+        let bins = film.bins as usize;
+        for pixel in 0..(film.width * film.height) as usize {
+            if stratum_factors(t, self.params.seed, pixel as u32, first_sample, self.samples_in_film, &mut factors).is_none() {
+                return;
+            }
+            for (j, f) in factors.iter().enumerate() {
+                let base = (pixel * bins + t.first_bin as usize + j) * 3;
+                film.data[base..base + 3].iter_mut().for_each(|v| *v *= f);
+            }
+        }
     }
 
     /// Clears the film and the further buffers `also` (e.g. a splat film).
