@@ -11,8 +11,9 @@
 //! a CW gate the envelope |cos|.
 //!
 //! Transient gates are stratified instead: [lo, hi) is whole bins, and a pixel's samples visit
-//! them in a fixed order from a random start, each uniformly within its bin (`stratified_sample`),
-//! so n consecutive samples meet each of the n bins once. The film then divides each bin by the
+//! them in a fixed order from a random start, each uniformly within its bin and a bin's visits
+//! spread over it by the golden-ratio sequence (`stratified_sample`), so n consecutive samples
+//! meet each of the n bins once. The film then divides each bin by the
 //! samples it actually had (`stratum_factors`) rather than by their expected number: with tau
 //! drawn uniformly (or by a low-discrepancy sequence) a bin of a few samples per pixel has a
 //! count off by one in a sizeable share of pixels, an error of 1 / count that dominates the
@@ -139,7 +140,8 @@ impl TargetSampler {
     pub fn stratified_sample(&self, seed: u32, pixel: u32, sample: u32) -> (f32, f32, u32) {
         let t = &self.params;
         let bin = t.first_bin + stratum(t, seed, pixel, sample);
-        let xi = (pcg4d([pixel, sample, seed, TAU_STREAM])[0] >> 8) as f32 * (1.0 / 16_777_216.0);
+        // The r-th visit of the bin (r = sample / n) takes the r-th low-discrepancy number.
+        let xi = target_u(pcg4d([pixel, bin, seed, TAU_STREAM])[0], sample / t.strata);
         let (p0, p1) = (self.gate.p0, self.gate.p1);
         let mut tau = p0 + (bin as f32 + xi) * p1;
         for _ in 0..8 {
