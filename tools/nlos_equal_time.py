@@ -52,10 +52,18 @@ C_MM_PER_PS = 0.299792458  # optical path per picosecond (mm)
 
 def gatetrace_render(args, method, seconds, seed, out, extra=()):
     """`render --nlos ... --time`; returns (capture [H, W, T, 3], rendering seconds, spp).
-    `method` may end in `:K`, ellipsoidal's connections per query."""
+    `method` may go on with `:K` (ellipsoidal's connections per query) and `:arcs` or
+    `:reflection` (its query weights), e.g. `ellipsoidal:1:arcs`."""
     origin = ",".join(map(str, args.origin))
-    method, _, k = method.partition(":")
-    extra = list(extra) + (["--connections-per-query", k] if k else [])
+    method, *options = method.split(":")
+    extra = list(extra)
+    for option in options:
+        if option in ("arcs", "reflection"):
+            extra += ["--query-weights", option]
+        elif option.isdigit():
+            extra += ["--connections-per-query", option]
+        else:
+            sys.exit(f"method option {option!r}: neither a number of connections per query nor arcs|reflection")
     cmd = [EXE, "render", args.scene, "--nlos", args.scan, "--method", method,
            "--res", f"{args.res}x{args.res}", "--max-bounces", str(args.max_bounces),
            "--gate", f"transient:{args.start},{args.base_width},{args.bins}",
@@ -140,8 +148,8 @@ def main():
     p.add_argument("--seconds", type=float, default=10.0, help="seconds of rendering per capture (default 10)")
     p.add_argument("--repeats", type=int, default=2, help="captures per renderer (default 2)")
     p.add_argument("--methods", default="ellipsoidal,ellipsoidal:1,path",
-                   help="gatetrace methods; ellipsoidal:K with K connections per query (default "
-                        "ellipsoidal,ellipsoidal:1,path)")
+                   help="gatetrace methods; ellipsoidal:K with K connections per query, ellipsoidal:arcs "
+                        "with arc weights (default ellipsoidal,ellipsoidal:1,path)")
     p.add_argument("--reference-method", default="ellipsoidal")
     p.add_argument("--reference-seconds", type=float, default=240.0,
                    help="seconds of rendering of the reference, in 8 batches (default 240)")
