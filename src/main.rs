@@ -133,8 +133,8 @@ struct RenderArgs {
     /// only where the contribution is (foci on opposite sides or in the triangle's plane, the
     /// back of a one-sided surface, black). Both are unbiased. Default: `reflection` for --nlos
     /// captures (on the example capture, 4 ps bins, `arcs` measured about 900x its error at
-    /// equal time), `arcs` otherwise (0.57x the error of `reflection` on the Cornell box at a 2.5 mm gate, 1.1x at
-    /// 5 and 50 cm).
+    /// equal time), `arcs` otherwise (0.57x the error of `reflection` on the Cornell box at a
+    /// 2.5 mm gate, 1.1x at 5 and 50 cm).
     #[arg(long, value_name = "WEIGHTS")]
     query_weights: Option<QueryWeights>,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
