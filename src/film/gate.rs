@@ -286,8 +286,13 @@ pub fn gate_bin(kind: GateKind, g: &layout::GateParams, path_length: f32) -> i32
     if kind != GateKind::Transient {
         return 0;
     }
-    let x = ((path_length - g.p0) / g.p1).floor();
+    let x = gate_bin_position(g, path_length);
     if x < 0.0 || x >= g.bins as f32 { -1 } else { x as i32 }
+}
+
+/// CPU twin of `gate_bin_position`: floor((path_length - start) / width) of a transient gate.
+pub fn gate_bin_position(g: &layout::GateParams, path_length: f32) -> f32 {
+    ((path_length - g.p0) / g.p1).floor()
 }
 
 fn gate_table_lookup(table: &[[f32; 2]], l: f32) -> f32 {

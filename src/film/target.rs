@@ -13,13 +13,13 @@
 //! Transient gates are stratified instead: [lo, hi) is whole bins, and a pixel's samples visit
 //! them in a fixed order from a random start, each uniformly within its bin and a bin's visits
 //! spread over it by the golden-ratio sequence (`stratified_sample`), so n consecutive samples
-//! meet each of the n bins once. The film then divides each bin by the
-//! samples it actually had (`stratum_factors`) rather than by their expected number: with tau
-//! drawn uniformly (or by a low-discrepancy sequence) a bin of a few samples per pixel has a
-//! count off by one in a sizeable share of pixels, an error of 1 / count that dominates the
-//! variance of fine transients rendered by ellipsoidal connections.
+//! meet each of the n bins once. The film then divides each bin by the samples it actually had
+//! (`stratum_factors`) rather than by their expected number: with tau drawn uniformly (or by a
+//! low-discrepancy sequence) a bin of a few samples per pixel has a count off by one in a
+//! sizeable share of pixels, an error of 1 / count that dominates the variance of fine
+//! transients rendered by ellipsoidal connections.
 
-use super::gate::{Gate, gate_weight};
+use super::gate::{Gate, gate_bin_position, gate_weight};
 use crate::gpu::layout::{GateParams, TargetParams};
 use crate::rng::pcg4d;
 
@@ -145,7 +145,7 @@ impl TargetSampler {
         let (p0, p1) = (self.gate.p0, self.gate.p1);
         let mut tau = p0 + (bin as f32 + xi) * p1;
         for _ in 0..8 {
-            let x = ((tau - p0) / p1).floor();
+            let x = gate_bin_position(&self.gate, tau);
             if x == bin as f32 {
                 break;
             }
@@ -159,7 +159,7 @@ impl TargetSampler {
 /// fits 32-bit arithmetic); wider gates draw them from the table like the other gates.
 pub const MAX_STRATA: u32 = 65_535;
 
-/// Fourth word of the hashes of a pixel's stratum offset and of a sample's position in its bin.
+/// Fourth word of the hashes that seed a pixel's target lengths (twin of the kernels' TAU_STREAM).
 const TAU_STREAM: u32 = 0x7461_756e;
 
 /// The stride of the bin sequence over `n` strata: the integer nearest n (golden ratio - 1) that

@@ -226,13 +226,11 @@ impl<'a> Wavefront<'a> {
     /// other pixels and keep the plain mean.
     pub fn divide_by_stratum_counts(&self, film: &mut Film) {
         let t = &self.params.target_length;
-        if t.strata == 0 {
-            return;
-        }
         let first_sample = self.next_sample - self.samples_in_film;
         let mut factors = vec![0.0f32; t.strata as usize];
         let bins = film.bins as usize;
         for pixel in 0..(film.width * film.height) as usize {
+            // None (for every pixel alike) when not stratified or some bin has no sample yet.
             if stratum_factors(t, self.params.seed, pixel as u32, first_sample, self.samples_in_film, &mut factors).is_none() {
                 return;
             }
