@@ -162,6 +162,13 @@ pub const MAX_STRATA: u32 = 65_535;
 /// Fourth word of the hashes that seed a pixel's target lengths (twin of the kernels' TAU_STREAM).
 const TAU_STREAM: u32 = 0x7461_756e;
 
+/// The target-length seed of the film after one with `seed` (`TargetParams::seed`): a film reset
+/// draws new strata orders and offsets within bins, so that successive estimates of one render
+/// are independent randomisations rather than continuations of one low-discrepancy sequence.
+pub fn next_target_seed(seed: u32) -> u32 {
+    pcg4d([seed, TAU_STREAM, 0, 1])[0]
+}
+
 /// The stride of the bin sequence over `n` strata: the integer nearest n (golden ratio - 1) that
 /// is coprime to n, so n consecutive samples meet every bin once and fewer spread evenly.
 pub fn golden_stride(n: u32) -> u32 {

@@ -223,8 +223,10 @@ pub struct TargetParams {
     pub first_bin: u32,
     /// Stride of a pixel's sequence of bins: coprime to `strata`, near strata x 0.618.
     pub stride: u32,
-    /// Padding.
-    pub reserved0: u32,
+    /// Seed of the hashes that randomise target lengths (strata order, offsets within bins):
+    /// the render seed for a film's first estimate, re-drawn at each film reset so that
+    /// successive estimates are independent.
+    pub seed: u32,
     /// Padding.
     pub reserved1: u32,
 }

@@ -15,7 +15,7 @@ use anyhow::Result;
 use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
-use crate::gpu::layout::{MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, WaveParams};
+use crate::gpu::layout::{MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, TargetParams, WaveParams};
 use crate::gpu::resources::ChunkLayout;
 use crate::gpu::Resources;
 use crate::scene::PreparedScene;
@@ -190,8 +190,9 @@ pub trait Integrator {
     /// Traces `samples` (1 ..= `samples_per_pass`) more samples of every pixel and adds them to
     /// the film; returns when the GPU has finished.
     fn render_pass(&mut self, samples: u32) -> Result<()>;
-    /// Clears the film; later samples continue the random sequence, so the next estimate is
-    /// independent of the previous one (for batch statistics).
+    /// Clears the film; later samples continue the random sequence and target lengths get a new
+    /// seed (`film::target::next_target_seed`), so the next estimate is independent of the
+    /// previous one (for batch statistics).
     fn reset_film(&mut self);
     /// Moves to `settings.gate` (everything else as when built) and clears the film, without
     /// rebuilding kernels or buffers when the gate has the same kind, bins and table length
@@ -371,7 +372,10 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
     RenderParams {
         camera: scene.scene.camera.to_gpu(settings.width, settings.height),
         gate: settings.gate.to_gpu(),
-        target_length: target_sampler(scene, settings).map(|t| t.params).unwrap_or_default(),
+        target_length: TargetParams {
+            seed: settings.seed,
+            ..target_sampler(scene, settings).map(|t| t.params).unwrap_or_default()
+        },
         light_bounds_min,
         image_area: scene.scene.camera.image_area(settings.width, settings.height),
         light_bounds_max,

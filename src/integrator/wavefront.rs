@@ -6,8 +6,8 @@ use anyhow::{Result, ensure};
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
 use crate::bvh::TRAVERSAL_BUDGET;
 use crate::film::Film;
-use crate::film::target::stratum_factors;
-use crate::gpu::layout::{QueueCounters, RenderParams, WaveParams};
+use crate::film::target::{next_target_seed, stratum_factors};
+use crate::gpu::layout::{QueueCounters, RenderParams, TargetParams, WaveParams};
 use crate::gpu::resources::{ChunkLayout, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
 
@@ -122,7 +122,8 @@ impl<'a> Wavefront<'a> {
             queue.write_buffer(self.resources.get("gate_table").unwrap(), 0, bytemuck::cast_slice(&table));
         }
         self.params.gate = new;
-        self.params.target_length = sampler.map(|t| t.params).unwrap_or_default();
+        let seed = self.params.target_length.seed;
+        self.params.target_length = TargetParams { seed, ..sampler.map(|t| t.params).unwrap_or_default() };
         queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         Ok(true)
     }
@@ -231,7 +232,7 @@ impl<'a> Wavefront<'a> {
         let bins = film.bins as usize;
         for pixel in 0..(film.width * film.height) as usize {
             // None (for every pixel alike) when not stratified or some bin has no sample yet.
-            if stratum_factors(t, self.params.seed, pixel as u32, first_sample, self.samples_in_film, &mut factors).is_none() {
+            if stratum_factors(t, t.seed, pixel as u32, first_sample, self.samples_in_film, &mut factors).is_none() {
                 return;
             }
             for (j, f) in factors.iter().enumerate() {
@@ -241,13 +242,16 @@ impl<'a> Wavefront<'a> {
         }
     }
 
-    /// Clears the film and the further buffers `also` (e.g. a splat film).
+    /// Clears the film and the further buffers `also` (e.g. a splat film), and draws the next
+    /// film's target-length seed.
     pub fn reset_film(&mut self, also: &[&str]) {
         let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
         self.resources.clear_chunked(&mut encoder, "film");
         for name in also {
             encoder.clear_buffer(self.resources.get(name).unwrap(), 0, None);
         }
+        self.params.target_length.seed = next_target_seed(self.params.target_length.seed);
+        self.ctx.queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;
     }
