@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
 """Writes a test scene of any size: the Cornell box (assets/scenes/cornell_box.gltf) holding one
 white, displaced geodesic sphere (radius 0.25 m, resting 5 cm above the floor), as a binary glTF
-(.glb). The sphere is an icosahedron whose faces are cut into f x f triangles (20 f^2 triangles;
+(.glb); with --nlos, the NLOS example scene (assets/scenes/nlos_letter.gltf) with the hidden
+letter replaced by such a sphere (node `hidden_sphere`, radius 0.15 m, centred 0.6 m in front of
+the relay wall's centre, still hidden from the origin by the occluder). The sphere is an icosahedron whose faces are cut into f x f triangles (20 f^2 triangles;
 f = 2^k gives the subdivided icospheres of 5,120 / 20,480 / 81,920 / 327,680 / 1,310,720
 triangles), each vertex pushed along its radius by a smooth deterministic bump field of +-4 %,
 so the mesh has curvature at several scales. Flat-shaded (no normals): every triangle's geometric normal. Standard library only.
 
     tools/make_sphere_scene.py --triangles 1300000 --out target/scenes/sphere_1310720.glb
     tools/make_sphere_scene.py --frequency 16 --out sphere_5120.glb
+    tools/make_sphere_scene.py --nlos --frequency 128 --out target/scenes/nlos_sphere_327680.glb
 
 The scene's name, the triangle count and the frequency are in the asset's `extras`. The time
 convention, camera and light are the Cornell box's (shortest path 1.9403 m).
@@ -23,9 +26,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 BOX = ROOT / "assets/scenes/cornell_box.gltf"
+NLOS = ROOT / "assets/scenes/nlos_letter.gltf"
 
 RADIUS = 0.25  # m
 CENTRE = (0.0, -0.5 + 0.05 + RADIUS, -0.05)  # m: 5 cm above the floor, a little back
+NLOS_RADIUS = 0.15  # m
+NLOS_CENTRE = (0.0, 0.0, 0.6)  # m: in front of the relay wall (z = 0), behind the occluder
 BUMP = 0.04  # relative amplitude of the radial displacement
 
 # Bumps: (direction, wavenumber, phase, weight); sums of sines of the direction's projection.
@@ -49,16 +55,16 @@ def icosahedron():
     return verts, faces
 
 
-def displaced(d):
+def displaced(d, centre, radius):
     """The sphere's surface point along unit direction d (m)."""
     r = 1.0
     for (w, k, phase, weight) in WAVES:
         r += BUMP * weight * math.sin(k * (w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) + phase)
-    r *= RADIUS
-    return (CENTRE[0] + r * d[0], CENTRE[1] + r * d[1], CENTRE[2] + r * d[2])
+    r *= radius
+    return (centre[0] + r * d[0], centre[1] + r * d[1], centre[2] + r * d[2])
 
 
-def sphere(frequency):
+def sphere(frequency, centre=CENTRE, radius=RADIUS):
     """Positions (flat float list) and triangle indices of the geodesic sphere; vertices on the
     icosahedron's edges are shared between faces, so the surface is closed."""
     verts, faces = icosahedron()
@@ -83,7 +89,7 @@ def sphere(frequency):
         y = sum(verts[k][1] * w for k, w in key)
         z = sum(verts[k][2] * w for k, w in key)
         n = math.sqrt(x * x + y * y + z * z)
-        positions.extend(displaced((x / n, y / n, z / n)))
+        positions.extend(displaced((x / n, y / n, z / n), centre, radius))
         index = len(positions) // 3 - 1
         # Interior points of a face are never shared: skip the dictionary for them.
         if len(key) < 3:
@@ -105,6 +111,8 @@ def main():
     size = parser.add_mutually_exclusive_group(required=True)
     size.add_argument("--triangles", type=int, help="about this many sphere triangles (20 f^2, f rounded)")
     size.add_argument("--frequency", type=int, help="cut each icosahedron face into f x f triangles")
+    parser.add_argument("--nlos", action="store_true",
+                        help="the sphere replaces the NLOS example scene's hidden letter instead")
     parser.add_argument("--out", required=True, type=Path, help="output .glb file")
     args = parser.parse_args()
     f = args.frequency if args.frequency else max(1, round(math.sqrt(args.triangles / 20.0)))
@@ -113,9 +121,10 @@ def main():
     if args.out.suffix != ".glb":
         sys.exit(f"make_sphere_scene: --out {args.out}: the output is binary glTF, name it .glb")
 
-    doc = json.loads(BOX.read_text())
+    doc = json.loads((NLOS if args.nlos else BOX).read_text())
     data = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
-    positions, indices = sphere(f)
+    centre, radius = (NLOS_CENTRE, NLOS_RADIUS) if args.nlos else (CENTRE, RADIUS)
+    positions, indices = sphere(f, centre, radius)
     triangles = len(indices) // 3
 
     def add_view(payload, target):
@@ -135,12 +144,20 @@ def main():
     doc["meshes"].append({"name": "sphere", "primitives": [
         {"attributes": {"POSITION": len(doc["accessors"]) - 2}, "indices": len(doc["accessors"]) - 1,
          "material": white}]})
-    doc["nodes"].append({"name": "sphere", "mesh": len(doc["meshes"]) - 1})
-    doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
+    description = (f"a displaced geodesic sphere of {triangles} triangles (frequency {f}, radius {radius} m, "
+                   f"+-{BUMP:.0%} bumps)")
     doc["asset"]["generator"] = "gatetrace tools/make_sphere_scene.py"
-    doc["extras"] = {"description": f"Cornell box with a displaced geodesic sphere of {triangles} triangles "
-                                    f"(frequency {f}, radius {RADIUS} m, +-{BUMP:.0%} bumps)",
-                     "sphere_triangles": triangles, "frequency": f}
+    if args.nlos:
+        # The letter's node holds the sphere (its buffer data stays, unreferenced).
+        node = next(n for n in doc["nodes"] if n["name"] == "hidden_letter")
+        node.update(name="hidden_sphere", mesh=len(doc["meshes"]) - 1)
+        doc["extras"] = {"description": f"The NLOS example scene with {description} hidden in place of the letter",
+                         "nlos": doc["extras"]["nlos"], "sphere_triangles": triangles, "frequency": f}
+    else:
+        doc["nodes"].append({"name": "sphere", "mesh": len(doc["meshes"]) - 1})
+        doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
+        doc["extras"] = {"description": f"Cornell box with {description}", "sphere_triangles": triangles,
+                         "frequency": f}
     while len(data) % 4:
         data.append(0)
     doc["buffers"] = [{"byteLength": len(data)}]
@@ -152,7 +169,7 @@ def main():
         out.write(struct.pack("<III", 0x46546C67, 2, total))
         out.write(struct.pack("<II", len(text), 0x4E4F534A) + text)
         out.write(struct.pack("<II", len(data), 0x004E4942) + bytes(data))
-    print(f"{args.out}: {triangles + 12} triangles ({triangles} on the sphere, frequency {f}), "
+    print(f"{args.out}: {triangles} sphere triangles (frequency {f}), "
           f"{len(positions) // 3} sphere vertices")
 
 

@@ -19,11 +19,10 @@ the quadrature, for ours and for the peer, twice:
   the distance to the hit is that much times the cosine at the wall shorter than the segment.
 
 Needs the release build (cargo build --release). Standard library + numpy;
-tools/peer_reference.py's glTF reader.
+tools/peer_reference.py's glTF reader, tools/nlos_peer_check.py's renders.
 """
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -32,6 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
+import nlos_peer_check  # noqa: E402
 import peer_reference  # noqa: E402
 
 MITSUBA_RAY_EPSILON = 1500 * 2.0 ** -24  # Mitsuba 3's math::RayEpsilon<float>
@@ -93,25 +93,17 @@ def quadrature(plane, wall_normal, albedo, sensed, spot, start, width, first, co
     return out
 
 
-def render_ours(peer_meta, peer, args, scene_path):
-    """Mean and variance of the mean of gatetrace's capture of the peer's setup."""
-    res = f"{peer['transient_mean'].shape[1]}x{peer['transient_mean'].shape[0]}"
-    cmd = [str(ROOT / "target/release/gatetrace"), "render", str(scene_path), "--nlos", peer_meta["scan"],
-           "--method", args.method, "--res", res, "--max-bounces", str(peer_meta["max_bounces"]),
-           "--gate", f"transient:{peer_meta['start']},{peer_meta['bin_width']},{peer_meta['bins']}",
-           "--spp", str(args.spp),
-           "--sensor-origin=" + ",".join(map(str, peer_meta["sensor_origin"])),
-           "--laser-origin=" + ",".join(map(str, peer_meta["laser_origin"]))]
-    if peer_meta["scan"] == "single":
-        cmd += ["--laser-spot", ",".join(map(str, peer_meta["laser_spot_uv"]))]
+def render_ours(peer_meta, peer, args):
+    """Mean and variance of the mean of gatetrace's capture of the peer's setup, in the peer's
+    units (each spot at the projector's equivalent beam power)."""
+    args.res = (peer["transient_mean"].shape[1], peer["transient_mean"].shape[0])
     power = peer["laser_power_equivalent"].astype(np.float64)
-    power = power.reshape(power.shape + (1, 1)) if power.size > 1 else float(power.ravel()[0])
+    power = power[..., None] if power.size > 1 else float(power.ravel()[0])
     batches = []
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "capture.npy"
         for b in range(args.batches):
-            subprocess.run(cmd + ["--seed", str(args.seed + b), "-o", str(out)], check=True, stdout=subprocess.DEVNULL)
-            batches.append(np.load(out)[..., 0].astype(np.float64) * power)
+            film = nlos_peer_check.render(peer_meta, args, args.seed + b, Path(tmp) / "capture.npy")
+            batches.append(film[..., 0] * power)
             print(f"batch {b + 1}/{args.batches}", file=sys.stderr)
     batches = np.stack(batches)
     return batches.mean(0), batches.var(0, ddof=1) / len(batches)
@@ -142,7 +134,7 @@ def main():
     wall_normal /= np.linalg.norm(wall_normal)
     scale = (wall_albedo / np.pi) ** 2 * hidden_albedo / np.pi
 
-    ours, ours_var = render_ours(meta, peer, args, scene_path)
+    ours, ours_var = render_ours(meta, peer, args)
     theirs, theirs_var = peer["transient_mean"][..., 0].astype(np.float64), peer["transient_var"][..., 0].astype(np.float64)
     sensed = peer["sensor_grid_xyz"].astype(np.float64)
     spots = np.broadcast_to(peer["laser_grid_xyz"].astype(np.float64), sensed.shape)
@@ -165,8 +157,9 @@ def main():
                     skipped += 1
                     break
                 for name, mean, var in (("ours", ours, ours_var), ("peer", theirs, theirs_var)):
-                    got = mean[y, x, edge:edge + n]
-                    z[model][name].append((got - q[1:]) / np.sqrt(var[y, x, edge:edge + n] + 1e-300))
+                    got, v = mean[y, x, edge:edge + n], var[y, x, edge:edge + n]
+                    # A bin without a single sample in any batch has no variance estimate: not tested.
+                    z[model][name].append(np.where(v > 0, (got - q[1:]) / np.sqrt(np.where(v > 0, v, 1.0)), np.nan))
     print(f"{args.peer}: {meta['scan']} scan, bins of {meta['bin_width'] * 1e3:g} mm; ours: {args.method}, "
           f"{args.batches} x {args.spp} spp; {skipped} sensed points lit first by other surfaces left out")
     for model, title in (("exact", "exact path lengths"),
@@ -176,7 +169,9 @@ def main():
             a = np.array(z[model][name])
             if a.size == 0:
                 continue
-            cols = "  ".join(f"bin {k}: z mean {a[:, k].mean():+.2f} std {a[:, k].std():.2f}" for k in range(n))
+            cols = "  ".join(f"bin {k}: z mean {np.nanmean(a[:, k]):+.2f} std {np.nanstd(a[:, k]):.2f}"
+                             + (f" ({np.isnan(a[:, k]).sum()} unsampled)" if np.isnan(a[:, k]).any() else "")
+                             for k in range(n))
             print(f"  {name} ({len(a)} points)  {cols}")
 
 
