@@ -12,7 +12,8 @@ same setup in --batches independent batches, then integrates the three-bounce tr
 rule on a grid of --cell metres, ignoring occlusion (the wall and the hidden object must see each
 other). For every sensed point whose light starts with the hidden object's (others, e.g. lit
 first by an occluder, are left out) it z-tests the first bins from the arrival edge on against
-the quadrature, for ours and for the peer, twice:
+the quadrature, for ours and for the peer (a bin a side never sampled in any batch or pass has no
+variance estimate: counted, not tested), twice:
 - with exact path lengths;
 - with the first hidden segment shortened as Mitsuba's spawned rays shorten it: their origin
   lies (1 + max |x_s|) x 1500 x 2^-24 m off the wall along its normal (Mitsuba's RayEpsilon), so
