@@ -23,27 +23,10 @@ fn example_scene() -> PreparedScene {
     PreparedScene::new(load_gltf(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap()).unwrap()
 }
 
-/// The peer's setup: origins at (-1.2, 0, 0.6) m, a 1 W laser (rescaled per spot below).
+/// The peer's setup: 16x16 sensed points, 100 bins of 12 mm from 0.9 m, a 1 W laser (rescaled
+/// per spot below).
 fn settings(aim: LaserAim, method: Method) -> RenderSettings {
-    let origin = Vec3::new(-1.2, 0.0, 0.6);
-    RenderSettings {
-        width: 16,
-        height: 16,
-        method,
-        gate: Gate::Transient { start: 0.9, width: 0.012, bins: 100 },
-        max_bounces: 3,
-        nlos: Some(NlosCapture {
-            relay_wall: "relay_wall".into(),
-            sensor_origin: origin,
-            laser_origin: origin,
-            aim,
-            laser_power: 1.0,
-            count_first_and_last: false,
-        }),
-        // As `render --nlos` does by default.
-        query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },
-        ..Default::default()
-    }
+    common::example_capture(16, 16, Gate::Transient { start: 0.9, width: 0.012, bins: 100 }, aim, method)
 }
 
 /// Blocks a comparison sums values over: `pixels` x `pixels` sensed points and `bins` bins.

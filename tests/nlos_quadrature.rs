@@ -21,10 +21,10 @@ mod common;
 
 use common::stats::{BatchStats, sidak, t_critical};
 use gatetrace::film::Gate;
-use gatetrace::integrator::{Method, QuerySettings, RenderSettings};
-use gatetrace::nlos::{LaserAim, NlosCapture, wall_points};
+use gatetrace::integrator::{Method, RenderSettings};
+use gatetrace::nlos::{LaserAim, wall_points};
 use gatetrace::scene::{PreparedScene, load_gltf};
-use glam::{DVec3, Vec2, Vec3};
+use glam::{DVec3, Vec2};
 use std::f64::consts::PI;
 
 const ALPHA: f64 = 0.01;
@@ -49,24 +49,7 @@ fn letter_and_wall() -> PreparedScene {
 }
 
 fn settings(aim: LaserAim, method: Method) -> RenderSettings {
-    let origin = Vec3::new(-1.2, 0.0, 0.6);
-    RenderSettings {
-        width: GRID,
-        height: GRID,
-        method,
-        gate: Gate::Transient { start: START, width: WIDTH, bins: BINS as u32 },
-        max_bounces: 3,
-        nlos: Some(NlosCapture {
-            relay_wall: "relay_wall".into(),
-            sensor_origin: origin,
-            laser_origin: origin,
-            aim,
-            laser_power: 1.0,
-            count_first_and_last: false,
-        }),
-        query: QuerySettings { reflection_weights: true, ..Default::default() },
-        ..Default::default()
-    }
+    common::example_capture(GRID, GRID, Gate::Transient { start: START, width: WIDTH, bins: BINS as u32 }, aim, method)
 }
 
 /// A hidden triangle: vertices (m), albedo, whether both faces reflect.

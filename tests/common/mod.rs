@@ -280,3 +280,28 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
     }
     PreparedScene::new(scene).unwrap()
 }
+
+/// An NLOS capture of assets/scenes/nlos_letter.gltf as the peer data was made: sensor and laser
+/// origins at (-1.2, 0, 0.6) m, a 1 W laser aimed by `aim`, a `width` x `height` grid of sensed
+/// points, three bounces, reflection-weighted ellipsoid queries (as `render --nlos` by default).
+pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim: gatetrace::nlos::LaserAim,
+                       method: gatetrace::integrator::Method) -> RenderSettings {
+    let origin = glam::Vec3::new(-1.2, 0.0, 0.6);
+    RenderSettings {
+        width,
+        height,
+        method,
+        gate,
+        max_bounces: 3,
+        nlos: Some(gatetrace::nlos::NlosCapture {
+            relay_wall: "relay_wall".into(),
+            sensor_origin: origin,
+            laser_origin: origin,
+            aim,
+            laser_power: 1.0,
+            count_first_and_last: false,
+        }),
+        query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },
+        ..Default::default()
+    }
+}
