@@ -308,3 +308,94 @@ fn the_twin_and_the_device_pick_alike() {
     // f32 and f64 may decide differently only at near-ties of the descent's estimates.
     assert!(same as f64 > 0.99 * keys as f64, "the twin and the device agree on only {same} of {keys} picks");
 }
+
+/// Points at the centroids of a triangle's 4^levels congruent sub-triangles (each standing for
+/// an equal share of its area): a quadrature independent of the closed forms under test.
+fn subdivided_centroids(v: [DVec3; 3], levels: u32, out: &mut Vec<DVec3>) {
+    if levels == 0 {
+        out.push((v[0] + v[1] + v[2]) / 3.0);
+        return;
+    }
+    let (ab, bc, ca) = (0.5 * (v[0] + v[1]), 0.5 * (v[1] + v[2]), 0.5 * (v[2] + v[0]));
+    for sub in [[v[0], ab, ca], [ab, v[1], bc], [ca, bc, v[2]], [ab, bc, ca]] {
+        subdivided_centroids(sub, levels - 1, out);
+    }
+}
+
+/// The descent's node estimate rests on each node's stored surface moments
+/// (`Bvh::node_surfaces`: area, centroid, covariance as f16 over the box's squared diagonal)
+/// and on `path_length_moments`, which predicts the mean and spread of the path length over a
+/// node from them. Both are checked against a quadrature over the node's triangles (centroids
+/// of 1024 sub-triangles each, weighted by area, the covariance extrapolated from 256): the
+/// moments to f32 and f16 rounding, the
+/// predicted mean to a hundredth and the spread to a tenth of the true one for nodes small
+/// against their distance to the foci (the prediction is exact to second order in that ratio).
+#[test]
+fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
+    use gatetrace::ellipsoid::query::path_length_moments;
+    use gatetrace::scene::materials::unpack2x16float;
+    let scene = common::sphere_scene(16);
+    let nodes = &scene.bvh.nodes;
+    // Foci outside the Cornell box, on one side of it (no node lies between them).
+    let foci = [(DVec3::new(0.3, 0.2, 3.0), DVec3::new(-0.4, -0.1, 2.5)), (DVec3::new(2.5, 0.1, 0.0), DVec3::new(2.5, 0.1, 0.0))];
+    let mut checked = 0;
+    for (i, node) in nodes.iter().enumerate().step_by(37) {
+        let end = node.skip as usize;
+        // Area-weighted points at 4 and 5 levels of subdivision.
+        let quadrature = |levels: u32| {
+            let (mut points, mut weights) = (Vec::new(), Vec::new());
+            for n in &nodes[i..end] {
+                for k in n.leaf_range().into_iter().flatten() {
+                    let t = oracle_triangle(&scene.triangles[k as usize]);
+                    let before = points.len();
+                    subdivided_centroids(t.vertices, levels, &mut points);
+                    let [a, b, c] = t.vertices;
+                    let share = 0.5 * (b - a).cross(c - a).length() / (points.len() - before) as f64;
+                    weights.extend(std::iter::repeat_n(share, points.len() - before));
+                }
+            }
+            (points, weights)
+        };
+        let (coarse_points, coarse_weights) = quadrature(4);
+        let (points, weights) = quadrature(5);
+        let area: f64 = weights.iter().sum();
+        let surface = scene.node_surfaces[i];
+        assert!((surface.area as f64 - area).abs() <= 1e-5 * area, "node {i}: area {} against {area}", surface.area);
+        // Sub-triangle centroids average to the centroid exactly.
+        let mean = points.iter().zip(&weights).map(|(p, w)| *p * *w).sum::<DVec3>() / area;
+        let (lo, hi) = (node.min.as_dvec3(), node.max.as_dvec3());
+        let diagonal2 = (hi - lo).length_squared();
+        assert!((surface.centroid.as_dvec3() - mean).length() <= 1e-5 * diagonal2.sqrt(), "node {i}: centroid {} against {mean}", surface.centroid);
+        // The centroid rule misses each sub-triangle's own spread, 1/4 of it per level: two
+        // levels extrapolate to the exact covariance.
+        let cov_at = |points: &[DVec3], weights: &[f64], a: usize, b: usize| {
+            points.iter().zip(weights).map(|(p, w)| (p[a] - mean[a]) * (p[b] - mean[b]) * w).sum::<f64>() / area
+        };
+        let cov = |a: usize, b: usize| (4.0 * cov_at(&points, &weights, a, b) - cov_at(&coarse_points, &coarse_weights, a, b)) / 3.0;
+        let stored = surface.spread.map(|w| unpack2x16float(w).as_dvec2() * diagonal2);
+        for (got, (a, b)) in [stored[0].x, stored[0].y, stored[1].x, stored[1].y, stored[2].x, stored[2].y]
+            .into_iter()
+            .zip([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)])
+        {
+            // f16 keeps 11 significant bits (and steps of 6e-8 below 6e-5).
+            let want = cov(a, b);
+            assert!((got - want).abs() <= 1e-3 * want.abs() + 1e-7 * diagonal2, "node {i}: covariance ({a}, {b}) {got} against {want}");
+        }
+        for &(fs, fc) in &foci {
+            let lengths: Vec<f64> = points.iter().map(|p| p.distance(fs) + p.distance(fc)).collect();
+            let true_mean = lengths.iter().zip(&weights).map(|(l, w)| l * w).sum::<f64>() / area;
+            let true_sd = (lengths.iter().zip(&weights).map(|(l, w)| (l - true_mean).powi(2) * w).sum::<f64>() / area).sqrt();
+            let distance = mean.distance(fs).min(mean.distance(fc));
+            if diagonal2.sqrt() > 0.1 * distance || true_sd < 1e-3 * diagonal2.sqrt() {
+                continue;
+            }
+            let query = Query { focus_s: fs, focus_c: fc, tau_e: true_mean, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
+            let (m, sd) = path_length_moments(lo, hi, &surface, &query);
+            assert!((m - true_mean).abs() <= 0.01 * true_sd.max(1e-3 * diagonal2.sqrt()), "node {i}: mean path length {m} against {true_mean} (sd {true_sd})");
+            assert!((sd / true_sd - 1.0).abs() <= 0.1, "node {i}: path length deviation {sd} against {true_sd}");
+            checked += 1;
+        }
+    }
+    println!("{checked} node and focus pairs checked");
+    assert!(checked >= 50, "only {checked} node and focus pairs were small enough to check");
+}

@@ -6,10 +6,11 @@
 
 pub mod traverse;
 
-use glam::Vec3;
+use glam::{DMat3, DVec3, Vec3};
 use obvhs::{BvhBuildParams, triangle::Triangle as ObvhsTriangle};
 
-use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, Triangle};
+use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, NodeSurface, Triangle};
+use crate::scene::materials::pack2x16float;
 
 /// Most nodes one invocation's ray traversal visits before it stops and a later dispatch
 /// resumes it (the TRAVERSAL_BUDGET override of shaders/lib/bvh.wesl, passed to every kernel):
@@ -80,26 +81,75 @@ impl Bvh {
         self.nodes[me].skip = self.nodes.len() as u32;
     }
 
-    /// Per node, the total area of the triangles below it and of the emitting ones among them
-    /// (m^2), for `triangles` in BVH order: what the ellipsoid queries' stochastic descent
-    /// weighs children by (shaders/lib/ellipsoid_query.wesl, `bvh_node_areas`). Summed in f64.
-    pub fn node_areas(&self, triangles: &[Triangle]) -> Vec<[f32; 2]> {
-        let mut sums = vec![[0.0f64; 2]; self.nodes.len()];
+    /// Per node, the area of the triangles below it, of the emitting ones among them, and the
+    /// centroid and covariance of a point drawn uniformly on them (`NodeSurface`), for
+    /// `triangles` in BVH order: what the ellipsoid queries' stochastic descent weighs children
+    /// by (shaders/lib/ellipsoid_query.wesl `node_estimate`). Summed in f64.
+    pub fn node_surfaces(&self, triangles: &[Triangle]) -> Vec<NodeSurface> {
+        /// Area, emitting area, area-weighted first and second moments of the position.
+        #[derive(Clone, Copy)]
+        struct Sums {
+            area: f64,
+            light_area: f64,
+            first: DVec3,
+            second: DMat3,
+        }
+        // (Not derived: glam's default matrix is the identity.)
+        const ZERO: Sums = Sums { area: 0.0, light_area: 0.0, first: DVec3::ZERO, second: DMat3::ZERO };
+        let mut sums = vec![ZERO; self.nodes.len()];
         // Children follow their parent in depth-first order: fill from the back.
         for i in (0..self.nodes.len()).rev() {
             sums[i] = match self.nodes[i].leaf_range() {
-                Some(range) => range.fold([0.0; 2], |[all, lit], k| {
+                Some(range) => range.fold(ZERO, |s, k| {
                     let t = &triangles[k as usize];
+                    let a = t.v0.as_dvec3();
+                    let (b, c) = (a + t.e1.as_dvec3(), a + t.e2.as_dvec3());
                     let area = 0.5 * t.e1.as_dvec3().cross(t.e2.as_dvec3()).length();
-                    [all + area, lit + if t.light == NONE { 0.0 } else { area }]
+                    // A uniform point of triangle abc: E[x] = (a + b + c) / 3 and
+                    // E[x x^T] = (a a^T + b b^T + c c^T + (a + b + c)(a + b + c)^T) / 12.
+                    let sum = a + b + c;
+                    let outer = |v: DVec3| DMat3::from_cols(v * v.x, v * v.y, v * v.z);
+                    Sums {
+                        area: s.area + area,
+                        light_area: s.light_area + if t.light == NONE { 0.0 } else { area },
+                        first: s.first + area / 3.0 * sum,
+                        second: s.second + (outer(a) + outer(b) + outer(c) + outer(sum)) * (area / 12.0),
+                    }
                 }),
                 None => {
                     let (a, b) = (sums[i + 1], sums[self.nodes[i + 1].skip as usize]);
-                    [a[0] + b[0], a[1] + b[1]]
+                    Sums {
+                        area: a.area + b.area,
+                        light_area: a.light_area + b.light_area,
+                        first: a.first + b.first,
+                        second: a.second + b.second,
+                    }
                 }
             };
         }
-        sums.into_iter().map(|[all, lit]| [all as f32, lit as f32]).collect()
+        sums.iter()
+            .zip(&self.nodes)
+            .map(|(s, node)| {
+                let (lo, hi) = (node.min.as_dvec3(), node.max.as_dvec3());
+                if s.area <= 0.0 {
+                    return NodeSurface {
+                        centroid: (0.5 * (lo + hi)).as_vec3(),
+                        light_area: s.light_area as f32,
+                        ..Default::default()
+                    };
+                }
+                let mean = s.first / s.area;
+                let m = s.second * (1.0 / s.area) - DMat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
+                let scale = 1.0 / (hi - lo).length_squared().max(f64::MIN_POSITIVE);
+                let w = |a: f64, b: f64| pack2x16float((a * scale) as f32, (b * scale) as f32);
+                NodeSurface {
+                    centroid: mean.as_vec3(),
+                    area: s.area as f32,
+                    light_area: s.light_area as f32,
+                    spread: [w(m.x_axis.x, m.y_axis.y), w(m.z_axis.z, m.y_axis.x), w(m.z_axis.x, m.z_axis.y)],
+                }
+            })
+            .collect()
     }
 
     /// `position[i]` = BVH position of input triangle `i` (inverse of `order`).

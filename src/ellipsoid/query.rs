@@ -14,7 +14,7 @@
 use glam::{DVec3, DVec4};
 
 use super::{Spheroid, Triangle as OracleTriangle};
-use crate::gpu::layout::{BvhNode, MATERIAL_DOUBLE_SIDED, Material, NONE, Triangle};
+use crate::gpu::layout::{BvhNode, MATERIAL_DOUBLE_SIDED, Material, NONE, NodeSurface, Triangle};
 use crate::integrator::QuerySettings;
 use crate::rng::pcg4d;
 
@@ -24,8 +24,8 @@ use crate::rng::pcg4d;
 pub struct QueryScene<'a> {
     /// Stackless BVH nodes (depth-first, skip links).
     pub nodes: &'a [BvhNode],
-    /// Per node: area of its triangles and of the emitting ones (m^2).
-    pub node_areas: &'a [[f32; 2]],
+    /// Per node: the area and spread of its triangles.
+    pub node_surfaces: &'a [NodeSurface],
     /// Triangles in BVH order.
     pub triangles: &'a [Triangle],
     /// The materials the triangles index (albedo and sides weigh reflecting queries' picks).
@@ -37,7 +37,7 @@ impl<'a> QueryScene<'a> {
     pub fn of(scene: &'a crate::scene::PreparedScene) -> Self {
         Self {
             nodes: &scene.bvh.nodes,
-            node_areas: &scene.node_areas,
+            node_surfaces: &scene.node_surfaces,
             triangles: &scene.triangles,
             materials: &scene.materials,
         }
@@ -78,7 +78,7 @@ impl Reached {
     }
 }
 
-/// The tent density of `node_estimate` never falls below this fraction of its peak.
+/// The density of `node_estimate` never falls below this fraction of its peak.
 pub const ESTIMATE_FLOOR: f64 = 0.05;
 /// Leaves the device batches before testing their triangles (ellipsoid_query.wesl LEAF_BATCH).
 const LEAF_BATCH: usize = 16;
@@ -124,9 +124,10 @@ fn spheroid_bounds(q: &Query) -> (DVec3, DVec3) {
     (m - half, m + half)
 }
 
-/// Estimate of the arc measure below a node with box [lo, hi] and counted area `area` (twin of
+/// Estimate of the arc measure below a node with box [lo, hi] and surface `surface` (twin of
 /// `node_estimate`): zero exactly when the box cannot hold a counted point of the spheroid.
-pub fn node_estimate(lo: DVec3, hi: DVec3, area: f64, q: &Query, bounds: (DVec3, DVec3)) -> f64 {
+pub fn node_estimate(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Query, bounds: (DVec3, DVec3)) -> f64 {
+    let area = if q.lights_only { surface.light_area } else { surface.area } as f64;
     if area <= 0.0
         || hi.cmplt(bounds.0).any()
         || lo.cmpgt(bounds.1).any()
@@ -139,15 +140,45 @@ pub fn node_estimate(lo: DVec3, hi: DVec3, area: f64, q: &Query, bounds: (DVec3,
     if shortest > q.tau_e || longest < q.tau_e {
         return 0.0;
     }
-    let c = 0.5 * (lo + hi);
-    let centre = (c.distance(q.focus_s) + c.distance(q.focus_c)).clamp(shortest, longest);
-    let rise = if q.tau_e <= centre {
-        (q.tau_e - shortest) / (centre - shortest).max(1e-30)
-    } else {
-        (longest - q.tau_e) / (longest - centre).max(1e-30)
-    };
-    let width = (longest - shortest).max(1e-6 * q.tau_e);
-    area * (2.0 / width) * rise.clamp(ESTIMATE_FLOOR, 1.0)
+    if q.lights_only {
+        let c = 0.5 * (lo + hi);
+        let centre = (c.distance(q.focus_s) + c.distance(q.focus_c)).clamp(shortest, longest);
+        let rise = if q.tau_e <= centre {
+            (q.tau_e - shortest) / (centre - shortest).max(1e-30)
+        } else {
+            (longest - q.tau_e) / (longest - centre).max(1e-30)
+        };
+        let width = (longest - shortest).max(1e-6 * q.tau_e);
+        return area * (2.0 / width) * rise.clamp(ESTIMATE_FLOOR, 1.0);
+    }
+    let (mean, sd) = path_length_moments(lo, hi, surface, q);
+    let t = (q.tau_e - mean) / sd;
+    let semicircle = (4.0 - t * t).max(0.0).sqrt() / std::f64::consts::TAU;
+    area / sd * semicircle.max(ESTIMATE_FLOOR / std::f64::consts::PI)
+}
+
+/// Mean and standard deviation of the path length |x - x_s| + |x - x_c| of a point x drawn
+/// uniformly on a node's triangles: the mean to second order about their centroid, the
+/// deviation to first order (twin of `path_length_moments`).
+pub fn path_length_moments(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Query) -> (f64, f64) {
+    use crate::scene::materials::unpack2x16float;
+    let scale = (hi - lo).length_squared();
+    let [a, b, c] = surface.spread.map(|w| unpack2x16float(w).as_dvec2() * scale);
+    let cov = glam::DMat3::from_cols(DVec3::new(a.x, b.y, c.x), DVec3::new(b.y, a.y, c.y), DVec3::new(c.x, c.y, b.x));
+    let centroid = surface.centroid.as_dvec3();
+    let trace = a.x + a.y + b.x;
+    let floor = 1e-6 * q.tau_e;
+    let mut mean = 0.0;
+    let mut gradient = DVec3::ZERO;
+    for focus in [q.focus_s, q.focus_c] {
+        let d = centroid - focus;
+        let r = d.length().max(floor);
+        let u = d / r;
+        gradient += u;
+        // The Hessian of |x - f| is (I - u u^T) / r, and E[delta^T H delta] = tr(H cov).
+        mean += r + 0.5 * (trace - u.dot(cov * u)) / r;
+    }
+    (mean, gradient.dot(cov * gradient).max(0.0).sqrt().max(floor))
 }
 
 /// The circular interval of eccentric angle an edge from p along `edge` allows (twin of
@@ -264,8 +295,7 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
     let bounds = spheroid_bounds(q);
     let nodes = scene.nodes;
     let count = nodes.len();
-    let area = |i: usize| scene.node_areas[i][q.lights_only as usize] as f64;
-    let estimate = |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), area(i), q, bounds);
+    let estimate = |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), &scene.node_surfaces[i], q, bounds);
     let step_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0]);
     let rest_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0]);
     let split_size = settings.split as f64 * 0.5 * q.tau_e;

@@ -102,6 +102,26 @@ impl BvhNode {
     }
 }
 
+/// What the ellipsoid queries' stochastic descent knows of the surface below a BVH node (one
+/// per node, in node order): the area of its triangles and the first two moments of a point
+/// drawn uniformly on them, from which `node_estimate` (shaders/lib/ellipsoid_query.wesl)
+/// predicts the density of path length over the node.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct NodeSurface {
+    /// The area-weighted centroid of the node's triangles (m); the box centre when they have
+    /// no area.
+    pub centroid: Vec3,
+    /// Total area of the node's triangles (m^2).
+    pub area: f32,
+    /// Total area of its emitting triangles (m^2).
+    pub light_area: f32,
+    /// Covariance of a point drawn uniformly on the triangles (m^2) divided by the squared
+    /// diagonal of the node's box (so in [-1, 1]), as three pack2x16float words: (xx, yy),
+    /// (zz, xy), (xz, yz).
+    pub spread: [u32; 3],
+}
+
 /// A surface material: a Lambertian lobe and a GGX conductor lobe blended by `metallic`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]

@@ -432,7 +432,7 @@ pub fn upload_scene(
     let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
-    r.storage_init(ctx, "bvh_node_areas", &scene.node_areas)?;
+    r.storage_init(ctx, "bvh_node_surfaces", &scene.node_surfaces)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
     let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();

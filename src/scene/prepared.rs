@@ -7,7 +7,7 @@ use super::Scene;
 use super::lights::LightTable;
 use super::materials::{gpu_materials, gpu_textures};
 use crate::bvh::Bvh;
-use crate::gpu::layout::{Material, NONE, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
+use crate::gpu::layout::{Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
 
 /// Everything the kernels read about a scene.
 #[derive(Clone, Debug)]
@@ -18,8 +18,8 @@ pub struct PreparedScene {
     pub bvh: Bvh,
     /// Triangles in BVH order.
     pub triangles: Vec<Triangle>,
-    /// Per BVH node: area of its triangles and of the emitting ones (m^2), see `Bvh::node_areas`.
-    pub node_areas: Vec<[f32; 2]>,
+    /// Per BVH node: the area and spread of its triangles, see `Bvh::node_surfaces`.
+    pub node_surfaces: Vec<NodeSurface>,
     /// Per triangle (BVH order): unit normal from an f64 cross product, octahedral
     /// (`surface::triangle_normal`).
     pub normals: Vec<[f32; 2]>,
@@ -85,13 +85,13 @@ impl PreparedScene {
         }
         let (texture_infos, texels) = gpu_textures(&scene);
         let ray_epsilon = 1e-6 * scene.triangle_extent();
-        let node_areas = bvh.node_areas(&triangles);
+        let node_surfaces = bvh.node_surfaces(&triangles);
         Ok(Self {
             materials: gpu_materials(&scene),
             scene,
             bvh,
             triangles,
-            node_areas,
+            node_surfaces,
             normals,
             shading,
             texture_infos,
