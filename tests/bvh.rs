@@ -6,7 +6,7 @@ mod common;
 use gatetrace::bvh::Bvh;
 use gatetrace::bvh::traverse::{brute_force_closest, trace_any, trace_closest};
 use gatetrace::gpu::layout::{NONE, Triangle};
-use gatetrace::integrator::{Integrator, PathTracer, RenderSettings};
+use gatetrace::integrator::{Integrator, Method, PathTracer, RenderSettings};
 use gatetrace::rng::Rng;
 use glam::Vec3;
 
@@ -138,7 +138,8 @@ fn split_buffers_render_identically() {
     let (t, n) = (scene.triangles.len() as u64, scene.bvh.nodes.len() as u64);
     let (width, height) = (8u32, 8u32);
     let splits = |limit: u64, bins: u64| {
-        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("film", 3 * (width * height) as u64 * bins, 4)]
+        let film = 3 * (width * height) as u64 * bins;
+        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("bvh_node_surfaces", n, 32), ("film", film, 4)]
             .iter()
             .all(|&(name, count, size)| ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2))
     };
@@ -161,6 +162,29 @@ fn split_buffers_render_identically() {
     let b = common::render_films(&ctx, &scene, &split, 1, 16).remove(0);
     assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the test image is nearly black");
     assert_eq!(a.data, b.data, "limit {limit} B, {bins} bins: split layout changed the image");
+    // Ellipsoid queries read the split node surfaces too. Their light-tracing image is one
+    // binding, so this render has a box gate (one bin) and the smallest limit that holds it.
+    // Its splats add with float atomics in no fixed order, so the two images agree to f32
+    // rounding of the sums, while a misread node surface changes the descents' choices and so
+    // the image's noise.
+    let splat_image = 3 * 4 * (width * height) as u64;
+    let fits = |l: u64| {
+        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32)]
+            .iter()
+            .all(|&(name, count, size)| ChunkLayout::new(name, count, size, l).is_ok())
+    };
+    let limit = (splat_image..1 << 20)
+        .find(|&l| fits(l) && ChunkLayout::new("bvh_node_surfaces", n, 32, l).is_ok_and(|c| c.chunks >= 2))
+        .expect("a binding limit that holds the light-tracing image splits the node surfaces");
+    let gate = Gate::Box { start: 0.0, end: 10.0 };
+    let base = RenderSettings { method: Method::Ellipsoidal, gate, ..base };
+    let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
+    let a = common::render_films(&ctx, &scene, &base, 1, 16).remove(0);
+    let b = common::render_films(&ctx, &scene, &split, 1, 16).remove(0);
+    assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the ellipsoidal test image is nearly black");
+    for (i, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
+        assert!((x - y).abs() <= 1e-5 * x.abs().max(y.abs()) + 1e-30, "ellipsoidal, element {i}: {x} vs {y}");
+    }
 }
 
 #[test]

@@ -132,6 +132,9 @@ pub fn chunk_names(name: &'static str) -> [&'static str; 4] {
         "triangles" => ["triangles", "triangles_1", "triangles_2", "triangles_3"],
         "triangle_shading" => ["triangle_shading", "triangle_shading_1", "triangle_shading_2", "triangle_shading_3"],
         "bvh_nodes" => ["bvh_nodes", "bvh_nodes_1", "bvh_nodes_2", "bvh_nodes_3"],
+        "bvh_node_surfaces" => {
+            ["bvh_node_surfaces", "bvh_node_surfaces_1", "bvh_node_surfaces_2", "bvh_node_surfaces_3"]
+        }
         "film" => ["film", "film_1", "film_2", "film_3"],
         other => panic!("`{other}` is not a split array"),
     }

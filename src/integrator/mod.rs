@@ -432,7 +432,7 @@ pub fn upload_scene(
     let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
-    r.storage_init(ctx, "bvh_node_surfaces", &scene.node_surfaces)?;
+    let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
     let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();
@@ -471,6 +471,7 @@ pub fn upload_scene(
         ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),
         ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),
         ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
+        ("BVH_NODE_SURFACES_CHUNK_BITS", bvh_node_surfaces.bits as f64),
         ("FILM_CHUNK_BITS", film.bits as f64),
         ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
         ("SMALL_SCENE_TRIANGLES", small as f64),
