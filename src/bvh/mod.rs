@@ -98,6 +98,7 @@ impl Bvh {
         const ZERO: Sums = Sums { area: 0.0, light_area: 0.0, first: DVec3::ZERO, second: DMat3::ZERO };
         let mut sums = vec![ZERO; self.nodes.len()];
         // Children follow their parent in depth-first order: fill from the back.
+        let outer = |v: DVec3| DMat3::from_cols(v * v.x, v * v.y, v * v.z);
         for i in (0..self.nodes.len()).rev() {
             sums[i] = match self.nodes[i].leaf_range() {
                 Some(range) => range.fold(ZERO, |s, k| {
@@ -108,7 +109,6 @@ impl Bvh {
                     // A uniform point of triangle abc: E[x] = (a + b + c) / 3 and
                     // E[x x^T] = (a a^T + b b^T + c c^T + (a + b + c)(a + b + c)^T) / 12.
                     let sum = a + b + c;
-                    let outer = |v: DVec3| DMat3::from_cols(v * v.x, v * v.y, v * v.z);
                     Sums {
                         area: s.area + area,
                         light_area: s.light_area + if t.light == NONE { 0.0 } else { area },
@@ -139,7 +139,7 @@ impl Bvh {
                     };
                 }
                 let mean = s.first / s.area;
-                let m = s.second * (1.0 / s.area) - DMat3::from_cols(mean * mean.x, mean * mean.y, mean * mean.z);
+                let m = s.second * (1.0 / s.area) - outer(mean);
                 let scale = 1.0 / (hi - lo).length_squared().max(f64::MIN_POSITIVE);
                 let w = |a: f64, b: f64| pack2x16float((a * scale) as f32, (b * scale) as f32);
                 NodeSurface {
