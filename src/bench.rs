@@ -176,8 +176,7 @@ pub struct EqualTimeSettings {
 /// seconds actually spent.
 fn render_for(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings, seconds: f64) -> Result<(crate::film::Film, f64)> {
     let mut tracer = create_integrator(ctx, scene, settings)?;
-    tracer.render_pass(1)?;
-    tracer.reset_film();
+    tracer.warm_up()?;
     let spent = crate::integrator::PassSizer::default().render_for(tracer.as_mut(), seconds, |_, _| {})?;
     Ok((tracer.film()?, spent))
 }

@@ -1,15 +1,16 @@
 //! Target path lengths drawn from the gate (for ellipsoidal connections): the WGSL sampler
 //! matches its CPU twin, the estimate E[W(tau)/p(tau) g(tau)] equals the integral of W g by
 //! quadrature for every gate kind, and a pixel's low-discrepancy numbers are uniform and spread;
-//! transient gates' stratified target lengths visit every bin once per round, lie in their bin
-//! as the film sees it, match their CPU twin, and the film's factors count each bin's samples.
+//! transient gates' stratified target lengths visit every bin once per round (and each as often
+//! as its row of extra visits says), lie in their bin as the film sees it, match their CPU
+//! twin, and the film's factors count each bin's samples; a pilot's transient shapes the rows.
 
 mod common;
 
 use gatetrace::film::Gate;
 use gatetrace::film::target::{TargetSampler, target_u};
 use gatetrace::film::gate::gate_weight;
-use gatetrace::integrator::{PathTracer, RenderSettings, target_sampler};
+use gatetrace::integrator::{Integrator, PathTracer, RenderSettings, target_sampler};
 
 fn gates() -> Vec<(&'static str, Gate)> {
     vec![
@@ -105,10 +106,27 @@ fn transient_gates() -> Vec<Gate> {
     ]
 }
 
+/// Rows of `target_visits` for `pixels` pixels of `n` strata sharing `extra` visits at random
+/// (some bins none, some many).
+fn random_rows(n: u32, extra: u32, pixels: u32, rng: &mut gatetrace::rng::Rng) -> Vec<u32> {
+    let mut rows = Vec::new();
+    for _ in 0..pixels {
+        let weights: Vec<f64> = (0..n).map(|_| if rng.next_f32() < 0.3 { 0.0 } else { (rng.next_f32() as f64).powi(3) }).collect();
+        let total: f64 = weights.iter().sum::<f64>().max(1e-30);
+        let mut acc = 0.0;
+        rows.push(0);
+        for (j, w) in weights.iter().enumerate() {
+            acc += w;
+            rows.push(if j + 1 == n as usize { extra } else { ((extra as f64 * acc / total).round() as u32).min(extra) });
+        }
+    }
+    rows
+}
+
 #[test]
 fn stratified_target_lengths_visit_every_bin_once_per_round() {
     use gatetrace::film::gate::gate_bin;
-    use gatetrace::film::target::{golden_stride, stratum};
+    use gatetrace::film::target::{golden_stride, target_visit};
     for n in 1..300u32 {
         let g = golden_stride(n);
         assert!((1..n.max(2)).contains(&g) && (1..=g).all(|d| d == 1 || g % d != 0 || n % d != 0), "stride {g} of {n}");
@@ -118,8 +136,8 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
     for gate in transient_gates() {
         let settings = RenderSettings { max_bounces: 5, gate: gate.clone(), seed: 11, ..Default::default() };
         let sampler = target_sampler(&scene, &settings).unwrap();
-        let t = sampler.params;
         let Gate::Transient { start, width, bins } = gate else { unreachable!() };
+        let t = sampler.params;
         assert!(t.strata >= 1 && t.first_bin + t.strata <= bins, "{gate:?}: {t:?}");
         // The strata are whole bins covering the lengths the scene allows within the gate.
         assert_eq!(t.lo as f64, (start + t.first_bin as f64 * width) as f32 as f64);
@@ -128,13 +146,15 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
         let n = t.strata;
         for _ in 0..20 {
             let pixel = (rng.next_f32() * 1e6) as u32;
-            let first = (rng.next_f32() * 1e7) as u32;
+            let t = gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: (rng.next_f32() * 1e7) as u32, ..t };
+            let first = t.film_first_sample.wrapping_add((rng.next_f32() * 1e7) as u32);
             let mut seen = vec![0u32; n as usize];
             for sample in first..first + n {
-                let j = stratum(&t, settings.seed, pixel, sample);
-                seen[j as usize] += 1;
-                let (tau, inv_pdf, bin) = sampler.stratified_sample(settings.seed, pixel, sample);
-                assert_eq!(bin, t.first_bin + j);
+                let v = target_visit(&t, &[], pixel, sample);
+                seen[v.stratum as usize] += 1;
+                assert_eq!((v.visit, v.per_cycle), ((sample - t.film_first_sample) / n, 1));
+                let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, &[], pixel, sample);
+                assert_eq!(bin, t.first_bin + v.stratum);
                 assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), tau), bin as i32, "{gate:?}: tau {tau} outside bin {bin}");
                 assert!((inv_pdf as f64 - n as f64 * width).abs() <= 1e-6 * n as f64 * width, "1/p {inv_pdf}");
             }
@@ -144,26 +164,130 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
 }
 
 #[test]
+fn extra_visits_follow_the_pixels_rows() {
+    use gatetrace::film::gate::gate_bin;
+    use gatetrace::film::target::{golden_stride, target_visit};
+    let scene = common::cornell_box();
+    let mut rng = gatetrace::rng::Rng::new(8, 9, 10);
+    for gate in transient_gates() {
+        let settings = RenderSettings { max_bounces: 5, gate: gate.clone(), seed: 12, ..Default::default() };
+        let sampler = target_sampler(&scene, &settings).unwrap();
+        let Gate::Transient { width, .. } = gate else { unreachable!() };
+        let n = sampler.params.strata;
+        let extra = 3 * n + 1;
+        let pixels = 6u32;
+        let rows = random_rows(n, extra, pixels, &mut rng);
+        let t = gatetrace::gpu::layout::TargetParams {
+            seed: settings.seed,
+            extra,
+            extra_stride: golden_stride(extra),
+            film_first_sample: 1000,
+            ..sampler.params
+        };
+        let cycle = n + extra;
+        for pixel in 0..pixels {
+            let row = &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize];
+            let per_cycle = |j: usize| 1 + row[j + 1] - row[j];
+            // Any cycle-long run of samples visits bin j per_cycle_j times.
+            for start in [0u32, 1, n, cycle / 2, 5 * cycle + 3] {
+                let mut seen = vec![0u32; n as usize];
+                for s in start..start + cycle {
+                    seen[target_visit(&t, row, pixel, t.film_first_sample + s).stratum as usize] += 1;
+                }
+                for j in 0..n as usize {
+                    assert_eq!(seen[j], per_cycle(j), "{gate:?} pixel {pixel}: bin {j} in the cycle from {start}");
+                }
+            }
+            // Over whole cycles, a bin's visits are numbered 0, 1, ... without gaps or repeats,
+            // lie in the bin and weigh cycle x width / per_cycle.
+            let mut visits: Vec<Vec<u32>> = vec![Vec::new(); n as usize];
+            for s in 0..3 * cycle {
+                let sample = t.film_first_sample + s;
+                let v = target_visit(&t, row, pixel, sample);
+                assert_eq!(v.per_cycle, per_cycle(v.stratum as usize));
+                visits[v.stratum as usize].push(v.visit);
+                let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, row, pixel, sample);
+                assert_eq!(bin, t.first_bin + v.stratum);
+                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), tau), bin as i32, "{gate:?}: tau {tau} outside bin {bin}");
+                let expected = cycle as f64 * width / v.per_cycle as f64;
+                assert!((inv_pdf as f64 - expected).abs() <= 1e-6 * expected, "1/p {inv_pdf}, expected {expected}");
+            }
+            for (j, v) in visits.iter_mut().enumerate() {
+                v.sort_unstable();
+                assert!(v.iter().copied().eq(0..3 * per_cycle(j)), "{gate:?} pixel {pixel} bin {j}: visits {v:?}");
+            }
+        }
+    }
+}
+
+#[test]
 fn stratum_factors_divide_each_bin_by_its_samples() {
-    use gatetrace::film::target::{stratum, stratum_factors};
+    use gatetrace::film::target::{golden_stride, stratum_factors, target_visit};
     let scene = common::cornell_box();
     let settings = RenderSettings { max_bounces: 5, gate: transient_gates()[0].clone(), seed: 3, ..Default::default() };
-    let t = target_sampler(&scene, &settings).unwrap().params;
-    let n = t.strata as u64;
+    let plain = gatetrace::gpu::layout::TargetParams { seed: 3, film_first_sample: 77, ..target_sampler(&scene, &settings).unwrap().params };
+    let n = plain.strata;
+    let extra = 5 * n - 2;
+    let mut rng = gatetrace::rng::Rng::new(1, 2, 3);
+    let rows = random_rows(n, extra, 130, &mut rng);
+    let shaped = gatetrace::gpu::layout::TargetParams { extra, extra_stride: golden_stride(extra), ..plain };
     let mut factors = vec![0.0f32; n as usize];
-    for (pixel, first, samples) in [(0u32, 0u64, n - 1), (7, 13, n), (9, 1000, 3 * n + 5), (123, 77, 10 * n + n - 1)] {
-        let done = stratum_factors(&t, settings.seed, pixel, first, samples, &mut factors);
-        if samples < n {
-            assert!(done.is_none(), "{samples} samples < {n} strata: no factors");
-            continue;
+    for t in [plain, shaped] {
+        let cycle = (n + t.extra) as u64;
+        let n = n as u64;
+        for (pixel, samples) in [(0u32, n - 1), (7, n), (9, 3 * cycle + 5), (123, 10 * cycle + cycle - 1), (45, n + 3), (46, cycle)] {
+            let row = if t.extra > 0 { &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)] } else { &[][..] };
+            let done = stratum_factors(&t, row, pixel, samples, &mut factors);
+            if samples < n {
+                assert!(done.is_none(), "{samples} samples < {n} strata: no factors");
+                continue;
+            }
+            assert!(done.is_some(), "{samples} samples from the film's first visit every bin");
+            let mut counts = vec![0u64; n as usize];
+            for s in 0..samples {
+                counts[target_visit(&t, row, pixel, t.film_first_sample + s as u32).stratum as usize] += 1;
+            }
+            for (j, (&f, &c)) in factors.iter().zip(&counts).enumerate() {
+                let per_cycle = if t.extra > 0 { 1 + row[j + 1] - row[j] } else { 1 } as f64;
+                let expected = samples as f64 * per_cycle / (cycle as f64 * c as f64);
+                assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f}, {c} samples of {samples}");
+            }
         }
-        let mut counts = vec![0u64; n as usize];
-        for s in first..first + samples {
-            counts[stratum(&t, settings.seed, pixel, s as u32) as usize] += 1;
-        }
-        for (j, (&f, &c)) in factors.iter().zip(&counts).enumerate() {
-            let expected = samples as f64 / (n as f64 * c as f64);
-            assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f}, {c} samples of {samples}");
+    }
+}
+
+#[test]
+fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
+    use gatetrace::film::target::{EXTRA_VISITS_PER_BIN, PILOT_CELLS, PILOT_SPREAD, visit_tables};
+    let (strata, bins) = (512u32, 530usize);
+    let t = gatetrace::gpu::layout::TargetParams { strata, first_bin: 10, ..Default::default() };
+    // Pixel 0: light in bins 110 .. 130 only (strata 100 .. 120); pixel 1: black; pixel 2: NaN.
+    let mut film = vec![0.0f32; 3 * bins * 3];
+    for bin in 110..130 {
+        film[bin * 3 + 1] = -2.0; // signed values count by magnitude
+    }
+    film[2 * bins * 3 + 40] = f32::NAN;
+    let (extra, rows) = visit_tables(&t, &film, bins);
+    assert_eq!(extra, EXTRA_VISITS_PER_BIN * strata);
+    assert_eq!(rows.len(), 3 * (strata as usize + 1));
+    for row in rows.chunks(strata as usize + 1) {
+        assert_eq!((row[0], row[strata as usize]), (0, extra));
+        assert!(row.windows(2).all(|w| w[0] <= w[1]), "rows are cumulative");
+    }
+    // Strata 100 .. 120 lie in cells 25 .. 30 of 128 (4 bins each); spread by PILOT_SPREAD
+    // cells, the shaped visits fall in cells 23 .. 32, strata 92 .. 128, evenly.
+    assert_eq!((PILOT_CELLS, PILOT_SPREAD), (128, 2));
+    let row = &rows[..strata as usize + 1];
+    assert_eq!(row[92], 0);
+    assert_eq!(row[128], extra);
+    let share = extra as f64 / 36.0;
+    for j in 92..128 {
+        assert!(((row[j + 1] - row[j]) as f64 - share).abs() <= 1.0, "stratum {j}: {} extra visits", row[j + 1] - row[j]);
+    }
+    // A pixel the pilot saw nothing in (or nothing finite) gets its extra visits evenly.
+    for row in rows.chunks(strata as usize + 1).skip(1) {
+        for j in 0..strata as usize {
+            assert_eq!(row[j + 1] - row[j], EXTRA_VISITS_PER_BIN, "stratum {j}");
         }
     }
 }
@@ -171,22 +295,39 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
 #[test]
 fn wgsl_stratified_target_lengths_match_cpu_twin() {
     use gatetrace::film::gate::gate_bin;
+    use gatetrace::film::target::golden_stride;
     let ctx = common::gpu();
     let scene = common::cornell_box();
+    let mut rng = gatetrace::rng::Rng::new(4, 4, 4);
     for gate in transient_gates() {
         let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), seed: 21, ..Default::default() };
         let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
         let sampler = target_sampler(&scene, &settings).unwrap();
-        let input: Vec<[f32; 4]> = (0..4096u32)
-            .map(|i| [f32::from_bits(i.wrapping_mul(2_246_822_519) >> 12), f32::from_bits(i * 7919), 0.0, 0.0])
-            .collect();
-        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 15.0)], &input, input.len());
-        for (i, (x, o)) in input.iter().zip(&out).enumerate() {
-            let (tau, inv_pdf, bin) = sampler.stratified_sample(settings.seed, x[0].to_bits(), x[1].to_bits());
-            assert_eq!(o[2] as u32 + sampler.params.first_bin, bin, "{gate:?} record {i}: stratum");
-            assert!((o[0] - tau).abs() <= 2.0 * f32::EPSILON * tau, "{gate:?} record {i}: tau GPU {} CPU {tau}", o[0]);
-            assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), o[0]), bin as i32, "{gate:?} record {i}: GPU tau {} outside bin {bin}", o[0]);
-            assert!((o[1] - inv_pdf).abs() <= 1e-6 * inv_pdf, "{gate:?} record {i}: 1/p GPU {} CPU {inv_pdf}", o[1]);
+        let n = sampler.params.strata;
+        // Each bin once a cycle, then with extra visits from random rows of the 16 pixels.
+        let plain = gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: 123_456, ..sampler.params };
+        let extra = 2 * n + 3;
+        let shaped = gatetrace::gpu::layout::TargetParams { extra, extra_stride: golden_stride(extra), ..plain };
+        let rows = random_rows(n, extra, 16, &mut rng);
+        for t in [plain, shaped] {
+            let mut resources = tracer.resources().clone();
+            let mut params = tracer.wavefront().params;
+            params.target_length = t;
+            resources.uniform_init(&ctx, "params", &params);
+            resources.storage_init(&ctx, "target_visits", if t.extra > 0 { &rows[..] } else { &[0u32][..] }).unwrap();
+            let input: Vec<[f32; 4]> = (0..4096u32)
+                .map(|i| [f32::from_bits(i % 16), f32::from_bits(i.wrapping_mul(2_246_822_519) >> 12), 0.0, 0.0])
+                .collect();
+            let out = common::run_probe_with(&ctx, &resources, tracer.constants(), "probe_functions", &[("FUNCTION", 15.0)], &input, input.len());
+            for (i, (x, o)) in input.iter().zip(&out).enumerate() {
+                let pixel = x[0].to_bits();
+                let row = if t.extra > 0 { &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize] } else { &[][..] };
+                let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, row, pixel, x[1].to_bits());
+                assert_eq!(o[2] as u32 + t.first_bin, bin, "{gate:?} record {i}: stratum");
+                assert!((o[0] - tau).abs() <= 2.0 * f32::EPSILON * tau, "{gate:?} record {i}: tau GPU {} CPU {tau}", o[0]);
+                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), o[0]), bin as i32, "{gate:?} record {i}: GPU tau {} outside bin {bin}", o[0]);
+                assert!((o[1] - inv_pdf).abs() <= 1e-6 * inv_pdf, "{gate:?} record {i}: 1/p GPU {} CPU {inv_pdf}", o[1]);
+            }
         }
     }
 }

@@ -26,7 +26,7 @@ adding each sample to a single bin can have (bins drawn in proportion to the ref
 values): how far each is from that floor, and so how much any such estimator could gain on it
 per sample. Also a JSON line with everything.
 
-Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,ellipsoidal:1,path]
+Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,ellipsoidal:4,path]
            [--reference-seconds S] [--widths-ps 1,2,4,10,20,50,100]
 Requires: a built gatetrace (cargo build --release), numpy, mitsuba and mitransient.
 """
@@ -52,8 +52,9 @@ C_MM_PER_PS = 0.299792458  # optical path per picosecond (mm)
 
 def gatetrace_render(args, method, seconds, seed, out, extra=()):
     """`render --nlos ... --time`; returns (capture [H, W, T, 3], rendering seconds, spp).
-    `method` may go on with `:K` (ellipsoidal's connections per query) and `:arcs` or
-    `:reflection` (its query weights), e.g. `ellipsoidal:1:arcs`."""
+    `method` may go on with `:K` (ellipsoidal's connections per query), `:arcs` or
+    `:reflection` (its query weights) and `:pilotN` (its pilot render of N spp, `--target-pilot`),
+    e.g. `ellipsoidal:1:arcs:pilot0`."""
     origin = ",".join(map(str, args.origin))
     method, *options = method.split(":")
     extra = list(extra)
@@ -62,8 +63,11 @@ def gatetrace_render(args, method, seconds, seed, out, extra=()):
             extra += ["--query-weights", option]
         elif option.isdigit():
             extra += ["--connections-per-query", option]
+        elif option.startswith("pilot") and option[5:].isdigit():
+            extra += ["--target-pilot", option[5:]]
         else:
-            sys.exit(f"method option {option!r}: neither a number of connections per query nor arcs|reflection")
+            sys.exit(f"method option {option!r}: neither a number of connections per query, arcs|reflection "
+                     "nor pilotN")
     cmd = [EXE, "render", args.scene, "--nlos", args.scan, "--method", method,
            "--res", f"{args.res}x{args.res}", "--max-bounces", str(args.max_bounces),
            "--gate", f"transient:{args.start},{args.base_width},{args.bins}",
@@ -147,9 +151,10 @@ def main():
                    help="bin widths reported, ps, multiples of --base-ps (default 1,2,4,10,20,50,100)")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds of rendering per capture (default 10)")
     p.add_argument("--repeats", type=int, default=2, help="captures per renderer (default 2)")
-    p.add_argument("--methods", default="ellipsoidal,ellipsoidal:1,path",
+    p.add_argument("--methods", default="ellipsoidal,ellipsoidal:4,path",
                    help="gatetrace methods; ellipsoidal:K with K connections per query, ellipsoidal:arcs "
-                        "with arc weights (default ellipsoidal,ellipsoidal:1,path)")
+                        "with arc weights, ellipsoidal:pilotN with a pilot of N spp (default "
+                        "ellipsoidal,ellipsoidal:4,path; `render --nlos` gives ellipsoidal K = 1 and a 256-spp pilot)")
     p.add_argument("--reference-method", default="ellipsoidal")
     p.add_argument("--reference-seconds", type=float, default=240.0,
                    help="seconds of rendering of the reference, in 8 batches (default 240)")

@@ -247,8 +247,17 @@ pub struct TargetParams {
     /// the render seed for a film's first estimate, re-drawn at each film reset so that
     /// successive estimates are independent.
     pub seed: u32,
+    /// Stratified gates: visits per cycle beyond one per bin, shared out among each pixel's
+    /// bins by `target_visits` (see `film::target::visit_tables`); 0: each bin once a cycle.
+    pub extra: u32,
+    /// Stride of a pixel's sequence of extra visits: coprime to `extra`, near extra x 0.618.
+    pub extra_stride: u32,
+    /// Index of the film's first sample (u32, wrapping): a pixel's cycles of visits start there.
+    pub film_first_sample: u32,
     /// Padding.
     pub reserved1: u32,
+    /// Padding.
+    pub reserved2: u32,
 }
 
 /// Settings that hold for a whole render.

@@ -104,6 +104,12 @@ pub struct RenderSettings {
     /// An NLOS capture (`--nlos`): pixels are sensed points of a relay wall lit by a laser spot,
     /// and the image's width x height is the grid of sensed points (see [`crate::nlos`]).
     pub nlos: Option<crate::nlos::NlosCapture>,
+    /// `ellipsoidal` on a transient gate: samples per pixel of a pilot render, traced before
+    /// the first pass and then discarded, whose transient shares out extra visits of each
+    /// pixel's bins (`film::target::visit_tables`); 0: none, every bin gets the same share of
+    /// the samples. `--target-pilot`; `render --nlos` gives `ellipsoidal`
+    /// [`bidirectional::DEFAULT_NLOS_TARGET_PILOT`].
+    pub target_pilot_spp: u32,
 }
 
 /// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
@@ -179,6 +185,7 @@ impl Default for RenderSettings {
             ellipsoid_guards: EllipsoidGuards::default(),
             keep_splats_on_device: false,
             nlos: None,
+            target_pilot_spp: 0,
         }
     }
 }
@@ -227,6 +234,19 @@ pub trait Integrator {
     /// What `--stats` prints about the work done so far, if the method keeps statistics.
     fn stats_report(&self) -> Result<Option<String>> {
         Ok(None)
+    }
+    /// Samples per pixel of the pilot render traced before the film's (discarded; see
+    /// `RenderSettings::target_pilot_spp`), 0 for none.
+    fn target_pilot_spp(&self) -> u32 {
+        0
+    }
+    /// Traces one sample per pixel and discards it, so that a device that compiles kernels at
+    /// their first dispatch (lavapipe does) does so before a time budget starts. Work that
+    /// belongs to the render (a pilot) is left for its first pass.
+    fn warm_up(&mut self) -> Result<()> {
+        self.render_pass(1)?;
+        self.reset_film();
+        Ok(())
     }
     /// Traces `spp` more samples of every pixel, in as few passes as possible.
     fn render_samples(&mut self, spp: u64) -> Result<()> {
@@ -337,6 +357,9 @@ pub struct RenderOutput {
     pub truncated_traversals: u64,
     /// The method's `--stats` report, when asked for.
     pub stats: Option<String>,
+    /// Samples per pixel of the pilot render traced before the film's and discarded (see
+    /// `RenderSettings::target_pilot_spp`).
+    pub target_pilot_spp: u32,
 }
 
 /// Why no path of the scene can reach the gate, if none can (checked before any work).
@@ -459,6 +482,8 @@ pub fn upload_scene(
     r.storage_init(ctx, "wall_points", &wall_points)?;
     let cdf = target_sampler(scene, settings).map_or(vec![0.0, 1.0], |t| t.cdf);
     r.storage_init(ctx, "target_cdf", &cdf)?;
+    // Extra target-length visits come from a pilot render (BidirectionalTracer), if any.
+    r.storage_init(ctx, "target_visits", &[0u32])?;
     let film_len = film_elements(settings)?;
     let film = r.storage_chunked_zeroed(ctx, "film", film_len, 8, limit)?;
     let flag = |b: bool| b as u32 as f64;
@@ -505,14 +530,20 @@ pub fn render(
         eprintln!("warning: {reason}: the image is black; no samples were traced");
         let g = &settings.gate;
         let film = Film::zeroed(settings.width, settings.height, g.bins());
-        return Ok(RenderOutput { film, elapsed: start.elapsed(), rendering: Duration::ZERO, truncated_traversals: 0, stats: None });
+        return Ok(RenderOutput {
+            film,
+            elapsed: start.elapsed(),
+            rendering: Duration::ZERO,
+            truncated_traversals: 0,
+            stats: None,
+            target_pilot_spp: 0,
+        });
     }
     let mut tracer = create_integrator(ctx, scene, settings)?;
     if let Budget::Time(_) = budget {
         // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
         // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
-        tracer.render_pass(1)?;
-        tracer.reset_film();
+        tracer.warm_up()?;
     }
     let mut passes = 0;
     let rendering = Instant::now();
@@ -544,7 +575,8 @@ pub fn render(
         );
     }
     let stats = if settings.stats { tracer.stats_report()? } else { None };
-    Ok(RenderOutput { film, elapsed: start.elapsed(), rendering, truncated_traversals, stats })
+    let target_pilot_spp = tracer.target_pilot_spp();
+    Ok(RenderOutput { film, elapsed: start.elapsed(), rendering, truncated_traversals, stats, target_pilot_spp })
 }
 
 #[cfg(test)]

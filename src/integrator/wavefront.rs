@@ -82,6 +82,9 @@ pub struct Wavefront<'a> {
     pub samples_in_film: u64,
     /// Index of the next sample to trace (never reused, so batches are independent).
     pub next_sample: u64,
+    /// The host copy of `target_visits` (per pixel, `strata + 1` cumulative extra visits of
+    /// the stratified bins); empty while `params.target_length.extra` is 0.
+    pub target_visits: Vec<u32>,
 }
 
 impl<'a> Wavefront<'a> {
@@ -94,7 +97,18 @@ impl<'a> Wavefront<'a> {
         constants: Vec<(&'static str, f64)>,
         (samples_per_pass, slots_per_wave): (u32, u64),
     ) -> Self {
-        Self { ctx, params, resources, film_layout, constants, slots_per_wave, samples_per_pass, samples_in_film: 0, next_sample: 0 }
+        Self {
+            ctx,
+            params,
+            resources,
+            film_layout,
+            constants,
+            slots_per_wave,
+            samples_per_pass,
+            samples_in_film: 0,
+            next_sample: 0,
+            target_visits: Vec::new(),
+        }
     }
 
     /// Moves the render to `settings.gate` without rebuilding anything when the kernels'
@@ -122,8 +136,10 @@ impl<'a> Wavefront<'a> {
             queue.write_buffer(self.resources.get("gate_table").unwrap(), 0, bytemuck::cast_slice(&table));
         }
         self.params.gate = new;
-        let seed = self.params.target_length.seed;
-        self.params.target_length = TargetParams { seed, ..sampler.map(|t| t.params).unwrap_or_default() };
+        let (seed, film_first_sample) = (self.params.target_length.seed, self.params.target_length.film_first_sample);
+        // Extra visits were shaped for the old gate: each bin gets one a cycle again.
+        self.params.target_length = TargetParams { seed, film_first_sample, ..sampler.map(|t| t.params).unwrap_or_default() };
+        self.target_visits.clear();
         queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         Ok(true)
     }
@@ -227,13 +243,17 @@ impl<'a> Wavefront<'a> {
     /// other pixels and keep the plain mean.
     pub fn divide_by_stratum_counts(&self, film: &mut Film) {
         let t = &self.params.target_length;
-        let first_sample = self.next_sample - self.samples_in_film;
-        let mut factors = vec![0.0f32; t.strata as usize];
+        let n = t.strata as usize;
+        if n == 0 {
+            return;
+        }
+        let mut factors = vec![0.0f32; n];
         let bins = film.bins as usize;
         for pixel in 0..(film.width * film.height) as usize {
-            // None (for every pixel alike) when not stratified or some bin has no sample yet.
-            if stratum_factors(t, t.seed, pixel as u32, first_sample, self.samples_in_film, &mut factors).is_none() {
-                return;
+            let row = if t.extra > 0 { &self.target_visits[pixel * (n + 1)..(pixel + 1) * (n + 1)] } else { &[][..] };
+            // None while some bin of the pixel has no sample: its plain mean is kept (unbiased too).
+            if stratum_factors(t, row, pixel as u32, self.samples_in_film, &mut factors).is_none() {
+                continue;
             }
             for (j, f) in factors.iter().enumerate() {
                 let base = (pixel * bins + t.first_bin as usize + j) * 3;
@@ -251,6 +271,8 @@ impl<'a> Wavefront<'a> {
             encoder.clear_buffer(self.resources.get(name).unwrap(), 0, None);
         }
         self.params.target_length.seed = next_target_seed(self.params.target_length.seed);
+        // The film's cycles of target-length visits start at its first sample.
+        self.params.target_length.film_first_sample = self.next_sample as u32;
         self.ctx.queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;

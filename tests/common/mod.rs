@@ -105,11 +105,25 @@ pub fn run_probe(
     input: &[[f32; 4]],
     outputs: usize,
 ) -> Vec<[f32; 4]> {
+    run_probe_with(ctx, tracer.resources(), tracer.constants(), kernel, extra, input, outputs)
+}
+
+/// `run_probe` with the resources and specialisation constants given (e.g. a tracer's, some
+/// replaced).
+pub fn run_probe_with(
+    ctx: &GpuContext,
+    resources: &gatetrace::gpu::resources::Resources,
+    constants: &[(&'static str, f64)],
+    kernel: &str,
+    extra: &[(&'static str, f64)],
+    input: &[[f32; 4]],
+    outputs: usize,
+) -> Vec<[f32; 4]> {
     use gatetrace::gpu::{Kernel, resources::read_buffer};
-    let mut resources = tracer.resources().clone();
+    let mut resources = resources.clone();
     resources.storage_init(ctx, "probe_input", input).unwrap();
     resources.storage_zeroed(ctx, "probe_output", 16 * outputs as u64, wgpu::BufferUsages::empty()).unwrap();
-    let mut constants = tracer.constants().to_vec();
+    let mut constants = constants.to_vec();
     constants.extend_from_slice(extra);
     let k = Kernel::new(ctx, kernel, None, &constants);
     let bind_group = k.bind(ctx, &resources);
@@ -302,6 +316,12 @@ pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim
             count_first_and_last: false,
         }),
         query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },
+        // The command line's defaults for captures.
+        target_pilot_spp: if method == gatetrace::integrator::Method::Ellipsoidal {
+            gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
+        } else {
+            0
+        },
         ..Default::default()
     }
 }
