@@ -139,14 +139,15 @@ struct RenderArgs {
     /// 2.5 mm gate, 1.1x at 5 and 50 cm).
     #[arg(long, value_name = "WEIGHTS")]
     query_weights: Option<QueryWeights>,
-    /// `ellipsoidal` on a transient gate: samples per pixel of a pilot render, traced first and
-    /// then discarded, whose transient decides how the render's target lengths visit each
-    /// pixel's bins: every bin once a cycle, and 7 more visits per bin shared out in proportion
-    /// to the light the pilot saw near it. Unbiased whatever the pilot saw (each bin is divided
-    /// by its own visits). 0: no pilot, every bin an equal share. Default: 256 for --nlos
-    /// captures (at equal time, 4 ps bins, K = 1: a quarter of the error on a 327,680-triangle
-    /// hidden object, a sixth on the example scene's letter), 0 otherwise. Needs pixels x (bins + 1) x 4 bytes of device memory
-    /// in one binding; where that does not fit, the render goes without.
+    /// --nlos captures with `ellipsoidal` on a transient gate: samples per pixel of a pilot
+    /// render, traced first and then discarded, whose transient decides how the render's target
+    /// lengths visit each pixel's bins: every bin once a cycle, and 7 more visits per bin (at
+    /// most 65,535 a cycle) shared out in proportion to the light the pilot saw near it.
+    /// Unbiased whatever the pilot saw (each bin is divided by its own visits). 0: no pilot,
+    /// every bin an equal share. Default 256 (at equal time, 4 ps bins, K = 1: a quarter of the
+    /// error on a 327,680-triangle hidden object, a sixth on the example scene's letter). Needs
+    /// at most pixels x (bins + 1) x 4 bytes of device memory in one binding; where that does
+    /// not fit, the render goes without (the metadata's target_pilot_spp says 0).
     #[arg(long, value_name = "SPP")]
     target_pilot: Option<u32>,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
@@ -557,7 +558,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
         keep_splats_on_device: false,
         nlos: None,
-        target_pilot_spp: args.target_pilot.unwrap_or(if args.nlos.is_some() && args.method == Method::Ellipsoidal {
+        target_pilot_spp: args.target_pilot.unwrap_or(if args.nlos.is_some()
+            && args.method == Method::Ellipsoidal
+            && matches!(gate, Gate::Transient { .. })
+        {
             gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
         } else {
             0

@@ -238,8 +238,18 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
         for (pixel, samples) in [(0u32, n - 1), (7, n), (9, 3 * cycle + 5), (123, 10 * cycle + cycle - 1), (45, n + 3), (46, cycle)] {
             let row = if t.extra > 0 { &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)] } else { &[][..] };
             let done = stratum_factors(&t, row, pixel, samples, &mut factors);
+            if samples < n && t.extra == 0 {
+                assert!(done.is_none(), "{samples} samples < {n} strata, no extra visits: nothing to change");
+                continue;
+            }
             if samples < n {
-                assert!(done.is_none(), "{samples} samples < {n} strata: no factors");
+                // Base visits only, each to a bin uniform over the strata: each bin's base-visit
+                // weight n per_cycle / cycle.
+                assert!(done.is_some());
+                for (j, &f) in factors.iter().enumerate() {
+                    let expected = (n * (1 + row[j + 1] - row[j]) as u64) as f64 / cycle as f64;
+                    assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f} with {samples} samples");
+                }
                 continue;
             }
             assert!(done.is_some(), "{samples} samples from the film's first visit every bin");

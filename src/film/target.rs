@@ -251,17 +251,25 @@ fn extra_stratum(row: &[u32], k: u32) -> u32 {
 /// `pixel`'s stratum j `count_j` samples, where the film's division by `samples` and the
 /// weight 1 / p = cycle x width / per_cycle_j assumed samples x per_cycle_j / cycle; factor_j =
 /// samples per_cycle_j / (cycle count_j) turns bin first_bin + j into the mean over its own
-/// samples. That mean is unbiased only when every bin has a sample, so this returns None
-/// while some has none (the plain mean is unbiased too). `row`: the pixel's row of
-/// `target_visits` (empty without extra visits). Writes the factors into `factors` (strata
-/// values).
+/// samples. Every bin has a sample once samples >= strata (a film's first strata samples
+/// visit each bin once). Before that, every sample is a cycle's base visit, to a bin uniform
+/// over the strata, so factor_j = strata per_cycle_j / cycle makes the plain mean unbiased;
+/// without extra visits that factor is 1 and this returns None (nothing to change). `row`: the
+/// pixel's row of `target_visits` (empty without extra visits). Writes the factors into
+/// `factors` (strata values).
 pub fn stratum_factors(t: &TargetParams, row: &[u32], pixel: u32, samples: u64, factors: &mut [f32]) -> Option<()> {
     let n = t.strata as u64;
     let cycle = n + t.extra as u64;
-    if n == 0 || samples < n {
+    if n == 0 || (samples < n && t.extra == 0) {
         return None;
     }
     let per_cycle = |j: usize| if t.extra == 0 { 1 } else { 1 + row[j + 1] - row[j] } as u64;
+    if samples < n {
+        for (j, f) in factors.iter_mut().enumerate() {
+            *f = (n as f64 * per_cycle(j) as f64 / cycle as f64) as f32;
+        }
+        return Some(());
+    }
     let (rounds, rest) = (samples / cycle, samples % cycle);
     let mut counts: Vec<u64> = (0..n as usize).map(|j| rounds * per_cycle(j)).collect();
     // Any cycle-long run of samples meets stratum j per_cycle_j times; the `rest` last ones

@@ -141,6 +141,14 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
             settings.target_pilot_spp == 0 || matches!(settings.gate, crate::film::Gate::Transient { .. }),
             "--target-pilot shapes the target lengths of a transient gate: give --gate transient:... or --target-pilot 0"
         );
+        // Light-tracing connections (t = 1) land in other pixels, whose bins cannot be divided by
+        // the source pixel's visits: with extra visits only whole cycles would be unbiased.
+        // Captures have none (no connection ends at the sensor origin).
+        ensure!(
+            settings.target_pilot_spp == 0 || settings.nlos.is_some(),
+            "--target-pilot applies to --nlos captures only (a camera's light-tracing connections would be biased \
+             by the extra visits)"
+        );
     } else {
         ensure!(
             settings.connections_per_query == 1,
@@ -220,6 +228,8 @@ pub struct BidirectionalTracer<'a> {
     target_pilot_spp: u32,
     /// The pilot render is still to run (before the next pass).
     target_pilot_pending: bool,
+    /// The film's target lengths follow a pilot render's extra visits.
+    target_pilot_ran: bool,
 }
 
 impl<'a> BidirectionalTracer<'a> {
@@ -409,6 +419,7 @@ impl<'a> BidirectionalTracer<'a> {
             inline_shadow_rays,
             target_pilot_spp,
             target_pilot_pending: target_pilot_spp > 0,
+            target_pilot_ran: false,
         })
     }
 
@@ -433,6 +444,7 @@ impl<'a> BidirectionalTracer<'a> {
         self.wf.target_visits = rows;
         // Writes the parameters with a new seed and the film's first sample.
         self.reset_film();
+        self.target_pilot_ran = true;
         Ok(())
     }
 
@@ -536,9 +548,7 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn render_pass(&mut self, samples: u32) -> Result<()> {
-        if self.target_pilot_pending {
-            self.run_target_pilot()?;
-        }
+        self.prepare()?;
         for wave in self.wf.pass_waves(samples)? {
             self.render_wave(wave)?;
         }
@@ -566,7 +576,14 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn target_pilot_spp(&self) -> u32 {
-        self.target_pilot_spp
+        if self.target_pilot_ran { self.target_pilot_spp } else { 0 }
+    }
+
+    fn prepare(&mut self) -> Result<()> {
+        if self.target_pilot_pending {
+            self.run_target_pilot()?;
+        }
+        Ok(())
     }
 
     fn warm_up(&mut self) -> Result<()> {
@@ -592,6 +609,7 @@ impl Integrator for BidirectionalTracer<'_> {
             let bytes = (settings.width as u64 * settings.height as u64) * (t.strata as u64 + 1) * 4;
             let room = self.wf.resources.get("target_visits").unwrap().size();
             self.target_pilot_pending = self.target_pilot_spp > 0 && t.strata > 0 && bytes <= room;
+            self.target_pilot_ran = false;
             self.reset_film();
         }
         Ok(moved)

@@ -240,6 +240,12 @@ pub trait Integrator {
     fn target_pilot_spp(&self) -> u32 {
         0
     }
+    /// Work a render does once before its first pass (`BidirectionalTracer`: the pilot render
+    /// of `RenderSettings::target_pilot_spp`); `render_pass` does it when it has not been done.
+    /// A time budget counts it, but the pass sizer's rate of samples does not.
+    fn prepare(&mut self) -> Result<()> {
+        Ok(())
+    }
     /// Traces one sample per pixel and discards it, so that a device that compiles kernels at
     /// their first dispatch (lavapipe does) does so before a time budget starts. Work that
     /// belongs to the render (a pilot) is left for its first pass.
@@ -314,6 +320,7 @@ impl PassSizer {
         mut after_pass: impl FnMut(&dyn Integrator, f64),
     ) -> Result<f64> {
         let start = Instant::now();
+        tracer.prepare()?;
         let mut passes = 0;
         loop {
             let remaining = seconds - start.elapsed().as_secs_f64();

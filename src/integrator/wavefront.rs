@@ -237,7 +237,8 @@ impl<'a> Wavefront<'a> {
     /// Turns each bin of a film of stratified target lengths (ellipsoidal connections on a
     /// transient gate, `TargetParams::strata` > 0) from the sum over the pixel's samples divided
     /// by their number into the mean over the samples whose target fell in it, once every bin
-    /// has had one (see `film::target::stratum_factors`). Both are unbiased; the second is
+    /// has had one (see `film::target::stratum_factors`; before that, with extra visits, the
+    /// plain mean with each bin's base-visit weight). Both are unbiased; the second is
     /// free of the error of a bin's sample count. Only for the film of camera-subpath
     /// contributions, whose lengths are their slot's target; light-tracing splats land in
     /// other pixels and keep the plain mean.
@@ -251,7 +252,7 @@ impl<'a> Wavefront<'a> {
         let bins = film.bins as usize;
         for pixel in 0..(film.width * film.height) as usize {
             let row = if t.extra > 0 { &self.target_visits[pixel * (n + 1)..(pixel + 1) * (n + 1)] } else { &[][..] };
-            // None while some bin of the pixel has no sample: its plain mean is kept (unbiased too).
+            // None when there is nothing to change (no extra visits and fewer samples than bins).
             if stratum_factors(t, row, pixel as u32, self.samples_in_film, &mut factors).is_none() {
                 continue;
             }
