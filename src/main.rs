@@ -68,7 +68,10 @@ struct RenderArgs {
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
     /// `none` (steady state); `box:A..B` (W = 1 on [A, B)); `gaussian:MU,SIGMA`;
-    /// `cw:FREQ_HZ,PHASE_DEG` (W = cos(2 pi f l / c + phase), signed); `table:FILE.csv`
+    /// `cw:FREQ_HZ,PHASE_DEG` (W = cos(2 pi f l / c + phase), signed);
+    /// `cw:FREQ_HZ,PHASE_DEG,CODE` (W = C(f l / c + phase / 360), one period C of a CW-ToF code:
+    /// `sine`, `square`, `ham3`, `ham4:1`..`ham4:4`, `mseq[:CHIPS]`, `depthsel[:CHIPS[:N]]`;
+    /// see the README); `table:FILE.csv`
     /// (rows `length,weight`, linear in between, 0 outside); `transient:START,WIDTH,BINS`
     /// (a cube of BINS bin-integrated images).
     #[arg(long, default_value = "none", value_name = "SPEC")]

@@ -34,6 +34,17 @@ pub enum Gate {
         /// Phase (degrees).
         phase_deg: f64,
     },
+    /// W = C(f l / c + phase / 360): a continuous-wave code's correlation C of one period (a
+    /// function of the phase in periods), repeated (see [`CwCode`]).
+    CwCode {
+        /// Modulation frequency (Hz): the code repeats every c / f of optical path.
+        frequency_hz: f64,
+        /// Phase (degrees): W(l) = C(l / lambda + phase / 360), so a positive phase moves the
+        /// code to shorter paths, as for `Cw`.
+        phase_deg: f64,
+        /// The code.
+        code: CwCode,
+    },
     /// Piecewise-linear W through (length, weight) points, 0 outside them.
     Table {
         /// (length m, weight) points, increasing in length.
@@ -68,6 +79,144 @@ pub enum GateKind {
     Table = 4,
     /// One box per bin.
     Transient = 5,
+    /// A continuous-wave code: one period of piecewise-linear W, repeated.
+    CwCode = 6,
+}
+
+/// Correlation functions of continuous-wave time-of-flight codes (illumination modulation
+/// against sensor demodulation) as the pathlength importance of one measurement: C(x) over one
+/// period x in [0, 1), piecewise linear, peak 1. The shapes are those of the paper's reference
+/// implementation of CW-ToF in time-gated rendering (Pediredla et al. 2019) and, for the K = 4
+/// Hamiltonian code, of Gupta et al. 2018 ("What are optimal coding functions for
+/// time-of-flight imaging?").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CwCode {
+    /// Square-wave modulation and demodulation (50 % duty), DC removed: a triangle wave, +1 at
+    /// x = 0, -1 at x = 1/2 (signed, zero mean).
+    Square,
+    /// Hamiltonian code, K = 3: a pulse of 1/6 duty against a square demodulation of 1/2 duty.
+    /// C rises from 0 to 1 over [0, 1/6), stays 1 to 1/2, falls to 0 at 2/3 and is 0 to the end
+    /// of the period. The K = 3 measurements are this code at phases 0, 120 and 240 degrees.
+    Hamiltonian3,
+    /// Hamiltonian code, K = 4, measurement `i` (1 to 4): a pulse of 1/12 duty against the
+    /// binary demodulation 000001111110, 001111110000, 111000011100 or 100011000111 (twelfths of
+    /// the period). C equals the demodulation's bit k at x = k/12, linear in between.
+    Hamiltonian4(u8),
+    /// An m-sequence of `chips` chips per period (idealised autocorrelation): 1 at x = 0,
+    /// falling linearly over one chip either side to a floor of 1/chips.
+    MSequence {
+        /// Chips per period (at least 2).
+        chips: u32,
+    },
+    /// The depth-selective code of Tadano et al. 2015 (the paper's Fig. 9): the sum of
+    /// `neighbours` m-sequence correlations shifted by one chip each, less their overlapping
+    /// floors. A trapezoid on the floor 1/chips: 1 from x = 0 to (neighbours - 1)/chips,
+    /// falling to the floor over the next chip and rising over the last chip of the period.
+    /// Paths in the trapezoid weigh about `chips` times the others: the sensor selects a range
+    /// of depths.
+    DepthSelective {
+        /// Chips per period (at least neighbours + 1).
+        chips: u32,
+        /// Chips of the flat top plus one (at least 1).
+        neighbours: u32,
+    },
+}
+
+/// The Hamiltonian K = 4 demodulations (bits of twelfths of the period).
+const HAMILTONIAN4: [&str; 4] = ["000001111110", "001111110000", "111000011100", "100011000111"];
+
+impl CwCode {
+    /// Parses `square`, `ham3`, `ham4:I`, `mseq[:CHIPS]` and `depthsel[:CHIPS[:NEIGHBOURS]]`
+    /// (defaults 32 chips, 3 neighbours); None for `sine`, the plain `cw` gate.
+    pub fn parse(spec: &str) -> Result<Option<Self>> {
+        let mut parts = spec.trim().split(':');
+        let name = parts.next().unwrap_or("");
+        let args: Vec<&str> = parts.collect();
+        let number = |i: usize, default: u32, what: &str| -> Result<u32> {
+            match args.get(i) {
+                None => Ok(default),
+                Some(a) => a.trim().parse::<u32>().with_context(|| format!("cw code `{spec}`: {what} `{a}` is not a whole number")),
+            }
+        };
+        let most = |n: usize| -> Result<()> {
+            ensure!(args.len() <= n, "cw code `{spec}`: too many parameters");
+            Ok(())
+        };
+        let code = match name {
+            "sine" => {
+                most(0)?;
+                return Ok(None);
+            }
+            "square" => {
+                most(0)?;
+                CwCode::Square
+            }
+            "ham3" => {
+                most(0)?;
+                CwCode::Hamiltonian3
+            }
+            "ham4" => {
+                most(1)?;
+                let i = number(0, 0, "measurement")?;
+                ensure!((1..=4).contains(&i), "cw code `{spec}`: give the K = 4 measurement 1 to 4, e.g. ham4:2");
+                CwCode::Hamiltonian4(i as u8)
+            }
+            "mseq" => {
+                most(1)?;
+                CwCode::MSequence { chips: number(0, 32, "chips")? }
+            }
+            "depthsel" => {
+                most(2)?;
+                CwCode::DepthSelective { chips: number(0, 32, "chips")?, neighbours: number(1, 3, "neighbours")? }
+            }
+            other => bail!("unknown cw code `{other}`: use sine, square, ham3, ham4:I, mseq[:CHIPS] or depthsel[:CHIPS[:NEIGHBOURS]]"),
+        };
+        match code {
+            CwCode::MSequence { chips } => ensure!(chips >= 2, "cw code `{spec}`: an m-sequence needs at least 2 chips"),
+            CwCode::DepthSelective { chips, neighbours } => ensure!(
+                neighbours >= 1 && chips > neighbours && chips <= 1 << 20,
+                "cw code `{spec}`: depth selection needs 1 <= neighbours < chips (<= 2^20)"
+            ),
+            _ => {}
+        }
+        if let CwCode::MSequence { chips } = code {
+            ensure!(chips <= 1 << 20, "cw code `{spec}`: at most 2^20 chips");
+        }
+        Ok(Some(code))
+    }
+
+    /// The code as `parse` reads it.
+    pub fn name(&self) -> String {
+        match self {
+            CwCode::Square => "square".into(),
+            CwCode::Hamiltonian3 => "ham3".into(),
+            CwCode::Hamiltonian4(i) => format!("ham4:{i}"),
+            CwCode::MSequence { chips } => format!("mseq:{chips}"),
+            CwCode::DepthSelective { chips, neighbours } => format!("depthsel:{chips}:{neighbours}"),
+        }
+    }
+
+    /// One period of C as (x, C(x)) points from x = 0 to x = 1 (C(1) = C(0)), x in periods,
+    /// nondecreasing; C is linear between them.
+    pub fn breakpoints(&self) -> Vec<(f64, f64)> {
+        match *self {
+            CwCode::Square => vec![(0.0, 1.0), (0.5, -1.0), (1.0, 1.0)],
+            CwCode::Hamiltonian3 => vec![(0.0, 0.0), (1.0 / 6.0, 1.0), (0.5, 1.0), (2.0 / 3.0, 0.0), (1.0, 0.0)],
+            CwCode::Hamiltonian4(i) => {
+                let bits: Vec<f64> = HAMILTONIAN4[i as usize - 1].bytes().map(|b| (b - b'0') as f64).collect();
+                (0..=12).map(|k| (k as f64 / 12.0, bits[k % 12])).collect()
+            }
+            CwCode::MSequence { chips } => {
+                let (p, floor) = (chips as f64, 1.0 / chips as f64);
+                vec![(0.0, 1.0), (1.0 / p, floor), (1.0 - 1.0 / p, floor), (1.0, 1.0)]
+            }
+            CwCode::DepthSelective { chips, neighbours } => {
+                let (p, n) = (chips as f64, neighbours as f64);
+                let floor = 1.0 / p;
+                vec![(0.0, 1.0), ((n - 1.0) / p, 1.0), (n / p, floor), (1.0 - 1.0 / p, floor), (1.0, 1.0)]
+            }
+        }
+    }
 }
 
 impl Gate {
@@ -87,10 +236,17 @@ impl Gate {
                 Gate::Gaussian { mean: parse_length(mu)?, sigma: parse_length(sigma)? }
             }
             "cw" => {
-                let [f, phase] = split_n(args, "cw:FREQ_HZ,PHASE_DEG")?;
+                let (f, phase, code) = match args.split(',').collect::<Vec<_>>()[..] {
+                    [f, phase] => (f, phase, None),
+                    [f, phase, code] => (f, phase, CwCode::parse(code)?),
+                    _ => bail!("cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:1.4e9,0,depthsel, got `cw:{args}`"),
+                };
                 let frequency_hz = parse_number(f, "cw frequency (Hz)")?;
                 let phase_deg = parse_number(phase, "cw phase (degrees)")?;
-                Gate::Cw { frequency_hz, phase_deg }
+                match code {
+                    None => Gate::Cw { frequency_hz, phase_deg },
+                    Some(code) => Gate::CwCode { frequency_hz, phase_deg, code },
+                }
             }
             "table" => {
                 let path = Path::new(args.trim());
@@ -104,7 +260,7 @@ impl Gate {
                 Gate::Transient { start: parse_length(start)?, width: parse_length(width)?, bins }
             }
             other => bail!(
-                "unknown gate kind `{other}`: use none, box:A..B, gaussian:MU,SIGMA, cw:FREQ_HZ,PHASE_DEG, \
+                "unknown gate kind `{other}`: use none, box:A..B, gaussian:MU,SIGMA, cw:FREQ_HZ,PHASE_DEG[,CODE], \
                  table:FILE.csv or transient:START,WIDTH,BINS"
             ),
         };
@@ -128,8 +284,11 @@ impl Gate {
             Gate::Box { start, end } if !(end > start) => bail!("box gate: end {end} m must exceed start {start} m"),
             Gate::Box { start, .. } if start < 0.0 => bail!("box gate: start {start} m is negative"),
             Gate::Gaussian { sigma, .. } if !(sigma > 0.0) => bail!("gaussian gate: sigma {sigma} m must be positive"),
-            Gate::Cw { frequency_hz, .. } if !(frequency_hz > 0.0) => {
+            Gate::Cw { frequency_hz, .. } | Gate::CwCode { frequency_hz, .. } if !(frequency_hz > 0.0 && frequency_hz.is_finite()) => {
                 bail!("cw gate: frequency {frequency_hz} Hz must be positive")
+            }
+            Gate::Cw { phase_deg, .. } | Gate::CwCode { phase_deg, .. } if !phase_deg.is_finite() => {
+                bail!("cw gate: phase {phase_deg} degrees must be finite")
             }
             Gate::Transient { width, .. } if !(width > 0.0) => bail!("transient gate: bin width {width} m must be positive"),
             Gate::Transient { start, .. } if start < 0.0 => bail!("transient gate: start {start} m is negative"),
@@ -149,6 +308,9 @@ impl Gate {
             Gate::Cw { frequency_hz, phase_deg } => {
                 Gate::Cw { frequency_hz, phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT }
             }
+            Gate::CwCode { frequency_hz, phase_deg, code } => {
+                Gate::CwCode { frequency_hz, phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT, code }
+            }
             Gate::Table { points, source } => {
                 let points: Vec<(f64, f64)> = points.iter().map(|&(l, w)| (l + d, w)).collect();
                 ensure!(points[0].0 >= 0.0, "table gate {} shifted by {d} m starts below zero length", source.display());
@@ -167,6 +329,7 @@ impl Gate {
             Gate::Box { .. } => GateKind::Box,
             Gate::Gaussian { .. } => GateKind::Gaussian,
             Gate::Cw { .. } => GateKind::Cw,
+            Gate::CwCode { .. } => GateKind::CwCode,
             Gate::Table { .. } => GateKind::Table,
             Gate::Transient { .. } => GateKind::Transient,
         }
@@ -207,10 +370,12 @@ impl Gate {
         }
     }
 
-    /// The (length, weight) table for the GPU (empty unless a table gate).
+    /// The (length, weight) table for the GPU: a table gate's points, a cw code's period
+    /// ((phase in periods, weight)); empty for the other gates.
     pub fn table(&self) -> Vec<[f32; 2]> {
         match self {
             Gate::Table { points, .. } => points.iter().map(|&(l, w)| [l as f32, w as f32]).collect(),
+            Gate::CwCode { code, .. } => code.breakpoints().iter().map(|&(x, w)| [x as f32, w as f32]).collect(),
             _ => Vec::new(),
         }
     }
@@ -224,6 +389,8 @@ impl Gate {
             Gate::Cw { frequency_hz, phase_deg } => {
                 (2.0 * std::f64::consts::PI * frequency_hz / SPEED_OF_LIGHT, phase_deg.to_radians())
             }
+            // Periods per metre and the phase in periods, in [0, 1).
+            Gate::CwCode { frequency_hz, phase_deg, .. } => (frequency_hz / SPEED_OF_LIGHT, (phase_deg / 360.0).rem_euclid(1.0)),
             Gate::Table { ref points, .. } => (points[0].0, points[points.len() - 1].0),
             Gate::Transient { start, width, .. } => (start, width),
         };
@@ -258,6 +425,13 @@ impl Gate {
                 format!("gaussian mean {} m, sigma {} m ({:.2} ps)", short(*mean), short(*sigma), ps(*sigma))
             }
             Gate::Cw { frequency_hz, phase_deg } => format!("cw {frequency_hz} Hz, phase {} deg", short(*phase_deg)),
+            Gate::CwCode { frequency_hz, phase_deg, code } => format!(
+                "cw {frequency_hz} Hz, phase {} deg, code {} (period {:.4} m = {:.2} ps)",
+                short(*phase_deg),
+                code.name(),
+                SPEED_OF_LIGHT / frequency_hz,
+                ps(SPEED_OF_LIGHT / frequency_hz)
+            ),
             Gate::Table { points, source } => format!("table {} ({} points)", source.display(), points.len()),
             Gate::Transient { start, width, bins } => {
                 format!("transient {bins} bins of {} m ({:.2} ps) from {} m", short(*width), ps(*width), short(*start))
@@ -276,6 +450,10 @@ pub fn gate_weight(kind: GateKind, g: &layout::GateParams, table: &[[f32; 2]], p
             (-0.5 * z * z).exp()
         }
         GateKind::Cw => (g.p0 * path_length + g.p1).cos(),
+        GateKind::CwCode => {
+            let x = g.p0 * path_length + g.p1;
+            gate_table_lookup(table, x - x.floor())
+        }
         GateKind::Table => gate_table_lookup(table, path_length),
         GateKind::Transient => (gate_bin(kind, g, path_length) >= 0) as u32 as f32,
     }
@@ -402,5 +580,72 @@ mod tests {
         assert!(e.contains("bad.csv:2"), "{e}");
         std::fs::write(&bad, "1.0,0\n0.5,1\n").unwrap();
         assert!(format!("{:#}", Gate::parse(&format!("table:{}", bad.display())).unwrap_err()).contains("increase"));
+    }
+
+    #[test]
+    fn cw_codes_parse_and_have_their_shapes() {
+        let code = |spec: &str| match Gate::parse(spec).unwrap() {
+            Gate::CwCode { code, frequency_hz, phase_deg } => {
+                assert_eq!((frequency_hz, phase_deg), (1e9, 30.0));
+                code
+            }
+            other => panic!("{spec}: {other:?}"),
+        };
+        assert_eq!(Gate::parse("cw:1e9,30,sine").unwrap(), Gate::Cw { frequency_hz: 1e9, phase_deg: 30.0 });
+        assert_eq!(code("cw:1e9,30,square"), CwCode::Square);
+        assert_eq!(code("cw:1e9,30,ham3"), CwCode::Hamiltonian3);
+        assert_eq!(code("cw:1e9,30,ham4:3"), CwCode::Hamiltonian4(3));
+        assert_eq!(code("cw:1e9,30,mseq"), CwCode::MSequence { chips: 32 });
+        assert_eq!(code("cw:1e9,30,depthsel"), CwCode::DepthSelective { chips: 32, neighbours: 3 });
+        assert_eq!(code("cw:1e9,30,depthsel:64:5"), CwCode::DepthSelective { chips: 64, neighbours: 5 });
+        for bad in ["cw:1e9,30,ham4", "cw:1e9,30,ham4:0", "cw:1e9,30,mseq:1", "cw:1e9,30,depthsel:4:4", "cw:1e9,30,depthsel:4:0",
+                    "cw:1e9,30,cosine", "cw:1e9,30,ham3:1", "cw:0,30,square", "cw:1e9,inf,square", "cw:1e9,30,square,1"] {
+            assert!(Gate::parse(bad).is_err(), "{bad} should not parse");
+        }
+        let at = |c: CwCode, x: f64| -> f64 {
+            let p = c.breakpoints();
+            let i = p.partition_point(|q| q.0 <= x) - 1;
+            if i + 1 == p.len() { p[i].1 } else { p[i].1 + (p[i + 1].1 - p[i].1) * (x - p[i].0) / (p[i + 1].0 - p[i].0) }
+        };
+        let integral = |c: CwCode| c.breakpoints().windows(2).map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0)).sum::<f64>();
+        for c in [CwCode::Square, CwCode::Hamiltonian3, CwCode::Hamiltonian4(1), CwCode::Hamiltonian4(4), CwCode::MSequence { chips: 7 },
+                  CwCode::DepthSelective { chips: 32, neighbours: 3 }] {
+            let p = c.breakpoints();
+            assert_eq!((p[0].0, p[p.len() - 1].0), (0.0, 1.0), "{c:?} spans one period");
+            assert_eq!(p[0].1, p[p.len() - 1].1, "{c:?} is periodic");
+            assert!(p.windows(2).all(|w| w[0].0 <= w[1].0), "{c:?}: x nondecreasing");
+            assert_eq!(p.iter().map(|q| q.1).fold(f64::MIN, f64::max), 1.0, "{c:?}: peak 1");
+            assert_eq!(CwCode::parse(&c.name()).unwrap(), Some(c));
+        }
+        // Square: a triangle of zero mean.
+        assert_eq!((at(CwCode::Square, 0.25), at(CwCode::Square, 0.5), integral(CwCode::Square)), (0.0, -1.0, 0.0));
+        // Hamiltonian K = 3: a third of a period at 1, ramps of a sixth.
+        assert_eq!((at(CwCode::Hamiltonian3, 1.0 / 12.0), at(CwCode::Hamiltonian3, 0.4), at(CwCode::Hamiltonian3, 0.8)), (0.5, 1.0, 0.0));
+        assert!((integral(CwCode::Hamiltonian3) - 0.5).abs() < 1e-12);
+        // Hamiltonian K = 4: at every twelfth the four measurements form a code word, and
+        // neighbouring words differ in one measurement (a Hamiltonian cycle of 12 words).
+        let words: Vec<u32> = (0..12)
+            .map(|k| (1..=4u8).map(|i| at(CwCode::Hamiltonian4(i), k as f64 / 12.0) as u32).fold(0, |w, b| 2 * w + b))
+            .collect();
+        assert!((0..12).all(|k| (words[k] ^ words[(k + 1) % 12]).count_ones() == 1), "{words:?}");
+        assert_eq!(words.iter().collect::<std::collections::HashSet<_>>().len(), 12);
+        // m-sequence and depth selection: a floor of 1/chips; depth selection's period integral
+        // is (n + 1 - n/P) / P and its top (n - 1) chips wide.
+        assert_eq!(at(CwCode::MSequence { chips: 8 }, 0.5), 0.125);
+        let ds = CwCode::DepthSelective { chips: 32, neighbours: 3 };
+        assert_eq!((at(ds, 1.5 / 32.0), at(ds, 2.5 / 32.0), at(ds, 0.5)), (1.0, (1.0 + 1.0 / 32.0) / 2.0, 1.0 / 32.0));
+        assert!((integral(ds) - (4.0 - 3.0 / 32.0) / 32.0).abs() < 1e-12);
+        // W(l) = C(f l / c + phase / 360), on the CPU twin.
+        let gate = Gate::parse("cw:299792458,90,ham3").unwrap();
+        let (kind, g, table) = (gate.kind(), gate.to_gpu(), gate.table());
+        assert_eq!(kind, GateKind::CwCode);
+        for l in [0.1f32, 0.35, 2.6, 7.95] {
+            let x = (l as f64 + 0.25).fract();
+            assert!((gate_weight(kind, &g, &table, l) as f64 - at(CwCode::Hamiltonian3, x)).abs() < 1e-5, "W({l})");
+        }
+        // Shifting a code later by d is a phase change of -360 f d / c, as for the sine.
+        let later = gate.shifted(0.25).unwrap();
+        let (g2, t2) = (later.to_gpu(), later.table());
+        assert!((gate_weight(kind, &g2, &t2, 2.85) - gate_weight(kind, &g, &table, 2.6)).abs() < 1e-5);
     }
 }

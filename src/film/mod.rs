@@ -5,7 +5,7 @@ pub mod gate;
 pub mod output;
 pub mod target;
 
-pub use gate::{Gate, GateKind};
+pub use gate::{CwCode, Gate, GateKind};
 
 /// Pixel estimates of a render: `data[((y * width + x) * bins + bin) * 3 + channel]`, row 0 at
 /// the top (the [H, W, T, 3] layout of mitransient). Values are bin-integrated radiance

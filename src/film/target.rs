@@ -26,11 +26,26 @@
 //! keeps a visit a cycle, and `stratum_factors` still divides each bin by its own visits.
 
 use super::gate::{Gate, gate_bin_position, gate_weight};
+use crate::units::SPEED_OF_LIGHT;
 use crate::gpu::layout::{GateParams, TargetParams};
 use crate::rng::pcg4d;
 
-/// Cells of the target table.
+/// Cells of the target table (fewest, for cw codes).
 pub const TARGET_CELLS: u32 = 1024;
+/// Most cells of a cw code's target table.
+pub const MAX_TARGET_CELLS: u32 = 1 << 16;
+
+/// The largest |C| of a cw code's period `points` (see `CwCode::breakpoints`) at its breakpoints
+/// with phase in [x0, x1] (periods; every breakpoint when the range spans a period).
+fn largest_between(points: &[(f64, f64)], x0: f64, x1: f64) -> f64 {
+    let whole = x1 - x0 >= 1.0;
+    let (a, b) = (x0 - x0.floor(), x1 - x0.floor());
+    points
+        .iter()
+        .filter(|&&(x, _)| whole || (x >= a && x <= b) || (x + 1.0 >= a && x + 1.0 <= b))
+        .map(|p| p.1.abs())
+        .fold(0.0, f64::max)
+}
 
 /// Target-length sampling of one gate.
 #[derive(Clone, Debug)]
@@ -52,7 +67,7 @@ impl TargetSampler {
             Gate::None => return None,
             Gate::Box { start, end } => (*start, *end),
             Gate::Gaussian { mean, sigma } => (mean - 8.0 * sigma, mean + 8.0 * sigma),
-            Gate::Cw { .. } => path_range,
+            Gate::Cw { .. } | Gate::CwCode { .. } => path_range,
             Gate::Table { points, .. } => (points.first()?.0, points.last()?.0),
             Gate::Transient { start, width, bins } => (*start, start + width * *bins as f64),
         };
@@ -76,11 +91,29 @@ impl TargetSampler {
         let kind = gate.kind();
         let table = gate.table();
         let w = |l: f64| gate_weight(kind, &g, &table, l as f32).abs() as f64;
-        let h = (hi - lo) / TARGET_CELLS as f64;
-        let mut masses: Vec<f64> = (0..TARGET_CELLS)
+        // A cw code gets cells of at most half its narrowest feature, and each cell's exact
+        // bound (the largest |W| at its ends and at the code's breakpoints within it).
+        let code = match gate {
+            Gate::CwCode { frequency_hz, phase_deg, code } => Some((frequency_hz / SPEED_OF_LIGHT, phase_deg / 360.0, code.breakpoints())),
+            _ => None,
+        };
+        let cells = match &code {
+            Some((per_metre, _, points)) => {
+                let narrowest = points.windows(2).map(|p| p[1].0 - p[0].0).filter(|&d| d > 0.0).fold(1.0, f64::min);
+                let periods = (hi - lo) * per_metre;
+                ((periods * 2.0 / narrowest).ceil() as u64).clamp(TARGET_CELLS as u64, MAX_TARGET_CELLS as u64) as u32
+            }
+            None => TARGET_CELLS,
+        };
+        let h = (hi - lo) / cells as f64;
+        let mut masses: Vec<f64> = (0..cells)
             .map(|i| {
                 let a = lo + i as f64 * h;
-                w(a).max(w(a + 0.5 * h)).max(w(a + h))
+                let sampled = w(a).max(w(a + 0.5 * h)).max(w(a + h));
+                match &code {
+                    Some((per_metre, phase, points)) => sampled.max(largest_between(points, a * per_metre + phase, (a + h) * per_metre + phase)),
+                    None => sampled,
+                }
             })
             .collect();
         let top = masses.iter().cloned().fold(0.0, f64::max);
@@ -103,7 +136,7 @@ impl TargetSampler {
         let params = TargetParams {
             lo: lo as f32,
             hi: hi as f32,
-            cells: TARGET_CELLS,
+            cells,
             strata,
             first_bin,
             stride: golden_stride(strata),
