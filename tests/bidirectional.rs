@@ -232,13 +232,13 @@ fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
 
 /// CW codes: a Hamiltonian code (zero over a third of its period, where connections trace no
 /// shadow ray) through direct connections, and the depth-selective code of the paper's Fig. 9
-/// (a trapezoid about 20 ps wide at half height on a floor of 1/32; 1.4 GHz) through ellipsoidal
+/// (a trapezoid about 20 ps wide at half height on a floor of 1/32; 4.7 GHz) through ellipsoidal
 /// ones, whose target lengths follow it.
 #[test]
 fn bidirectional_methods_match_at_cw_codes() {
     let scene = common::cornell_box();
     assert_direct_matches_path("direct cw ham3 300 MHz", &scene, Gate::parse("cw:300e6,40,ham3").unwrap(), 32, 480);
-    assert_ellipsoidal_matches_direct("ellipsoidal cw depthsel 1.4 GHz", &scene, Gate::parse("cw:1.4e9,-30,depthsel").unwrap(), 32, 490);
+    assert_ellipsoidal_matches_direct("ellipsoidal cw depthsel 4.7 GHz", &scene, Gate::parse("cw:4.7e9,-30,depthsel").unwrap(), 32, 490);
 }
 
 /// Transient gates draw target lengths bin by bin (stratified); with at least as many samples

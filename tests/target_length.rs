@@ -18,7 +18,7 @@ fn gates() -> Vec<(&'static str, Gate)> {
         ("wide box", Gate::Box { start: 2.5, end: 4.0 }),
         ("gaussian", Gate::Gaussian { mean: 3.2, sigma: 0.05 }),
         ("cw", Gate::Cw { frequency_hz: 1e8, phase_deg: 30.0 }),
-        ("cw depth-selective", Gate::parse("cw:1.4e9,-30,depthsel").unwrap()),
+        ("cw depth-selective", Gate::parse("cw:4.7e9,-30,depthsel").unwrap()),
         ("cw hamiltonian", Gate::parse("cw:300e6,75,ham4:3").unwrap()),
         ("table", Gate::Table { points: vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)], source: "t.csv".into() }),
         ("transient", Gate::Transient { start: 1.94, width: 0.1, bins: 20 }),

@@ -122,6 +122,10 @@ pub enum CwCode {
     },
 }
 
+/// Most chips of an m-sequence or depth-selective code: f32 path lengths (a unit in the last
+/// place is about 1 um at 10 m) must resolve a chip at the frequencies these codes use.
+pub const MAX_CHIPS: u32 = 4096;
+
 /// The Hamiltonian K = 4 demodulations (bits of twelfths of the period).
 const HAMILTONIAN4: [&str; 4] = ["000001111110", "001111110000", "111000011100", "100011000111"];
 
@@ -174,13 +178,13 @@ impl CwCode {
         match code {
             CwCode::MSequence { chips } => ensure!(chips >= 2, "cw code `{spec}`: an m-sequence needs at least 2 chips"),
             CwCode::DepthSelective { chips, neighbours } => ensure!(
-                neighbours >= 1 && chips > neighbours && chips <= 1 << 20,
-                "cw code `{spec}`: depth selection needs 1 <= neighbours < chips (<= 2^20)"
+                neighbours >= 1 && chips > neighbours && chips <= MAX_CHIPS,
+                "cw code `{spec}`: depth selection needs 1 <= neighbours < chips <= {MAX_CHIPS}"
             ),
             _ => {}
         }
         if let CwCode::MSequence { chips } = code {
-            ensure!(chips <= 1 << 20, "cw code `{spec}`: at most 2^20 chips");
+            ensure!(chips <= MAX_CHIPS, "cw code `{spec}`: at most {MAX_CHIPS} chips");
         }
         Ok(Some(code))
     }
@@ -220,8 +224,8 @@ impl CwCode {
 }
 
 impl Gate {
-    /// Parses `none`, `box:A..B`, `gaussian:MU,SIGMA`, `cw:FREQ_HZ,PHASE_DEG`, `table:FILE.csv`,
-    /// `transient:START,WIDTH,BINS`. Lengths accept `m`, `mm`, `ps`, `ns` suffixes.
+    /// Parses `none`, `box:A..B`, `gaussian:MU,SIGMA`, `cw:FREQ_HZ,PHASE_DEG[,CODE]` (see
+    /// [`CwCode::parse`]), `table:FILE.csv`, `transient:START,WIDTH,BINS`. Lengths accept `m`, `mm`, `ps`, `ns` suffixes.
     pub fn parse(spec: &str) -> Result<Self> {
         let (kind, args) = spec.split_once(':').unwrap_or((spec, ""));
         let gate = match kind.trim() {
@@ -239,7 +243,7 @@ impl Gate {
                 let (f, phase, code) = match args.split(',').collect::<Vec<_>>()[..] {
                     [f, phase] => (f, phase, None),
                     [f, phase, code] => (f, phase, CwCode::parse(code)?),
-                    _ => bail!("cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:1.4e9,0,depthsel, got `cw:{args}`"),
+                    _ => bail!("cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:4.7e9,0,depthsel, got `cw:{args}`"),
                 };
                 let frequency_hz = parse_number(f, "cw frequency (Hz)")?;
                 let phase_deg = parse_number(phase, "cw phase (degrees)")?;

@@ -91,8 +91,9 @@ impl TargetSampler {
         let kind = gate.kind();
         let table = gate.table();
         let w = |l: f64| gate_weight(kind, &g, &table, l as f32).abs() as f64;
-        // A cw code gets cells of at most half its narrowest feature, and each cell's exact
-        // bound (the largest |W| at its ends and at the code's breakpoints within it).
+        // A cw code gets cells of at most half its narrowest feature (up to MAX_TARGET_CELLS),
+        // and each cell's exact bound (the largest |W| at its ends and at the code's
+        // breakpoints within it).
         let code = match gate {
             Gate::CwCode { frequency_hz, phase_deg, code } => Some((frequency_hz / SPEED_OF_LIGHT, phase_deg / 360.0, code.breakpoints())),
             _ => None,

@@ -209,17 +209,17 @@ pub struct Camera {
 pub struct GateParams {
     /// Film bins per pixel (1 unless transient).
     pub bins: u32,
-    /// Points of a table gate.
+    /// Points of a table gate, or of a cw code's period.
     pub table_len: u32,
     /// Padding.
     pub reserved0: u32,
     /// Padding.
     pub reserved1: u32,
     /// box: start (m); gaussian: mean (m); cw: 2 pi f / c (rad/m); transient: start (m);
-    /// table: first tabulated length (m).
+    /// table: first tabulated length (m); cw code: f / c (periods per metre).
     pub p0: f32,
     /// box: end (m); gaussian: sigma (m); cw: phase (rad); transient: bin width (m);
-    /// table: last tabulated length (m).
+    /// table: last tabulated length (m); cw code: phase (periods, in [0, 1)).
     pub p1: f32,
     /// Upper end of the support (m); `f32::MAX` when unbounded.
     pub max_length: f32,
