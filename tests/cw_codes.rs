@@ -69,8 +69,7 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
                     (code_integral(&points, x1) - code_integral(&points, x0)) / (x1 - x0)
                 })
                 .collect();
-            let slope = points.windows(2).filter(|w| w[1].0 > w[0].0).map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs()).fold(0.0, f64::max);
-            let within_bin = slope * per_metre * width;
+            let within_bin = code.steepest_slope() * per_metre * width;
             let mut worst = 0.0f64;
             let mut spread = 0.0f64;
             for p in 0..pixels {

@@ -336,10 +336,8 @@ fn wgsl_gates_match_cpu_twin() {
             let abs = match &gate {
                 Gate::Cw { .. } => SIN_COS_ABS,
                 Gate::CwCode { code, .. } => {
-                    let p = code.breakpoints();
-                    let slope = p.windows(2).filter(|w| w[1].0 > w[0].0).map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs()).fold(0.0, f64::max);
                     let x = g.p0 * x[0] + g.p1 + 1.0;
-                    (4.0 * slope * (f32::from_bits(x.to_bits() + 1) - x) as f64) as f32 + 1e-6
+                    (4.0 * code.steepest_slope() * (f32::from_bits(x.to_bits() + 1) - x) as f64) as f32 + 1e-6
                 }
                 _ => 1e-6,
             };

@@ -200,6 +200,12 @@ impl CwCode {
         }
     }
 
+    /// The largest |dC/dx| (per period) over the code's linear pieces.
+    pub fn steepest_slope(&self) -> f64 {
+        let p = self.breakpoints();
+        p.windows(2).filter(|w| w[1].0 > w[0].0).map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs()).fold(0.0, f64::max)
+    }
+
     /// One period of C as (x, C(x)) points from x = 0 to x = 1 (C(1) = C(0)), x in periods,
     /// nondecreasing; C is linear between them.
     pub fn breakpoints(&self) -> Vec<(f64, f64)> {

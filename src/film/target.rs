@@ -304,15 +304,11 @@ pub fn stratum_factors(t: &TargetParams, row: &[u32], pixel: u32, samples: u64, 
         }
         return Some(());
     }
-    let (rounds, rest) = (samples / cycle, samples % cycle);
+    let rounds = samples / cycle;
     let mut counts: Vec<u64> = (0..n as usize).map(|j| rounds * per_cycle(j)).collect();
-    // Any cycle-long run of samples meets stratum j per_cycle_j times; the `rest` last ones
-    // are the first of a cycle: base visits, then extra ones.
-    for q in 0..rest.min(n) {
-        counts[stratum(t, t.seed, pixel, (rounds * n + q) as u32) as usize] += 1;
-    }
-    for i in 0..rest.saturating_sub(n) {
-        counts[extra_stratum(row, extra_position(t, pixel, i as u32)) as usize] += 1;
+    // Any cycle-long run of samples meets stratum j per_cycle_j times; the rest are counted.
+    for s in rounds * cycle..samples {
+        counts[target_visit(t, row, pixel, t.film_first_sample.wrapping_add(s as u32)).stratum as usize] += 1;
     }
     if counts.contains(&0) {
         return None;

@@ -429,12 +429,7 @@ impl<'a> BidirectionalTracer<'a> {
     /// stays unbiased whatever the allocation.
     fn run_target_pilot(&mut self) -> Result<()> {
         self.target_pilot_pending = false;
-        let mut left = self.target_pilot_spp;
-        while left > 0 {
-            let n = left.min(self.wf.samples_per_pass);
-            self.render_pass(n)?;
-            left -= n;
-        }
+        self.render_samples(self.target_pilot_spp as u64)?;
         let pilot = self.film()?;
         let t = self.wf.params.target_length;
         let (extra, rows) = crate::film::target::visit_tables(&t, &pilot.data, pilot.bins as usize);
