@@ -128,6 +128,16 @@ struct RenderArgs {
     /// touch.
     #[arg(long, default_value_t = 1.0, value_name = "R")]
     query_split: f32,
+    /// Thin-lens camera: radius of the lens in metres (0: a pinhole). Overrides the camera
+    /// node's `extras.aperture_radius`; needs a focus distance (--focus-distance or
+    /// `extras.focus_distance`). The lens lies in the plane through the camera node's origin
+    /// normal to its viewing direction.
+    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
+    aperture_radius: Option<f32>,
+    /// Thin-lens camera: distance in metres along the viewing direction from the lens to the
+    /// plane in focus. Overrides the camera node's `extras.focus_distance`.
+    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
+    focus_distance: Option<f32>,
     /// `ellipsoidal`: a stochastic descent visits every node of a subtree once it reaches one
     /// of at most N BVH nodes (1: descend to single leaves).
     #[arg(long, default_value_t = 31, value_name = "N")]
@@ -501,6 +511,26 @@ fn run_view(args: ViewArgs) -> Result<()> {
     })
 }
 
+/// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
+/// (each overrides the glTF camera node's extras; an aperture radius of 0 makes a pinhole).
+fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &RenderArgs) -> Result<gatetrace::scene::Scene> {
+    if args.aperture_radius.is_none() && args.focus_distance.is_none() {
+        return Ok(scene);
+    }
+    let old = scene.camera.lens;
+    let radius = args.aperture_radius.or(old.map(|l| l.aperture_radius)).unwrap_or(0.0);
+    let focus = args.focus_distance.or(old.map(|l| l.focus_distance));
+    scene.camera.lens = match (radius, focus) {
+        (r, _) if r == 0.0 => None,
+        (r, Some(f)) => Some(gatetrace::scene::ThinLens::new(r, f).context("--aperture-radius/--focus-distance")?),
+        (_, None) => bail!(
+            "--aperture-radius needs a focus distance: give --focus-distance METRES (the camera of {} has none)",
+            scene.source
+        ),
+    };
+    Ok(scene)
+}
+
 fn run_render(args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
@@ -576,6 +606,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
     );
     if let Some(scan) = args.nlos {
         ensure!(
+            args.aperture_radius.is_none() && args.focus_distance.is_none(),
+            "--aperture-radius and --focus-distance set the camera's lens: an NLOS capture (--nlos) has no camera"
+        );
+        ensure!(
             !sequence && args.anim_time.is_none(),
             "--nlos renders one capture: --frames, --frame-range and --anim-time do not apply to it"
         );
@@ -602,9 +636,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
-        None => Some(PreparedScene::new(load_gltf(&scene_path)?)?),
+        None => Some(PreparedScene::new(with_lens_options(load_gltf(&scene_path)?, &args)?)?),
         Some(_) => {
-            load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?;
+            with_lens_options(load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?, &args)?;
             None
         }
     };
@@ -628,7 +662,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
             let scene = match &static_scene {
                 Some(scene) => scene,
                 None => {
-                    animated = PreparedScene::new(load_gltf_at(&scene_path, plan.anim_time(*frame))?)?;
+                    animated = PreparedScene::new(with_lens_options(
+                        load_gltf_at(&scene_path, plan.anim_time(*frame))?,
+                        &args,
+                    )?)?;
                     &animated
                 }
             };
@@ -809,6 +846,16 @@ fn render_one(
     let film = &output.film;
     let secs = output.elapsed.as_secs_f64();
     let mut metadata = render_metadata(ctx, scene_path, gate_spec, settings, &output);
+    metadata.push((
+        "camera".into(),
+        match scene.scene.camera.lens {
+            None => "pinhole".into(),
+            Some(l) => format!(
+                "thin lens: aperture radius {} m, focus distance {} m",
+                l.aperture_radius, l.focus_distance
+            ),
+        },
+    ));
     if let Some((index, plan)) = frame {
         metadata.push(("frame".into(), index.to_string()));
         metadata.push(("frames".into(), plan.count.to_string()));

@@ -44,6 +44,13 @@ pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u.x).max(0.0).sqrt())
 }
 
+/// Uniform point of the unit disk (polar mapping); pdf = 1 / pi (twin of `sample_disk`).
+pub fn sample_disk(u: Vec2) -> Vec2 {
+    let r = u.x.sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u.y;
+    Vec2::new(r * phi.cos(), r * phi.sin())
+}
+
 /// Uniform point on a triangle as barycentrics (b1, b2) of v1 and v2; pdf = 1 / area.
 pub fn sample_triangle_barycentrics(u: Vec2) -> Vec2 {
     let su = u.x.sqrt();

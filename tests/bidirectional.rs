@@ -71,7 +71,7 @@ fn direct_matches_path_at_gaussian_cw_and_table_gates() {
 fn modified_cornell_box(point: bool, double_sided: bool) -> PreparedScene {
     let mut scene = load_gltf(&common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
     if point {
-        scene.point_lights.push(PointLight { position: glam::Vec3::new(0.2, -0.3, -0.1), intensity: glam::Vec3::new(0.3, 0.2, 0.1) });
+        scene.point_lights.push(PointLight { position: glam::Vec3::new(0.2, -0.3, -0.1), intensity: glam::Vec3::new(0.3, 0.2, 0.1), spot: None });
     }
     for m in &mut scene.materials {
         m.double_sided |= double_sided;

@@ -106,6 +106,9 @@ fn bad_input_gives_clear_errors() {
         (&["render", "--out", "image.png"], ".exr or .npy"),
         (&["render", "--spp", "0", "--out", out], "at least 1"),
         (&["render", "--res", "0x4", "--out", out], "resolution"),
+        (&["render", "--aperture-radius", "0.1", "--out", out], "give --focus-distance"),
+        (&["render", "--aperture-radius", "0.1", "--focus-distance", "-2", "--out", out], "focus distance -2 m is not a positive length"),
+        (&["render", "--aperture-radius", "nan", "--focus-distance", "2", "--out", out], "aperture radius NaN m"),
     ];
     for (args, needle) in cases {
         let o = gatetrace(args);

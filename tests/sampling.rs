@@ -105,8 +105,8 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         ],
         materials: vec![material(1.0), material(4.0), material(30.0), material(0.0)],
         textures: vec![],
-        point_lights: vec![PointLight { position: Vec3::new(0.0, 3.0, 0.0), intensity: Vec3::splat(0.2) }],
-        camera: CameraDesc { position: Vec3::Z, right: Vec3::X, up: Vec3::Y, forward: -Vec3::Z, yfov: 1.0 },
+        point_lights: vec![PointLight { position: Vec3::new(0.0, 3.0, 0.0), intensity: Vec3::splat(0.2), spot: None }],
+        camera: CameraDesc { position: Vec3::Z, right: Vec3::X, up: Vec3::Y, forward: -Vec3::Z, yfov: 1.0, lens: None },
         dropped_degenerate: 0,
         nodes: Vec::new(),
     }
@@ -392,4 +392,72 @@ fn wgsl_surfaces_match_cpu_twin() {
         assert_close("uv", i, positions[i][3], s.uv.x, 1e-6, 1e-5);
         assert_close("uv", i, normals[i][3], s.uv.y, 1e-6, 1e-5);
     }
+}
+
+/// The thin-lens camera (rays, and the image coordinates a ray from a lens point lands on) and
+/// a spot light's intensity and direction density, against their CPU twins.
+#[test]
+fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
+    use gatetrace::scene::camera::{camera_ray, image_coordinates};
+    let ctx = common::gpu();
+    let scene = gatetrace::scene::PreparedScene::new(
+        gatetrace::scene::load_gltf(&common::repo_path("assets/scenes/cornell_box_thin_lens.gltf")).unwrap(),
+    )
+    .unwrap();
+    let lens = scene.scene.camera.lens.expect("the scene has a thin lens");
+    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let camera = scene.scene.camera.to_gpu(32, 24);
+    let input: Vec<[f32; 4]> = uniform_inputs(2048, 7).iter().map(|x| [x[0] * 32.0, x[1] * 24.0, x[2], x[3]]).collect();
+    let run = |f: u32| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], &input, input.len());
+    let (directions, origins, coordinates) = (run(16), run(17), run(18));
+    for (i, x) in input.iter().enumerate() {
+        let (origin, direction) = camera_ray(&camera, Vec2::new(x[0], x[1]), Vec2::new(x[2], x[3]), 32, 24);
+        assert!((origin - camera.position).length() <= lens.aperture_radius * (1.0 + 1e-6), "record {i}: off the lens");
+        for k in 0..3 {
+            // The lens point carries sin/cos of the disk's angle.
+            assert_close("lens point", i, origins[i][k], origin[k], SIN_COS_ABS * lens.aperture_radius + 1e-6, 1e-5);
+            assert_close("thin-lens direction", i, directions[i][k], direction[k], 1e-4, 1e-4);
+        }
+        // The ray lands where it was aimed: its film point, in [-1, 1]^2 image coordinates.
+        let aimed = Vec2::new(2.0 * x[0] / 32.0 - 1.0, 1.0 - 2.0 * x[1] / 24.0);
+        let c = image_coordinates(&camera, origin, direction);
+        for k in 0..2 {
+            assert_close("image coordinates (CPU)", i, c[k], aimed[k], 1e-5, 1e-5);
+            assert_close("image coordinates (GPU)", i, coordinates[i][k], aimed[k], 1e-4, 1e-4);
+        }
+        assert!(c.z > 0.0 && (coordinates[i][2] - c.z).abs() <= 1e-4, "record {i}: cosine {} vs {}", coordinates[i][2], c.z);
+    }
+
+    // A spot light with a wide falloff (inner 0.2 rad, outer 0.5 rad): intensity and the density
+    // of its uniform cone sampling towards directions all around.
+    let mut spot_scene = gatetrace::scene::load_gltf(&common::repo_path("assets/scenes/cornell_box_spot.gltf")).unwrap();
+    let spot = spot_scene.point_lights[0].spot.as_mut().expect("the scene's light is a spot");
+    (spot.inner, spot.outer) = (0.2, 0.5);
+    let spot_scene = gatetrace::scene::PreparedScene::new(spot_scene).unwrap();
+    let light = spot_scene.scene.point_lights[0].clone();
+    let cone = light.spot.unwrap();
+    let tracer = tracer_for(&ctx, &spot_scene, Gate::None);
+    // Directions concentrated about the axis (half of them inside the outer cone).
+    let input: Vec<[f32; 4]> = uniform_inputs(4096, 8)
+        .iter()
+        .map(|x| {
+            let w = cone.direction + 1.2 * (Vec3::new(x[0], x[1], x[2]) * 2.0 - Vec3::ONE);
+            [w.x, w.y, w.z, 0.0]
+        })
+        .collect();
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 19.0)], &input, input.len());
+    let mut inside = 0;
+    for (i, (x, g)) in input.iter().zip(out).enumerate() {
+        let w = Vec3::new(x[0], x[1], x[2]).normalize();
+        let intensity = light.intensity.x * cone.falloff(w);
+        let in_cone = w.dot(cone.direction) >= cone.outer.cos();
+        let pdf = if in_cone { 1.0 / (2.0 * std::f32::consts::PI * (1.0 - cone.outer.cos())) } else { 0.0 };
+        inside += in_cone as usize;
+        // The ramp's slope is at most 2 / (cos inner - cos outer) = 19.6 per unit cosine.
+        assert_close("spot intensity", i, g[0], intensity, 20.0 * 1e-6 * light.intensity.x, 1e-5);
+        if (w.dot(cone.direction) - cone.outer.cos()).abs() > 1e-6 {
+            assert_close("spot direction pdf", i, g[1], pdf, 0.0, 1e-5);
+        }
+    }
+    assert!(inside > 1000 && inside < 3500, "{inside} of 4096 directions inside the cone");
 }

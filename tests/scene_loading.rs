@@ -144,11 +144,57 @@ fn bad_files_give_clear_errors() {
 
     let mut doc = lit_quad().to_json();
     doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
-    doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "spot", "spot": {}}]}});
+    doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "spot", "spot": {"innerConeAngle": 0.6, "outerConeAngle": 0.5}}]}});
     doc["nodes"].as_array_mut().unwrap().push(json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
     doc["scenes"][0]["nodes"] = json!([0, 1, 2]);
     let e = load_error(&dir, "spot.gltf", &doc);
-    assert!(e.contains("spot") && e.contains("lamp"), "{e}");
+    assert!(e.contains("spot cone angles") && e.contains("lamp") && e.contains("spot.gltf"), "{e}");
+
+    // Thin-lens extras on the camera node: both lengths, positive, numbers.
+    let camera_node = lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
+    for (extras, needle) in [
+        (json!({"aperture_radius": 0.1}), "needs `focus_distance`"),
+        (json!({"focus_distance": 2.0}), "needs `aperture_radius`"),
+        (json!({"aperture_radius": -0.1, "focus_distance": 2.0}), "aperture radius -0.1 m is not a positive length"),
+        (json!({"aperture_radius": 0.1, "focus_distance": 0.0}), "focus distance 0 m is not a positive length"),
+        (json!({"aperture_radius": "wide", "focus_distance": 2.0}), "not a number of metres"),
+    ] {
+        let mut doc = lit_quad().to_json();
+        doc["nodes"][camera_node]["extras"] = extras.clone();
+        let e = load_error(&dir, "lens.gltf", &doc);
+        assert!(e.contains(needle) && e.contains("lens.gltf") && e.contains("camera extras"), "{extras}: {e}");
+    }
+}
+
+#[test]
+fn thin_lens_extras_and_spot_cones_load() {
+    let dir = common::scratch_dir("lens_and_spot");
+    let camera_node = lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
+    let mut doc = lit_quad().to_json();
+    doc["nodes"][camera_node]["extras"] = json!({"aperture_radius": 0.05, "focus_distance": 3.0, "note": "kept"});
+    doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+    doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+        {"type": "spot", "intensity": 2.0, "spot": {"innerConeAngle": 0.25, "outerConeAngle": 0.5}}]}});
+    // The spot looks along its node's -z turned 90 degrees about +x: straight down.
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    doc["nodes"].as_array_mut().unwrap().push(json!({"name": "lamp", "translation": [0.0, 1.0, 0.0],
+        "rotation": [-s, 0.0, 0.0, s], "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+    let count = doc["nodes"].as_array().unwrap().len();
+    doc["scenes"][0]["nodes"] = json!((0..count).collect::<Vec<_>>());
+    let scene = load_gltf(&write_json(&dir, "lens_and_spot.gltf", &doc)).unwrap();
+    assert_eq!(scene.camera.lens, Some(gatetrace::scene::ThinLens { aperture_radius: 0.05, focus_distance: 3.0 }));
+    let spot = scene.point_lights[0].spot.expect("a spot cone");
+    assert!((spot.direction - glam::Vec3::NEG_Y).length() < 1e-6, "{}", spot.direction);
+    assert_eq!((spot.inner, spot.outer), (0.25, 0.5));
+    assert_eq!(spot.falloff(glam::Vec3::NEG_Y), 1.0);
+    assert_eq!(spot.falloff(glam::Vec3::X), 0.0);
+    // Halfway between the cones' cosines the ramp is 1/2, squared.
+    let c = 0.5 * (0.25f32.cos() + 0.5f32.cos());
+    let w = glam::Vec3::new((1.0 - c * c).sqrt(), -c, 0.0);
+    assert!((spot.falloff(w) - 0.25).abs() < 1e-4, "{}", spot.falloff(w));
+    // An aperture radius of 0 is a pinhole.
+    doc["nodes"][camera_node]["extras"] = json!({"aperture_radius": 0.0, "focus_distance": 3.0});
+    assert_eq!(load_gltf(&write_json(&dir, "pinhole.gltf", &doc)).unwrap().camera.lens, None);
 }
 
 #[test]

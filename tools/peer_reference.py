@@ -35,16 +35,49 @@ Units and conventions
   materials get an ``area`` emitter with radiance ``emissiveFactor *
   KHR_materials_emissive_strength`` (Mitsuba area lights emit on the front
   side only, also for double-sided materials: a warning is printed).
+* KHR_lights_punctual lights (any number, together with area lights) become
+  Mitsuba emitters; ``intensity`` x ``color`` is taken as radiant intensity
+  in W/sr at the beam's centre (point, spot) or as irradiance in W/m^2 on a
+  surface facing the light (directional).  A light's direction is its node's
+  world -z.
+
+  - ``point``: ``point`` emitter, ``intensity``, ``position`` = the node's
+    world origin.
+  - ``spot``: ``spot`` emitter, ``intensity``, ``cutoff_angle`` =
+    degrees(outerConeAngle), ``beam_width`` = degrees(innerConeAngle)
+    (always set: Mitsuba's default is 3/4 of the cutoff), ``to_world`` a
+    rigid look-at frame whose local +z (Mitsuba's beam axis) is the node's
+    world -z.  Mitsuba's intensity is constant inside the inner cone, falls
+    off linearly in *angle* to zero at the outer cone and is zero beyond
+    (glTF suggests a smooth profile: a warning is printed when the cones
+    differ by more than 1e-3 rad; a hard edge, inner ~ outer, sidesteps it).
+  - ``directional``: ``directional`` emitter, ``irradiance``, ``direction``
+    = the travel direction (the node's world -z).  mitransient gives its
+    light segment a constant length 2 x (radius of the scene's bounding
+    sphere, or more for points outside it) rather than a plane-wave distance,
+    so with directional lights only the steady image is a meaningful
+    reference; the transient cube and gates are shifted by an arbitrary
+    amount.
+  - ``range`` is ignored (warning); other light types are an error.
 * The camera is the glTF's first camera: ``perspective`` sensor, vertical fov
   ``yfov`` (``fov_axis = 'y'``), ``near_clip = znear``, pinhole, box pixel
   filter, ``independent`` sampler.  glTF cameras look down -z with +y up;
   Mitsuba cameras look down +z with +x to the *left*, so the node matrix is
   multiplied by diag(-1, 1, -1) (a 180 degree turn about y).
+* Thin lens: when the camera *node's* ``extras`` hold ``aperture_radius`` > 0
+  (metres) and ``focus_distance`` (metres), the sensor is Mitsuba's
+  ``thinlens`` with those values (same fov, fov_axis, near_clip, to_world;
+  the node matrix must be rigid).  The lens is a disc of that radius centred
+  on the node's origin, perpendicular to the viewing direction; the focus
+  surface is the plane at focus_distance along the viewing direction.  The
+  camera segment starts on the lens (uniformly sampled point of the disc).
 * Mitsuba starts camera rays on the near plane, so the first ``near_clip /
   cos(angle to the optical axis)`` metres of the camera segment are *not*
   counted in the path length (checked: znear 0.5 shifts everything by about
-  0.52 m).  With the canonical znear = 1e-5 this is negligible; a warning is
-  printed when it could exceed 1% of a bin.
+  0.52 m).  ``thinlens`` does the same from the lens point (origin moved
+  by near_clip / d_z along the ray direction d).  With the canonical znear =
+  1e-5 this is negligible; a warning is printed when it could exceed 1% of a
+  bin.
 * The steady image is accumulated by a separate ``hdrfilm`` from every
   path, whatever its length; when the bins cover all path lengths it equals
   the sum of the bins (checked to 1e-6).
@@ -59,9 +92,19 @@ Output (.npz, all arrays float32, row 0 = top of the image, RGB last)
                                    binned range), and its variance of the mean
 ``gate_mean``      [H, W, 3]      only with ``--gate A B``: sum of the bins
 ``gate_var``       [H, W, 3]      covering [A, B) (must lie on bin edges); the
-                                   variance is taken over per-pass gate images
+                                   variance is taken over per-pass gate images.
+                                   ``--gate`` may be repeated: with more than
+                                   one, each is written as ``gate_A_B_*``
+``transient_coarse_mean`` / ``_var`` [H, W, T/K, 3]  only with ``--sum-bins K``
+                                   (K > 1): every K consecutive bins summed in
+                                   each pass, variance over those per-pass sums
 ``meta``           0-d str        JSON: versions, settings, bin edges, seeds,
-                                   timings and the command line
+                                   camera, lights, timings and the command line
+
+``--steady-only`` keeps only ``steady_*``.  ``--test-keys`` renames the arrays
+as in tests/data/*_peer: ``gate_A_B_*`` and ``transient_START_step_WIDTH_*``
+(numbers with dots as underscores; the cube is the ``--sum-bins`` one when
+K > 1, and the fine cube is then not written).
 
 Example (Cornell box; ~3.5 min on 2 CPU cores for 16 x 8192 spp, comparable
 with shared/references/cornell_box_peer.npz)::
@@ -69,6 +112,11 @@ with shared/references/cornell_box_peer.npz)::
     python tools/peer_reference.py assets/scenes/cornell_box.gltf -o cb.npz \\
         --res 64 64 --max-bounces 5 --spp 8192 --passes 16 --seed 1 \\
         --start 1.94 --bin-width 0.05 --bins 40 --gate 3.14 3.19
+
+With ``--test-keys --sum-bins 2`` the same run writes the arrays under the
+names of tests/data/cornell_box_peer (steady, gate_3_14_3_19,
+transient_1_94_step_0_1: 20 bins of 0.1 m, each the per-pass sum of two
+0.05 m bins), ready for tools/convert_peer_reference.py.
 """
 
 from __future__ import annotations
@@ -233,15 +281,17 @@ def load_gltf(path):
     """Parse a glTF 2.0 file into world-space triangle meshes and a camera.
 
     Returns a dict with ``meshes`` (list of dicts: name, positions [N,3],
-    normals [N,3] or None, faces [M,3] uint32, material dict) and ``camera``
+    normals [N,3] or None, faces [M,3] uint32, material dict), ``camera``
     (dict: to_world 4x4 in glTF camera convention, yfov, znear, zfar,
-    aspect_ratio) or None.
+    aspect_ratio, aperture_radius (0: pinhole), focus_distance) or None, and
+    ``lights`` (KHR_lights_punctual lights, see _light_info).
     """
     doc, glb_bin = _read_gltf_file(path)
     buffers = _load_buffers(doc, os.path.dirname(os.path.abspath(path)), glb_bin)
     for ext in doc.get("extensionsRequired", []):
-        if ext != "KHR_materials_emissive_strength":
+        if ext not in ("KHR_materials_emissive_strength", "KHR_lights_punctual"):
             _warn(f"required extension {ext} is not supported")
+    punctual = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
 
     nodes = doc.get("nodes", [])
     if doc.get("scenes"):
@@ -250,7 +300,7 @@ def load_gltf(path):
         children = {c for n in nodes for c in n.get("children", [])}
         roots = [i for i in range(len(nodes)) if i not in children]
 
-    meshes, camera_nodes, node_positions = [], [], {}
+    meshes, camera_nodes, node_positions, lights = [], [], {}, []
     stack = [(i, np.eye(4)) for i in reversed(roots)]
     while stack:  # depth-first, in document order
         ni, parent = stack.pop()
@@ -258,7 +308,10 @@ def load_gltf(path):
         world = parent @ _node_local_matrix(node)
         stack.extend((c, world) for c in reversed(node.get("children", [])))
         if "camera" in node:
-            camera_nodes.append((node["camera"], world))
+            camera_nodes.append((node["camera"], world, node.get("extras") or {}))
+        light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
+        if light_ref is not None:
+            lights.append(_light_info(punctual, light_ref.get("light"), node, world))
         if node.get("name"):
             node_positions.setdefault(node["name"], world[:3, 3].copy())
         if "mesh" in node:
@@ -307,7 +360,7 @@ def load_gltf(path):
 
     camera = None
     if camera_nodes:
-        cam_index, cam_world = min(camera_nodes, key=lambda c: c[0])
+        cam_index, cam_world, cam_extras = min(camera_nodes, key=lambda c: c[0])
         cam = doc["cameras"][cam_index]
         if cam.get("type") != "perspective":
             raise NotImplementedError("only perspective cameras are supported")
@@ -315,8 +368,63 @@ def load_gltf(path):
         camera = {"index": cam_index, "to_world": cam_world,
                   "yfov": float(p["yfov"]), "znear": float(p["znear"]),
                   "zfar": float(p["zfar"]) if "zfar" in p else None,
-                  "aspect_ratio": p.get("aspectRatio")}
-    return {"meshes": meshes, "camera": camera, "doc": doc, "node_positions": node_positions}
+                  "aspect_ratio": p.get("aspectRatio"),
+                  "aperture_radius": float(cam_extras.get("aperture_radius", 0.0)),
+                  "focus_distance": cam_extras.get("focus_distance")}
+        if camera["aperture_radius"] < 0:
+            raise ValueError(f"camera node extras: aperture_radius {camera['aperture_radius']} < 0")
+        if camera["aperture_radius"] > 0:
+            fd = camera["focus_distance"]
+            if fd is None or not float(fd) > 0:
+                raise ValueError("camera node extras: a thin lens (aperture_radius > 0) needs "
+                                 f"focus_distance > 0, got {fd!r}")
+            camera["focus_distance"] = float(fd)
+    return {"meshes": meshes, "camera": camera, "lights": lights, "doc": doc,
+            "node_positions": node_positions}
+
+
+_LIGHT_TYPES = ("point", "spot", "directional")
+
+
+def _light_info(punctual, index, node, world):
+    """A KHR_lights_punctual light placed by its node's world matrix: type, name, rgb
+    (intensity x color: W/sr for point and spot at the beam's centre, W/m^2 for directional),
+    position, direction (the node's world -Z, normalised) and, for spots, the cone angles in
+    radians."""
+    name = node.get("name", "<unnamed node>")
+    if index is None or not 0 <= index < len(punctual):
+        raise ValueError(f"node '{name}': KHR_lights_punctual light {index!r} does not exist")
+    light = punctual[index]
+    kind = light.get("type")
+    if kind not in _LIGHT_TYPES:
+        raise NotImplementedError(
+            f"node '{name}': KHR_lights_punctual light type {kind!r} is not supported "
+            f"(supported: {', '.join(_LIGHT_TYPES)})")
+    color = [float(v) for v in light.get("color", [1.0, 1.0, 1.0])]
+    intensity = float(light.get("intensity", 1.0))
+    direction = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    norm = np.linalg.norm(direction)
+    if kind != "point" and not norm > 0:
+        raise ValueError(f"node '{name}': degenerate transform, the light has no direction")
+    info = {"type": kind, "name": light.get("name", name), "node": name,
+            "rgb": [c * intensity for c in color],
+            "position": world[:3, 3].copy(),
+            "direction": direction / norm if norm > 0 else direction,
+            "up": world[:3, :3] @ np.array([0.0, 1.0, 0.0])}
+    if "range" in light and kind != "directional":
+        _warn(f"light '{info['name']}': range {light['range']} ignored (Mitsuba lights have no range)")
+    if kind == "spot":
+        spot = light.get("spot", {})
+        inner = float(spot.get("innerConeAngle", 0.0))
+        outer = float(spot.get("outerConeAngle", math.pi / 4))
+        if not 0.0 <= inner <= outer <= math.pi / 2 or outer <= 0.0:
+            raise ValueError(f"light '{info['name']}': need 0 <= innerConeAngle <= outerConeAngle "
+                             f"<= pi/2 and outerConeAngle > 0, got {inner}, {outer}")
+        if outer - inner > 1e-3:
+            _warn(f"light '{info['name']}': Mitsuba's spot falls off linearly in angle from the inner "
+                  "to the outer cone; a renderer with another transition profile will differ there")
+        info["inner"], info["outer"] = inner, outer
+    return info
 
 
 def _check_winding(mesh):
@@ -355,17 +463,28 @@ def build_mitsuba_scene(mi, scene, args, max_depth):
               f"{width}x{height}; the vertical fov is kept")
 
     # Largest near-plane offset (image corner) that Mitsuba leaves out of the
-    # optical path length.
+    # optical path length: near_clip / cos(ray angle to the optical axis); a
+    # thin-lens ray from the aperture's rim is tilted further by up to
+    # atan(aperture_radius / focus_distance).
     tan_y = math.tan(cam["yfov"] / 2)
-    corner = math.sqrt(1 + tan_y ** 2 * (1 + (width / height) ** 2))
+    tan_corner = tan_y * math.sqrt(1 + (width / height) ** 2)
+    thin_lens = cam.get("aperture_radius", 0.0) > 0
+    if thin_lens:
+        tan_corner += cam["aperture_radius"] / cam["focus_distance"]
+    corner = math.sqrt(1 + tan_corner ** 2)
     if cam["znear"] * corner > 0.01 * args.bin_width:
         _warn(f"znear {cam['znear']} m: Mitsuba omits up to "
               f"{cam['znear'] * corner:.3g} m of the camera segment from the "
               "path length (rays start on the near plane)")
 
     to_world = cam["to_world"] @ _GLTF_TO_MITSUBA_CAMERA
+    if thin_lens:
+        lin = to_world[:3, :3]
+        if np.abs(lin.T @ lin - np.eye(3)).max() > 1e-5:
+            raise ValueError("thin-lens camera: the camera node's world matrix has a scale or "
+                             "shear (Mitsuba's thinlens sensor accepts rigid transforms only)")
     sensor = {
-        "type": "perspective",
+        "type": "thinlens" if thin_lens else "perspective",
         "fov": math.degrees(cam["yfov"]),
         "fov_axis": "y",
         "near_clip": cam["znear"],
@@ -383,6 +502,9 @@ def build_mitsuba_scene(mi, scene, args, max_depth):
     }
     if cam["zfar"] is not None:
         sensor["far_clip"] = cam["zfar"]
+    if thin_lens:
+        sensor["aperture_radius"] = cam["aperture_radius"]
+        sensor["focus_distance"] = cam["focus_distance"]
 
     out = {
         "type": "scene",
@@ -396,7 +518,35 @@ def build_mitsuba_scene(mi, scene, args, max_depth):
     }
     for m in scene["meshes"]:
         out[m["name"]] = _make_mesh(mi, m)
+    for i, light in enumerate(scene.get("lights", [])):
+        out[f"punctual_{i}_{light['type']}"] = _make_light(mi, light)
+    if not scene.get("lights") and not any(any(v > 0 for v in m["material"]["emission"])
+                                           for m in scene["meshes"]):
+        _warn("the scene has no emissive material and no KHR_lights_punctual light: it renders black")
     return out
+
+
+def _make_light(mi, light):
+    """Mitsuba emitter dict of a parsed KHR_lights_punctual light (see _light_info)."""
+    rgb = {"type": "rgb", "value": light["rgb"]}
+    if light["type"] == "point":
+        return {"type": "point", "intensity": rgb, "position": light["position"].tolist()}
+    if light["type"] == "directional":
+        # Mitsuba radiates along its local +Z; `direction` is the travel direction.
+        return {"type": "directional", "irradiance": rgb, "direction": light["direction"].tolist()}
+    # spot: Mitsuba's beam axis is its local +Z; look_at maps +Z onto target - origin, so the
+    # beam runs along the node's world -Z (the rigid frame drops any scale of the node).
+    origin, axis = light["position"], light["direction"]
+    up = light["up"] - axis * np.dot(light["up"], axis)
+    if np.linalg.norm(up) < 1e-6:
+        up = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    return {"type": "spot", "intensity": rgb,
+            "cutoff_angle": math.degrees(light["outer"]),
+            # Always given: Mitsuba's default beam_width is 3/4 of the cutoff.
+            "beam_width": math.degrees(light["inner"]),
+            "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(),
+                                                       target=(origin + axis).tolist(),
+                                                       up=(up / np.linalg.norm(up)).tolist())}
 
 
 def _make_mesh(mi, m):
@@ -466,6 +616,8 @@ def build_nlos_scene(mi, scene, args):
     of irradiance 1 at unit distance. Returns (dict, wall point_at, sensor and laser
     origins)."""
     to_world, point_at = wall_rectangle(scene, args.relay_wall)
+    if scene.get("lights"):
+        _warn("--nlos: the glTF's KHR_lights_punctual lights are ignored (the laser lights the scene)")
     origins = scene["node_positions"]
     sensor_origin = np.array(args.sensor_origin if args.sensor_origin else
                              origins.get("sensor_origin", origins.get("nlos_origin")), dtype=np.float64)
@@ -578,11 +730,17 @@ class OneBinRenderer:
         return image, time.perf_counter() - start
 
 
+def _key_number(x):
+    """A length as used in the tests' array names: 1.94 -> '1_94', 0.1 -> '0_1'."""
+    return f"{round(x, 6):g}".replace("-", "minus").replace(".", "_")
+
+
 def gate_bins(args):
-    """Return (first, last_exclusive) bin indices of --gate, or None."""
-    if args.gate is None:
-        return None
-    a, b = args.gate
+    """Return [(first, last_exclusive) bin indices] of each --gate (empty without any)."""
+    return [_gate_bins(args, a, b) for a, b in (args.gate or [])]
+
+
+def _gate_bins(args, a, b):
     ka, kb = (a - args.start) / args.bin_width, (b - args.start) / args.bin_width
     ia, ib = round(ka), round(kb)
     tol = 1e-6
@@ -623,9 +781,21 @@ def parse_args(argv=None):
                    help="time bin width, metres of optical path (default 0.1)")
     p.add_argument("--bins", type=int, default=100,
                    help="number of time bins (default 100)")
-    p.add_argument("--gate", nargs=2, type=float, metavar=("A", "B"),
-                   help="also write gate_mean/gate_var: the sum of the bins "
+    p.add_argument("--gate", nargs=2, type=float, metavar=("A", "B"), action="append",
+                   help="(repeatable) also write gate_mean/gate_var: the sum of the bins "
                         "covering [A, B) metres; A and B must be bin edges")
+    p.add_argument("--sum-bins", type=int, default=1, metavar="K",
+                   help="also write transient_coarse_mean/var: the cube with every K "
+                        "consecutive bins summed in each pass (--bins must be a multiple "
+                        "of K); its variance is taken over the per-pass summed cubes")
+    p.add_argument("--test-keys", action="store_true",
+                   help="name the arrays as in tests/data/*_peer: steady, gate_A_B and "
+                        "transient_START_step_WIDTH (+ _mean/_var, dots as underscores; the "
+                        "cube is the --sum-bins one when K > 1, the fine cube is then left out)")
+    p.add_argument("--steady-only", action="store_true",
+                   help="write only steady_mean/var (e.g. for scenes with directional "
+                        "lights, whose path lengths mitransient does not model); --gate and "
+                        "--sum-bins are then not allowed")
     p.add_argument("--chunk-spp", type=int, default=1024,
                    help="render a pass in calls of at most this many spp to "
                         "bound memory (default 1024)")
@@ -657,6 +827,10 @@ def parse_args(argv=None):
         p.error("--max-bounces must be >= 0; --spp, --passes, --bins >= 1")
     if args.bin_width <= 0:
         p.error("--bin-width must be > 0")
+    if args.sum_bins < 1 or args.bins % args.sum_bins:
+        p.error("--sum-bins must be >= 1 and divide --bins")
+    if args.steady_only and (args.gate is not None or args.sum_bins > 1):
+        p.error("--steady-only writes no gate and no cube: drop --gate and --sum-bins")
     if not args.variant.endswith("_rgb"):
         p.error("only RGB variants are supported")
     if args.passes < 2:
@@ -732,7 +906,7 @@ def main(argv=None):
     args = parse_args(argv)
     if args.nlos:
         return main_nlos(args)
-    gate = gate_bins(args)
+    gates = gate_bins(args)
     out_path = args.output or os.path.splitext(os.path.basename(args.scene))[0] + "_peer.npz"
 
     import drjit as dr
@@ -743,6 +917,10 @@ def main(argv=None):
         dr.set_thread_count(args.threads)
 
     scene_data = load_gltf(args.scene)
+    if not args.steady_only and any(l["type"] == "directional" for l in scene_data["lights"]):
+        _warn("directional light: mitransient's path lengths for it are a constant 2 x the scene's "
+              "bounding radius, not a plane wave's; only the steady image is a meaningful "
+              "reference (see --steady-only)")
     max_depth = args.max_bounces + 1
     scene_dict = build_mitsuba_scene(mi, scene_data, args, max_depth)
     scene = mi.load_dict(scene_dict)
@@ -755,7 +933,10 @@ def main(argv=None):
     seeds = np.random.SeedSequence(args.seed).generate_state(
         args.passes * len(chunks), dtype=np.uint32).reshape(args.passes, len(chunks))
 
-    steady_m, trans_m, gate_m = _RunningMoments(), _RunningMoments(), _RunningMoments()
+    steady_m, trans_m = _RunningMoments(), _RunningMoments()
+    gate_ms = [_RunningMoments() for _ in gates]
+    coarse_m = _RunningMoments()
+    k = args.sum_bins
     t0 = time.time()
     pass_times = []
     for p in range(args.passes):
@@ -768,8 +949,11 @@ def main(argv=None):
             trans = trans + np.array(t_img, dtype=np.float64) * (spp / args.spp)
         steady_m.add(steady[..., :3])
         trans_m.add(trans[..., :3])
-        if gate is not None:
-            gate_m.add(trans[:, :, gate[0]:gate[1], :3].sum(axis=2))
+        for (ia, ib), gate_m in zip(gates, gate_ms):
+            gate_m.add(trans[:, :, ia:ib, :3].sum(axis=2))
+        if k > 1:
+            h, w, t = trans.shape[:3]
+            coarse_m.add(trans[..., :3].reshape(h, w, t // k, k, 3).sum(axis=3))
         pass_times.append(time.time() - tp)
         print(f"pass {p + 1}/{args.passes}: {pass_times[-1]:.1f} s, "
               f"steady image mean {steady[..., :3].reshape(-1, 3).mean(0)}",
@@ -803,9 +987,22 @@ def main(argv=None):
         "time_unit": "metres of optical path (camera and light segments included)",
         "start": args.start, "bin_width": args.bin_width, "bins": args.bins,
         "bin_edges": [args.start + k * args.bin_width for k in range(args.bins + 1)],
-        "gate": args.gate, "gate_bins": list(gate) if gate else None,
-        "camera": {"yfov_rad": scene_data["camera"]["yfov"],
-                   "znear": scene_data["camera"]["znear"]},
+        "gates": args.gate, "gate_bins": [list(g) for g in gates],
+        "steady_only": args.steady_only,
+        "sum_bins": k,
+        "coarse_bin_edges": ([args.start + j * k * args.bin_width for j in range(args.bins // k + 1)]
+                             if k > 1 else None),
+        "camera": {"type": scene_dict["sensor"]["type"],
+                   "yfov_rad": scene_data["camera"]["yfov"],
+                   "znear": scene_data["camera"]["znear"],
+                   "aperture_radius": scene_data["camera"]["aperture_radius"],
+                   "focus_distance": scene_data["camera"]["focus_distance"]},
+        "lights": [{key: (val.tolist() if isinstance(val, np.ndarray) else val)
+                    for key, val in light.items() if key != "up"}
+                   for light in scene_data["lights"]],
+        "emitters": {key: {kk: (vv if not hasattr(vv, "matrix") else np.array(vv.matrix).tolist())
+                           for kk, vv in val.items()}
+                     for key, val in scene_dict.items() if key.startswith("punctual_")},
         "layout": "row 0 at the top, RGB last; transient [H,W,T,3]; "
                   "*_var = variance of the mean over passes",
         "seconds_total": total,
@@ -813,10 +1010,26 @@ def main(argv=None):
         "threads": dr.thread_count(),
     }
 
+    names = {"steady": "steady", "transient": "transient", "coarse": "transient_coarse"}
+    moments = [("steady", steady_m), ("transient", trans_m)]
+    for i, ((a, b), gate_m) in enumerate(zip(args.gate or [], gate_ms)):
+        one = len(gate_ms) == 1 and not args.test_keys
+        names[f"gate{i}"] = "gate" if one else f"gate_{_key_number(a)}_{_key_number(b)}"
+        moments.append((f"gate{i}", gate_m))
+    moments.append(("coarse", coarse_m))
+    if len(set(names.values())) != len(names):
+        raise SystemExit(f"error: two arrays would share a name: {sorted(names.values())}")
+    if args.test_keys:
+        cube = f"transient_{_key_number(args.start)}_step_{_key_number(args.bin_width * k)}"
+        names["coarse" if k > 1 else "transient"] = cube
+        if k > 1:
+            names["transient"] = None
+    meta["keys"] = {role: name for role, name in names.items() if name}
     out = {}
-    for key, mom in (("steady", steady_m), ("transient", trans_m), ("gate", gate_m)):
-        if mom.n == 0:
+    for key, mom in moments:
+        if mom.n == 0 or names[key] is None or (args.steady_only and key != "steady"):
             continue
+        key = names[key]
         mean, var = mom.mean_and_var_of_mean()
         out[f"{key}_mean"] = mean.astype(np.float32)
         out[f"{key}_var"] = var.astype(np.float32)

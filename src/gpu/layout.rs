@@ -19,7 +19,7 @@ pub const TEXTURE_CLAMP_U: u32 = 1;
 pub const TEXTURE_CLAMP_V: u32 = 2;
 /// [`Light::kind`]: an emissive triangle.
 pub const LIGHT_AREA: u32 = 0;
-/// [`Light::kind`]: a point light.
+/// [`Light::kind`]: a point or spot light.
 pub const LIGHT_POINT: u32 = 1;
 /// [`Light::flags`]: an area light that emits from both faces.
 pub const LIGHT_DOUBLE_SIDED: u32 = 1;
@@ -158,33 +158,38 @@ pub struct TextureInfo {
     pub wrap: u32,
 }
 
-/// An area light (one emissive triangle) or a point light.
+/// One light: an emissive triangle (area light), or a point or spot light.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Light {
-    /// Point light position (m).
+    /// Point or spot light: position (m). Area light: unused.
     pub position: Vec3,
-    /// [`LIGHT_AREA`] or [`LIGHT_POINT`].
+    /// [`LIGHT_AREA`], or [`LIGHT_POINT`] (a point or spot light).
     pub kind: u32,
-    /// Radiance (area, W m^-2 sr^-1) or intensity (point, W sr^-1).
+    /// Area light: radiance (W m^-2 sr^-1). Point or spot light: intensity (W sr^-1), on the
+    /// beam's axis for a spot.
     pub emission: Vec3,
-    /// Emitting triangle (BVH order) or [`NONE`].
+    /// Area light: the emitting triangle (BVH order). Otherwise [`NONE`].
     pub triangle: u32,
-    /// Triangle area (m^2).
+    /// Spot light: unit axis of the beam. Point light: +z (unused).
+    pub direction: Vec3,
+    /// Area light: the triangle's area (m^2).
     pub area: f32,
     /// Probability that light sampling picks this light.
     pub select_pdf: f32,
     /// [`LIGHT_DOUBLE_SIDED`].
     pub flags: u32,
-    /// Padding.
-    pub reserved: u32,
+    /// Point or spot light: cosine of the outer cone half-angle (-1 for a point light).
+    pub cos_outer: f32,
+    /// Point or spot light: cosine of the inner cone half-angle (-1 for a point light).
+    pub cos_inner: f32,
 }
 
-/// Pinhole camera in world space.
+/// The camera in world space: a pinhole, or a thin lens centred on `position`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Camera {
-    /// Pinhole position (m).
+    /// Pinhole position, or the centre of the lens (m).
     pub position: Vec3,
     /// tan(yfov / 2).
     pub tan_half_fov_y: f32,
@@ -194,12 +199,13 @@ pub struct Camera {
     pub aspect: f32,
     /// Unit vector along +y of the image (up).
     pub up: Vec3,
-    /// Padding.
-    pub reserved0: u32,
+    /// Radius of the lens (m), in the plane through `position` normal to `forward`; 0 for a
+    /// pinhole.
+    pub lens_radius: f32,
     /// Unit viewing direction.
     pub forward: Vec3,
-    /// Padding.
-    pub reserved1: u32,
+    /// Distance (m) along `forward` of the plane in focus; 1 for a pinhole (unused there).
+    pub focus_distance: f32,
 }
 
 /// The kernels' gate parameters (the kind is the GATE_KIND override); built by

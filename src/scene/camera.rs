@@ -1,15 +1,15 @@
-//! The pinhole camera. CPU twin of `shaders/lib/camera.wesl`.
+//! The camera: a pinhole, or a thin lens. CPU twin of `shaders/lib/camera.wesl`.
 
 use glam::{Vec2, Vec3};
 
 use crate::gpu::layout::Camera;
+use crate::sampling::sample_disk;
 
-/// A perspective pinhole camera in world space.
+/// A perspective camera in world space: a pinhole at `position`, or a thin lens centred there.
 #[derive(Clone, Copy, Debug)]
 pub struct CameraDesc {
-    /// Pinhole position (m).
+    /// Pinhole position, or the centre of the lens (m).
     pub position: Vec3,
-    /// Unit vectors: image right, image up, viewing direction.
     /// Unit vector along +x of the image.
     pub right: Vec3,
     /// Unit vector along +y of the image.
@@ -18,20 +18,48 @@ pub struct CameraDesc {
     pub forward: Vec3,
     /// Vertical field of view (rad).
     pub yfov: f32,
+    /// The thin lens, or `None` for a pinhole.
+    pub lens: Option<ThinLens>,
+}
+
+/// A thin lens: a disk normal to the viewing direction, and the plane it brings into focus.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThinLens {
+    /// Radius of the lens (m), > 0.
+    pub aperture_radius: f32,
+    /// Distance (m) along the viewing direction from the lens to the plane in focus, > 0.
+    pub focus_distance: f32,
+}
+
+impl ThinLens {
+    /// A thin lens; both lengths must be finite and positive.
+    pub fn new(aperture_radius: f32, focus_distance: f32) -> anyhow::Result<Self> {
+        if !(aperture_radius.is_finite() && aperture_radius > 0.0) {
+            anyhow::bail!("aperture radius {aperture_radius} m is not a positive length");
+        }
+        if !(focus_distance.is_finite() && focus_distance > 0.0) {
+            anyhow::bail!("focus distance {focus_distance} m is not a positive length");
+        }
+        Ok(Self { aperture_radius, focus_distance })
+    }
 }
 
 impl CameraDesc {
     /// The GPU camera for an image of `width` x `height` pixels (aspect from the resolution).
     pub fn to_gpu(&self, width: u32, height: u32) -> Camera {
+        let (lens_radius, focus_distance) = match self.lens {
+            Some(l) => (l.aperture_radius, l.focus_distance),
+            None => (0.0, 1.0),
+        };
         Camera {
             position: self.position,
             tan_half_fov_y: (0.5 * self.yfov).tan(),
             right: self.right,
             aspect: width as f32 / height as f32,
             up: self.up,
-            reserved0: 0,
+            lens_radius,
             forward: self.forward,
-            reserved1: 0,
+            focus_distance,
         }
     }
 
@@ -41,13 +69,47 @@ impl CameraDesc {
         let t = (0.5 * self.yfov).tan();
         4.0 * t * t * width as f32 / height as f32
     }
+
+    /// The lens radius (m): 0 for a pinhole.
+    pub fn lens_radius(&self) -> f32 {
+        self.lens.map_or(0.0, |l| l.aperture_radius)
+    }
 }
 
-/// Unit direction through film position `film` (pixels from the top-left corner, y down).
+/// Unit direction of the pinhole ray (from the lens centre) through film position `film`
+/// (pixels from the top-left corner, y down).
 pub fn camera_direction(camera: &Camera, film: Vec2, width: u32, height: u32) -> Vec3 {
     let ndc_x = 2.0 * film.x / width as f32 - 1.0;
     let ndc_y = 1.0 - 2.0 * film.y / height as f32;
     let x = ndc_x * camera.tan_half_fov_y * camera.aspect;
     let y = ndc_y * camera.tan_half_fov_y;
     (camera.forward + x * camera.right + y * camera.up).normalize()
+}
+
+/// The camera ray through film position `film` (pixels) as (origin, unit direction): the
+/// pinhole ray, or for a thin lens the ray from the lens point that `u_lens` in [0, 1)^2 picks
+/// uniformly on the disk to where the pinhole ray meets the plane in focus (twin of
+/// `camera_path`).
+pub fn camera_ray(camera: &Camera, film: Vec2, u_lens: Vec2, width: u32, height: u32) -> (Vec3, Vec3) {
+    let direction = camera_direction(camera, film, width, height);
+    if camera.lens_radius <= 0.0 {
+        return (camera.position, direction);
+    }
+    let disk = camera.lens_radius * sample_disk(u_lens);
+    let origin = camera.position + disk.x * camera.right + disk.y * camera.up;
+    let in_focus = camera.position + direction * (camera.focus_distance / direction.dot(camera.forward));
+    (origin, (in_focus - origin).normalize())
+}
+
+/// Where the ray leaving lens point `lens` along unit direction `w` lands on the image:
+/// (x, y, c) with x, y in [-1, 1] inside the image (x right, y up) and c the cosine to the
+/// viewing direction; meaningless unless c > 0 (twin of `image_coordinates`).
+pub fn image_coordinates(camera: &Camera, lens: Vec3, w: Vec3) -> Vec3 {
+    let c = w.dot(camera.forward);
+    let v = (lens - camera.position) * (1.0 / camera.focus_distance) + w * (1.0 / c);
+    Vec3::new(
+        v.dot(camera.right) / (camera.tan_half_fov_y * camera.aspect),
+        v.dot(camera.up) / camera.tan_half_fov_y,
+        c,
+    )
 }

@@ -7,7 +7,8 @@ use std::path::Path;
 use anyhow::{Context as _, Result, anyhow, bail};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
-use super::{CameraDesc, MaterialDesc, PointLight, Scene, SceneTriangle, TextureData};
+use super::camera::ThinLens;
+use super::{CameraDesc, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, TextureData};
 
 /// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
@@ -102,7 +103,14 @@ impl Loader<'_> {
                     (Vec3::INFINITY, Vec3::NEG_INFINITY),
                     |(lo, hi), p| (lo.min(p), hi.max(p)),
                 );
-                CameraDesc { position: 0.5 * (lo + hi), right: Vec3::X, up: Vec3::Y, forward: Vec3::NEG_Z, yfov: 1.0 }
+                CameraDesc {
+                    position: 0.5 * (lo + hi),
+                    right: Vec3::X,
+                    up: Vec3::Y,
+                    forward: Vec3::NEG_Z,
+                    yfov: 1.0,
+                    lens: None,
+                }
             }
             None => bail!(
                 "{name}: no camera: gatetrace renders from the first perspective camera node of the scene (an NLOS \
@@ -158,7 +166,7 @@ impl Loader<'_> {
         if let Some(camera) = node.camera()
             && c.camera.is_none()
         {
-            c.camera = Some(self.camera(&camera, world, &node_name)?);
+            c.camera = Some(self.camera(&camera, node, world, &node_name)?);
         }
         if let Some(light) = node.light() {
             self.punctual_light(&light, world, &node_name, c)?;
@@ -183,7 +191,7 @@ impl Loader<'_> {
         Ok(())
     }
 
-    fn camera(&self, camera: &gltf::Camera, world: Mat4, node_name: &str) -> Result<CameraDesc> {
+    fn camera(&self, camera: &gltf::Camera, node: &gltf::Node, world: Mat4, node_name: &str) -> Result<CameraDesc> {
         let name = self.name;
         let gltf::camera::Projection::Perspective(p) = camera.projection() else {
             bail!("{name}: {node_name}: orthographic cameras are not supported (use a perspective camera)");
@@ -200,6 +208,8 @@ impl Loader<'_> {
             up: frame.y_axis.normalize(),
             forward: (-frame.z_axis).normalize(),
             yfov,
+            lens: thin_lens(node.extras().as_deref().or(camera.extras().as_deref()))
+                .map_err(|e| anyhow!("{name}: {node_name}: camera extras: {e}"))?,
         };
         let finite = [camera.position, camera.right, camera.up, camera.forward].iter().all(|v| v.is_finite());
         if !finite || scale.min_element().abs() < 1e-12 {
@@ -217,16 +227,32 @@ impl Loader<'_> {
     ) -> Result<()> {
         let name = self.name;
         match light.kind() {
-            gltf::khr_lights_punctual::Kind::Point => {
+            kind @ (gltf::khr_lights_punctual::Kind::Point | gltf::khr_lights_punctual::Kind::Spot { .. }) => {
                 let intensity = Vec3::from(light.color()) * light.intensity();
                 if !intensity.is_finite() || intensity.min_element() < 0.0 {
-                    bail!("{name}: {node_name}: point light intensity {intensity} is not finite and non-negative");
+                    bail!("{name}: {node_name}: light intensity {intensity} is not finite and non-negative");
                 }
-                c.point_lights.push(PointLight { position: world.transform_point3(Vec3::ZERO), intensity });
+                let spot = match kind {
+                    gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
+                        let (inner, outer) = (inner_cone_angle, outer_cone_angle);
+                        if !(inner.is_finite() && outer.is_finite() && 0.0 <= inner && inner < outer
+                            && outer <= std::f32::consts::FRAC_PI_2 + 1e-6)
+                        {
+                            bail!(
+                                "{name}: {node_name}: spot cone angles inner {inner} rad, outer {outer} rad: glTF \
+                                 needs 0 <= inner < outer <= pi/2"
+                            );
+                        }
+                        let direction = world.transform_vector3(Vec3::NEG_Z).normalize();
+                        if !direction.is_finite() {
+                            bail!("{name}: {node_name}: the spot light's transform is degenerate (no direction)");
+                        }
+                        Some(SpotCone { direction, inner, outer })
+                    }
+                    _ => None,
+                };
+                c.point_lights.push(PointLight { position: world.transform_point3(Vec3::ZERO), intensity, spot });
                 Ok(())
-            }
-            gltf::khr_lights_punctual::Kind::Spot { .. } => {
-                bail!("{name}: {node_name}: spot lights are not supported yet (use a point light or an emitter)")
             }
             gltf::khr_lights_punctual::Kind::Directional => {
                 bail!("{name}: {node_name}: directional lights are not supported (a time-of-flight source is at a finite distance)")
@@ -433,4 +459,30 @@ fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
 /// sRGB transfer function, encoded [0, 1] to linear.
 pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// The thin lens described by a camera node's `extras` (`aperture_radius` and `focus_distance`,
+/// both in metres; DESIGN.md section 3), or `None` (a pinhole) when there are none or the
+/// aperture radius is 0.
+pub fn thin_lens(extras: Option<&serde_json::value::RawValue>) -> Result<Option<ThinLens>> {
+    let Some(raw) = extras else { return Ok(None) };
+    let value: serde_json::Value = serde_json::from_str(raw.get())?;
+    let number = |key: &str| -> Result<Option<f32>> {
+        match value.get(key) {
+            None => Ok(None),
+            Some(v) => match v.as_f64() {
+                Some(x) => Ok(Some(x as f32)),
+                None => bail!("`{key}` is {v}, not a number of metres"),
+            },
+        }
+    };
+    let radius = number("aperture_radius")?;
+    let focus = number("focus_distance")?;
+    match (radius, focus) {
+        (None, None) => Ok(None),
+        (Some(r), _) if r == 0.0 => Ok(None),
+        (Some(r), Some(f)) => ThinLens::new(r, f).map(Some),
+        (Some(_), None) => bail!("`aperture_radius` needs `focus_distance` (m) beside it"),
+        (None, Some(_)) => bail!("`focus_distance` needs `aperture_radius` (m) beside it"),
+    }
 }

@@ -1,7 +1,8 @@
 //! The light table and light sampling. CPU twin of `shaders/lib/lights.wesl`.
 //!
-//! Every emissive triangle is an area light and every KHR_lights_punctual point light is a point
-//! light; next-event estimation picks one with probability proportional to its power.
+//! Every emissive triangle is an area light and every KHR_lights_punctual point or spot light a
+//! point light (a spot's cone shapes its intensity); next-event estimation picks one with
+//! probability proportional to its power.
 
 use glam::{Vec2, Vec3};
 
@@ -45,12 +46,22 @@ impl LightTable {
             source_triangle.push(i as u32);
         }
         for p in &scene.point_lights {
-            power.push(4.0 * std::f64::consts::PI * mean(p.intensity));
+            // A point light is a spot whose cone is the whole sphere.
+            let (direction, cos_outer, cos_inner) = match p.spot {
+                Some(s) => (s.direction, s.outer.cos(), s.inner.cos()),
+                None => (Vec3::Z, -1.0, -1.0),
+            };
+            // Power over the cone, the falloff's ramp counted as half (4 pi I for a point).
+            let solid_angle = 2.0 * std::f64::consts::PI * (1.0 - 0.5 * (cos_outer as f64 + cos_inner as f64));
+            power.push(solid_angle * mean(p.intensity));
             lights.push(Light {
                 position: p.position,
                 kind: LIGHT_POINT,
                 emission: p.intensity,
                 triangle: NONE,
+                direction,
+                cos_outer,
+                cos_inner,
                 ..Default::default()
             });
             source_triangle.push(NONE);

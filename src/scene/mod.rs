@@ -12,7 +12,7 @@ pub mod surface;
 
 use glam::{Vec2, Vec3};
 
-pub use camera::CameraDesc;
+pub use camera::{CameraDesc, ThinLens};
 pub use gltf_loader::{load_gltf, load_gltf_at, load_gltf_for_capture};
 pub use prepared::PreparedScene;
 
@@ -78,13 +78,51 @@ pub struct TextureData {
     pub clamp_v: bool,
 }
 
-/// A point light (KHR_lights_punctual).
+/// A point or spot light (KHR_lights_punctual).
 #[derive(Clone, Debug)]
 pub struct PointLight {
     /// Position (m).
     pub position: Vec3,
-    /// Intensity (W sr^-1 per channel) = colour x intensity.
+    /// Intensity (W sr^-1 per channel) = colour x intensity; on the beam's axis for a spot.
     pub intensity: Vec3,
+    /// The beam of a spot light; `None` for a point light, which shines equally everywhere.
+    pub spot: Option<SpotCone>,
+}
+
+/// The beam of a spot light: full intensity within `inner` of its axis, falling to zero at
+/// `outer` as glTF's KHR_lights_punctual recommends (the square of a ramp linear in the cosine
+/// of the angle to the axis; `spot_falloff` in lights.wesl).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpotCone {
+    /// Unit axis of the beam (world space).
+    pub direction: Vec3,
+    /// Inner cone half-angle (rad), 0 <= inner < outer.
+    pub inner: f32,
+    /// Outer cone half-angle (rad), at most pi/2.
+    pub outer: f32,
+}
+
+impl SpotCone {
+    /// Relative intensity (0 to 1) toward unit direction `w` (twin of `spot_falloff`).
+    pub fn falloff(&self, w: Vec3) -> f32 {
+        spot_falloff(w.dot(self.direction), self.outer.cos(), self.inner.cos())
+    }
+}
+
+/// The falloff of a spot light whose cone half-angles have cosines `cos_outer` < `cos_inner`
+/// at cosine `cd` to its axis: 0 outside the outer cone, 1 inside the inner one, the square of
+/// the linear ramp in the cosine between (twin of `spot_falloff`); a hard edge when the two
+/// cosines are equal (a point light has both at -1: 1 everywhere).
+pub fn spot_falloff(cd: f32, cos_outer: f32, cos_inner: f32) -> f32 {
+    if cd < cos_outer {
+        return 0.0;
+    }
+    let span = cos_inner - cos_outer;
+    if span <= 0.0 {
+        return 1.0;
+    }
+    let ramp = ((cd - cos_outer) / span).clamp(0.0, 1.0);
+    ramp * ramp
 }
 
 /// A named node of the glTF scene: where it is and which triangles it contributed (what an NLOS
@@ -128,10 +166,11 @@ impl Scene {
         self.nodes.iter().find(|n| n.name == name)
     }
 
-    /// Axis-aligned bounds of all triangles and the camera (m).
+    /// Axis-aligned bounds of all triangles and the camera (its lens included) (m).
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        let mut lo = self.camera.position;
-        let mut hi = self.camera.position;
+        let lens = Vec3::splat(self.camera.lens_radius());
+        let mut lo = self.camera.position - lens;
+        let mut hi = self.camera.position + lens;
         for t in &self.triangles {
             for p in t.positions {
                 lo = lo.min(p);
@@ -167,7 +206,7 @@ impl Scene {
 
     /// Shortest and longest optical path length (m) any light path with at most `max_bounces`
     /// scattering vertices can have: at least the distance from the pinhole to the nearest
-    /// light, at most (max_bounces + 1) diagonals of the scene's bounds.
+    /// light less the lens radius, at most (max_bounces + 1) diagonals of the scene's bounds.
     pub fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
         let camera = self.camera.position;
         let mut shortest = f32::INFINITY;
@@ -179,6 +218,7 @@ impl Scene {
         for l in &self.point_lights {
             shortest = shortest.min(camera.distance(l.position));
         }
+        let shortest = (shortest - self.camera.lens_radius()).max(0.0);
         let (lo, hi) = self.bounds();
         (shortest, (max_bounces as f32 + 1.0) * (hi - lo).length())
     }

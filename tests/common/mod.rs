@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod gltf_builder;
+pub mod peer;
 pub mod stats;
 
 use std::path::{Path, PathBuf};

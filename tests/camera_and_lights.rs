@@ -1,0 +1,87 @@
+//! The thin-lens camera and spot lights against peer references (Mitsuba 3.9.1 + mitransient
+//! 1.3.1: `thinlens` sensor, `spot` emitter; tests/data/cornell_box_thin_lens_peer/README.md and
+//! tests/data/cornell_box_spot_peer/README.md), through every method: `path` for the steady
+//! image and the transient cube, `direct` and `ellipsoidal` for a box gate (`direct` at the
+//! steady state for the thin lens, see below). Image means per
+//! channel (|z| < 4), 8x8-pixel blocks and transient bins (Sidak-corrected) from the variance
+//! measured over independent batches on our side and the peer's variance of its mean.
+
+mod common;
+
+use common::peer::{check_image, check_transient};
+use gatetrace::film::Gate;
+use gatetrace::integrator::{Method, RenderSettings};
+use gatetrace::scene::{PreparedScene, load_gltf};
+
+const BATCHES: usize = 16;
+
+fn scene(name: &str) -> PreparedScene {
+    PreparedScene::new(load_gltf(&common::repo_path(&format!("assets/scenes/{name}.gltf"))).unwrap()).unwrap()
+}
+
+/// The peer's settings: 64x64, at most 5 bounces (max_depth 6), no Russian roulette.
+fn settings(method: Method, gate: Gate, seed: u32) -> RenderSettings {
+    RenderSettings { width: 64, height: 64, max_bounces: 5, method, gate, seed, ..Default::default() }
+}
+
+/// Renders `name` with `method` (BATCHES x spp) and compares it with the peer's `key`.
+fn check(name: &str, method: Method, gate: Gate, spp: u32, seed: u32, key: &str) {
+    let ctx = common::gpu();
+    let films = common::render_films(&ctx, &scene(name), &settings(method, gate, seed), BATCHES, spp);
+    let label = format!("{name}_{}_{key}", method.name());
+    check_image(&label, &films, &format!("{name}_peer/{key}"));
+}
+
+#[test]
+fn thin_lens_steady_image_matches_peer() {
+    check("cornell_box_thin_lens", Method::Path, Gate::None, 64, 1, "steady");
+}
+
+/// `direct` is compared at the steady state: at the box gate, the light of a pixel on the
+/// lens-blurred lower edge of the gated band comes from the few lens points whose paths are
+/// short enough (about one sample in a thousand, each worth ~1e-5), so 16 batches of 64 spp can
+/// all miss an 8x8 block whose peer mean is ~1e-6 (1/4000 of the image mean), and a z-score
+/// from batch variances is then meaningless (zero over zero). `ellipsoidal`, whose paths all
+/// have the gate's lengths, samples those edges densely and is compared at the gate.
+#[test]
+fn thin_lens_steady_image_matches_peer_with_direct_connections() {
+    check("cornell_box_thin_lens", Method::Direct, Gate::None, 32, 2, "steady");
+}
+
+#[test]
+fn thin_lens_box_gate_matches_peer_with_ellipsoidal_connections() {
+    check("cornell_box_thin_lens", Method::Ellipsoidal, Gate::Box { start: 3.1, end: 3.15 }, 16, 3, "gate_3_1_3_15");
+}
+
+#[test]
+fn thin_lens_transient_cube_matches_peer_per_bin() {
+    let ctx = common::gpu();
+    let gate = Gate::Transient { start: 1.9, width: 0.1, bins: 20 };
+    let films = common::render_films(&ctx, &scene("cornell_box_thin_lens"), &settings(Method::Path, gate, 4), BATCHES, 64);
+    check_transient("cornell_box_thin_lens_transient", &films, "cornell_box_thin_lens_peer/transient_1_9_step_0_1", 20);
+}
+
+#[test]
+fn spot_light_steady_image_matches_peer() {
+    check("cornell_box_spot", Method::Path, Gate::None, 64, 11, "steady");
+}
+
+#[test]
+fn spot_light_box_gate_matches_peer_with_direct_connections() {
+    check("cornell_box_spot", Method::Direct, Gate::Box { start: 3.6, end: 3.65 }, 64, 12, "gate_3_6_3_65");
+}
+
+#[test]
+fn spot_light_box_gate_matches_peer_with_ellipsoidal_connections() {
+    check("cornell_box_spot", Method::Ellipsoidal, Gate::Box { start: 3.6, end: 3.65 }, 16, 13, "gate_3_6_3_65");
+}
+
+#[test]
+fn spot_light_transient_cube_matches_peer_per_bin() {
+    let ctx = common::gpu();
+    let gate = Gate::Transient { start: 2.8, width: 0.1, bins: 20 };
+    let films = common::render_films(&ctx, &scene("cornell_box_spot"), &settings(Method::Path, gate, 14), BATCHES, 64);
+    let bins = check_transient("cornell_box_spot_transient", &films, "cornell_box_spot_peer/transient_2_8_step_0_1", 20);
+    // Nothing arrives before the shortest path (spot -> floor -> camera).
+    assert!(bins.iter().any(|b| b.0 > 0.0), "the spot light lights the cube");
+}
