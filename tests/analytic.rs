@@ -372,3 +372,164 @@ fn one_sided_emitters_light_only_their_front() {
     let lit = towards.data.iter().filter(|&&v| v > 0.0).count();
     assert!(lit > towards.data.len() / 2, "an emitter facing the floor lights it ({lit} values)");
 }
+
+#[test]
+fn a_spot_light_lights_the_plane_by_its_falloff() {
+    // The plane lit from the camera again, the point light made a spot looking down the axis
+    // with a wide ramp (inner cone 0.05 rad, outer 0.2 rad; the image reaches 0.35 rad at its
+    // corners): along a ray at angle theta, L = rho I s(cos theta) cos^3(theta) / (pi d^2) with
+    // glTF's falloff s = clamp((cos - cos_outer) / (cos_inner - cos_outer), 0, 1)^2, averaged
+    // over each pixel's rectangle by a 48 x 48 midpoint rule. Both the path tracer (next-event
+    // estimation) and `direct` (light subpaths sampled over the cone, MIS) must agree with it.
+    use gatetrace::integrator::Method;
+    let (inner, outer) = (0.05f64, 0.2f64);
+    let dir = common::scratch_dir("plane_spot");
+    let base = Scene {
+        meshes: vec![quad_z(4.0, -PLANE_D as f32, true, 0)],
+        materials: vec![Material::diffuse([PLANE_RHO as f32; 3])],
+        camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: PLANE_FOV as f32 }),
+        point_lights: vec![PointLight { position: [0.0; 3], intensity: PLANE_I as f32 }],
+    };
+    let mut scene = load_gltf(&base.write(&dir, "plane_spot.gltf")).unwrap();
+    scene.point_lights[0].spot =
+        Some(gatetrace::scene::SpotCone { direction: glam::Vec3::NEG_Z, inner: inner as f32, outer: outer as f32 });
+    let scene = PreparedScene::new(scene).unwrap();
+    let falloff = |c: f64| ((c - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2);
+    let ctx = common::gpu();
+    let batches = 16;
+    let methods = [Method::Path, Method::Direct];
+    let threshold = t_critical(sidak(0.01, methods.len() * (PLANE_RES * PLANE_RES) as usize), (batches - 1) as f64);
+    let n = 48;
+    for method in methods {
+        let settings = RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, method, ..Default::default() };
+        let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
+        let (mean, var) = (stats.mean(), stats.var_of_mean());
+        let (mut lit, mut dark, mut edge) = (0, 0, 0);
+        for y in 0..PLANE_RES {
+            for x in 0..PLANE_RES {
+                let (x0, x1, y0, y1) = plane_pixel(x, y);
+                let (mut acc, mut inside) = (0.0, 0);
+                for i in 0..n {
+                    for j in 0..n {
+                        let u = x0 + (x1 - x0) * (i as f64 + 0.5) / n as f64;
+                        let v = y0 + (y1 - y0) * (j as f64 + 0.5) / n as f64;
+                        let sec = (1.0 + u * u + v * v).sqrt();
+                        acc += falloff(1.0 / sec) / (sec * sec * sec);
+                        inside += (falloff(1.0 / sec) > 0.0) as usize;
+                    }
+                }
+                let expected = PLANE_RHO * PLANE_I / (std::f64::consts::PI * PLANE_D * PLANE_D) * acc / (n * n) as f64;
+                let i = ((y * PLANE_RES + x) * 3) as usize;
+                if expected == 0.0 {
+                    // Wholly outside the cone: no light at all.
+                    assert_eq!(mean[i], 0.0, "{method:?}: pixel ({x}, {y}) lies outside the cone");
+                    dark += 1;
+                    continue;
+                }
+                // A pixel that the cone's edge only grazes: fewer than 100 of its samples are
+                // expected to see any light, too few for a z-score (all batches may see none).
+                // The cone bounds it from above: its light is that of the cone's faint edge.
+                let lit_samples = inside as f64 / (n * n) as f64 * (batches * 64) as f64;
+                if lit_samples < 100.0 {
+                    assert!(mean[i] >= 0.0 && mean[i] < 0.01 * PLANE_RHO * PLANE_I / PLANE_D.powi(2), "{method:?}: edge pixel ({x}, {y}) {}", mean[i]);
+                    edge += 1;
+                    continue;
+                }
+                lit += 1;
+                let z = (mean[i] - expected) / var[i].sqrt().max(1e-9 * expected);
+                assert!(z.abs() < threshold, "{method:?}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2}, limit {threshold:.2})", mean[i]);
+            }
+        }
+        assert!(lit > 20 && dark > 20 && edge < 16, "{method:?}: {lit} lit, {edge} edge and {dark} dark pixels");
+    }
+}
+
+#[test]
+fn first_return_of_a_plane_lit_by_a_directional_light() {
+    // The plane facing the camera, lit by a directional light of irradiance E travelling along
+    // the view (-z): every point sees L = rho E / pi, and light reaches the plane's point x after
+    // the plane-wave length l0 = -(x_z - c_z) + r (c, r: the bounding sphere, where the wave
+    // starts), so a pixel's light arrives at l0 + d sec(theta), between its rectangle's nearest
+    // and farthest points from the axis. Both `path` and `direct` (light subpaths from the
+    // disk, s = 1 resampled along the beam) must give it.
+    use gatetrace::integrator::Method;
+    const E: f64 = 2.5;
+    let dir = common::scratch_dir("plane_directional");
+    let base = Scene {
+        meshes: vec![quad_z(4.0, -PLANE_D as f32, true, 0)],
+        materials: vec![Material::diffuse([PLANE_RHO as f32; 3])],
+        camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: PLANE_FOV as f32 }),
+        point_lights: vec![],
+    };
+    let mut doc = base.to_json();
+    doc["extensionsUsed"] = serde_json::json!(["KHR_lights_punctual"]);
+    doc["extensions"] =
+        serde_json::json!({"KHR_lights_punctual": {"lights": [{"type": "directional", "intensity": E}]}});
+    doc["nodes"].as_array_mut().unwrap().push(serde_json::json!({"name": "sun", "translation": [0.0, 0.0, 5.0],
+        "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+    let count = doc["nodes"].as_array().unwrap().len();
+    doc["scenes"][0]["nodes"] = serde_json::json!((0..count).collect::<Vec<_>>());
+    let scene = load_gltf(&common::gltf_builder::write_json(&dir, "plane_directional.gltf", &doc)).unwrap();
+    assert_eq!(scene.directional_lights.len(), 1);
+    let (centre, radius) = scene.bounding_sphere();
+    let l0 = PLANE_D + centre.z as f64 + radius as f64;
+    let scene = PreparedScene::new(scene).unwrap();
+    let (w, h) = (PLANE_RES, PLANE_RES);
+    let width = 0.01;
+    let start = ((l0 + PLANE_D) / width).floor() * width - 0.005;
+    let bins = 40usize;
+    let ctx = common::gpu();
+    let batches = 16;
+    let threshold = t_critical(sidak(0.01, (w * h) as usize), (batches - 1) as f64);
+    let expected = PLANE_RHO * E / std::f64::consts::PI;
+    let slack = 1e-5 * (l0 + PLANE_D);
+    for method in [Method::Path, Method::Direct] {
+        let gate = Gate::Transient { start, width, bins: bins as u32 };
+        let settings = RenderSettings { width: w, height: h, max_bounces: 3, gate, method, ..Default::default() };
+        let films = common::render_films(&ctx, &scene, &settings, batches, 16);
+        let mut stats = common::stats::BatchStats::new(films[0].data.len());
+        for f in &films {
+            stats.add(&f.data);
+        }
+        let (mean, var) = (stats.mean(), stats.var_of_mean());
+        // `direct` leaves about 1e-4 of the light to light tracing (MIS), whose splats reach a
+        // pixel about twice in all 16 batches: per pixel, a batch variance says nothing about
+        // them, so `direct` is judged by its image mean (about 650 splats) and per pixel only by
+        // where its light arrives.
+        if method == Method::Direct {
+            let image: Vec<f64> = films.iter().map(|f| f.data.iter().step_by(3).map(|&v| v as f64).sum::<f64>() / (w * h) as f64).collect();
+            let n = image.len() as f64;
+            let m = image.iter().sum::<f64>() / n;
+            let v = image.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0) / n;
+            let z = (m - expected) / v.sqrt();
+            assert!(z.abs() < 4.0, "direct: image mean {m} vs {expected} (z = {z:.2})");
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let (x0, x1, y0, y1) = plane_pixel(x, y);
+                let p = (y * w + x) as usize;
+                let (mut sum, mut sum_var) = (0.0, 0.0);
+                for b in 0..bins {
+                    sum += mean[(p * bins + b) * 3];
+                    sum_var += var[(p * bins + b) * 3];
+                }
+                if method == Method::Path {
+                    // Next-event estimation gives every sample exactly rho E / pi (to f32 rounding
+                    // of the factors, a few ulps): the variance can vanish, so allow 8 f32 ulps.
+                    let z = (sum - expected) / sum_var.sqrt().max(8.0 * f32::EPSILON as f64 * expected);
+                    assert!(z.abs() < threshold, "path: pixel ({x}, {y}) {sum} vs {expected} (z = {z:.2}, limit {threshold:.2})");
+                }
+                let nearest = |a: f64, b: f64| if a <= 0.0 && b >= 0.0 { 0.0 } else { a.abs().min(b.abs()) };
+                let r_min2 = nearest(x0, x1).powi(2) + nearest(y0, y1).powi(2);
+                let r_max2 = x0.abs().max(x1.abs()).powi(2) + y0.abs().max(y1.abs()).powi(2);
+                let (shortest, longest) = (l0 + PLANE_D * (1.0 + r_min2).sqrt(), l0 + PLANE_D * (1.0 + r_max2).sqrt());
+                for b in 0..bins {
+                    let (lo, hi) = (start + b as f64 * width, start + (b + 1) as f64 * width);
+                    if hi < shortest - slack || lo > longest + slack {
+                        assert_eq!(mean[(p * bins + b) * 3], 0.0, "{method:?}: pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]");
+                    }
+                }
+            }
+        }
+    }
+}

@@ -106,6 +106,7 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         materials: vec![material(1.0), material(4.0), material(30.0), material(0.0)],
         textures: vec![],
         point_lights: vec![PointLight { position: Vec3::new(0.0, 3.0, 0.0), intensity: Vec3::splat(0.2), spot: None }],
+        directional_lights: vec![],
         camera: CameraDesc { position: Vec3::Z, right: Vec3::X, up: Vec3::Y, forward: -Vec3::Z, yfov: 1.0, lens: None },
         dropped_degenerate: 0,
         nodes: Vec::new(),

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Writes the Cornell-box variants that exercise the thin-lens camera and spot lights (standard
-library only):
+"""Writes the Cornell-box variants that exercise the thin-lens camera and the punctual lights
+(standard library only):
 
 * assets/scenes/cornell_box_thin_lens.gltf: the Cornell box with a white block (0.3 m cube,
   turned 30 deg) on the floor and a thin-lens camera (camera node extras: aperture radius
@@ -9,6 +9,9 @@ library only):
   KHR_lights_punctual spot light under the ceiling aimed down towards the back-left corner
   (intensity 3 W/sr, outer cone 0.5 rad, inner cone 0.4999 rad: an almost hard edge, which a
   Mitsuba `spot` emitter reproduces).
+* assets/scenes/cornell_box_directional.gltf: the Cornell box without its area light and with
+  the front of its ceiling cut away, lit by a directional light (irradiance 2 W/m^2) shining
+  down and backwards through the opening.
 
     tools/make_cornell_variants.py
 """
@@ -129,6 +132,30 @@ def spot():
         " (normalised), intensity 3 W/sr, outer cone 0.5 rad, inner cone 0.4999 rad."))
 
 
+def directional():
+    d = Doc()
+    d.drop_node("light")
+    # The ceiling ends at z = -0.1: the light enters through the opening in front of it.
+    ceiling = d.doc["meshes"][d.doc["nodes"][d.node("ceiling")]["mesh"]]
+    acc = d.doc["accessors"][ceiling["primitives"][0]["attributes"]["POSITION"]]
+    view = d.doc["bufferViews"][acc["bufferView"]]
+    off = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    points = [list(struct.unpack_from("<3f", d.data, off + 12 * i)) for i in range(acc["count"])]
+    moved = [[p[0], p[1], min(p[2], -0.1)] for p in points]
+    raw = b"".join(struct.pack("<3f", *p) for p in moved)
+    acc["bufferView"] = d.view(raw, 34962)
+    acc.pop("byteOffset", None)
+    acc["min"] = [min(p[k] for p in moved) for k in range(3)]
+    acc["max"] = [max(p[k] for p in moved) for k in range(3)]
+    travel = normalized([0.2, -1.0, -0.6])
+    d.add_light({"name": "sun", "type": "directional", "color": [1.0, 1.0, 1.0], "intensity": 2.0},
+                {"name": "sun", "translation": [0.0, 2.0, 1.0], "rotation": quat_from_to([0.0, 0.0, -1.0], travel)})
+    d.write("cornell_box_directional.gltf", BASE + (
+        " No area light; the ceiling ends at z = -0.1 m. A KHR_lights_punctual directional light (irradiance"
+        " 2 W/m^2 on a surface facing it) travels along (0.2, -1, -0.6) (normalised) through the opening."))
+
+
 if __name__ == "__main__":
     thin_lens()
     spot()
+    directional()

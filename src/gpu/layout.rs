@@ -21,6 +21,8 @@ pub const TEXTURE_CLAMP_V: u32 = 2;
 pub const LIGHT_AREA: u32 = 0;
 /// [`Light::kind`]: a point or spot light.
 pub const LIGHT_POINT: u32 = 1;
+/// [`Light::kind`]: a directional light.
+pub const LIGHT_DIRECTIONAL: u32 = 2;
 /// [`Light::flags`]: an area light that emits from both faces.
 pub const LIGHT_DOUBLE_SIDED: u32 = 1;
 /// Largest triangle count a BVH leaf can hold (4 bits of `BvhNode::leaf`).
@@ -158,30 +160,35 @@ pub struct TextureInfo {
     pub wrap: u32,
 }
 
-/// One light: an emissive triangle (area light), or a point or spot light.
+/// One light: an emissive triangle (area light), a point or spot light, or a directional light.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Light {
-    /// Point or spot light: position (m). Area light: unused.
+    /// Point or spot light: position (m). Directional light: centre of the sphere bounding the
+    /// scene. Area light: unused.
     pub position: Vec3,
-    /// [`LIGHT_AREA`], or [`LIGHT_POINT`] (a point or spot light).
+    /// [`LIGHT_AREA`], [`LIGHT_POINT`] (a point or spot light) or [`LIGHT_DIRECTIONAL`].
     pub kind: u32,
     /// Area light: radiance (W m^-2 sr^-1). Point or spot light: intensity (W sr^-1), on the
-    /// beam's axis for a spot.
+    /// beam's axis for a spot. Directional light: irradiance (W m^-2) on a surface facing it.
     pub emission: Vec3,
     /// Area light: the emitting triangle (BVH order). Otherwise [`NONE`].
     pub triangle: u32,
-    /// Spot light: unit axis of the beam. Point light: +z (unused).
+    /// Spot light: unit axis of the beam. Directional light: unit direction of travel. Point
+    /// light: +z (unused).
     pub direction: Vec3,
-    /// Area light: the triangle's area (m^2).
+    /// Area light: the triangle's area (m^2). Directional light: area (m^2) of the disk its
+    /// light subpaths start on, pi r^2 for the bounding sphere's radius r.
     pub area: f32,
     /// Probability that light sampling picks this light.
     pub select_pdf: f32,
     /// [`LIGHT_DOUBLE_SIDED`].
     pub flags: u32,
-    /// Point or spot light: cosine of the outer cone half-angle (-1 for a point light).
+    /// Point or spot light: cosine of the outer cone half-angle (-1 for a point light and for
+    /// a directional light).
     pub cos_outer: f32,
-    /// Point or spot light: cosine of the inner cone half-angle (-1 for a point light).
+    /// Point or spot light: cosine of the inner cone half-angle (-1 for a point light and for
+    /// a directional light).
     pub cos_inner: f32,
 }
 

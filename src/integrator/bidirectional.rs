@@ -236,6 +236,13 @@ impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
+        ensure!(
+            settings.method != Method::Ellipsoidal || scene.scene.directional_lights.is_empty(),
+            "{}: --method ellipsoidal does not support directional lights yet (with the light at infinity, the \
+             paths of one length through a scattering vertex lie on a paraboloid, not a spheroid); use --method \
+             direct or path",
+            scene.scene.source
+        );
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;

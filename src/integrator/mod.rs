@@ -499,6 +499,7 @@ pub fn upload_scene(
         ("HAS_TEXTURES", flag(scene.has_textures())),
         ("HAS_SHADING_NORMALS", flag(scene.has_shading_normals())),
         ("HAS_POINT_LIGHTS", flag(scene.has_point_lights())),
+        ("HAS_DIRECTIONAL_LIGHTS", flag(!scene.scene.directional_lights.is_empty())),
         ("HAS_GLOSSY", flag(scene.has_glossy())),
         ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),
         ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),

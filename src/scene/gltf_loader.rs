@@ -8,7 +8,7 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use super::camera::ThinLens;
-use super::{CameraDesc, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, TextureData};
+use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, TextureData};
 
 /// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
@@ -59,6 +59,7 @@ struct Loader<'a> {
 struct Collected {
     triangles: Vec<SceneTriangle>,
     point_lights: Vec<PointLight>,
+    directional_lights: Vec<DirectionalLight>,
     camera: Option<CameraDesc>,
     dropped_degenerate: usize,
     nodes: Vec<super::NamedNode>,
@@ -118,10 +119,10 @@ impl Loader<'_> {
             ),
         };
         let emissive = c.triangles.iter().any(|t| materials[t.material as usize].is_emissive());
-        if !emissive && c.point_lights.is_empty() && !self.capture {
+        if !emissive && c.point_lights.is_empty() && c.directional_lights.is_empty() && !self.capture {
             bail!(
                 "{name}: no light: add an emissive material (emissiveFactor, KHR_materials_emissive_strength) \
-                 or a KHR_lights_punctual point light (an NLOS capture, --nlos, needs none)"
+                 or a KHR_lights_punctual light (an NLOS capture, --nlos, needs none)"
             );
         }
         if c.triangles.is_empty() {
@@ -139,6 +140,7 @@ impl Loader<'_> {
             materials,
             textures,
             point_lights: c.point_lights,
+            directional_lights: c.directional_lights,
             camera,
             dropped_degenerate: c.dropped_degenerate,
             nodes: c.nodes,
@@ -255,7 +257,16 @@ impl Loader<'_> {
                 Ok(())
             }
             gltf::khr_lights_punctual::Kind::Directional => {
-                bail!("{name}: {node_name}: directional lights are not supported (a time-of-flight source is at a finite distance)")
+                let irradiance = Vec3::from(light.color()) * light.intensity();
+                if !irradiance.is_finite() || irradiance.min_element() < 0.0 {
+                    bail!("{name}: {node_name}: directional light irradiance {irradiance} is not finite and non-negative");
+                }
+                let direction = world.transform_vector3(Vec3::NEG_Z).normalize();
+                if !direction.is_finite() {
+                    bail!("{name}: {node_name}: the directional light's transform is degenerate (no direction)");
+                }
+                c.directional_lights.push(DirectionalLight { direction, irradiance });
+                Ok(())
             }
         }
     }

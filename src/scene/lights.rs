@@ -1,13 +1,13 @@
 //! The light table and light sampling. CPU twin of `shaders/lib/lights.wesl`.
 //!
 //! Every emissive triangle is an area light and every KHR_lights_punctual point or spot light a
-//! point light (a spot's cone shapes its intensity); next-event estimation picks one with
-//! probability proportional to its power.
+//! point light (a spot's cone shapes its intensity), every directional light a plane wave;
+//! next-event estimation picks one with probability proportional to its power.
 
 use glam::{Vec2, Vec3};
 
 use super::Scene;
-use crate::gpu::layout::{LIGHT_AREA, LIGHT_DOUBLE_SIDED, LIGHT_POINT, Light, NONE, Triangle};
+use crate::gpu::layout::{LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_POINT, Light, NONE, Triangle};
 use crate::sampling::sample_triangle_barycentrics;
 
 /// Lights with their selection CDF.
@@ -66,6 +66,24 @@ impl LightTable {
             });
             source_triangle.push(NONE);
         }
+        let (centre, radius) = scene.bounding_sphere();
+        for l in &scene.directional_lights {
+            // Light subpaths start on the disk where the plane wave enters the bounding sphere.
+            let disk = std::f32::consts::PI * radius * radius;
+            power.push(disk as f64 * mean(l.irradiance));
+            lights.push(Light {
+                position: centre,
+                kind: LIGHT_DIRECTIONAL,
+                emission: l.irradiance,
+                triangle: NONE,
+                direction: l.direction,
+                area: disk,
+                cos_outer: -1.0,
+                cos_inner: -1.0,
+                ..Default::default()
+            });
+            source_triangle.push(NONE);
+        }
         let total: f64 = power.iter().sum();
         if total <= 0.0 {
             power.iter_mut().for_each(|p| *p = 1.0);
@@ -98,6 +116,19 @@ impl LightTable {
     pub fn sample(&self, triangles: &[Triangle], u_select: f32, u: Vec2) -> LightSample {
         let index = self.select(u_select);
         let light = &self.lights[index];
+        if light.kind == LIGHT_DIRECTIONAL {
+            // Where the light starts depends on the point it lights (directional_origin).
+            return LightSample {
+                position: light.position,
+                normal: light.direction,
+                emission: light.emission,
+                pdf: light.select_pdf,
+                is_point: true,
+                is_directional: true,
+                double_sided: false,
+                triangle: light.triangle,
+            };
+        }
         if light.kind == LIGHT_POINT {
             return LightSample {
                 position: light.position,
@@ -105,6 +136,7 @@ impl LightTable {
                 emission: light.emission,
                 pdf: light.select_pdf,
                 is_point: true,
+                is_directional: false,
                 double_sided: false,
                 triangle: light.triangle,
             };
@@ -117,6 +149,7 @@ impl LightTable {
             emission: light.emission,
             pdf: light.select_pdf / light.area,
             is_point: false,
+            is_directional: false,
             double_sided: light.flags & LIGHT_DOUBLE_SIDED != 0,
             triangle: light.triangle,
         }
@@ -134,8 +167,11 @@ pub struct LightSample {
     pub emission: Vec3,
     /// Area pdf with selection (m^-2) for area lights; selection probability for point lights.
     pub pdf: f32,
-    /// A point light (a delta: reached by light sampling only).
+    /// A point, spot or directional light (a delta: reached by light sampling only).
     pub is_point: bool,
+    /// A directional light: `position` is the bounding sphere's centre and `normal` the
+    /// direction of travel.
+    pub is_directional: bool,
     /// An area light that emits from both faces.
     pub double_sided: bool,
     /// The emitting triangle (BVH order), or NONE.

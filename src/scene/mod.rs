@@ -125,6 +125,18 @@ pub fn spot_falloff(cd: f32, cos_outer: f32, cos_inner: f32) -> f32 {
     ramp * ramp
 }
 
+/// A directional light (KHR_lights_punctual): a plane wave. Its light starts (path length 0)
+/// on the plane normal to `direction` that touches the sphere bounding the scene on the side
+/// the light comes from, so a point x receives it after d . (x - c) + r metres (c, r: the
+/// bounding sphere of [`Scene::bounds`]).
+#[derive(Clone, Debug)]
+pub struct DirectionalLight {
+    /// Unit direction of travel (world space).
+    pub direction: Vec3,
+    /// Irradiance (W m^-2 per channel) on a surface facing the light = colour x intensity.
+    pub irradiance: Vec3,
+}
+
 /// A named node of the glTF scene: where it is and which triangles it contributed (what an NLOS
 /// capture needs to find its relay wall and its sensor and laser origins by name).
 #[derive(Clone, Debug)]
@@ -150,8 +162,10 @@ pub struct Scene {
     pub materials: Vec<MaterialDesc>,
     /// Decoded base-colour textures.
     pub textures: Vec<TextureData>,
-    /// KHR_lights_punctual point lights.
+    /// KHR_lights_punctual point and spot lights.
     pub point_lights: Vec<PointLight>,
+    /// KHR_lights_punctual directional lights.
+    pub directional_lights: Vec<DirectionalLight>,
     /// The first camera of the scene.
     pub camera: CameraDesc,
     /// Zero-area triangles dropped at load.
@@ -184,9 +198,21 @@ impl Scene {
         (lo, hi)
     }
 
-    /// Axis-aligned bounds of every emitting triangle and point light (m); an empty box
-    /// (min > max) when the scene has no light.
+    /// The sphere bounding [`Scene::bounds`], as (centre, radius) (m), a little enlarged: where
+    /// directional lights start their light.
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        let (lo, hi) = self.bounds();
+        let radius = 0.5 * (hi - lo).length();
+        (0.5 * (lo + hi), radius * (1.0 + 1e-4) + 1e-6)
+    }
+
+    /// Axis-aligned bounds of every emitting triangle and point light (m); with a directional
+    /// light, which can reach any point, the scene's bounds; an empty box (min > max) when the
+    /// scene has no light.
     pub fn light_bounds(&self) -> (Vec3, Vec3) {
+        if !self.directional_lights.is_empty() {
+            return self.bounds();
+        }
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
         for t in &self.triangles {
@@ -217,6 +243,12 @@ impl Scene {
         }
         for l in &self.point_lights {
             shortest = shortest.min(camera.distance(l.position));
+        }
+        // A directional light's path length grows by at most the distance travelled, so no path
+        // is shorter than the camera's own distance from where the wave starts.
+        let (centre, radius) = self.bounding_sphere();
+        for l in &self.directional_lights {
+            shortest = shortest.min((l.direction.dot(camera - centre) + radius).max(0.0));
         }
         let shortest = (shortest - self.camera.lens_radius()).max(0.0);
         let (lo, hi) = self.bounds();
