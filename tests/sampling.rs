@@ -141,7 +141,7 @@ fn light_sampling_follows_power_and_area() {
     let mut rng = Rng::new(7, 8, 9);
     for _ in 0..n {
         let s = table.sample(&prepared.triangles, rng.next_f32(), rng.next_vec2());
-        let (light, cell) = if s.is_point {
+        let (light, cell) = if s.is_delta {
             let l = table.lights.iter().position(|l| l.position == s.position).unwrap();
             (l, 0)
         } else {

@@ -245,11 +245,7 @@ impl Loader<'_> {
                                  needs 0 <= inner < outer <= pi/2"
                             );
                         }
-                        let direction = world.transform_vector3(Vec3::NEG_Z).normalize();
-                        if !direction.is_finite() {
-                            bail!("{name}: {node_name}: the spot light's transform is degenerate (no direction)");
-                        }
-                        Some(SpotCone { direction, inner, outer })
+                        Some(SpotCone { direction: light_direction(world, name, node_name)?, inner, outer })
                     }
                     _ => None,
                 };
@@ -261,10 +257,7 @@ impl Loader<'_> {
                 if !irradiance.is_finite() || irradiance.min_element() < 0.0 {
                     bail!("{name}: {node_name}: directional light irradiance {irradiance} is not finite and non-negative");
                 }
-                let direction = world.transform_vector3(Vec3::NEG_Z).normalize();
-                if !direction.is_finite() {
-                    bail!("{name}: {node_name}: the directional light's transform is degenerate (no direction)");
-                }
+                let direction = light_direction(world, name, node_name)?;
                 c.directional_lights.push(DirectionalLight { direction, irradiance });
                 Ok(())
             }
@@ -470,6 +463,16 @@ fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
 /// sRGB transfer function, encoded [0, 1] to linear.
 pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// The unit direction a KHR_lights_punctual spot or directional light points in: its node's -z
+/// in world space; an error when the node's transform collapses it.
+fn light_direction(world: Mat4, name: &str, node_name: &str) -> Result<Vec3> {
+    let direction = world.transform_vector3(Vec3::NEG_Z).normalize();
+    if !direction.is_finite() {
+        bail!("{name}: {node_name}: the light's transform is degenerate (no direction)");
+    }
+    Ok(direction)
 }
 
 /// The thin lens described by a camera node's `extras` (`aperture_radius` and `focus_distance`,

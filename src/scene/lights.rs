@@ -123,7 +123,7 @@ impl LightTable {
                 normal: light.direction,
                 emission: light.emission,
                 pdf: light.select_pdf,
-                is_point: true,
+                is_delta: true,
                 is_directional: true,
                 double_sided: false,
                 triangle: light.triangle,
@@ -135,7 +135,7 @@ impl LightTable {
                 normal: Vec3::ZERO,
                 emission: light.emission,
                 pdf: light.select_pdf,
-                is_point: true,
+                is_delta: true,
                 is_directional: false,
                 double_sided: false,
                 triangle: light.triangle,
@@ -148,7 +148,7 @@ impl LightTable {
             normal: tri.e1.cross(tri.e2).normalize(),
             emission: light.emission,
             pdf: light.select_pdf / light.area,
-            is_point: false,
+            is_delta: false,
             is_directional: false,
             double_sided: light.flags & LIGHT_DOUBLE_SIDED != 0,
             triangle: light.triangle,
@@ -168,7 +168,7 @@ pub struct LightSample {
     /// Area pdf with selection (m^-2) for area lights; selection probability for point lights.
     pub pdf: f32,
     /// A point, spot or directional light (a delta: reached by light sampling only).
-    pub is_point: bool,
+    pub is_delta: bool,
     /// A directional light: `position` is the bounding sphere's centre and `normal` the
     /// direction of travel.
     pub is_directional: bool,
