@@ -95,8 +95,9 @@ impl Variant {
         let mut variant = Self { method, connections_per_query, query: Default::default() };
         for option in parts {
             anyhow::ensure!(
-                method == crate::integrator::Method::Ellipsoidal,
-                "`{s}`: only ellipsoidal takes options (K, exhaustive, split=R, bottom=N, reflection)"
+                matches!(method, crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto),
+                "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
+                 split=R, bottom=N, reflection)"
             );
             if option == "exhaustive" {
                 variant.query.split = 0.0;
@@ -123,7 +124,7 @@ impl Variant {
         if self.connections_per_query != crate::integrator::bidirectional::default_connections_per_query(self.method) {
             name += &format!(":{}", self.connections_per_query);
         }
-        if self.method == crate::integrator::Method::Ellipsoidal {
+        if matches!(self.method, crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto) {
             let default = crate::integrator::QuerySettings::default();
             if self.query.split == 0.0 {
                 name += ":exhaustive";
@@ -169,16 +170,23 @@ pub struct EqualTimeSettings {
     pub base: RenderSettings,
     /// CSV file for the results.
     pub csv: Option<std::path::PathBuf>,
+    /// Animation time (s) at which animated scenes are posed; None: as the file poses them.
+    pub anim_time: Option<f64>,
 }
 
-/// A film rendered for `seconds` in passes sized to end on time, after a warm-up pass (kernel
-/// builds, upload and the device's first compilation excluded); returns the film and the
-/// seconds actually spent.
-fn render_for(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings, seconds: f64) -> Result<(crate::film::Film, f64)> {
-    let mut tracer = create_integrator(ctx, scene, settings)?;
-    tracer.warm_up()?;
-    let spent = crate::integrator::PassSizer::default().render_for(tracer.as_mut(), seconds, |_, _| {})?;
-    Ok((tracer.film()?, spent))
+/// A film rendered for `seconds` as `render --time` renders it: passes sized to end on time,
+/// after a warm-up pass (kernel builds, upload and the device's first compilation excluded;
+/// `auto`'s pilot included); returns the film, the seconds actually spent and, for `auto`, the
+/// method it chose.
+fn render_for(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    seconds: f64,
+) -> Result<(crate::film::Film, f64, Option<Method>)> {
+    let budget = crate::integrator::Budget::Time(Duration::from_secs_f64(seconds));
+    let output = crate::integrator::render(ctx, scene, settings, budget, |_| {})?;
+    Ok((output.film, output.rendering.as_secs_f64(), output.choice.map(|c| c.chosen)))
 }
 
 /// Work of one ellipsoid query: (loop iterations, triangles tested), from a short render with
@@ -215,13 +223,14 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
     );
     let mut csv = String::from(
         "scene,triangles,gate,method,repeat,seconds,spp,mse,relative_mse,reference_noise,iterations_per_query,\
-         triangles_tested_per_query\n",
+         triangles_tested_per_query,chosen_method\n",
     );
     let mut seed = 1000;
     for scene_path in scene_paths {
-        let scene = PreparedScene::new(load_gltf(scene_path)?)?;
+        let scene = PreparedScene::new(crate::scene::load_gltf_at(scene_path, s.anim_time)?)?;
         let triangles = scene.triangles.len();
-        println!("\nscene {} ({triangles} triangles)", scene_path.display());
+        let posed = s.anim_time.map_or(String::new(), |t| format!(", posed at {t} s"));
+        println!("\nscene {} ({triangles} triangles{posed})", scene_path.display());
         let scene_name = scene_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for (spec, gate) in &s.gates {
             // Reference: 8 batches, mean and variance of the mean per element.
@@ -231,7 +240,7 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
             for _ in 0..batches {
                 seed += 1;
                 let settings = RenderSettings { gate: gate.clone(), seed, ..s.reference.settings(b) };
-                let (film, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
+                let (film, _, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
                 ref_spp += film.spp;
                 let (sum, sq) = stats.get_or_insert_with(|| (vec![0.0; film.data.len()], vec![0.0; film.data.len()]));
                 for (i, &v) in film.data.iter().enumerate() {
@@ -252,26 +261,28 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 sum.iter().sum::<f64>() / n / elements
             );
             println!(
-                "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9}",
-                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query"
+                "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9} {}",
+                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query", "chosen"
             );
             let mut first = None;
             for variant in &s.methods {
                 let mut mses = Vec::new();
                 let mut spps = Vec::new();
+                let mut choices = Vec::new();
                 let base = RenderSettings { gate: gate.clone(), ..variant.settings(b) };
                 let cost = query_cost(&ctx, &scene, &base)?;
                 let (iterations, tested) = cost.map_or((String::new(), String::new()), |(n, t)| (format!("{n:.2}"), format!("{t:.2}")));
                 for repeat in 0..s.repeats {
                     seed += 1;
                     let settings = RenderSettings { seed, ..base.clone() };
-                    let (film, secs) = render_for(&ctx, &scene, &settings, s.seconds)?;
+                    let (film, secs, chosen) = render_for(&ctx, &scene, &settings, s.seconds)?;
+                    let chosen = chosen.map_or("", Method::name);
                     let se: f64 =
                         film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
                     let mse = se - ref_noise;
                     writeln!(
                         csv,
-                        "{scene_name},{triangles},{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e},{iterations},{tested}",
+                        "{scene_name},{triangles},{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e},{iterations},{tested},{chosen}",
                         variant.name(),
                         film.spp,
                         mse / ref_power
@@ -279,18 +290,30 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                     .unwrap();
                     mses.push(mse);
                     spps.push(film.spp);
+                    if !chosen.is_empty() {
+                        choices.push(chosen);
+                    }
                 }
                 let mse = mses.iter().sum::<f64>() / mses.len() as f64;
                 let first_mse = *first.get_or_insert(mse);
+                // auto: the methods its pilots chose, e.g. `direct x2, ellipsoidal x1`.
+                let mut chosen = String::new();
+                for method in [Method::Direct, Method::Ellipsoidal] {
+                    let n = choices.iter().filter(|&&c| c == method.name()).count();
+                    if n > 0 {
+                        chosen += &format!("{}{} x{n}", if chosen.is_empty() { "" } else { ", " }, method.name());
+                    }
+                }
                 println!(
-                    "{:>24} {:>8} {:>12.4e} {:>12.4e} {:>12.3} {:>11} {:>9}",
+                    "{:>24} {:>8} {:>12.4e} {:>12.4e} {:>12.3} {:>11} {:>9} {}",
                     variant.name(),
                     spps.iter().sum::<u64>() / spps.len() as u64,
                     mse,
                     mse / ref_power,
                     mse / first_mse,
                     iterations,
-                    tested
+                    tested,
+                    chosen
                 );
             }
         }

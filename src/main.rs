@@ -63,7 +63,11 @@ struct RenderArgs {
     /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
     /// bounces); `ellipsoidal` (bidirectional path tracing whose subpaths are joined through a
     /// vertex on the spheroid of a target length drawn from the gate, so every path has a
-    /// length the gate weighs; needs a gate; at most 24 bounces).
+    /// length the gate weighs; needs a gate; at most 24 bounces); `auto` (`direct` or
+    /// `ellipsoidal`, whichever a pilot of both on this render measures to have the lower
+    /// variance x time per sample; the pilot takes 5 % of a --time budget, or 1/16 of --spp per
+    /// method, and is discarded; `direct` without a pilot in the steady state or with
+    /// directional lights; the metadata records the choice and the pilot's figures).
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
@@ -326,15 +330,21 @@ enum QueryWeights {
 struct EqualTimeArgs {
     /// glTF 2.0 scenes, each compared separately; the Cornell box when omitted.
     scenes: Vec<PathBuf>,
-    /// Methods to compare, comma-separated: path, direct, ellipsoidal, and ellipsoidal with
-    /// options after colons: K (connections per query, see render --connections-per-query),
-    /// `exhaustive` (render --query-split 0), `split=R`, `bottom=N` or `reflection` (render
-    /// --query-weights reflection), e.g. ellipsoidal:4:exhaustive.
+    /// Methods to compare, comma-separated: path, direct, ellipsoidal, auto, and ellipsoidal
+    /// (or auto, for its ellipsoidal candidate) with options after colons: K (connections per
+    /// query, see render --connections-per-query), `exhaustive` (render --query-split 0),
+    /// `split=R`, `bottom=N` or `reflection` (render --query-weights reflection), e.g.
+    /// ellipsoidal:4:exhaustive. `auto`'s pilot counts in its time; the `chosen` column says
+    /// which method each of its renders took.
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<gatetrace::bench::Variant>,
     /// Gates to compare at, separated by `;` (same syntax as `render --gate`).
     #[arg(long, default_value = "none;box:3.14..3.1425")]
     gates: String,
+    /// Animation time (seconds of the scene's clock) at which animated scenes are compared, as
+    /// `render --anim-time` poses them; without it, as the file poses them.
+    #[arg(long, value_name = "SECONDS")]
+    anim_time: Option<f64>,
     /// Seconds of rendering per method, gate and repeat (kernel builds excluded).
     #[arg(long, default_value_t = 10.0)]
     seconds: f64,
@@ -394,6 +404,7 @@ fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
         reference: args.reference_method,
         reference_seconds: args.reference_seconds,
         base: RenderSettings { width: args.res.0, height: args.res.1, max_bounces: args.max_bounces, ..Default::default() },
+        anim_time: args.anim_time,
         csv: args.csv,
     };
     gatetrace::bench::run_equal_time(&scenes, &settings)
@@ -479,6 +490,11 @@ fn main() {
 
 fn run_view(args: ViewArgs) -> Result<()> {
     use gatetrace::viewer::{GateChoice, ViewOptions, run_viewer};
+    ensure!(
+        args.method != Method::Auto,
+        "--method auto chooses per render from a pilot; the viewer renders progressively: start it with path, direct \
+         or ellipsoidal"
+    );
     let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let (gate, tau, gate_width) = match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
         Gate::None => (GateChoice::None, 3.165, 0.05),
@@ -605,6 +621,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
         "--target-pilot applies to --method ellipsoidal only"
     );
     if let Some(scan) = args.nlos {
+        ensure!(
+            args.method != Method::Auto,
+            "--method auto does not apply to NLOS captures (--nlos): choose path, direct or ellipsoidal"
+        );
         ensure!(
             args.aperture_radius.is_none() && args.focus_distance.is_none(),
             "--aperture-radius and --focus-distance set the camera's lens: an NLOS capture (--nlos) has no camera"
@@ -873,7 +893,10 @@ fn render_one(
         scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
         settings.width,
         settings.height,
-        settings.method.name(),
+        match &output.choice {
+            Some(choice) => format!("auto ({})", choice.chosen.name()),
+            None => settings.method.name().to_owned(),
+        },
         if frame.is_some_and(|(i, p)| p.gate_step != 0.0 && i > 0) { gate.describe() } else { gate_spec.to_owned() },
         film.spp,
         secs,
@@ -885,6 +908,9 @@ fn render_one(
         mean[2],
         out.display()
     ))?;
+    if let Some(choice) = &output.choice {
+        say(bars, format!("auto chose {}: {}", choice.chosen.name(), choice.reason))?;
+    }
     print_stats(settings, &output);
     Ok(())
 }
@@ -929,7 +955,20 @@ fn render_metadata(
     if let Some((s, t)) = settings.debug_strategy {
         metadata.push(("debug_strategy".into(), format!("{s},{t}")));
     }
-    if settings.method == Method::Ellipsoidal {
+    if let Some(choice) = &output.choice {
+        metadata.push(("chosen_method".into(), choice.chosen.name().into()));
+        metadata.push(("auto_reason".into(), choice.reason.clone()));
+        for c in &choice.candidates {
+            metadata.push((
+                format!("auto_pilot_{}", c.method.name()),
+                format!(
+                    "{} spp in {:.3} s, variance per sample {:.4e}, variance x seconds per sample {:.4e}",
+                    c.spp, c.seconds, c.variance_per_sample, c.cost()
+                ),
+            ));
+        }
+    }
+    if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
         let g = settings.ellipsoid_guards;
         metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
         metadata.push(("query_split".into(), settings.query.split.to_string()));

@@ -74,9 +74,10 @@ pub const DEFAULT_NLOS_CONNECTIONS_PER_QUERY: u32 = 1;
 pub const DEFAULT_NLOS_TARGET_PILOT: u32 = 256;
 
 /// The connections per ellipsoid query a method uses unless told otherwise:
-/// DEFAULT_CONNECTIONS_PER_QUERY for `ellipsoidal`, 1 (the only value they take) for the others.
+/// DEFAULT_CONNECTIONS_PER_QUERY for `ellipsoidal` and for `auto` (whose `ellipsoidal` pilot and
+/// render use it), 1 (the only value they take) for the others.
 pub fn default_connections_per_query(method: Method) -> u32 {
-    if method == Method::Ellipsoidal { DEFAULT_CONNECTIONS_PER_QUERY } else { 1 }
+    if matches!(method, Method::Ellipsoidal | Method::Auto) { DEFAULT_CONNECTIONS_PER_QUERY } else { 1 }
 }
 
 /// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
@@ -105,6 +106,14 @@ pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
 
 /// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
 pub fn check_settings(settings: &RenderSettings) -> Result<()> {
+    if settings.method == Method::Auto {
+        // Both candidates must be valid, ellipsoidal only where it applies (it needs a gate).
+        check_settings(&super::auto::candidate_settings(settings, Method::Direct))?;
+        if !matches!(settings.gate, crate::film::Gate::None) {
+            check_settings(&super::auto::candidate_settings(settings, Method::Ellipsoidal))?;
+        }
+        return Ok(());
+    }
     let b = super::kernel_bounces(settings);
     let method = settings.method.name();
     ensure!(

@@ -3,6 +3,7 @@
 //! direct or ellipsoidal connections, sections 4.2 and 4.3); `mis` is the CPU twin of the
 //! direct connections' MIS weights.
 
+pub mod auto;
 pub mod bidirectional;
 pub mod mis;
 pub mod path;
@@ -32,6 +33,9 @@ pub enum Method {
     Direct,
     /// Bidirectional path tracing with ellipsoidal connections.
     Ellipsoidal,
+    /// `direct` or `ellipsoidal`, whichever a short pilot of both on this render measures to
+    /// have the lower variance x time per sample (see [`auto`]).
+    Auto,
 }
 
 impl Method {
@@ -41,6 +45,7 @@ impl Method {
             Method::Path => "path",
             Method::Direct => "direct",
             Method::Ellipsoidal => "ellipsoidal",
+            Method::Auto => "auto",
         }
     }
 }
@@ -275,6 +280,10 @@ pub fn create_integrator<'a>(
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
         Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
+        Method::Auto => anyhow::bail!(
+            "--method auto has no integrator of its own: it renders with direct or ellipsoidal after a pilot of both \
+             (integrator::render); measure those two instead"
+        ),
     })
 }
 
@@ -367,6 +376,8 @@ pub struct RenderOutput {
     /// Samples per pixel of the pilot render traced before the film's and discarded (see
     /// `RenderSettings::target_pilot_spp`).
     pub target_pilot_spp: u32,
+    /// `--method auto`: the method chosen and the pilot's figures (its time is in `rendering`).
+    pub choice: Option<auto::MethodChoice>,
 }
 
 /// Why no path of the scene can reach the gate, if none can (checked before any work).
@@ -545,14 +556,27 @@ pub fn render(
             truncated_traversals: 0,
             stats: None,
             target_pilot_spp: 0,
+            choice: None,
         });
     }
-    let mut tracer = create_integrator(ctx, scene, settings)?;
-    if let Budget::Time(_) = budget {
-        // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
-        // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
-        tracer.warm_up()?;
-    }
+    let (mut tracer, choice) = if settings.method == Method::Auto {
+        // The pilot warms both methods' kernels up and counts against a time budget.
+        let (tracer, choice) = auto::choose(ctx, scene, settings, budget)?;
+        (tracer, Some(choice))
+    } else {
+        let mut tracer = create_integrator(ctx, scene, settings)?;
+        if let Budget::Time(_) = budget {
+            // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
+            // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
+            tracer.warm_up()?;
+        }
+        (tracer, None)
+    };
+    let pilot = Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds));
+    let budget = match budget {
+        Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
+        samples => samples,
+    };
     let mut passes = 0;
     let rendering = Instant::now();
     match budget {
@@ -561,19 +585,19 @@ pub fn render(
                 let next = (n - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
                 tracer.render_pass(next)?;
                 passes += 1;
-                let (elapsed, rendering) = (start.elapsed(), rendering.elapsed());
+                let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
                 progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
             }
         }
         Budget::Time(t) => {
             PassSizer::default().render_for(tracer.as_mut(), t.as_secs_f64(), |tracer, _| {
                 passes += 1;
-                let (elapsed, rendering) = (start.elapsed(), rendering.elapsed());
+                let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
                 progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
             })?;
         }
     }
-    let rendering = rendering.elapsed();
+    let rendering = pilot + rendering.elapsed();
     let film = tracer.film()?;
     let truncated_traversals = tracer.truncated_traversals()?;
     if truncated_traversals > 0 {
@@ -584,7 +608,7 @@ pub fn render(
     }
     let stats = if settings.stats { tracer.stats_report()? } else { None };
     let target_pilot_spp = tracer.target_pilot_spp();
-    Ok(RenderOutput { film, elapsed: start.elapsed(), rendering, truncated_traversals, stats, target_pilot_spp })
+    Ok(RenderOutput { film, elapsed: start.elapsed(), rendering, truncated_traversals, stats, target_pilot_spp, choice })
 }
 
 #[cfg(test)]

@@ -1,0 +1,168 @@
+#!/usr/bin/env python3
+"""The applications benchmark: renders each of the paper's application scenes (Pediredla et al.
+2019, section 7; made by tools/make_application_scenes.py) with `direct`, `ellipsoidal` and
+`auto` for equal time at the gate the scene names in its extras, and writes a table of the
+equal-time MSE gains over `direct` beside the paper's, with a picture of each scene.
+
+    tools/applications_benchmark.py                  # about 20 minutes on 2 CPU cores
+    tools/applications_benchmark.py --seconds 2 --reference-seconds 20 --no-pictures   # a quick look
+
+Writes into --out (target/applications): `applications.md` (the table), `applications.csv`
+(every render, from `gatetrace equal-time --csv`), `SCENE.png` (a steady-state picture beside
+the gated one; for the dynamic scene, four slices of its transient) and the raw NPY renders.
+The MSE of each method is measured against a reference rendered by `auto` for
+--reference-seconds (its own noise subtracted), as `gatetrace equal-time` does.
+
+Needs numpy and Pillow (pip install numpy pillow) for the pictures; not a dependency of the
+renderer.
+"""
+
+import argparse
+import csv
+import json
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BINARY = ROOT / "target/release/gatetrace"
+
+# name, scene file, animation time the comparison poses it at, the paper's figure, the paper's
+# gate as it states it, and the paper's equal-time MSE gains of ellipsoidal over direct
+# connections (Fig. 7 reports three frames; Fig. 6 gives no figure).
+APPLICATIONS = [
+    ("fence", "fence.gltf", None, "Fig. 8", "1 ns, 2.35 %", [3.37]),
+    ("proximity", "proximity.gltf", 0.65, "Fig. 7", "200 ps, 1.14 %", [9.25, 9.39, 2.73]),
+    ("cw_room", "cw_room.gltf", None, "Fig. 9", "depth-selective, 20 ps window, 1.28 %", [5.49]),
+    ("dynamic", "dynamic.gltf", 0.0, "Fig. 6", "200 ps, 1.74 %", []),
+]
+METHODS = ["direct", "ellipsoidal", "auto"]
+
+
+def run(cmd):
+    print("+", " ".join(str(c) for c in cmd), flush=True)
+    subprocess.run([str(c) for c in cmd], check=True)
+
+
+def scene_extras(path):
+    return json.loads(path.read_text()).get("extras", {})
+
+
+def equal_time(args, name, scene, gate, anim_time):
+    """Runs gatetrace equal-time on one scene; returns its CSV rows."""
+    out = args.out / f"{name}_equal_time.csv"
+    cmd = [BINARY, "equal-time", scene, "--methods", ",".join(METHODS), "--gates", gate,
+           "--seconds", args.seconds, "--repeats", args.repeats, "--reference-method", "auto",
+           "--reference-seconds", args.reference_seconds, "--res", args.res,
+           "--max-bounces", args.max_bounces, "--csv", out]
+    if anim_time is not None:
+        cmd += ["--anim-time", anim_time]
+    print("+", " ".join(str(c) for c in cmd), flush=True)
+    text = subprocess.run([str(c) for c in cmd], check=True, capture_output=True, text=True).stdout
+    print(text, flush=True)
+    adapter = next((line for line in text.splitlines() if line.startswith("adapter:")), "adapter: unknown")
+    with open(out, newline="") as f:
+        return list(csv.DictReader(f)), adapter
+
+
+def tone_map(rgb, white):
+    """Linear radiance to 8-bit sRGB-like values, `white` mapping to 1."""
+    import numpy as np
+
+    x = np.clip(rgb / max(white, 1e-30), 0.0, 1.0) ** (1 / 2.2)
+    return (x * 255 + 0.5).astype(np.uint8)
+
+
+def pictures(args, name, scene, gate, anim_time):
+    """A steady-state render beside the gated one (or four slices of the dynamic scene's
+    transient), each tone-mapped to its own 99.5th percentile; returns the PNG's path."""
+    import numpy as np
+    from PIL import Image
+
+    res = args.picture_res
+    common = ["--res", res, "--max-bounces", args.max_bounces, "--time", args.picture_seconds, "--force"]
+    panels = []
+    steady = args.out / f"{name}_steady.npy"
+    posed = ["--anim-time", anim_time] if anim_time is not None else []
+    run([BINARY, "render", scene, "--method", "path", "--gate", "none", "--out", steady] + posed + common)
+    panels.append(np.load(steady)[..., :3])
+    if name == "dynamic":
+        # Four slices, 24 cm and 0.3 s of the scene's clock apart.
+        pattern = args.out / f"{name}_slice_{{frame}}.npy"
+        run([BINARY, "render", scene, "--method", "auto", "--gate", gate, "--frames", 4, "--gate-step", "0.24",
+             "--anim-time", "0..0.9", "--out", pattern] + common)
+        panels += [np.load(args.out / f"{name}_slice_{k}.npy")[..., :3] for k in range(4)]
+    else:
+        gated = args.out / f"{name}_gated.npy"
+        run([BINARY, "render", scene, "--method", "auto", "--gate", gate, "--out", gated] + posed + common)
+        panels.append(np.load(gated)[..., :3])
+    tiles = [tone_map(p, np.percentile(p, 99.5)) for p in panels]
+    gap = np.full((tiles[0].shape[0], 4, 3), 255, np.uint8)
+    row = np.concatenate([t for tile in tiles for t in (tile, gap)][:-1], axis=1)
+    path = args.out / f"{name}.png"
+    Image.fromarray(row).save(path)
+    print(f"wrote {path}")
+    return path
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=6.0, help="rendering seconds per method and repeat")
+    parser.add_argument("--repeats", type=int, default=3, help="independent renders per method")
+    parser.add_argument("--reference-seconds", type=float, default=90.0, help="seconds of each reference")
+    parser.add_argument("--res", default="64x64", help="image size of the comparison, WxH")
+    parser.add_argument("--max-bounces", type=int, default=5, help="scattering vertices per path")
+    parser.add_argument("--picture-res", default="192x144", help="image size of the pictures, WxH")
+    parser.add_argument("--picture-seconds", type=float, default=20.0, help="rendering seconds per picture")
+    parser.add_argument("--no-pictures", action="store_true", help="skip the pictures")
+    parser.add_argument("--only", help="comma-separated application names (fence, proximity, cw_room, dynamic)")
+    parser.add_argument("--out", type=Path, default=ROOT / "target/applications", help="output folder")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    run(["cargo", "build", "--release", "--quiet", "--manifest-path", ROOT / "Cargo.toml"])
+    chosen = [a for a in APPLICATIONS if not args.only or a[0] in args.only.split(",")]
+    if not chosen:
+        sys.exit(f"--only {args.only}: no such application (fence, proximity, cw_room, dynamic)")
+
+    lines = ["| scene | paper | gate | triangles | paper's gain | ellipsoidal gain | auto gain | auto chose | "
+             "spp (direct / ellipsoidal / auto) |", "|---|---|---|---|---|---|---|---|---|"]
+    all_rows = []
+    for name, file, anim_time, figure, paper_gate, paper_gains in chosen:
+        scene = ROOT / "assets/scenes" / file
+        extras = scene_extras(scene)
+        gate = extras["gate"]
+        rows, adapter = equal_time(args, name, scene, gate, anim_time)
+        all_rows += rows
+        mse, spp, picks = defaultdict(list), defaultdict(list), defaultdict(int)
+        for r in rows:
+            mse[r["method"]].append(float(r["mse"]))
+            spp[r["method"]].append(int(r["spp"]))
+            if r.get("chosen_method"):
+                picks[r["chosen_method"]] += 1
+        mean = {m: sum(v) / len(v) for m, v in mse.items()}
+        gain = lambda m: mean["direct"] / mean[m] if mean[m] > 0 else float("inf")
+        paper = ", ".join(f"{g}x" for g in paper_gains) or "(none given)"
+        picked = ", ".join(f"{m} x{n}" for m, n in sorted(picks.items()))
+        spps = " / ".join(str(sum(spp[m]) // len(spp[m])) for m in METHODS)
+        lines.append(f"| {name}{'' if anim_time is None else f' at {anim_time} s'} | {figure}: {paper_gate} | "
+                     f"`{gate}` | {rows[0]['triangles']} | {paper} | {gain('ellipsoidal'):.2f}x | "
+                     f"{gain('auto'):.2f}x | {picked} | {spps} |")
+        if not args.no_pictures:
+            pictures(args, name, scene, gate, anim_time)
+
+    with open(args.out / "applications.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(all_rows[0].keys()))
+        writer.writeheader()
+        writer.writerows(all_rows)
+    header = [f"Equal-time MSE gain over `direct` (MSE of direct / MSE of the method), {args.res}, "
+              f"{args.max_bounces} bounces, {args.repeats} x {args.seconds} s per method, reference `auto` for "
+              f"{args.reference_seconds} s; {adapter}", ""]
+    table = "\n".join(header + lines) + "\n"
+    (args.out / "applications.md").write_text(table)
+    print()
+    print(table)
+
+
+if __name__ == "__main__":
+    main()
