@@ -282,7 +282,9 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                     let mse = se - ref_noise;
                     writeln!(
                         csv,
-                        "{scene_name},{triangles},{spec},{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e},{iterations},{tested},{chosen}",
+                        "{scene_name},{triangles},\"{}\",{},{repeat},{secs:.3},{},{mse:.6e},{:.6e},{ref_noise:.6e},{iterations},{tested},{chosen}",
+                        // Quoted: cw and transient gates hold commas.
+                        spec.replace('"', "\"\""),
                         variant.name(),
                         film.spp,
                         mse / ref_power
