@@ -35,14 +35,31 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     let scene = PreparedScene::new(load_gltf(scene_path)?)?;
     let ctx = GpuContext::new()?;
     println!("adapter: {}", ctx.adapter_description());
-    println!("scene: {} ({} triangles), max bounces {}", scene_path.display(), scene.triangles.len(), s.max_bounces);
-    println!("bench: {:<14} {:<20} {:>10} {:>8} {:>9} {:>11}", "method", "gate", "resolution", "spp", "seconds", "Msamples/s");
+    println!(
+        "scene: {} ({} triangles), max bounces {}",
+        scene_path.display(),
+        scene.triangles.len(),
+        s.max_bounces
+    );
+    println!(
+        "bench: {:<14} {:<20} {:>10} {:>8} {:>9} {:>11}",
+        "method", "gate", "resolution", "spp", "seconds", "Msamples/s"
+    );
     for variant in &s.methods {
-        let (spec, option) =
-            if variant.method == Method::Ellipsoidal { (&s.gates.1, "--ellipsoidal-gate") } else { (&s.gates.0, "--gate") };
+        let (spec, option) = if variant.method == Method::Ellipsoidal {
+            (&s.gates.1, "--ellipsoidal-gate")
+        } else {
+            (&s.gates.0, "--gate")
+        };
         let gate = Gate::parse(spec).with_context(|| format!("{option} {spec}"))?;
         for &(width, height) in &s.resolutions {
-            let base = RenderSettings { width, height, max_bounces: s.max_bounces, gate: gate.clone(), ..Default::default() };
+            let base = RenderSettings {
+                width,
+                height,
+                max_bounces: s.max_bounces,
+                gate: gate.clone(),
+                ..Default::default()
+            };
             let settings = variant.settings(&base);
             let mut tracer = create_integrator(&ctx, &scene, &settings)?;
             tracer.render_pass(tracer.samples_per_pass())?;
@@ -89,13 +106,24 @@ impl Variant {
         use clap::ValueEnum;
         let mut parts = s.split(':').map(str::trim);
         let name = parts.next().unwrap_or_default();
-        let method = crate::integrator::Method::from_str(name, true)
-            .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"))?;
-        let connections_per_query = crate::integrator::bidirectional::default_connections_per_query(method);
-        let mut variant = Self { method, connections_per_query, query: Default::default() };
+        let method = crate::integrator::Method::from_str(name, true).map_err(|_| {
+            anyhow::anyhow!(
+                "`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"
+            )
+        })?;
+        let connections_per_query =
+            crate::integrator::bidirectional::default_connections_per_query(method);
+        let mut variant = Self {
+            method,
+            connections_per_query,
+            query: Default::default(),
+        };
         for option in parts {
             anyhow::ensure!(
-                matches!(method, crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto),
+                matches!(
+                    method,
+                    crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto
+                ),
                 "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
                  split=R, bottom=N, reflection)"
             );
@@ -104,11 +132,13 @@ impl Variant {
             } else if option == "reflection" {
                 variant.query.reflection_weights = true;
             } else if let Some(r) = option.strip_prefix("split=") {
-                variant.query.split =
-                    r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
+                variant.query.split = r
+                    .parse()
+                    .map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
             } else if let Some(n) = option.strip_prefix("bottom=") {
-                variant.query.bottom_nodes =
-                    n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
+                variant.query.bottom_nodes = n.parse().map_err(|_| {
+                    anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`")
+                })?;
             } else {
                 variant.connections_per_query = option.parse().map_err(|_| {
                     anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, reflection)")
@@ -121,10 +151,15 @@ impl Variant {
     /// The name it was given by (options in a fixed order).
     pub fn name(&self) -> String {
         let mut name = self.method.name().to_owned();
-        if self.connections_per_query != crate::integrator::bidirectional::default_connections_per_query(self.method) {
+        if self.connections_per_query
+            != crate::integrator::bidirectional::default_connections_per_query(self.method)
+        {
             name += &format!(":{}", self.connections_per_query);
         }
-        if matches!(self.method, crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto) {
+        if matches!(
+            self.method,
+            crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto
+        ) {
             let default = crate::integrator::QuerySettings::default();
             if self.query.split == 0.0 {
                 name += ":exhaustive";
@@ -160,7 +195,7 @@ pub struct EqualTimeSettings {
     pub gates: Vec<(String, crate::film::Gate)>,
     /// Rendering time per method, gate and repeat (s), setup excluded.
     pub seconds: f64,
-    /// Independent renders per method and gate (the MSE is their mean).
+    /// Renders per method and gate, repeat r of each from the same seed (the MSE is their mean).
     pub repeats: u32,
     /// Method of the reference images.
     pub reference: Variant,
@@ -186,16 +221,27 @@ fn render_for(
 ) -> Result<(crate::film::Film, f64, Option<Method>)> {
     let budget = crate::integrator::Budget::Time(Duration::from_secs_f64(seconds));
     let output = crate::integrator::render(ctx, scene, settings, budget, |_| {})?;
-    Ok((output.film, output.rendering.as_secs_f64(), output.choice.map(|c| c.chosen)))
+    Ok((
+        output.film,
+        output.rendering.as_secs_f64(),
+        output.choice.map(|c| c.chosen),
+    ))
 }
 
 /// Work of one ellipsoid query: (loop iterations, triangles tested), from a short render with
 /// `--stats` (None for methods without queries).
-fn query_cost(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Option<(f64, f64)>> {
+fn query_cost(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+) -> Result<Option<(f64, f64)>> {
     if settings.method != crate::integrator::Method::Ellipsoidal {
         return Ok(None);
     }
-    let settings = RenderSettings { stats: true, ..settings.clone() };
+    let settings = RenderSettings {
+        stats: true,
+        ..settings.clone()
+    };
     let mut tracer = crate::integrator::BidirectionalTracer::new(ctx, scene, &settings)?;
     use crate::integrator::Integrator;
     tracer.render_samples(2)?;
@@ -205,7 +251,8 @@ fn query_cost(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
 /// Renders every gate of every scene with every method for equal wall time and prints, per
 /// method, the mean squared error against a reference rendered much longer (its own estimated
 /// noise variance is subtracted), with the ratio of MSEs to the first method, and the
-/// ellipsoid queries' work. Writes one CSV row per render.
+/// ellipsoid queries' work. Repeat r of every method renders from the same seed. Writes one CSV
+/// row per render.
 pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings) -> Result<()> {
     use std::fmt::Write as _;
     let ctx = GpuContext::new()?;
@@ -225,24 +272,49 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
         "scene,triangles,gate,method,repeat,seconds,spp,mse,relative_mse,reference_noise,iterations_per_query,\
          triangles_tested_per_query,chosen_method\n",
     );
-    let mut seed = 1000;
+    // Repeat r of every method renders from seed REPEAT_SEEDS + r (common random numbers: `auto`
+    // then renders exactly its chosen method's image, less the samples its pilot took, so a
+    // comparison shows the pilot's cost instead of the methods' independent noise); references
+    // draw seeds from another range.
+    const REPEAT_SEEDS: u32 = 1000;
+    let mut reference_seed = 1_000_000;
     for scene_path in scene_paths {
         let scene = PreparedScene::new(crate::scene::load_gltf_at(scene_path, s.anim_time)?)?;
         let triangles = scene.triangles.len();
-        let posed = s.anim_time.map_or(String::new(), |t| format!(", posed at {t} s"));
-        println!("\nscene {} ({triangles} triangles{posed})", scene_path.display());
-        let scene_name = scene_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let posed = s
+            .anim_time
+            .map_or(String::new(), |t| format!(", posed at {t} s"));
+        println!(
+            "\nscene {} ({triangles} triangles{posed})",
+            scene_path.display()
+        );
+        let scene_name = scene_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         for (spec, gate) in &s.gates {
             // Reference: 8 batches, mean and variance of the mean per element.
             let batches = 8;
             let mut stats: Option<(Vec<f64>, Vec<f64>)> = None;
             let mut ref_spp = 0;
             for _ in 0..batches {
-                seed += 1;
-                let settings = RenderSettings { gate: gate.clone(), seed, ..s.reference.settings(b) };
-                let (film, _, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
+                reference_seed += 1;
+                let seed = reference_seed;
+                let settings = RenderSettings {
+                    gate: gate.clone(),
+                    seed,
+                    ..s.reference.settings(b)
+                };
+                let (film, _, _) = render_for(
+                    &ctx,
+                    &scene,
+                    &settings,
+                    s.reference_seconds / batches as f64,
+                )?;
                 ref_spp += film.spp;
-                let (sum, sq) = stats.get_or_insert_with(|| (vec![0.0; film.data.len()], vec![0.0; film.data.len()]));
+                let (sum, sq) = stats.get_or_insert_with(|| {
+                    (vec![0.0; film.data.len()], vec![0.0; film.data.len()])
+                });
                 for (i, &v) in film.data.iter().enumerate() {
                     sum[i] += v as f64;
                     sq[i] += (v as f64) * (v as f64);
@@ -251,8 +323,11 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
             let (sum, sq) = stats.unwrap();
             let n = batches as f64;
             let reference: Vec<f64> = sum.iter().map(|x| x / n).collect();
-            let ref_var: Vec<f64> =
-                sq.iter().zip(&reference).map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n).collect();
+            let ref_var: Vec<f64> = sq
+                .iter()
+                .zip(&reference)
+                .map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n)
+                .collect();
             let elements = reference.len() as f64;
             let ref_noise = ref_var.iter().sum::<f64>() / elements;
             let ref_power = reference.iter().map(|x| x * x).sum::<f64>() / elements;
@@ -262,23 +337,42 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
             );
             println!(
                 "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9} {}",
-                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query", "chosen"
+                "method",
+                "spp",
+                "MSE",
+                "rel. MSE",
+                "MSE / first",
+                "iter/query",
+                "tri/query",
+                "chosen"
             );
             let mut first = None;
             for variant in &s.methods {
                 let mut mses = Vec::new();
                 let mut spps = Vec::new();
                 let mut choices = Vec::new();
-                let base = RenderSettings { gate: gate.clone(), ..variant.settings(b) };
+                let base = RenderSettings {
+                    gate: gate.clone(),
+                    ..variant.settings(b)
+                };
                 let cost = query_cost(&ctx, &scene, &base)?;
-                let (iterations, tested) = cost.map_or((String::new(), String::new()), |(n, t)| (format!("{n:.2}"), format!("{t:.2}")));
+                let (iterations, tested) = cost.map_or((String::new(), String::new()), |(n, t)| {
+                    (format!("{n:.2}"), format!("{t:.2}"))
+                });
                 for repeat in 0..s.repeats {
-                    seed += 1;
-                    let settings = RenderSettings { seed, ..base.clone() };
+                    let settings = RenderSettings {
+                        seed: REPEAT_SEEDS + repeat,
+                        ..base.clone()
+                    };
                     let (film, secs, chosen) = render_for(&ctx, &scene, &settings, s.seconds)?;
                     let chosen = chosen.map_or("", Method::name);
-                    let se: f64 =
-                        film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
+                    let se: f64 = film
+                        .data
+                        .iter()
+                        .zip(&reference)
+                        .map(|(&x, r)| (x as f64 - r).powi(2))
+                        .sum::<f64>()
+                        / elements;
                     let mse = se - ref_noise;
                     writeln!(
                         csv,
@@ -303,7 +397,11 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 for method in [Method::Direct, Method::Ellipsoidal] {
                     let n = choices.iter().filter(|&&c| c == method.name()).count();
                     if n > 0 {
-                        chosen += &format!("{}{} x{n}", if chosen.is_empty() { "" } else { ", " }, method.name());
+                        chosen += &format!(
+                            "{}{} x{n}",
+                            if chosen.is_empty() { "" } else { ", " },
+                            method.name()
+                        );
                     }
                 }
                 println!(

@@ -7,13 +7,18 @@ use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
 use gatetrace::film::output::{Metadata, OutputFormat, check_writable, write_film};
-use gatetrace::frames::{FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range};
+use gatetrace::frames::{
+    FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range,
+};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render};
 use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
 
 /// The scene rendered when none is given.
-const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
+const DEFAULT_SCENE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/assets/scenes/cornell_box.gltf"
+);
 
 /// gatetrace: a physically based GPU renderer for time-of-flight cameras.
 ///
@@ -65,9 +70,11 @@ struct RenderArgs {
     /// vertex on the spheroid of a target length drawn from the gate, so every path has a
     /// length the gate weighs; needs a gate; at most 24 bounces); `auto` (`direct` or
     /// `ellipsoidal`, whichever a pilot of both on this render measures to have the lower
-    /// variance x time per sample; the pilot takes 5 % of a --time budget, or 1/16 of --spp per
-    /// method, and is discarded; `direct` without a pilot in the steady state or with
-    /// directional lights; the metadata records the choice and the pilot's figures).
+    /// variance x time per sample; the pilot renders a smaller image (down to 32x32) from a seed
+    /// of its own, takes 5 % of a --time budget (half where one method is 8x ahead after half
+    /// its batches), or the work of 1/16 of --spp per method, and is discarded, so the image is
+    /// the chosen method's with the same seed; `direct` without a pilot in the steady state or
+    /// with directional lights; the metadata records the choice and the pilot's figures).
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
@@ -186,7 +193,12 @@ struct RenderArgs {
     frames: u32,
     /// Move the gate by D per frame: metres of optical path, or with a mm/ps/ns suffix
     /// (negative: earlier). A CW gate's phase moves by -360 f D / c degrees.
-    #[arg(long, default_value = "0", value_name = "D", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        default_value = "0",
+        value_name = "D",
+        allow_hyphen_values = true
+    )]
     gate_step: String,
     /// Sample the scene's glTF animations (node translation, rotation, scale; all animations on
     /// one clock) at --frames evenly spaced times from T0 to T1 (seconds of the animation
@@ -348,7 +360,8 @@ struct EqualTimeArgs {
     /// Seconds of rendering per method, gate and repeat (kernel builds excluded).
     #[arg(long, default_value_t = 10.0)]
     seconds: f64,
-    /// Independent renders per method and gate.
+    /// Renders per method and gate; repeat r of every method renders from the same seed (common
+    /// random numbers: `auto` then shows just what its pilot costs), references from others.
     #[arg(long, default_value_t = 3)]
     repeats: u32,
     /// Method of the reference images (same syntax as --methods).
@@ -375,11 +388,17 @@ fn run_stress(args: StressArgs) -> Result<()> {
     ensure!(args.configs >= 1, "--configs must be at least 1");
     let ctx = GpuContext::new()?;
     println!("adapter: {}", ctx.adapter_description());
-    println!("errors of the device's f32 results against the f64 oracle on the same inputs; \
-              guard: fraction of samples with |L(x) - tau_e| > 1e-5 tau_e");
+    println!(
+        "errors of the device's f32 results against the f64 oracle on the same inputs; \
+              guard: fraction of samples with |L(x) - tau_e| > 1e-5 tau_e"
+    );
     println!("{}", Report::header());
     for family in Family::all() {
-        let count = if family == Family::Random { args.configs } else { args.configs.div_ceil(4) };
+        let count = if family == Family::Random {
+            args.configs
+        } else {
+            args.configs.div_ceil(4)
+        };
         let configs = generate(family, count, args.seed);
         let device = run_on_device(&ctx, &configs)?;
         println!("{}", compare(&family.name(), &configs, &device).row());
@@ -388,13 +407,20 @@ fn run_stress(args: StressArgs) -> Result<()> {
 }
 
 fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
-    let scenes = if args.scenes.is_empty() { vec![PathBuf::from(DEFAULT_SCENE)] } else { args.scenes.clone() };
+    let scenes = if args.scenes.is_empty() {
+        vec![PathBuf::from(DEFAULT_SCENE)]
+    } else {
+        args.scenes.clone()
+    };
     let gates = args
         .gates
         .split(';')
         .map(|g| Ok((g.trim().to_owned(), Gate::parse(g.trim())?)))
         .collect::<Result<Vec<_>>>()?;
-    ensure!(args.seconds > 0.0 && args.reference_seconds > 0.0, "--seconds and --reference-seconds must be positive");
+    ensure!(
+        args.seconds > 0.0 && args.reference_seconds > 0.0,
+        "--seconds and --reference-seconds must be positive"
+    );
     ensure!(args.repeats >= 1, "--repeats must be at least 1");
     let settings = gatetrace::bench::EqualTimeSettings {
         methods: args.methods,
@@ -403,7 +429,12 @@ fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
         repeats: args.repeats,
         reference: args.reference_method,
         reference_seconds: args.reference_seconds,
-        base: RenderSettings { width: args.res.0, height: args.res.1, max_bounces: args.max_bounces, ..Default::default() },
+        base: RenderSettings {
+            width: args.res.0,
+            height: args.res.1,
+            max_bounces: args.max_bounces,
+            ..Default::default()
+        },
         anim_time: args.anim_time,
         csv: args.csv,
     };
@@ -416,9 +447,14 @@ fn parse_variant(s: &str) -> Result<gatetrace::bench::Variant, String> {
 
 fn parse_point(s: &str) -> Result<glam::Vec3, String> {
     let bad = || format!("`{s}` is not X,Y,Z (three finite numbers in metres, e.g. -1.2,0,0.6)");
-    let v: Vec<f32> = s.split(',').map(|c| c.trim().parse::<f32>().map_err(|_| bad())).collect::<Result<_, _>>()?;
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f32>().map_err(|_| bad()))
+        .collect::<Result<_, _>>()?;
     match v[..] {
-        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => Ok(glam::Vec3::new(x, y, z)),
+        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => {
+            Ok(glam::Vec3::new(x, y, z))
+        }
         _ => Err(bad()),
     }
 }
@@ -426,7 +462,10 @@ fn parse_point(s: &str) -> Result<glam::Vec3, String> {
 fn parse_uv(s: &str) -> Result<glam::Vec2, String> {
     let bad = || format!("`{s}` is not U,V (two texture coordinates in [0, 1], e.g. 0.5,0.5)");
     let (u, v) = s.split_once(',').ok_or_else(bad)?;
-    let (u, v) = (u.trim().parse::<f32>().map_err(|_| bad())?, v.trim().parse::<f32>().map_err(|_| bad())?);
+    let (u, v) = (
+        u.trim().parse::<f32>().map_err(|_| bad())?,
+        v.trim().parse::<f32>().map_err(|_| bad())?,
+    );
     if !((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)) {
         return Err(bad());
     }
@@ -444,15 +483,23 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
 fn parse_pair(s: &str, what: &str) -> Result<(u32, u32), String> {
     let bad = || format!("`{s}` is not {what} (two non-negative integers, e.g. 1,2)");
     let (a, b) = s.split_once(',').ok_or_else(bad)?;
-    Ok((a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?))
+    Ok((
+        a.trim().parse().map_err(|_| bad())?,
+        b.trim().parse().map_err(|_| bad())?,
+    ))
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let bad = || format!("`{s}` is not WIDTHxHEIGHT (e.g. 256x256)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
+    let (w, h) = (
+        w.trim().parse::<u32>().map_err(|_| bad())?,
+        h.trim().parse::<u32>().map_err(|_| bad())?,
+    );
     if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("resolution {w}x{h} must be between 1x1 and 16384x16384"));
+        return Err(format!(
+            "resolution {w}x{h} must be between 1x1 and 16384x16384"
+        ));
     }
     Ok((w, h))
 }
@@ -495,18 +542,34 @@ fn run_view(args: ViewArgs) -> Result<()> {
         "--method auto chooses per render from a pilot; the viewer renders progressively: start it with path, direct \
          or ellipsoidal"
     );
-    let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
-    let (gate, tau, gate_width) = match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
-        Gate::None => (GateChoice::None, 3.165, 0.05),
-        Gate::Box { start, end } => (GateChoice::Box, 0.5 * (start + end), end - start),
-        Gate::Gaussian { mean, sigma } => (GateChoice::Gaussian, mean, sigma),
-        other => bail!("--gate {}: the viewer shows none, box or gaussian gates (got {})", args.gate, other.describe()),
-    };
+    let scene = args
+        .scene
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let (gate, tau, gate_width) =
+        match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
+            Gate::None => (GateChoice::None, 3.165, 0.05),
+            Gate::Box { start, end } => (GateChoice::Box, 0.5 * (start + end), end - start),
+            Gate::Gaussian { mean, sigma } => (GateChoice::Gaussian, mean, sigma),
+            other => bail!(
+                "--gate {}: the viewer shows none, box or gaussian gates (got {})",
+                args.gate,
+                other.describe()
+            ),
+        };
     if args.screenshot.is_some() {
         ensure!(args.after_frames >= 1, "--after-frames must be at least 1");
     }
-    let scrub_step = args.scrub_step.as_deref().map(gatetrace::units::parse_length).transpose().context("--scrub-step")?;
-    ensure!(scrub_step.is_none() || args.screenshot.is_some(), "--scrub-step needs --screenshot");
+    let scrub_step = args
+        .scrub_step
+        .as_deref()
+        .map(gatetrace::units::parse_length)
+        .transpose()
+        .context("--scrub-step")?;
+    ensure!(
+        scrub_step.is_none() || args.screenshot.is_some(),
+        "--scrub-step needs --screenshot"
+    );
     run_viewer(ViewOptions {
         scene,
         width: args.res.0,
@@ -529,16 +592,24 @@ fn run_view(args: ViewArgs) -> Result<()> {
 
 /// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
 /// (each overrides the glTF camera node's extras; an aperture radius of 0 makes a pinhole).
-fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &RenderArgs) -> Result<gatetrace::scene::Scene> {
+fn with_lens_options(
+    mut scene: gatetrace::scene::Scene,
+    args: &RenderArgs,
+) -> Result<gatetrace::scene::Scene> {
     if args.aperture_radius.is_none() && args.focus_distance.is_none() {
         return Ok(scene);
     }
     let old = scene.camera.lens;
-    let radius = args.aperture_radius.or(old.map(|l| l.aperture_radius)).unwrap_or(0.0);
+    let radius = args
+        .aperture_radius
+        .or(old.map(|l| l.aperture_radius))
+        .unwrap_or(0.0);
     let focus = args.focus_distance.or(old.map(|l| l.focus_distance));
     scene.camera.lens = match (radius, focus) {
         (r, _) if r == 0.0 => None,
-        (r, Some(f)) => Some(gatetrace::scene::ThinLens::new(r, f).context("--aperture-radius/--focus-distance")?),
+        (r, Some(f)) => Some(
+            gatetrace::scene::ThinLens::new(r, f).context("--aperture-radius/--focus-distance")?,
+        ),
         (_, None) => bail!(
             "--aperture-radius needs a focus distance: give --focus-distance METRES (the camera of {} has none)",
             scene.source
@@ -548,7 +619,10 @@ fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &RenderArgs) -> R
 }
 
 fn run_render(args: RenderArgs) -> Result<()> {
-    let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let scene_path = args
+        .scene
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
     let budget = match (args.spp, args.time) {
         (_, Some(t)) => match Duration::try_from_secs_f64(t) {
@@ -559,14 +633,32 @@ fn run_render(args: RenderArgs) -> Result<()> {
         (Some(n), None) => Budget::Samples(n),
         (None, None) => Budget::Samples(64),
     };
-    let range = args.frame_range.as_deref().map(parse_frame_range).transpose().context("--frame-range")?;
+    let range = args
+        .frame_range
+        .as_deref()
+        .map(parse_frame_range)
+        .transpose()
+        .context("--frame-range")?;
     let gate_step = gatetrace::units::parse_length(&args.gate_step).context("--gate-step")?;
-    let anim_time = args.anim_time.as_deref().map(parse_time_range).transpose().context("--anim-time")?;
+    let anim_time = args
+        .anim_time
+        .as_deref()
+        .map(parse_time_range)
+        .transpose()
+        .context("--anim-time")?;
     let plan = FramePlan::new(args.frames, gate_step, anim_time, range)?;
     let sequence = args.frames > 1 || args.frame_range.is_some();
-    let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render").to_owned();
+    let stem = scene_path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("render")
+        .to_owned();
     let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from(if sequence { format!("{stem}_{{frame:04}}.exr") } else { format!("{stem}.exr") })
+        PathBuf::from(if sequence {
+            format!("{stem}_{{frame:04}}.exr")
+        } else {
+            format!("{stem}.exr")
+        })
     });
     let pattern = out.to_string_lossy().into_owned();
     ensure!(
@@ -604,17 +696,22 @@ fn run_render(args: RenderArgs) -> Result<()> {
             },
             ..Default::default()
         },
-        ellipsoid_guards: gatetrace::integrator::EllipsoidGuards { needle: args.needle_guard, length: args.length_guard },
+        ellipsoid_guards: gatetrace::integrator::EllipsoidGuards {
+            needle: args.needle_guard,
+            length: args.length_guard,
+        },
         keep_splats_on_device: false,
         nlos: None,
-        target_pilot_spp: args.target_pilot.unwrap_or(if args.nlos.is_some()
-            && args.method == Method::Ellipsoidal
-            && matches!(gate, Gate::Transient { .. })
-        {
-            gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
-        } else {
-            0
-        }),
+        target_pilot_spp: args.target_pilot.unwrap_or(
+            if args.nlos.is_some()
+                && args.method == Method::Ellipsoidal
+                && matches!(gate, Gate::Transient { .. })
+            {
+                gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
+            } else {
+                0
+            },
+        ),
     };
     ensure!(
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
@@ -638,9 +735,17 @@ fn run_render(args: RenderArgs) -> Result<()> {
     // Every frame's settings and output, checked before any work.
     let mut frames = Vec::new();
     for frame in plan.frames() {
-        let path = if is_frame_pattern(&pattern) { frame_path(&pattern, frame)? } else { out.clone() };
+        let path = if is_frame_pattern(&pattern) {
+            frame_path(&pattern, frame)?
+        } else {
+            out.clone()
+        };
         OutputFormat::of(&path)?;
-        let settings = RenderSettings { gate: plan.gate(&gate, frame)?, seed: frame_seed(args.seed, frame), ..settings.clone() };
+        let settings = RenderSettings {
+            gate: plan.gate(&gate, frame)?,
+            seed: frame_seed(args.seed, frame),
+            ..settings.clone()
+        };
         if settings.debug_strategy.is_some() && settings.method != Method::Direct {
             bail!("--debug-strategy needs --method direct");
         }
@@ -656,9 +761,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
-        None => Some(PreparedScene::new(with_lens_options(load_gltf(&scene_path)?, &args)?)?),
+        None => Some(PreparedScene::new(with_lens_options(
+            load_gltf(&scene_path)?,
+            &args,
+        )?)?),
         Some(_) => {
-            with_lens_options(load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?, &args)?;
+            with_lens_options(
+                load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?,
+                &args,
+            )?;
             None
         }
     };
@@ -670,13 +781,21 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let bars = indicatif::MultiProgress::new();
     let frames_bar = sequence.then(|| {
         let bar = bars.add(indicatif::ProgressBar::new(frames.len() as u64));
-        let style = indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames (ETA {eta})");
+        let style = indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} frames (ETA {eta})",
+        );
         bar.set_style(style.unwrap().progress_chars("=> "));
         bar
     });
     for (frame, path, settings) in &frames {
         if sequence && path.exists() && !args.force {
-            say(&bars, format!("frame {frame}: {} exists, skipped (--force renders it again)", path.display()))?;
+            say(
+                &bars,
+                format!(
+                    "frame {frame}: {} exists, skipped (--force renders it again)",
+                    path.display()
+                ),
+            )?;
         } else {
             let animated;
             let scene = match &static_scene {
@@ -691,7 +810,18 @@ fn run_render(args: RenderArgs) -> Result<()> {
             };
             let label = sequence.then(|| format!("frame {frame}/{}", plan.count - 1));
             let frame_info = (sequence || plan.anim_time.is_some()).then_some((*frame, &plan));
-            render_one(&ctx, scene, &scene_path, &args.gate, settings, budget, path, label, frame_info, &bars)?;
+            render_one(
+                &ctx,
+                scene,
+                &scene_path,
+                &args.gate,
+                settings,
+                budget,
+                path,
+                label,
+                frame_info,
+                &bars,
+            )?;
         }
         if let Some(bar) = &frames_bar {
             bar.inc(1);
@@ -708,10 +838,22 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
 /// Renders an NLOS capture (`--nlos`): one render for a single or confocal scan, one per laser
 /// spot for an exhaustive one; writes the transients with the sensed points and laser spots.
-fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, base: RenderSettings, budget: Budget) -> Result<()> {
+fn run_nlos(
+    args: &RenderArgs,
+    scan: gatetrace::nlos::Scan,
+    scene_path: &Path,
+    base: RenderSettings,
+    budget: Budget,
+) -> Result<()> {
     use gatetrace::nlos::{self, LaserAim, NlosCapture, Scan};
-    let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{stem}_nlos.npy")));
+    let stem = scene_path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("render");
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{stem}_nlos.npy")));
     let format = OutputFormat::of(&out)?;
     ensure!(
         scan != Scan::Exhaustive || format == OutputFormat::Npy,
@@ -724,20 +866,32 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
          three-bounce paths spot -> hidden point -> sensed point)",
         base.max_bounces
     );
-    ensure!(args.laser_grid.is_none() || scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
+    ensure!(
+        args.laser_grid.is_none() || scan == Scan::Exhaustive,
+        "--laser-grid needs --nlos exhaustive"
+    );
     film_elements(&base)?;
     check_writable(&out)?;
     let scene = PreparedScene::new(load_gltf_for_capture(scene_path)?)?;
     let origin = |given: Option<glam::Vec3>, node: &str, flag: &str| -> Result<glam::Vec3> {
-        given.or_else(|| nlos::origin_from_nodes(&scene.scene, node)).with_context(|| {
-            format!("{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)", scene_path.display())
-        })
+        given
+            .or_else(|| nlos::origin_from_nodes(&scene.scene, node))
+            .with_context(|| {
+                format!(
+                    "{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)",
+                    scene_path.display()
+                )
+            })
     };
     let capture = NlosCapture {
         relay_wall: args.relay_wall.clone(),
         sensor_origin: origin(args.sensor_origin, "sensor_origin", "--sensor-origin")?,
         laser_origin: origin(args.laser_origin, "laser_origin", "--laser-origin")?,
-        aim: if scan == Scan::Confocal { LaserAim::Confocal } else { LaserAim::Spot(args.laser_spot) },
+        aim: if scan == Scan::Confocal {
+            LaserAim::Confocal
+        } else {
+            LaserAim::Spot(args.laser_spot)
+        },
         laser_power: args.laser_power,
         count_first_and_last: args.count_first_last,
     };
@@ -750,7 +904,9 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
     };
     let aims: Vec<LaserAim> = match scan {
         Scan::Exhaustive => (0..laser_h)
-            .flat_map(|j| (0..laser_w).map(move |i| LaserAim::Spot(nlos::cell_uv(i, j, laser_w, laser_h))))
+            .flat_map(|j| {
+                (0..laser_w).map(move |i| LaserAim::Spot(nlos::cell_uv(i, j, laser_w, laser_h)))
+            })
             .collect(),
         _ => vec![capture.aim],
     };
@@ -763,7 +919,10 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
     let (mut data, mut spots, mut sensed) = (Vec::new(), Vec::new(), Vec::new());
     let mut last = None;
     for (k, &aim) in aims.iter().enumerate() {
-        let capture = NlosCapture { aim, ..capture.clone() };
+        let capture = NlosCapture {
+            aim,
+            ..capture.clone()
+        };
         let (points, warnings) = nlos::wall_points_and_warnings(&scene, &capture, w, h)?;
         if k == 0 {
             for warning in warnings {
@@ -771,11 +930,27 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
             }
         }
         sensed = points[..pixels].to_vec();
-        spots.extend_from_slice(if scan == Scan::Confocal { &points[pixels..] } else { &points[pixels..pixels + 1] });
-        let seed = if aims.len() > 1 { frame_seed(base.seed, k as u32) } else { base.seed };
-        let settings = RenderSettings { nlos: Some(capture), seed, ..base.clone() };
+        spots.extend_from_slice(if scan == Scan::Confocal {
+            &points[pixels..]
+        } else {
+            &points[pixels..pixels + 1]
+        });
+        let seed = if aims.len() > 1 {
+            frame_seed(base.seed, k as u32)
+        } else {
+            base.seed
+        };
+        let settings = RenderSettings {
+            nlos: Some(capture),
+            seed,
+            ..base.clone()
+        };
         let bar = bars.add(progress_bar(budget));
-        let label = if aims.len() > 1 { format!("laser spot {}/{}: ", k + 1, aims.len()) } else { String::new() };
+        let label = if aims.len() > 1 {
+            format!("laser spot {}/{}: ", k + 1, aims.len())
+        } else {
+            String::new()
+        };
         let output = render(&ctx, &scene, &settings, budget, |p| {
             match budget {
                 Budget::Samples(_) => bar.set_position(p.spp),
@@ -799,7 +974,9 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
     ));
     let extras = nlos::capture_record(&scene, &capture, scan, &sensed, w, &spots, laser_w);
     let film = &output.film;
-    let bin_ranges: Vec<(f64, f64)> = (0..settings.gate.bins()).filter_map(|b| settings.gate.bin_range(b)).collect();
+    let bin_ranges: Vec<(f64, f64)> = (0..settings.gate.bins())
+        .filter_map(|b| settings.gate.bin_range(b))
+        .collect();
     if scan == Scan::Exhaustive {
         let bins = film.bins as usize;
         let mut shape = vec![laser_h as usize, laser_w as usize, h as usize, w as usize];
@@ -807,28 +984,42 @@ fn run_nlos(args: &RenderArgs, scan: gatetrace::nlos::Scan, scene_path: &Path, b
             shape.push(bins);
         }
         shape.push(3);
-        ensure!(data.iter().all(|v| v.is_finite()), "refusing to write {}: the capture holds non-finite values", out.display());
+        ensure!(
+            data.iter().all(|v| v.is_finite()),
+            "refusing to write {}: the capture holds non-finite values",
+            out.display()
+        );
         gatetrace::film::output::write_npy_f32(&out, &shape, &data)?;
         gatetrace::film::output::write_sidecar(&out, &metadata, &extras)?;
     } else {
         gatetrace::film::output::write_film_with(&out, film, &metadata, &bin_ranges, &extras)?;
     }
     let total: f64 = data.iter().map(|&v| v as f64).sum();
-    say(&bars, format!(
-        "{}: NLOS {} capture, {}x{} sensed points, {} laser spot(s), gate {} | {} spp, {:.2} s rendering{} on {} | \
+    say(
+        &bars,
+        format!(
+            "{}: NLOS {} capture, {}x{} sensed points, {} laser spot(s), gate {} | {} spp, {:.2} s rendering{} on {} | \
          total {total:.6e} -> {}",
-        scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
-        scan.name(),
-        w,
-        h,
-        spots.len(),
-        args.gate,
-        film.spp,
-        output.rendering.as_secs_f64(),
-        if aims.len() > 1 { " per laser spot" } else { "" },
-        ctx.adapter_info.name,
-        out.display()
-    ))?;
+            scene_path
+                .file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default(),
+            scan.name(),
+            w,
+            h,
+            spots.len(),
+            args.gate,
+            film.spp,
+            output.rendering.as_secs_f64(),
+            if aims.len() > 1 {
+                " per laser spot"
+            } else {
+                ""
+            },
+            ctx.adapter_info.name,
+            out.display()
+        ),
+    )?;
     print_stats(&settings, &output);
     if let Some(report) = ctx.profile_report()? {
         print!("{report}");
@@ -851,14 +1042,23 @@ fn render_one(
     bars: &indicatif::MultiProgress,
 ) -> Result<()> {
     let bar = bars.add(progress_bar(budget));
-    let prefix = label.as_deref().map(|l| format!("{l}: ")).unwrap_or_default();
+    let prefix = label
+        .as_deref()
+        .map(|l| format!("{l}: "))
+        .unwrap_or_default();
     let output = render(ctx, scene, settings, budget, |p| {
         match budget {
             Budget::Samples(_) => bar.set_position(p.spp),
             Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
         }
-        let rate = (p.spp * (settings.width * settings.height) as u64) as f64 / p.elapsed.as_secs_f64().max(1e-9);
-        bar.set_message(format!("{prefix}{} passes, {} spp, {:.2} Msamples/s", p.passes, p.spp, rate / 1e6));
+        let rate = (p.spp * (settings.width * settings.height) as u64) as f64
+            / p.elapsed.as_secs_f64().max(1e-9);
+        bar.set_message(format!(
+            "{prefix}{} passes, {} spp, {:.2} Msamples/s",
+            p.passes,
+            p.spp,
+            rate / 1e6
+        ));
     })?;
     bar.finish_and_clear();
 
@@ -879,7 +1079,10 @@ fn render_one(
     if let Some((index, plan)) = frame {
         metadata.push(("frame".into(), index.to_string()));
         metadata.push(("frames".into(), plan.count.to_string()));
-        metadata.push(("gate_shift_m".into(), (plan.gate_step * index as f64).to_string()));
+        metadata.push((
+            "gate_shift_m".into(),
+            (plan.gate_step * index as f64).to_string(),
+        ));
         if let Some(t) = plan.anim_time(index) {
             metadata.push(("anim_time_s".into(), t.to_string()));
         }
@@ -887,29 +1090,44 @@ fn render_one(
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
     write_film(out, film, &metadata, &bin_ranges)?;
     let mean = film.mean_rgb();
-    say(bars, format!(
-        "{}{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} s rendering, {:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
-        label.map(|l| format!("{l} ")).unwrap_or_default(),
-        scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
-        settings.width,
-        settings.height,
-        match &output.choice {
-            Some(choice) => format!("auto ({})", choice.chosen.name()),
-            None => settings.method.name().to_owned(),
-        },
-        if frame.is_some_and(|(i, p)| p.gate_step != 0.0 && i > 0) { gate.describe() } else { gate_spec.to_owned() },
-        film.spp,
-        secs,
-        output.rendering.as_secs_f64(),
-        (film.spp * (settings.width * settings.height) as u64) as f64 / output.rendering.as_secs_f64().max(1e-9) / 1e6,
-        ctx.adapter_info.name,
-        mean[0],
-        mean[1],
-        mean[2],
-        out.display()
-    ))?;
+    say(
+        bars,
+        format!(
+            "{}{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} s rendering, {:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+            label.map(|l| format!("{l} ")).unwrap_or_default(),
+            scene_path
+                .file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default(),
+            settings.width,
+            settings.height,
+            match &output.choice {
+                Some(choice) => format!("auto ({})", choice.chosen.name()),
+                None => settings.method.name().to_owned(),
+            },
+            if frame.is_some_and(|(i, p)| p.gate_step != 0.0 && i > 0) {
+                gate.describe()
+            } else {
+                gate_spec.to_owned()
+            },
+            film.spp,
+            secs,
+            output.rendering.as_secs_f64(),
+            (film.spp * (settings.width * settings.height) as u64) as f64
+                / output.rendering.as_secs_f64().max(1e-9)
+                / 1e6,
+            ctx.adapter_info.name,
+            mean[0],
+            mean[1],
+            mean[2],
+            out.display()
+        ),
+    )?;
     if let Some(choice) = &output.choice {
-        say(bars, format!("auto chose {}: {}", choice.chosen.name(), choice.reason))?;
+        say(
+            bars,
+            format!("auto chose {}: {}", choice.chosen.name(), choice.reason),
+        )?;
     }
     print_stats(settings, &output);
     Ok(())
@@ -920,7 +1138,10 @@ fn print_stats(settings: &RenderSettings, output: &gatetrace::integrator::Render
     if let Some(report) = &output.stats {
         print!("{report}");
     } else if settings.stats {
-        println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
+        println!(
+            "--stats: method {} keeps no per-strategy statistics",
+            settings.method.name()
+        );
     }
 }
 
@@ -962,19 +1183,42 @@ fn render_metadata(
             metadata.push((
                 format!("auto_pilot_{}", c.method.name()),
                 format!(
-                    "{} spp in {:.3} s, variance per sample {:.4e}, variance x seconds per sample {:.4e}",
-                    c.spp, c.seconds, c.variance_per_sample, c.cost()
+                    "{} spp of {}x{} in {:.3} s, variance per sample {:.4e}, variance x seconds per sample (of the \
+                     image) {:.4e}",
+                    c.spp,
+                    choice.pilot_resolution.0,
+                    choice.pilot_resolution.1,
+                    c.seconds,
+                    c.variance_per_sample,
+                    c.cost()
                 ),
             ));
         }
     }
     if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
         let g = settings.ellipsoid_guards;
-        metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
+        metadata.push((
+            "connections_per_query".into(),
+            settings.connections_per_query.to_string(),
+        ));
         metadata.push(("query_split".into(), settings.query.split.to_string()));
-        metadata.push(("query_weights".into(), if settings.query.reflection_weights { "reflection" } else { "arcs" }.into()));
-        metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
-        metadata.push(("target_pilot_spp".into(), output.target_pilot_spp.to_string()));
+        metadata.push((
+            "query_weights".into(),
+            if settings.query.reflection_weights {
+                "reflection"
+            } else {
+                "arcs"
+            }
+            .into(),
+        ));
+        metadata.push((
+            "ellipsoid_guards".into(),
+            format!("needle {:e}, length {:e}", g.needle, g.length),
+        ));
+        metadata.push((
+            "target_pilot_spp".into(),
+            output.target_pilot_spp.to_string(),
+        ));
     }
     metadata
 }
@@ -995,7 +1239,12 @@ fn progress_bar(budget: Budget) -> indicatif::ProgressBar {
         Budget::Time(t) => (t.as_millis() as u64, "ms"),
     };
     let bar = indicatif::ProgressBar::new(len);
-    let template = format!("{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{msg}} (ETA {{eta}})");
-    bar.set_style(indicatif::ProgressStyle::with_template(&template).unwrap().progress_chars("=> "));
+    let template =
+        format!("{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{msg}} (ETA {{eta}})");
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&template)
+            .unwrap()
+            .progress_chars("=> "),
+    );
     bar
 }

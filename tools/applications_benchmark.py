@@ -109,7 +109,7 @@ def pictures(args, name, scene, gate, anim_time):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=6.0, help="rendering seconds per method and repeat")
-    parser.add_argument("--repeats", type=int, default=3, help="independent renders per method")
+    parser.add_argument("--repeats", type=int, default=3, help="renders per method (repeat r of each from the same seed)")
     parser.add_argument("--reference-seconds", type=float, default=90.0, help="seconds of each reference")
     parser.add_argument("--res", default="64x64", help="image size of the comparison, WxH")
     parser.add_argument("--max-bounces", type=int, default=5, help="scattering vertices per path")

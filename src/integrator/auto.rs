@@ -1,25 +1,36 @@
 //! `--method auto`: a short pilot of `direct` and `ellipsoidal` on the render's own scene, gate
 //! and image, then the whole budget on the one whose measured variance x time per sample is
-//! lower. The pilot's films are discarded, so the render is an unbiased estimate of the chosen
-//! method whatever the pilot saw (choosing from samples that are then kept would bias it).
+//! lower. The pilot's films are discarded and its random numbers are not reused, so the render
+//! is an unbiased estimate of the chosen method whatever the pilot saw (choosing from samples
+//! that are then kept would bias it).
 //!
 //! Why a pilot and not a rule of gate width: where one method wins depends on the gate's width
 //! against the scene's size, on where the gate sits in the scene's path lengths, on the
 //! geometry the ellipsoid queries cross (their cost) and on the image; a measurement on the
-//! render itself sees all of it. The pilot costs [`PILOT_SHARE`] of a time budget.
+//! render itself sees all of it. The pilot costs [`PILOT_SHARE`] of a time budget, and renders
+//! the camera's image at a lower resolution ([`pilot_resolution`]) so that its floor of a few
+//! one-sample batches stays small beside a short budget on a slow scene. It runs from a seed of
+//! its own ([`pilot_seed`]); the render then starts afresh from the user's seed, so an `auto`
+//! image is the chosen method's image with the same seed and budget.
 //!
-//! Estimating the variances: each method renders a few independent batches, whose spread gives
-//! its variance per sample, value by value (pixel, bin, channel). A narrow gate makes that
+//! Estimating the variances: each method renders a few independent batches; the squared
+//! differences of consecutive pairs of them, summed over the image's values (pixel, bin,
+//! channel), give estimates of its variance per sample, and the median of the pairs' estimates
+//! is taken (a firefly in one batch moves one pair's estimate, not the median). A narrow gate
+//! makes that
 //! spread blind where it matters most: a `direct` pilot that found none of a gate's rare paths
 //! has zero spread, though its true variance is huge, and per pixel the other pilot is often
 //! too sparse to show it (a pixel where one batch of 8 holds all of `ellipsoidal`'s light
 //! differs from a zero by just what that one batch's spread predicts). Summed over the image,
 //! the evidence is plain. Per group of values (one bin and channel, summed over the pixels),
 //! where the two pilots' means differ by more than [`MISS_FACTOR`] times the squared difference
-//! the groups' batch spreads predict, the excess is charged to the method whose mean is smaller
-//! in magnitude (an estimator that misses rare large values falls short of the truth far more
-//! often than it overshoots): N times the excess is the per-sample variance of the group's sum
-//! that a mean of N samples that far off implies, and it is added to that method's variance.
+//! the groups' batch spreads predict, the excess is charged to the method whose groups' means
+//! have the larger relative variance (the one that saw fewer of the paths that make its
+//! estimate, and whose spread is the less trustworthy: an estimator of rare large values
+//! usually falls short of the truth and now and then overshoots it, both by more than its
+//! spread says): N times the
+//! excess is the per-sample variance of the group's sum that a mean of N samples that far off
+//! implies, and it is added to that method's variance.
 //! A pilot that found no light at all where the other found plenty scores M times the missed
 //! light's square, M the values the light spreads over, which is the order of its true
 //! variance (zero hits in N x M tries bound its hit rate by about 1 / (N M)).
@@ -41,28 +52,84 @@ pub const PILOT_SHARE: f64 = 0.05;
 /// batches cost more film readbacks.
 pub const PILOT_BATCHES: u32 = 8;
 
-/// With a sample budget of N samples per pixel, each method's pilot batches take N /
-/// SAMPLE_BUDGET_DIVISOR samples per pixel in all (at least one per batch).
+/// After this many batches of each method the pilot stops where one method is predicted at
+/// least [`EARLY_STOP_RATIO`] times ahead (the narrowest and the widest gates), halving its cost.
+pub const EARLY_STOP_BATCHES: u32 = 4;
+
+/// See [`EARLY_STOP_BATCHES`]: a margin far beyond what two pairs of batches mismeasure, so only
+/// a clear choice stops early (a firefly in one method's batch can only stop it early for the
+/// other method).
+pub const EARLY_STOP_RATIO: f64 = 8.0;
+
+/// With a sample budget of N samples per pixel, each method's pilot batches take in all the
+/// work of N / SAMPLE_BUDGET_DIVISOR samples per pixel of the image (at least one sample per
+/// pixel of the pilot's image per batch).
 pub const SAMPLE_BUDGET_DIVISOR: u64 = 16;
+
+/// The pilot's image keeps at least this many pixels (below, it is the render's own image).
+pub const PILOT_MIN_PIXELS: u32 = 1024;
+
+/// The pilot's image is at most this many times smaller than the render's along each axis.
+pub const PILOT_MAX_SHRINK: u32 = 4;
+
+/// The pilot renders the same camera at a resolution shrunk by an integer factor f along each
+/// axis, the largest f <= [`PILOT_MAX_SHRINK`] that divides both and leaves
+/// [`PILOT_MIN_PIXELS`] pixels (so the image keeps its aspect exactly): its
+/// floor of [`PILOT_BATCHES`] one-sample batches then costs about 1/f^2 of that at full size.
+/// The variance of one sample of a pixel's estimate barely depends on the pixel's size (a
+/// camera sample averages radiance over the pixel whatever its size; a light-tracing splat is
+/// f^2 times smaller, lands f^2 times more often per light path, and the image has f^2 times
+/// fewer light paths per sample), so per-sample variances carry over; times per sample are
+/// scaled by the pixel count. That scaling overstates both methods' times a little (a small
+/// pass pays the fixed cost of its dispatches and readbacks over fewer paths): on the fence
+/// scene at 32x32 for 64x64, `direct`'s by 1.75x and `ellipsoidal`'s by 1.5x, which matters
+/// only where the two are within about 20 %. Returns (width, height, f).
+pub fn pilot_resolution(width: u32, height: u32) -> (u32, u32, u32) {
+    let pixels = width as u64 * height as u64;
+    let fits = |f: u32| {
+        width % f == 0
+            && height % f == 0
+            && pixels / (f as u64 * f as u64) >= PILOT_MIN_PIXELS as u64
+    };
+    let f = (1..=PILOT_MAX_SHRINK).rev().find(|&f| fits(f)).unwrap_or(1);
+    (width / f, height / f, f)
+}
+
+/// The seed of the pilot's renders: a stream of its own, so the render that follows, from the
+/// user's seed, is independent of what the pilot saw and equals `--method <chosen>` with that
+/// seed.
+pub fn pilot_seed(seed: u32) -> u32 {
+    // One step of a 32-bit integer hash (lowbias32): nearby seeds give unrelated pilot seeds.
+    let mut x = seed ^ 0x9e37_79b9;
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
 
 /// What the pilot measured of one method.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CandidateFigures {
     /// The method.
     pub method: Method,
-    /// Samples per pixel the pilot traced with it (all batches).
+    /// Samples per pixel the pilot traced with it (all batches), on the pilot's image.
     pub spp: u64,
     /// Seconds its pilot passes took (film clears and readbacks not counted).
     pub seconds: f64,
+    /// The render's pixels per pilot pixel (f^2 of [`pilot_resolution`]): a sample per pixel of
+    /// the render is this many times the pilot's work.
+    pub pixel_ratio: f64,
     /// Estimated variance of one sample per pixel, summed over the image's values and divided by
     /// their number (radiance squared; the MSE of a 1-spp image).
     pub variance_per_sample: f64,
 }
 
 impl CandidateFigures {
-    /// Seconds per sample per pixel.
+    /// Seconds per sample per pixel of the render's image (the pilot's, scaled by
+    /// `pixel_ratio`).
     pub fn seconds_per_sample(&self) -> f64 {
-        self.seconds / self.spp.max(1) as f64
+        self.seconds / self.spp.max(1) as f64 * self.pixel_ratio
     }
 
     /// Variance x time per sample: the MSE of an image rendered for one second (radiance
@@ -79,6 +146,8 @@ pub struct MethodChoice {
     pub chosen: Method,
     /// The pilot's figures of each method measured (empty when only one method applied).
     pub candidates: Vec<CandidateFigures>,
+    /// Width and height of the pilot's image (pixels; the render's where no pilot ran).
+    pub pilot_resolution: (u32, u32),
     /// Why, in words (for logs and metadata).
     pub reason: String,
     /// Seconds the pilot took: passes, film clears and readbacks (counted in a time budget).
@@ -88,13 +157,24 @@ pub struct MethodChoice {
 /// `settings` with `method`, and the connections per query it takes (1 for `direct`; the auto
 /// settings' own K for `ellipsoidal`).
 pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSettings {
-    let connections_per_query = if method == Method::Ellipsoidal { settings.connections_per_query } else { 1 };
-    RenderSettings { method, connections_per_query, ..settings.clone() }
+    let connections_per_query = if method == Method::Ellipsoidal {
+        settings.connections_per_query
+    } else {
+        1
+    };
+    RenderSettings {
+        method,
+        connections_per_query,
+        ..settings.clone()
+    }
 }
 
 /// Why `ellipsoidal` cannot render `settings` on `scene`, if it cannot (then `auto` takes
 /// `direct` without a pilot).
-fn ellipsoidal_unavailable(scene: &PreparedScene, settings: &RenderSettings) -> Option<&'static str> {
+fn ellipsoidal_unavailable(
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+) -> Option<&'static str> {
     if matches!(settings.gate, Gate::None) {
         Some("ellipsoidal connections need a gate; the steady state has none")
     } else if !scene.scene.directional_lights.is_empty() {
@@ -104,48 +184,121 @@ fn ellipsoidal_unavailable(scene: &PreparedScene, settings: &RenderSettings) -> 
     }
 }
 
-/// Runs the pilot of `settings` (method `auto`) and returns the chosen method's integrator,
-/// warmed up, its film cleared and its random sequence past the pilot's, with the choice.
-/// With a time budget the pilot spends about [`PILOT_SHARE`] of it.
-pub fn choose<'a>(
-    ctx: &'a GpuContext,
+/// Runs the pilot of `settings` (method `auto`) on its own image ([`pilot_resolution`]) and
+/// seed ([`pilot_seed`]) and returns the method to render with and why. With a time budget the
+/// pilot spends about [`PILOT_SHARE`] of it (`MethodChoice::pilot_seconds`).
+pub fn choose(
+    ctx: &GpuContext,
     scene: &PreparedScene,
     settings: &RenderSettings,
     budget: Budget,
-) -> Result<(Box<dyn Integrator + 'a>, MethodChoice)> {
-    ensure!(settings.method == Method::Auto, "auto::choose needs --method auto, got {}", settings.method.name());
-    ensure!(settings.nlos.is_none(), "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal");
+) -> Result<MethodChoice> {
+    ensure!(
+        settings.method == Method::Auto,
+        "auto::choose needs --method auto, got {}",
+        settings.method.name()
+    );
+    ensure!(
+        settings.nlos.is_none(),
+        "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal"
+    );
+    let resolution = (settings.width, settings.height);
     if let Some(why) = ellipsoidal_unavailable(scene, settings) {
-        let mut tracer = create_integrator(ctx, scene, &candidate_settings(settings, Method::Direct))?;
-        tracer.warm_up()?;
-        let choice = MethodChoice { chosen: Method::Direct, candidates: vec![], reason: why.into(), pilot_seconds: 0.0 };
-        return Ok((tracer, choice));
+        let (candidates, reason) = (vec![], why.into());
+        return Ok(MethodChoice {
+            chosen: Method::Direct,
+            candidates,
+            pilot_resolution: resolution,
+            reason,
+            pilot_seconds: 0.0,
+        });
     }
+    let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
+    let pixel_ratio =
+        (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = match budget {
         Budget::Time(t) => PilotBudget::Seconds(t.as_secs_f64() * PILOT_SHARE / 2.0),
         Budget::Samples(n) => {
-            PilotBudget::Samples((n / SAMPLE_BUDGET_DIVISOR / PILOT_BATCHES as u64).max(1) as u32)
+            let pilot_spp = (n as f64 * pixel_ratio / SAMPLE_BUDGET_DIVISOR as f64) as u64;
+            PilotBudget::Samples((pilot_spp / PILOT_BATCHES as u64).clamp(1, u32::MAX as u64) as u32)
         }
     };
-    let mut pilots = Vec::new();
+    let pilot = RenderSettings {
+        width,
+        height,
+        seed: pilot_seed(settings.seed),
+        ..settings.clone()
+    };
+    let mut tracers = Vec::new();
     for method in [Method::Direct, Method::Ellipsoidal] {
-        let mut tracer = create_integrator(ctx, scene, &candidate_settings(settings, method))?;
+        let mut tracer = create_integrator(ctx, scene, &candidate_settings(&pilot, method))?;
         tracer.warm_up()?;
-        let batches = pilot_batches(tracer.as_mut(), per_method)?;
-        tracer.reset_film();
-        pilots.push((method, tracer, batches));
+        tracers.push(tracer);
     }
-    let (b, e) = (&pilots[0].2, &pilots[1].2);
-    let (v_direct, v_ellipsoidal) = per_sample_variances(b, e);
-    let candidates: Vec<CandidateFigures> = [(b, v_direct, Method::Direct), (e, v_ellipsoidal, Method::Ellipsoidal)]
-        .into_iter()
-        .map(|(p, v, method)| CandidateFigures {
-            method,
-            spp: p.samples,
-            seconds: p.seconds,
-            variance_per_sample: v,
-        })
-        .collect();
+    // The methods' batches alternate, so the pilot can stop after EARLY_STOP_BATCHES of each
+    // where one method is far ahead.
+    let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
+    let mut early = false;
+    for j in 1..=PILOT_BATCHES {
+        pilot_batch(tracers[0].as_mut(), &mut direct, per_method)?;
+        pilot_batch(tracers[1].as_mut(), &mut ellipsoidal, per_method)?;
+        if j == EARLY_STOP_BATCHES
+            && compare(&direct, &ellipsoidal, pixel_ratio).2 >= EARLY_STOP_RATIO
+        {
+            early = true;
+            break;
+        }
+    }
+    let (candidates, chosen, ratio) = compare(&direct, &ellipsoidal, pixel_ratio);
+    let shrunk = if shrink > 1 {
+        format!(" on a {width}x{height} image")
+    } else {
+        String::new()
+    };
+    let stopped = if early {
+        format!(", stopped after {EARLY_STOP_BATCHES} of {PILOT_BATCHES} batches")
+    } else {
+        String::new()
+    };
+    let reason = format!(
+        "pilot{shrunk}{stopped}: variance x time per sample {:.3e} (direct) vs {:.3e} (ellipsoidal); {} predicted \
+         {:.3}x lower MSE at equal time",
+        candidates[0].cost(),
+        candidates[1].cost(),
+        chosen.name(),
+        ratio
+    );
+    let pilot_seconds = direct.wall_seconds + ellipsoidal.wall_seconds;
+    Ok(MethodChoice {
+        chosen,
+        candidates,
+        pilot_resolution: (width, height),
+        reason,
+        pilot_seconds,
+    })
+}
+
+/// The two methods' figures from their pilot batches so far, the method of the lower variance x
+/// time per sample, and how many times lower it is.
+fn compare(
+    direct: &Batches,
+    ellipsoidal: &Batches,
+    pixel_ratio: f64,
+) -> (Vec<CandidateFigures>, Method, f64) {
+    let (v_direct, v_ellipsoidal) = per_sample_variances(direct, ellipsoidal);
+    let candidates: Vec<CandidateFigures> = [
+        (direct, v_direct, Method::Direct),
+        (ellipsoidal, v_ellipsoidal, Method::Ellipsoidal),
+    ]
+    .into_iter()
+    .map(|(p, v, method)| CandidateFigures {
+        method,
+        spp: p.samples,
+        seconds: p.seconds,
+        pixel_ratio,
+        variance_per_sample: v,
+    })
+    .collect();
     let (d, el) = (&candidates[0], &candidates[1]);
     // Ties (both zero: nothing reaches the gate in the pilot) go to the faster method.
     let pick_ellipsoidal = if d.cost() == el.cost() {
@@ -153,19 +306,17 @@ pub fn choose<'a>(
     } else {
         el.cost() < d.cost()
     };
-    let chosen = if pick_ellipsoidal { Method::Ellipsoidal } else { Method::Direct };
-    let ratio = if pick_ellipsoidal { d.cost() / el.cost() } else { el.cost() / d.cost() };
-    let reason = format!(
-        "pilot: variance x time per sample {:.3e} (direct) vs {:.3e} (ellipsoidal); {} predicted {:.3}x lower MSE at \
-         equal time",
-        d.cost(),
-        el.cost(),
-        chosen.name(),
-        ratio
-    );
-    let pilot_seconds = b.wall_seconds + e.wall_seconds;
-    let tracer = pilots.into_iter().find(|p| p.0 == chosen).map(|p| p.1).expect("the chosen method was piloted");
-    Ok((tracer, MethodChoice { chosen, candidates, reason, pilot_seconds }))
+    let chosen = if pick_ellipsoidal {
+        Method::Ellipsoidal
+    } else {
+        Method::Direct
+    };
+    let ratio = if pick_ellipsoidal {
+        d.cost() / el.cost()
+    } else {
+        el.cost() / d.cost()
+    };
+    (candidates, chosen, ratio)
 }
 
 /// How much pilot each method gets.
@@ -178,8 +329,8 @@ enum PilotBudget {
 }
 
 /// Sums over one method's pilot batches (k_j: samples per pixel of batch j) of the batches'
-/// estimates (x), weighted by k_j: sum k_j x and sum k_j x^2, for the values and for the
-/// groups' sums over pixels.
+/// estimates (x), weighted by k_j: sum k_j x and sum k_j x^2, one entry per value (here, per
+/// group's sum over pixels).
 #[derive(Default)]
 struct Moments {
     weighted_sum: Vec<f64>,
@@ -192,7 +343,12 @@ impl Moments {
             self.weighted_sum = vec![0.0; values.len()];
             self.weighted_squares = vec![0.0; values.len()];
         }
-        for ((s, q), x) in self.weighted_sum.iter_mut().zip(&mut self.weighted_squares).zip(values) {
+        for ((s, q), x) in self
+            .weighted_sum
+            .iter_mut()
+            .zip(&mut self.weighted_squares)
+            .zip(values)
+        {
             *s += k * x;
             *q += k * x * x;
         }
@@ -219,8 +375,13 @@ struct Batches {
     seconds: f64,
     /// Seconds of the whole batches: passes, film clears and readbacks (the pilot's cost).
     wall_seconds: f64,
-    /// Of every value (pixel, bin, channel).
-    values: Moments,
+    /// Values of an image (pixels x bins x channels).
+    values: usize,
+    /// The last batch's samples per pixel and image while it waits for its pair.
+    unpaired: Option<(u32, Vec<f64>)>,
+    /// One estimate per pair of consecutive batches (a, b) of the per-sample variance summed
+    /// over the values: sum_i (x_a,i - x_b,i)^2 / (1/k_a + 1/k_b).
+    pair_variances: Vec<f64>,
     /// Of every group's sum over the pixels (one group per bin and channel).
     groups: Moments,
 }
@@ -233,10 +394,33 @@ impl Batches {
         for (i, x) in image.iter().enumerate() {
             sums[i % per_pixel] += x;
         }
-        self.values.add(k as f64, image.iter().copied());
         self.groups.add(k as f64, sums.into_iter());
+        self.values = image.len();
+        match self.unpaired.take() {
+            None => self.unpaired = Some((k, image.to_vec())),
+            Some((k_a, a)) => {
+                let squares: f64 = a.iter().zip(image).map(|(x, y)| (x - y) * (x - y)).sum();
+                self.pair_variances
+                    .push(squares / (1.0 / k_a as f64 + 1.0 / k as f64));
+            }
+        }
         self.samples += k as u64;
         self.count += 1;
+    }
+
+    /// The per-sample variance summed over the values: the median of the pairs' estimates
+    /// (the mean of the middle two for an even count). Each pair's estimate is unbiased; their
+    /// median keeps one firefly (a rare path of huge weight, which a render of a hundred times
+    /// the pilot's samples shows at its true rate, not at the one in a few hundred it was drawn
+    /// with) from deciding the choice, where the mean of the pairs would follow it.
+    fn variance(&self) -> f64 {
+        let mut v = self.pair_variances.clone();
+        v.sort_by(f64::total_cmp);
+        match v.len() {
+            0 => 0.0,
+            n if n % 2 == 1 => v[n / 2],
+            n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+        }
     }
 }
 
@@ -245,47 +429,69 @@ impl Batches {
 /// of 7 degrees of freedom passes it with probability 1.6 %).
 pub const MISS_FACTOR: f64 = 10.0;
 
-/// Renders [`PILOT_BATCHES`] independent batches on `tracer` within `budget`.
-fn pilot_batches(tracer: &mut dyn Integrator, budget: PilotBudget) -> Result<Batches> {
-    let mut batches = Batches::default();
-    while batches.count < PILOT_BATCHES {
-        let k = match budget {
-            PilotBudget::Samples(k) => k,
-            // First one sample, then what spreads the time left over the batches left.
-            PilotBudget::Seconds(_) if batches.count == 0 => 1,
-            PilotBudget::Seconds(total) => {
-                let per_sample = batches.seconds / batches.samples as f64;
-                let left = (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
-                ((left / per_sample.max(1e-12)) as u32).clamp(1, tracer.samples_per_pass())
-            }
-        };
-        let start = Instant::now();
-        tracer.reset_film();
-        let pass = Instant::now();
-        tracer.render_pass(k)?;
-        batches.seconds += pass.elapsed().as_secs_f64();
-        let film = tracer.film()?;
-        let image: Vec<f64> = film.data.iter().map(|&x| x as f64).collect();
-        batches.add(k, &image, film.data.len() / (film.width as usize * film.height as usize).max(1));
-        batches.wall_seconds += start.elapsed().as_secs_f64();
-    }
-    Ok(batches)
+/// Renders the next of a method's [`PILOT_BATCHES`] independent batches on `tracer`, sized to
+/// `budget`, and adds it to `batches`.
+fn pilot_batch(
+    tracer: &mut dyn Integrator,
+    batches: &mut Batches,
+    budget: PilotBudget,
+) -> Result<()> {
+    let k = match budget {
+        PilotBudget::Samples(k) => k,
+        // First one sample, then what spreads the time left over the batches left.
+        PilotBudget::Seconds(_) if batches.count == 0 => 1,
+        PilotBudget::Seconds(total) => {
+            let per_sample = batches.seconds / batches.samples as f64;
+            let left =
+                (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
+            ((left / per_sample.max(1e-12)) as u32).clamp(1, tracer.samples_per_pass())
+        }
+    };
+    let start = Instant::now();
+    tracer.reset_film();
+    let pass = Instant::now();
+    tracer.render_pass(k)?;
+    batches.seconds += pass.elapsed().as_secs_f64();
+    let film = tracer.film()?;
+    let image: Vec<f64> = film.data.iter().map(|&x| x as f64).collect();
+    batches.add(
+        k,
+        &image,
+        film.data.len() / (film.width as usize * film.height as usize).max(1),
+    );
+    batches.wall_seconds += start.elapsed().as_secs_f64();
+    Ok(())
 }
 
 /// The per-sample variances of two methods' pilots, averaged over the image's values: each
-/// one's batch spread, plus the excesses of groups whose means differ beyond noise, charged to
-/// the method whose mean is the smaller (the module's header).
+/// one's median pair estimate, plus the excesses of groups whose means differ beyond noise,
+/// charged to the method of the larger relative variance (the module's header).
 fn per_sample_variances(a: &Batches, b: &Batches) -> (f64, f64) {
-    let values = a.values.weighted_sum.len();
-    let own = |m: &Batches| (0..values).map(|i| m.values.get(i, m.count, m.samples).1).sum::<f64>();
-    let (mut v_a, mut v_b) = (own(a), own(b));
+    let values = a.values.max(b.values);
+    let (mut v_a, mut v_b) = (a.variance(), b.variance());
+    // A rare-event pilot's variance moves with the share of the rare paths it drew, and so does
+    // its mean: the less trustworthy method's variance is scaled by the other's mean over its
+    // own (summed magnitudes of the groups' means), which is exact where its variance is
+    // proportional to its mean (hits of one size). A pilot that found nothing is left to the
+    // groups' test below.
+    let magnitude = |m: &Batches| {
+        (0..m.groups.weighted_sum.len())
+            .map(|g| m.groups.get(g, m.count, m.samples).0.abs())
+            .sum::<f64>()
+    };
+    let (noise_a, noise_b) = (relative_noise(a), relative_noise(b));
+    if noise_a > noise_b && magnitude(a) > 0.0 {
+        v_a *= magnitude(b) / magnitude(a);
+    } else if noise_b > noise_a && magnitude(b) > 0.0 {
+        v_b *= magnitude(a) / magnitude(b);
+    }
     for g in 0..a.groups.weighted_sum.len() {
         let (mean_a, var_a) = a.groups.get(g, a.count, a.samples);
         let (mean_b, var_b) = b.groups.get(g, b.count, b.samples);
         let expected = var_a / a.samples as f64 + var_b / b.samples as f64;
         let difference = (mean_a - mean_b).powi(2);
         if difference > MISS_FACTOR * expected {
-            if mean_a.abs() < mean_b.abs() {
+            if noise_a > noise_b {
                 v_a += a.samples as f64 * (difference - expected);
             } else {
                 v_b += b.samples as f64 * (difference - expected);
@@ -293,6 +499,25 @@ fn per_sample_variances(a: &Batches, b: &Batches) -> (f64, f64) {
         }
     }
     (v_a / values.max(1) as f64, v_b / values.max(1) as f64)
+}
+
+/// The relative variance of a pilot's groups' means: the groups' per-sample variances, from the
+/// plain spread of their batches (a firefly counts), summed, over the samples and the sum of
+/// the groups' squared means (infinite for a pilot that found no light). Of two pilots whose
+/// means differ beyond their spreads, the one with the larger relative variance is the one
+/// whose mean is the less trustworthy: it saw fewer of the paths that make its estimate (a
+/// `direct` pilot on a narrow gate, whether it found none of them, by chance more than its
+/// share, or one path of huge weight, which the median of the pairs leaves out of its variance
+/// but not out of its mean).
+fn relative_noise(m: &Batches) -> f64 {
+    let groups = (0..m.groups.weighted_sum.len()).map(|g| m.groups.get(g, m.count, m.samples));
+    let (variances, squares) =
+        groups.fold((0.0, 0.0), |(v, q), (mean, var)| (v + var, q + mean * mean));
+    if squares > 0.0 {
+        variances / (m.samples as f64 * squares)
+    } else {
+        f64::INFINITY
+    }
 }
 
 #[cfg(test)]
@@ -311,10 +536,38 @@ mod tests {
     /// Normal deviates from a small LCG (Box-Muller), so the test needs no crate.
     fn normals(seed: &mut u64, n: usize) -> Vec<f64> {
         let mut uniform = || {
-            *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((*seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
         };
-        (0..n).map(|_| (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos()).collect()
+        (0..n)
+            .map(|_| (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos())
+            .collect()
+    }
+
+    #[test]
+    fn pilot_images_keep_a_thousand_pixels_and_shrink_at_most_fourfold() {
+        assert_eq!(pilot_resolution(16, 16), (16, 16, 1));
+        assert_eq!(pilot_resolution(32, 32), (32, 32, 1));
+        assert_eq!(pilot_resolution(64, 64), (32, 32, 2));
+        assert_eq!(pilot_resolution(66, 64), (33, 32, 2));
+        assert_eq!(pilot_resolution(65, 64), (65, 64, 1));
+        assert_eq!(pilot_resolution(128, 128), (32, 32, 4));
+        assert_eq!(pilot_resolution(1920, 1080), (480, 270, 4));
+        assert_eq!(pilot_resolution(4096, 1), (4096, 1, 1));
+        assert_eq!(pilot_resolution(96, 96), (32, 32, 3));
+    }
+
+    #[test]
+    fn pilot_seeds_are_their_own() {
+        let seeds: Vec<u32> = (0..1000).map(pilot_seed).collect();
+        assert!(
+            seeds
+                .iter()
+                .enumerate()
+                .all(|(s, &p)| p != s as u32 && seeds[..s].iter().all(|&q| q != p))
+        );
     }
 
     #[test]
@@ -326,7 +579,11 @@ mod tests {
         let truth: Vec<f64> = (0..values).map(|i| (i % 17) as f64).collect();
         let image = |sigma: f64, k: u32, seed: &mut u64| -> Vec<f64> {
             let noise = normals(seed, values);
-            truth.iter().zip(noise).map(|(t, z)| t + sigma / (k as f64).sqrt() * z).collect()
+            truth
+                .iter()
+                .zip(noise)
+                .map(|(t, z)| t + sigma / (k as f64).sqrt() * z)
+                .collect()
         };
         let a: Vec<_> = (0..8).map(|_| image(1.0, 2, &mut seed)).collect();
         let b: Vec<_> = (0..8).map(|_| image(3.0, 5, &mut seed)).collect();
@@ -337,19 +594,80 @@ mod tests {
     }
 
     #[test]
+    fn one_firefly_does_not_decide() {
+        // Per-sample standard deviation 1 everywhere, but one batch of 8 holds one value of
+        // 1000: the mean of the four pairs' estimates would be about 1 + 1e6 / 2 / 4 / 4096 = 31
+        // per value; their median stays near 1.
+        let values = 4096;
+        let mut seed = 9;
+        let mut images: Vec<Vec<f64>> = (0..8).map(|_| normals(&mut seed, values)).collect();
+        images[5][17] = 1000.0;
+        let (v, _) = per_sample_variances(&batches(&images, 1), &batches(&images, 1));
+        assert!((v - 1.0).abs() < 0.1, "variance with a firefly: {v}");
+    }
+
+    #[test]
+    fn charges_a_rare_event_pilot_that_overshot() {
+        // A: hits of 1.15 / p with probability p = 0.05 per value and sample (mean 1.15, 15 %
+        // above the truth, as a `direct` pilot that drew more than its share of a narrow gate's
+        // paths); B: 1 + 0.01 z. The difference is far beyond the spreads, and it is A's spread
+        // that cannot be trusted, though B's mean is the smaller.
+        let (values, p) = (4096, 0.05);
+        let mut seed = 13u64;
+        let mut uniform = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let a: Vec<Vec<f64>> = (0..8)
+            .map(|_| {
+                (0..values)
+                    .map(|_| if uniform() < p { 1.15 / p } else { 0.0 })
+                    .collect()
+            })
+            .collect();
+        let mut normal_seed = 17;
+        let b: Vec<Vec<f64>> = (0..8)
+            .map(|_| {
+                normals(&mut normal_seed, values)
+                    .into_iter()
+                    .map(|z| 1.0 + 0.01 * z)
+                    .collect()
+            })
+            .collect();
+        let (v_a, v_b) = per_sample_variances(&batches(&a, 1), &batches(&b, 1));
+        assert!(
+            (v_b / 1e-4 - 1.0).abs() < 0.1,
+            "B's variance stays its own: {v_b}"
+        );
+        // A's own spread is 1.15^2 (1 - p) / p = 25 per value; the miss adds 8 x (0.15 x 4096)^2
+        // / 4096 = 737 per value.
+        assert!(v_a > 300.0, "A is charged the difference: {v_a}");
+    }
+
+    #[test]
     fn sees_what_a_batch_missed() {
         // A rare-event estimator that found nothing in its pilot (all zeros, no spread) against
         // one that sees the image: its variance is at least the missed signal's square.
         let values = 256;
         let mut seed = 3;
         let seen: Vec<_> = (0..8)
-            .map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + 0.1 * z).collect::<Vec<_>>())
+            .map(|_| {
+                normals(&mut seed, values)
+                    .into_iter()
+                    .map(|z| 1.0 + 0.1 * z)
+                    .collect::<Vec<_>>()
+            })
             .collect();
         let missed = vec![vec![0.0; values]; 8];
         let (v_missed, v_seen) = per_sample_variances(&batches(&missed, 1), &batches(&seen, 1));
         // Missing a sum of 256 in 8 samples implies a per-sample variance of the sum of 8 x
         // 256^2, or 8 x 256 per value.
-        assert!((v_missed / 2048.0 - 1.0).abs() < 0.01, "the empty pilot's variance per sample: {v_missed}");
+        assert!(
+            (v_missed / 2048.0 - 1.0).abs() < 0.01,
+            "the empty pilot's variance per sample: {v_missed}"
+        );
         assert!((v_seen - 0.01).abs() < 0.002, "the other pilot's: {v_seen}");
     }
 
@@ -361,11 +679,19 @@ mod tests {
         let values = 4096;
         let mut seed = 5;
         let seen: Vec<_> = (0..8)
-            .map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + z).collect::<Vec<_>>())
+            .map(|_| {
+                normals(&mut seed, values)
+                    .into_iter()
+                    .map(|z| 1.0 + z)
+                    .collect::<Vec<_>>()
+            })
             .collect();
         let missed = vec![vec![0.0; values]; 8];
         let (v_missed, v_seen) = per_sample_variances(&batches(&missed, 1), &batches(&seen, 1));
-        assert!((v_missed / (8.0 * 4096.0) - 1.0).abs() < 0.05, "the empty pilot's variance per sample: {v_missed}");
+        assert!(
+            (v_missed / (8.0 * 4096.0) - 1.0).abs() < 0.05,
+            "the empty pilot's variance per sample: {v_missed}"
+        );
         assert!((v_seen - 1.0).abs() < 0.1, "the other pilot's: {v_seen}");
     }
 }

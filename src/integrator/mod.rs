@@ -16,9 +16,11 @@ use anyhow::Result;
 use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
-use crate::gpu::layout::{MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, TargetParams, WaveParams};
-use crate::gpu::resources::ChunkLayout;
 use crate::gpu::Resources;
+use crate::gpu::layout::{
+    MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, TargetParams, WaveParams,
+};
+use crate::gpu::resources::ChunkLayout;
 use crate::scene::PreparedScene;
 pub use bidirectional::{BidirectionalTracer, StrategyStats};
 pub use path::{PathTracer, film_elements};
@@ -143,12 +145,22 @@ pub struct QuerySettings {
 
 impl QuerySettings {
     /// The exhaustive query (every node the spheroid may touch, up to the allowance).
-    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false };
+    pub const EXHAUSTIVE: Self = Self {
+        split: 0.0,
+        bottom_nodes: 31,
+        allowance: 4096,
+        reflection_weights: false,
+    };
 }
 
 impl Default for QuerySettings {
     fn default() -> Self {
-        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false }
+        Self {
+            split: 1.0,
+            bottom_nodes: 31,
+            allowance: 4096,
+            reflection_weights: false,
+        }
     }
 }
 
@@ -165,7 +177,10 @@ pub struct EllipsoidGuards {
 
 impl Default for EllipsoidGuards {
     fn default() -> Self {
-        Self { needle: 1e-6, length: 1e-5 }
+        Self {
+            needle: 1e-6,
+            length: 1e-5,
+        }
     }
 }
 
@@ -279,7 +294,9 @@ pub fn create_integrator<'a>(
 ) -> Result<Box<dyn Integrator + 'a>> {
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
-        Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
+        Method::Direct | Method::Ellipsoidal => {
+            Box::new(BidirectionalTracer::new(ctx, scene, settings)?)
+        }
         Method::Auto => anyhow::bail!(
             "--method auto has no integrator of its own: it renders with direct or ellipsoidal after a pilot of both \
              (integrator::render); measure those two instead"
@@ -310,7 +327,9 @@ impl PassSizer {
     /// seconds (with 5 % to spare); one sample before anything was measured; None when even one
     /// sample is predicted to overrun.
     pub fn next(&self, remaining: f64, max: u32) -> Option<u32> {
-        let Some(per_sample) = self.seconds_per_sample else { return Some(1) };
+        let Some(per_sample) = self.seconds_per_sample else {
+            return Some(1);
+        };
         let fit = 0.95 * remaining / per_sample.max(1e-12);
         (fit >= 1.0).then(|| (fit.min(max as f64) as u32).max(1))
     }
@@ -415,10 +434,15 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         gate: settings.gate.to_gpu(),
         target_length: TargetParams {
             seed: settings.seed,
-            ..target_sampler(scene, settings).map(|t| t.params).unwrap_or_default()
+            ..target_sampler(scene, settings)
+                .map(|t| t.params)
+                .unwrap_or_default()
         },
         light_bounds_min,
-        image_area: scene.scene.camera.image_area(settings.width, settings.height),
+        image_area: scene
+            .scene
+            .camera
+            .image_area(settings.width, settings.height),
         light_bounds_max,
         width: settings.width,
         height: settings.height,
@@ -436,7 +460,11 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
 /// The scattering vertices the kernels' subpaths may have: `max_bounces`, less one in an NLOS
 /// capture, whose laser spot is a bounce to the user and a light to the kernels.
 pub fn kernel_bounces(settings: &RenderSettings) -> u32 {
-    if settings.nlos.is_some() { settings.max_bounces.saturating_sub(1) } else { settings.max_bounces }
+    if settings.nlos.is_some() {
+        settings.max_bounces.saturating_sub(1)
+    } else {
+        settings.max_bounces
+    }
 }
 
 /// Target-length sampling of the settings' gate over the path lengths the scene allows with
@@ -448,8 +476,14 @@ pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Optio
         // scene's bounds with both origins.
         Some(capture) => {
             let (lo, hi) = scene.scene.bounds();
-            let (lo, hi) = (lo.min(capture.sensor_origin).min(capture.laser_origin), hi.max(capture.sensor_origin).max(capture.laser_origin));
-            (0.0, (settings.max_bounces as f32 + 1.0) * (hi - lo).length())
+            let (lo, hi) = (
+                lo.min(capture.sensor_origin).min(capture.laser_origin),
+                hi.max(capture.sensor_origin).max(capture.laser_origin),
+            );
+            (
+                0.0,
+                (settings.max_bounces as f32 + 1.0) * (hi - lo).length(),
+            )
         }
         None => scene.scene.path_length_bounds(settings.max_bounces),
     };
@@ -471,27 +505,56 @@ pub fn upload_scene(
     r.uniform_init(ctx, "params", params);
     r.uniform_init(ctx, "wave", &WaveParams::default());
     let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
-    let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
+    let triangle_shading =
+        r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
-    let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
+    let bvh_node_surfaces =
+        r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
-    let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();
+    let small_normals: Vec<[f32; 4]> = scene.normals[..small]
+        .iter()
+        .map(|n| [n[0], n[1], 0.0, 0.0])
+        .collect();
     let max_small = crate::bvh::MAX_SMALL_SCENE_TRIANGLES;
-    r.uniform_slice_init(ctx, "small_scene_triangles", &padded_table(small_scene, max_small));
-    r.uniform_slice_init(ctx, "small_scene_shading", &padded_table(&scene.shading[..small], max_small));
-    r.uniform_slice_init(ctx, "small_scene_normals", &padded_table(&small_normals, max_small));
+    r.uniform_slice_init(
+        ctx,
+        "small_scene_triangles",
+        &padded_table(small_scene, max_small),
+    );
+    r.uniform_slice_init(
+        ctx,
+        "small_scene_shading",
+        &padded_table(&scene.shading[..small], max_small),
+    );
+    r.uniform_slice_init(
+        ctx,
+        "small_scene_normals",
+        &padded_table(&small_normals, max_small),
+    );
     r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;
     r.storage_init(ctx, "lights", &scene.lights.lights)?;
     r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
-    let tables_in_uniforms =
-        scene.materials.len() <= MAX_UNIFORM_MATERIALS && scene.lights.lights.len() <= MAX_UNIFORM_LIGHTS;
-    r.uniform_slice_init(ctx, "uniform_materials", &padded_table(&scene.materials, MAX_UNIFORM_MATERIALS));
-    r.uniform_slice_init(ctx, "uniform_lights", &padded_table(&scene.lights.lights, MAX_UNIFORM_LIGHTS));
-    r.uniform_slice_init(ctx, "uniform_light_cdf", &padded_table(&scene.lights.cdf, MAX_UNIFORM_LIGHTS));
+    let tables_in_uniforms = scene.materials.len() <= MAX_UNIFORM_MATERIALS
+        && scene.lights.lights.len() <= MAX_UNIFORM_LIGHTS;
+    r.uniform_slice_init(
+        ctx,
+        "uniform_materials",
+        &padded_table(&scene.materials, MAX_UNIFORM_MATERIALS),
+    );
+    r.uniform_slice_init(
+        ctx,
+        "uniform_lights",
+        &padded_table(&scene.lights.lights, MAX_UNIFORM_LIGHTS),
+    );
+    r.uniform_slice_init(
+        ctx,
+        "uniform_light_cdf",
+        &padded_table(&scene.lights.cdf, MAX_UNIFORM_LIGHTS),
+    );
     r.storage_init(ctx, "gate_table", &gate.table())?;
     let wall_points = match &settings.nlos {
         Some(capture) => crate::nlos::wall_points(scene, capture, settings.width, settings.height)?,
@@ -510,17 +573,26 @@ pub fn upload_scene(
         ("HAS_TEXTURES", flag(scene.has_textures())),
         ("HAS_SHADING_NORMALS", flag(scene.has_shading_normals())),
         ("HAS_POINT_LIGHTS", flag(scene.has_point_lights())),
-        ("HAS_DIRECTIONAL_LIGHTS", flag(!scene.scene.directional_lights.is_empty())),
+        (
+            "HAS_DIRECTIONAL_LIGHTS",
+            flag(!scene.scene.directional_lights.is_empty()),
+        ),
         ("HAS_GLOSSY", flag(scene.has_glossy())),
         ("TRIANGLES_CHUNK_BITS", triangles.bits as f64),
         ("TRIANGLE_SHADING_CHUNK_BITS", triangle_shading.bits as f64),
         ("BVH_NODES_CHUNK_BITS", bvh_nodes.bits as f64),
-        ("BVH_NODE_SURFACES_CHUNK_BITS", bvh_node_surfaces.bits as f64),
+        (
+            "BVH_NODE_SURFACES_CHUNK_BITS",
+            bvh_node_surfaces.bits as f64,
+        ),
         ("FILM_CHUNK_BITS", film.bits as f64),
         ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
         ("SMALL_SCENE_TRIANGLES", small as f64),
         ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
-        ("RESUMABLE", flag(crate::bvh::traversals_can_stop(scene.bvh.nodes.len()))),
+        (
+            "RESUMABLE",
+            flag(crate::bvh::traversals_can_stop(scene.bvh.nodes.len())),
+        ),
         ("NLOS", flag(settings.nlos.is_some())),
     ];
     Ok((r, constants, film))
@@ -559,19 +631,22 @@ pub fn render(
             choice: None,
         });
     }
-    let (mut tracer, choice) = if settings.method == Method::Auto {
-        // The pilot warms both methods' kernels up and counts against a time budget.
-        let (tracer, choice) = auto::choose(ctx, scene, settings, budget)?;
-        (tracer, Some(choice))
+    // auto: a pilot of both methods (counted against a time budget) picks the one to render with.
+    let choice = if settings.method == Method::Auto {
+        Some(auto::choose(ctx, scene, settings, budget)?)
     } else {
-        let mut tracer = create_integrator(ctx, scene, settings)?;
-        if let Budget::Time(_) = budget {
-            // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
-            // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
-            tracer.warm_up()?;
-        }
-        (tracer, None)
+        None
     };
+    let render_settings = match &choice {
+        Some(c) => auto::candidate_settings(settings, c.chosen),
+        None => settings.clone(),
+    };
+    let mut tracer = create_integrator(ctx, scene, &render_settings)?;
+    if let Budget::Time(_) = budget {
+        // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
+        // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
+        tracer.warm_up()?;
+    }
     let pilot = Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds));
     let budget = match budget {
         Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
@@ -586,14 +661,24 @@ pub fn render(
                 tracer.render_pass(next)?;
                 passes += 1;
                 let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
-                progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
+                progress(Progress {
+                    passes,
+                    spp: tracer.samples_done(),
+                    elapsed,
+                    rendering,
+                });
             }
         }
         Budget::Time(t) => {
             PassSizer::default().render_for(tracer.as_mut(), t.as_secs_f64(), |tracer, _| {
                 passes += 1;
                 let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
-                progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
+                progress(Progress {
+                    passes,
+                    spp: tracer.samples_done(),
+                    elapsed,
+                    rendering,
+                });
             })?;
         }
     }
@@ -606,9 +691,21 @@ pub fn render(
              loops after 65535 iterations); the image may miss geometry. Use a GPU for this scene."
         );
     }
-    let stats = if settings.stats { tracer.stats_report()? } else { None };
+    let stats = if settings.stats {
+        tracer.stats_report()?
+    } else {
+        None
+    };
     let target_pilot_spp = tracer.target_pilot_spp();
-    Ok(RenderOutput { film, elapsed: start.elapsed(), rendering, truncated_traversals, stats, target_pilot_spp, choice })
+    Ok(RenderOutput {
+        film,
+        elapsed: start.elapsed(),
+        rendering,
+        truncated_traversals,
+        stats,
+        target_pilot_spp,
+        choice,
+    })
 }
 
 #[cfg(test)]
@@ -618,12 +715,24 @@ mod pass_sizer_tests {
     #[test]
     fn passes_fit_the_time_left() {
         let mut sizer = PassSizer::default();
-        assert_eq!(sizer.next(10.0, 64), Some(1), "one sample before anything is measured");
+        assert_eq!(
+            sizer.next(10.0, 64),
+            Some(1),
+            "one sample before anything is measured"
+        );
         sizer.record(10, 1.0);
         assert_eq!(sizer.next(100.0, 64), Some(64), "capped at a full pass");
-        assert_eq!(sizer.next(0.5, 64), Some(4), "0.95 x 0.5 s at 0.1 s per sample");
+        assert_eq!(
+            sizer.next(0.5, 64),
+            Some(4),
+            "0.95 x 0.5 s at 0.1 s per sample"
+        );
         assert_eq!(sizer.next(0.1, 64), None, "one sample would overrun");
         sizer.record(1, 0.01);
-        assert_eq!(sizer.next(0.1, 64), Some(9), "the latest pass's rate counts");
+        assert_eq!(
+            sizer.next(0.1, 64),
+            Some(9),
+            "the latest pass's rate counts"
+        );
     }
 }
