@@ -103,15 +103,17 @@ pub fn parse_frame_range(text: &str) -> Result<(u32, u32)> {
     }
 }
 
-/// Parses `T0..T1` (seconds of the scene's animation clock).
+/// Parses `T0..T1`, or `T0` alone for one time (seconds of the scene's animation clock).
 pub fn parse_time_range(text: &str) -> Result<(f64, f64)> {
-    let bad = || format!("`{text}` is not a time range: give T0..T1 in seconds, e.g. 0..2.5");
-    let (a, b) = text.split_once("..").with_context(bad)?;
-    let (a, b) = (
-        a.trim().trim_end_matches('s'),
-        b.trim().trim_end_matches('s'),
-    );
-    Ok((a.parse().with_context(bad)?, b.parse().with_context(bad)?))
+    let bad = || format!("`{text}` is not a time range: give T0..T1 or T0 in seconds, e.g. 0..2.5");
+    let seconds = |t: &str| t.trim().trim_end_matches('s').parse::<f64>().with_context(bad);
+    match text.split_once("..") {
+        Some((a, b)) => Ok((seconds(a)?, seconds(b)?)),
+        None => {
+            let t = seconds(text)?;
+            Ok((t, t))
+        }
+    }
 }
 
 /// True when `pattern` names frames: it holds `{frame}` or `{frame:0N}`.
@@ -187,6 +189,7 @@ mod tests {
         assert_eq!(parse_frame_range("3").unwrap(), (3, 3));
         assert!(parse_frame_range("a..2").is_err());
         assert_eq!(parse_time_range("0..2.5s").unwrap(), (0.0, 2.5));
+        assert_eq!(parse_time_range("0.65").unwrap(), (0.65, 0.65));
         assert!(FramePlan::new(3, 0.05, None, Some((2, 3))).is_err());
         assert!(FramePlan::new(0, 0.05, None, None).is_err());
         let plan = FramePlan::new(5, 0.05, Some((1.0, 2.0)), None).unwrap();
