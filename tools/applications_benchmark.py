@@ -6,6 +6,7 @@ equal-time MSE gains over `direct` beside the paper's, with a picture of each sc
 
     tools/applications_benchmark.py                  # about 20 minutes on 2 CPU cores
     tools/applications_benchmark.py --seconds 2 --reference-seconds 20 --no-pictures   # a quick look
+    tools/applications_benchmark.py --resume         # go on after an interruption
 
 Writes into --out (target/applications): `applications.md` (the table), `applications.csv`
 (every render, from `gatetrace equal-time --csv`), `SCENE.png` (a steady-state picture beside
@@ -50,8 +51,16 @@ def scene_extras(path):
 
 
 def equal_time(args, name, scene, gate, anim_time):
-    """Runs gatetrace equal-time on one scene; returns its CSV rows."""
+    """Runs gatetrace equal-time on one scene (or, with --resume, reads what an earlier run of
+    it left); returns its CSV rows and the adapter line."""
     out = args.out / f"{name}_equal_time.csv"
+    log = args.out / f"{name}_equal_time.txt"
+    if args.resume and out.exists():
+        print(f"reusing {out}", flush=True)
+        text = log.read_text() if log.exists() else ""
+        adapter = next((line for line in text.splitlines() if line.startswith("adapter:")), "adapter: unknown")
+        with open(out, newline="") as f:
+            return list(csv.DictReader(f)), adapter
     cmd = [BINARY, "equal-time", scene, "--methods", ",".join(METHODS), "--gates", gate,
            "--seconds", args.seconds, "--repeats", args.repeats, "--reference-method", "auto",
            "--reference-seconds", args.reference_seconds, "--res", args.res,
@@ -61,6 +70,7 @@ def equal_time(args, name, scene, gate, anim_time):
     print("+", " ".join(str(c) for c in cmd), flush=True)
     text = subprocess.run([str(c) for c in cmd], check=True, capture_output=True, text=True).stdout
     print(text, flush=True)
+    log.write_text(text)
     adapter = next((line for line in text.splitlines() if line.startswith("adapter:")), "adapter: unknown")
     with open(out, newline="") as f:
         return list(csv.DictReader(f)), adapter
@@ -118,6 +128,8 @@ def main():
     parser.add_argument("--no-pictures", action="store_true", help="skip the pictures")
     parser.add_argument("--only", help="comma-separated application names (fence, proximity, cw_room, dynamic)")
     parser.add_argument("--out", type=Path, default=ROOT / "target/applications", help="output folder")
+    parser.add_argument("--resume", action="store_true",
+                        help="reuse the equal-time CSVs and pictures an interrupted run left in --out")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     run(["cargo", "build", "--release", "--quiet", "--manifest-path", ROOT / "Cargo.toml"])
@@ -148,7 +160,7 @@ def main():
         lines.append(f"| {name}{'' if anim_time is None else f' at {anim_time} s'} | {figure}: {paper_gate} | "
                      f"`{gate}` | {rows[0]['triangles']} | {paper} | {gain('ellipsoidal'):.2f}x | "
                      f"{gain('auto'):.2f}x | {picked} | {spps} |")
-        if not args.no_pictures:
+        if not args.no_pictures and not (args.resume and (args.out / f"{name}.png").exists()):
             pictures(args, name, scene, gate, anim_time)
 
     with open(args.out / "applications.csv", "w", newline="") as f:
