@@ -25,12 +25,7 @@ pub struct FramePlan {
 
 impl FramePlan {
     /// A plan of `count` frames; `range` defaults to all of them. Errors name the option.
-    pub fn new(
-        count: u32,
-        gate_step: f64,
-        anim_time: Option<(f64, f64)>,
-        range: Option<(u32, u32)>,
-    ) -> Result<Self> {
+    pub fn new(count: u32, gate_step: f64, anim_time: Option<(f64, f64)>, range: Option<(u32, u32)>) -> Result<Self> {
         ensure!(count >= 1, "--frames must be at least 1");
         ensure!(gate_step.is_finite(), "--gate-step must be finite");
         let range = range.unwrap_or((0, count - 1));
@@ -42,17 +37,9 @@ impl FramePlan {
             count - 1
         );
         if let Some((t0, t1)) = anim_time {
-            ensure!(
-                t0.is_finite() && t1.is_finite(),
-                "--anim-time {t0}..{t1}: give finite times in seconds"
-            );
+            ensure!(t0.is_finite() && t1.is_finite(), "--anim-time {t0}..{t1}: give finite times in seconds");
         }
-        Ok(Self {
-            count,
-            gate_step,
-            anim_time,
-            range,
-        })
+        Ok(Self { count, gate_step, anim_time, range })
     }
 
     /// The frames to render, in order.
@@ -65,19 +52,14 @@ impl FramePlan {
         if self.gate_step == 0.0 {
             return Ok(gate.clone());
         }
-        gate.shifted(self.gate_step * frame as f64)
-            .with_context(|| format!("frame {frame} of --gate-step"))
+        gate.shifted(self.gate_step * frame as f64).with_context(|| format!("frame {frame} of --gate-step"))
     }
 
     /// Frame `frame`'s animation time (s): `count` evenly spaced times from t0 to t1 (t0 alone
     /// for one frame).
     pub fn anim_time(&self, frame: u32) -> Option<f64> {
         let (t0, t1) = self.anim_time?;
-        Some(if self.count == 1 {
-            t0
-        } else {
-            t0 + (t1 - t0) * frame as f64 / (self.count - 1) as f64
-        })
+        Some(if self.count == 1 { t0 } else { t0 + (t1 - t0) * frame as f64 / (self.count - 1) as f64 })
     }
 }
 
@@ -90,9 +72,7 @@ pub fn frame_seed(seed: u32, frame: u32) -> u32 {
 /// Parses `A..B` (inclusive) or `A` (one frame).
 pub fn parse_frame_range(text: &str) -> Result<(u32, u32)> {
     let number = |s: &str| {
-        s.trim().parse::<u32>().with_context(|| {
-            format!("`{text}` is not a frame range: give A..B or A (0-based frames)")
-        })
+        s.trim().parse::<u32>().with_context(|| format!("`{text}` is not a frame range: give A..B or A (0-based frames)"))
     };
     match text.split_once("..") {
         Some((a, b)) => Ok((number(a)?, number(b)?)),
@@ -125,14 +105,9 @@ pub fn is_frame_pattern(pattern: &str) -> bool {
 /// the number zero-padded to N digits (`frames/f_{frame:04}.npy` -> `frames/f_0007.npy`).
 pub fn frame_path(pattern: &str, frame: u32) -> Result<PathBuf> {
     let Some(open) = pattern.find("{frame") else {
-        bail!(
-            "output `{pattern}` names no frame: put {{frame}} or {{frame:04}} in it, e.g. frames/f_{{frame:04}}.npy"
-        );
+        bail!("output `{pattern}` names no frame: put {{frame}} or {{frame:04}} in it, e.g. frames/f_{{frame:04}}.npy");
     };
-    let close = open
-        + pattern[open..]
-            .find('}')
-            .with_context(|| format!("output `{pattern}`: unclosed {{frame"))?;
+    let close = open + pattern[open..].find('}').with_context(|| format!("output `{pattern}`: unclosed {{frame"))?;
     let spec = &pattern[open + "{frame".len()..close];
     let number = match spec {
         "" => frame.to_string(),
@@ -141,19 +116,12 @@ pub fn frame_path(pattern: &str, frame: u32) -> Result<PathBuf> {
                 .strip_prefix(":0")
                 .and_then(|d| d.parse::<usize>().ok())
                 .filter(|&d| d <= 12)
-                .with_context(|| {
-                    format!(
-                        "output `{pattern}`: `{{frame{spec}}}` is not {{frame}} or {{frame:0N}}"
-                    )
-                })?;
+                .with_context(|| format!("output `{pattern}`: `{{frame{spec}}}` is not {{frame}} or {{frame:0N}}"))?;
             format!("{frame:0digits$}")
         }
     };
     let rest = &pattern[close + 1..];
-    ensure!(
-        !is_frame_pattern(rest),
-        "output `{pattern}`: name the frame once"
-    );
+    ensure!(!is_frame_pattern(rest), "output `{pattern}`: name the frame once");
     Ok(PathBuf::from(format!("{}{number}{rest}", &pattern[..open])))
 }
 
@@ -170,14 +138,8 @@ mod tests {
 
     #[test]
     fn patterns_name_each_frame() {
-        assert_eq!(
-            frame_path("frames/f_{frame:04}.npy", 7).unwrap(),
-            PathBuf::from("frames/f_0007.npy")
-        );
-        assert_eq!(
-            frame_path("f{frame}.exr", 12).unwrap(),
-            PathBuf::from("f12.exr")
-        );
+        assert_eq!(frame_path("frames/f_{frame:04}.npy", 7).unwrap(), PathBuf::from("frames/f_0007.npy"));
+        assert_eq!(frame_path("f{frame}.exr", 12).unwrap(), PathBuf::from("f12.exr"));
         assert!(frame_path("f.exr", 1).is_err());
         assert!(frame_path("f{frame:x}.exr", 1).is_err());
         assert!(frame_path("f{frame}_{frame}.exr", 1).is_err());
@@ -201,22 +163,14 @@ mod tests {
     #[test]
     fn gates_move_by_the_step() {
         let plan = FramePlan::new(3, 0.05, None, None).unwrap();
-        let gate = Gate::Box {
-            start: 3.14,
-            end: 3.19,
-        };
+        let gate = Gate::Box { start: 3.14, end: 3.19 };
         match plan.gate(&gate, 2).unwrap() {
-            Gate::Box { start, end } => {
-                assert!((start - 3.24).abs() < 1e-12 && (end - 3.29).abs() < 1e-12)
-            }
+            Gate::Box { start, end } => assert!((start - 3.24).abs() < 1e-12 && (end - 3.29).abs() < 1e-12),
             g => panic!("{g:?}"),
         }
         assert!(plan.gate(&Gate::None, 1).is_err());
         // A CW gate moved by one modulation wavelength is the same gate.
-        let cw = Gate::Cw {
-            frequency_hz: 30e6,
-            phase_deg: 90.0,
-        };
+        let cw = Gate::Cw { frequency_hz: 30e6, phase_deg: 90.0 };
         let wavelength = crate::units::SPEED_OF_LIGHT / 30e6;
         match cw.shifted(wavelength).unwrap() {
             Gate::Cw { phase_deg, .. } => assert!((phase_deg - (90.0 - 360.0)).abs() < 1e-9),

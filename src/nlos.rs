@@ -84,18 +84,12 @@ pub struct NlosCapture {
 /// The origin named by node `name` of the scene, else by node `nlos_origin`: the default of the
 /// sensor and laser origins.
 pub fn origin_from_nodes(scene: &Scene, name: &str) -> Option<Vec3> {
-    scene
-        .node(name)
-        .or_else(|| scene.node("nlos_origin"))
-        .map(|n| n.position)
+    scene.node(name).or_else(|| scene.node("nlos_origin")).map(|n| n.position)
 }
 
 /// Texture coordinates of the centre of cell (i, j) of a width x height grid.
 pub fn cell_uv(i: u32, j: u32, width: u32, height: u32) -> Vec2 {
-    Vec2::new(
-        (i as f32 + 0.5) / width as f32,
-        (j as f32 + 0.5) / height as f32,
-    )
+    Vec2::new((i as f32 + 0.5) / width as f32, (j as f32 + 0.5) / height as f32)
 }
 
 /// The point of the relay wall at texture coordinates `uv` (m): interpolated on the first wall
@@ -105,10 +99,7 @@ pub fn wall_point_at(scene: &Scene, wall: &str, uv: Vec2) -> Result<Vec3> {
     let node = scene.node(wall).with_context(|| {
         format!("{name}: no node named `{wall}`: an NLOS capture needs the relay wall's mesh node (see --relay-wall)")
     })?;
-    ensure!(
-        !node.triangles.is_empty(),
-        "{name}: node `{wall}` (the relay wall) has no mesh"
-    );
+    ensure!(!node.triangles.is_empty(), "{name}: node `{wall}` (the relay wall) has no mesh");
     let texcoords = node.texcoords.as_ref().with_context(|| {
         format!(
             "{name}: node `{wall}` (the relay wall) has no TEXCOORD_0: the sensed-point grid is laid on the wall's \
@@ -130,11 +121,7 @@ pub fn wall_point_at(scene: &Scene, wall: &str, uv: Vec2) -> Result<Vec3> {
             return Ok(p0 + b1 * (p1 - p0) + b2 * (p2 - p0));
         }
     }
-    bail!(
-        "{name}: the relay wall `{wall}`'s texture coordinates do not cover ({}, {})",
-        uv.x,
-        uv.y
-    )
+    bail!("{name}: the relay wall `{wall}`'s texture coordinates do not cover ({}, {})", uv.x, uv.y)
 }
 
 /// What a ray from `origin` towards `target` hits first: a wall point with no power and no
@@ -143,45 +130,21 @@ fn first_hit(scene: &PreparedScene, origin: Vec3, target: Vec3) -> (WallPoint, b
     let to = target - origin;
     let distance = to.length();
     let direction = to / distance;
-    let hit = trace_closest(
-        &scene.bvh.nodes,
-        &scene.triangles,
-        origin,
-        direction,
-        f32::MAX,
-        NONE,
-    );
+    let hit = trace_closest(&scene.bvh.nodes, &scene.triangles, origin, direction, f32::MAX, NONE);
     if hit.triangle == NONE {
-        let point = WallPoint {
-            position: target,
-            origin,
-            triangle: NONE,
-            ..Default::default()
-        };
+        let point = WallPoint { position: target, origin, triangle: NONE, ..Default::default() };
         return (point, false);
     }
     let tri = &scene.triangles[hit.triangle as usize];
     let position = tri.v0 + hit.b1 * tri.e1 + hit.b2 * tri.e2;
     let on_target = (position - target).length() <= 1e-4 * distance.max(1.0);
-    let point = WallPoint {
-        position,
-        origin,
-        triangle: hit.triangle,
-        b1: hit.b1,
-        b2: hit.b2,
-        ..Default::default()
-    };
+    let point = WallPoint { position, origin, triangle: hit.triangle, b1: hit.b1, b2: hit.b2, ..Default::default() };
     (point, on_target)
 }
 
 /// The `wall_points` table of a width x height capture: the sensed point of every pixel
 /// (row-major), then the laser spot of every pixel. Fails when the laser hits nothing.
-pub fn wall_points(
-    scene: &PreparedScene,
-    capture: &NlosCapture,
-    width: u32,
-    height: u32,
-) -> Result<Vec<WallPoint>> {
+pub fn wall_points(scene: &PreparedScene, capture: &NlosCapture, width: u32, height: u32) -> Result<Vec<WallPoint>> {
     Ok(wall_points_and_warnings(scene, capture, width, height)?.0)
 }
 
@@ -206,11 +169,7 @@ pub fn wall_points_and_warnings(
             let (mut p, on_target) = first_hit(scene, capture.sensor_origin, target);
             hidden += !on_target as usize;
             let d = (p.position - capture.sensor_origin).length();
-            p.length_offset = if capture.count_first_and_last {
-                0.0
-            } else {
-                -d
-            };
+            p.length_offset = if capture.count_first_and_last { 0.0 } else { -d };
             points.push(p);
             targets.push(target);
         }
@@ -241,11 +200,7 @@ pub fn wall_points_and_warnings(
             ));
         }
         p.power = power;
-        p.length_offset = if capture.count_first_and_last {
-            (p.position - capture.laser_origin).length()
-        } else {
-            0.0
-        };
+        p.length_offset = if capture.count_first_and_last { (p.position - capture.laser_origin).length() } else { 0.0 };
         Ok(p)
     };
     match capture.aim {
@@ -261,11 +216,7 @@ pub fn wall_points_and_warnings(
     }
     if let Some(first) = blocked.first() {
         let more = blocked.len() - 1;
-        warnings.push(if more > 0 {
-            format!("{first} (and {more} more spots)")
-        } else {
-            first.clone()
-        });
+        warnings.push(if more > 0 { format!("{first} (and {more} more spots)") } else { first.clone() });
     }
     Ok((points, warnings))
 }
@@ -274,10 +225,7 @@ pub fn wall_points_and_warnings(
 /// parameterised, the origins are finite and the laser power positive.
 pub fn check_capture(scene: &Scene, capture: &NlosCapture) -> Result<()> {
     wall_point_at(scene, &capture.relay_wall, Vec2::splat(0.5))?;
-    for (what, p) in [
-        ("sensor origin", capture.sensor_origin),
-        ("laser origin", capture.laser_origin),
-    ] {
+    for (what, p) in [("sensor origin", capture.sensor_origin), ("laser origin", capture.laser_origin)] {
         ensure!(p.is_finite(), "the {what} {} is not finite", fmt_point(p));
     }
     ensure!(
@@ -302,28 +250,13 @@ pub fn wall_normal(scene: &PreparedScene, p: &WallPoint) -> Vec3 {
         return Vec3::ZERO;
     }
     let n = crate::scene::surface::octahedral_decode(scene.normals[p.triangle as usize]);
-    if n.dot(p.origin - p.position) < 0.0 {
-        -n
-    } else {
-        n
-    }
+    if n.dot(p.origin - p.position) < 0.0 { -n } else { n }
 }
 
 /// Positions and normals of `points` as nested JSON arrays [rows][columns][3].
-fn grid_json(
-    scene: &PreparedScene,
-    points: &[WallPoint],
-    width: u32,
-) -> (serde_json::Value, serde_json::Value) {
+fn grid_json(scene: &PreparedScene, points: &[WallPoint], width: u32) -> (serde_json::Value, serde_json::Value) {
     let rows = |f: &dyn Fn(&WallPoint) -> Vec3| -> serde_json::Value {
-        points
-            .chunks(width as usize)
-            .map(|row| {
-                row.iter()
-                    .map(|p| f(p).to_array().to_vec())
-                    .collect::<Vec<_>>()
-            })
-            .collect()
+        points.chunks(width as usize).map(|row| row.iter().map(|p| f(p).to_array().to_vec()).collect::<Vec<_>>()).collect()
     };
     (rows(&|p| p.position), rows(&|p| wall_normal(scene, p)))
 }
@@ -346,19 +279,10 @@ pub fn capture_record(
     let mut map = serde_json::Map::new();
     map.insert("nlos_scan".into(), json!(scan.name()));
     map.insert("relay_wall".into(), json!(capture.relay_wall));
-    map.insert(
-        "sensor_origin".into(),
-        json!(capture.sensor_origin.to_array()),
-    );
-    map.insert(
-        "laser_origin".into(),
-        json!(capture.laser_origin.to_array()),
-    );
+    map.insert("sensor_origin".into(), json!(capture.sensor_origin.to_array()));
+    map.insert("laser_origin".into(), json!(capture.laser_origin.to_array()));
     map.insert("laser_power_w".into(), json!(capture.laser_power));
-    map.insert(
-        "count_first_and_last".into(),
-        json!(capture.count_first_and_last),
-    );
+    map.insert("count_first_and_last".into(), json!(capture.count_first_and_last));
     map.insert("sensor_grid_xyz".into(), sensor_xyz);
     map.insert("sensor_grid_normals".into(), sensor_normals);
     map.insert("laser_grid_xyz".into(), laser_xyz);

@@ -32,12 +32,7 @@ pub struct Rng {
 impl Rng {
     /// The stream of sample `sample` of pixel `pixel` under render seed `seed`.
     pub fn new(seed: u32, pixel: u32, sample: u32) -> Self {
-        Self {
-            pixel,
-            sample,
-            seed,
-            dimension: 0,
-        }
+        Self { pixel, sample, seed, dimension: 0 }
     }
 
     /// Next uniform number in [0, 1) with 24 random bits (twin of `rng_next`).
@@ -76,8 +71,7 @@ mod tests {
                 let mut light = light(pixel, sample);
                 for _ in 0..8 {
                     let (a, b) = (camera.next_f32(), light.next_f32());
-                    same +=
-                        (((a * 16777216.0) as u32 & 127) == ((b * 16777216.0) as u32 & 127)) as u32;
+                    same += (((a * 16777216.0) as u32 & 127) == ((b * 16777216.0) as u32 & 127)) as u32;
                     total += 1;
                 }
             }
@@ -89,15 +83,9 @@ mod tests {
     fn camera_and_light_streams_are_independent() {
         // Independent streams agree in 7 bits with probability 1/128 (32768 draws: 256 +- 16).
         let hashed = low_bit_agreement(|p, s| Rng::new(light_stream_seed(7), p, s));
-        assert!(
-            (hashed - 1.0 / 128.0).abs() < 5.0 * (1.0f64 / 128.0 / 32768.0).sqrt(),
-            "agreement {hashed}"
-        );
+        assert!((hashed - 1.0 / 128.0).abs() < 5.0 * (1.0f64 / 128.0 / 32768.0).sqrt(), "agreement {hashed}");
         // Offsetting the dimension by 2^31 instead leaves pcg4d's low output bits equal.
-        let offset = low_bit_agreement(|p, s| Rng {
-            dimension: 1 << 31,
-            ..Rng::new(7, p, s)
-        });
+        let offset = low_bit_agreement(|p, s| Rng { dimension: 1 << 31, ..Rng::new(7, p, s) });
         assert!(offset > 0.5, "agreement {offset}");
     }
 }

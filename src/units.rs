@@ -23,9 +23,7 @@ pub fn parse_length(text: &str) -> Result<f64> {
         .unwrap_or((s, 1.0));
     match number.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v * scale),
-        _ => bail!(
-            "`{text}` is not a length: give metres (3.14, 3.14m, 2.5mm) or a time (12.5ps, 1ns)"
-        ),
+        _ => bail!("`{text}` is not a length: give metres (3.14, 3.14m, 2.5mm) or a time (12.5ps, 1ns)"),
     }
 }
 

@@ -82,14 +82,12 @@ pub fn run_viewer(options: ViewOptions) -> Result<()> {
             .with_title(format!("gatetrace — {}", options.scene.display()))
             .with_inner_size([1100.0, 760.0]),
         wgpu_options: eframe::egui_wgpu::WgpuConfiguration {
-            wgpu_setup: eframe::egui_wgpu::WgpuSetup::Existing(
-                eframe::egui_wgpu::WgpuSetupExisting {
-                    instance: ctx.instance.clone(),
-                    adapter: ctx.adapter.clone(),
-                    device: ctx.device.clone(),
-                    queue: ctx.queue.clone(),
-                },
-            ),
+            wgpu_setup: eframe::egui_wgpu::WgpuSetup::Existing(eframe::egui_wgpu::WgpuSetupExisting {
+                instance: ctx.instance.clone(),
+                adapter: ctx.adapter.clone(),
+                device: ctx.device.clone(),
+                queue: ctx.queue.clone(),
+            }),
             ..Default::default()
         },
         renderer: eframe::Renderer::Wgpu,
@@ -100,28 +98,16 @@ pub fn run_viewer(options: ViewOptions) -> Result<()> {
         "gatetrace",
         native,
         Box::new(|cc| {
-            let state = cc
-                .wgpu_render_state
-                .as_ref()
-                .ok_or("eframe started without its wgpu renderer")?;
-            let app = Viewer::new(
-                &ctx,
-                &scene,
-                options,
-                (shortest as f64, longest as f64),
-                state,
-                &mut failure,
-            )
-            .map_err(|e| format!("{e:#}"))?;
+            let state = cc.wgpu_render_state.as_ref().ok_or("eframe started without its wgpu renderer")?;
+            let app = Viewer::new(&ctx, &scene, options, (shortest as f64, longest as f64), state, &mut failure)
+                .map_err(|e| format!("{e:#}"))?;
             Ok(Box::new(app))
         }),
     );
     if let Some(e) = failure {
         return Err(e);
     }
-    result.map_err(|e| {
-        anyhow!("the viewer window failed: {e} (is there a display? under CI use xvfb-run)")
-    })
+    result.map_err(|e| anyhow!("the viewer window failed: {e} (is there a display? under CI use xvfb-run)"))
 }
 
 /// The GPU side of the displayed image: the resolve kernel, its buffers and the egui texture.
@@ -222,11 +208,7 @@ impl<'a> Viewer<'a> {
         viewer.sync()?;
         if let Some((x, y)) = viewer.options.profile_pixel {
             if x >= viewer.options.width || y >= viewer.options.height {
-                bail!(
-                    "--profile-pixel {x},{y} lies outside the {}x{} image",
-                    viewer.options.width,
-                    viewer.options.height
-                );
+                bail!("--profile-pixel {x},{y} lies outside the {}x{} image", viewer.options.width, viewer.options.height);
             }
             viewer.select_pixel((x, y))?;
         }
@@ -240,25 +222,15 @@ impl<'a> Viewer<'a> {
             GateChoice::None => Gate::None,
             GateChoice::Box => {
                 let start = (o.tau - 0.5 * o.gate_width).max(0.0);
-                Gate::Box {
-                    start,
-                    end: start + o.gate_width,
-                }
+                Gate::Box { start, end: start + o.gate_width }
             }
-            GateChoice::Gaussian => Gate::Gaussian {
-                mean: o.tau,
-                sigma: o.gate_width,
-            },
+            GateChoice::Gaussian => Gate::Gaussian { mean: o.tau, sigma: o.gate_width },
         }
     }
 
     fn settings(&self) -> RenderSettings {
         let o = &self.options;
-        let method = if o.gate == GateChoice::None && o.method == Method::Ellipsoidal {
-            Method::Direct
-        } else {
-            o.method
-        };
+        let method = if o.gate == GateChoice::None && o.method == Method::Ellipsoidal { Method::Direct } else { o.method };
         RenderSettings {
             width: o.width,
             height: o.height,
@@ -266,9 +238,7 @@ impl<'a> Viewer<'a> {
             gate: self.gate(),
             max_bounces: o.max_bounces,
             seed: o.seed,
-            connections_per_query: crate::integrator::bidirectional::default_connections_per_query(
-                method,
-            ),
+            connections_per_query: crate::integrator::bidirectional::default_connections_per_query(method),
             keep_splats_on_device: true,
             ..Default::default()
         }
@@ -283,10 +253,7 @@ impl<'a> Viewer<'a> {
         }
         self.timing.pending_change = Some(Instant::now());
         if let (Some(built), Some(tracer)) = (&self.built, &mut self.tracer) {
-            let same_but_gate = RenderSettings {
-                gate: wanted.gate.clone(),
-                ..built.clone()
-            } == wanted;
+            let same_but_gate = RenderSettings { gate: wanted.gate.clone(), ..built.clone() } == wanted;
             if same_but_gate && tracer.set_gate(self.scene, &wanted)? {
                 self.built = Some(wanted);
                 return Ok(());
@@ -315,20 +282,11 @@ impl<'a> Viewer<'a> {
         };
         let mut resources: Resources = tracer.resources().clone();
         resources.uniform_init(ctx, "display_params", &DisplayParams::default());
-        resources.storage_zeroed(
-            ctx,
-            "display",
-            stride as u64 * h as u64 * 4,
-            wgpu::BufferUsages::COPY_SRC,
-        )?;
+        resources.storage_zeroed(ctx, "display", stride as u64 * h as u64 * 4, wgpu::BufferUsages::COPY_SRC)?;
         let bind_group = kernel.bind(ctx, &resources);
         let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("display"),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
+            size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -340,19 +298,10 @@ impl<'a> Viewer<'a> {
         let view = texture.create_view(&Default::default());
         let texture_id = match &self.display {
             Some(old) => {
-                self.renderer.write().update_egui_texture_from_wgpu_texture(
-                    &ctx.device,
-                    &view,
-                    wgpu::FilterMode::Nearest,
-                    old.texture_id,
-                );
+                self.renderer.write().update_egui_texture_from_wgpu_texture(&ctx.device, &view, wgpu::FilterMode::Nearest, old.texture_id);
                 old.texture_id
             }
-            None => self.renderer.write().register_native_texture(
-                &ctx.device,
-                &view,
-                wgpu::FilterMode::Nearest,
-            ),
+            None => self.renderer.write().register_native_texture(&ctx.device, &view, wgpu::FilterMode::Nearest),
         };
         Ok(Display {
             kernel,
@@ -368,9 +317,7 @@ impl<'a> Viewer<'a> {
     /// Renders for about `budget`, at least one pass (one sample per pixel right after a
     /// change, so the first image comes quickly), then resolves the film into the texture.
     fn render(&mut self, budget: Duration) -> Result<()> {
-        let (Some(tracer), Some(display)) = (&mut self.tracer, &self.display) else {
-            return Ok(());
-        };
+        let (Some(tracer), Some(display)) = (&mut self.tracer, &self.display) else { return Ok(()) };
         let start = Instant::now();
         let before = tracer.samples_done();
         let pixels = (self.options.width * self.options.height) as f64;
@@ -379,65 +326,36 @@ impl<'a> Viewer<'a> {
         if tracer.samples_done() == 0 {
             self.sizer = PassSizer::default();
         }
-        self.sizer
-            .render_for(tracer.as_mut(), budget.as_secs_f64(), |_, _| {})?;
+        self.sizer.render_for(tracer.as_mut(), budget.as_secs_f64(), |_, _| {})?;
         let done = tracer.samples_done() - before;
         let rate = done as f64 * pixels / start.elapsed().as_secs_f64().max(1e-9);
         let t = &mut self.timing;
-        t.samples_per_second = if t.samples_per_second == 0.0 {
-            rate
-        } else {
-            0.8 * t.samples_per_second + 0.2 * rate
-        };
+        t.samples_per_second = if t.samples_per_second == 0.0 { rate } else { 0.8 * t.samples_per_second + 0.2 * rate };
 
         let params = DisplayParams {
             inverse_spp: 1.0 / tracer.samples_done().max(1) as f32,
             exposure: 2f32.powf(self.options.exposure_ev),
-            curve: if self.options.log_curve {
-                DISPLAY_LOG
-            } else {
-                DISPLAY_LINEAR
-            },
+            curve: if self.options.log_curve { DISPLAY_LOG } else { DISPLAY_LINEAR },
             bin: 0,
             decades: 4.0,
             stride: display.stride,
             ..Default::default()
         };
         let ctx = self.ctx;
-        ctx.queue
-            .write_buffer(&display.params, 0, bytemuck::bytes_of(&params));
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("resolve_display"),
-            });
+        ctx.queue.write_buffer(&display.params, 0, bytemuck::bytes_of(&params));
+        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("resolve_display") });
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("resolve_display"),
-                timestamp_writes: None,
-            });
-            display.kernel.dispatch(
-                &mut pass,
-                &display.bind_group,
-                self.options.width * self.options.height,
-            );
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("resolve_display"), timestamp_writes: None });
+            display.kernel.dispatch(&mut pass, &display.bind_group, self.options.width * self.options.height);
         }
         let (w, h) = (self.options.width, self.options.height);
         encoder.copy_buffer_to_texture(
             wgpu::TexelCopyBufferInfo {
                 buffer: &display.pixels,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(display.stride * 4),
-                    rows_per_image: Some(h),
-                },
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(display.stride * 4), rows_per_image: Some(h) },
             },
             display.texture.as_image_copy(),
-            wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
+            wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
         );
         ctx.queue.submit([encoder.finish()]);
         // The new gate's first image is on screen once this frame has been painted: the latency
@@ -450,9 +368,7 @@ impl<'a> Viewer<'a> {
 
     /// One more pass of the selected pixel's transient render, and its bins read back.
     fn update_profile(&mut self) -> Result<()> {
-        let Some(p) = &mut self.profile else {
-            return Ok(());
-        };
+        let Some(p) = &mut self.profile else { return Ok(()) };
         p.tracer.render_pass(1)?;
         let ctx = self.ctx;
         let film = p.tracer.resources().get("film").unwrap();
@@ -466,9 +382,7 @@ impl<'a> Viewer<'a> {
         slice.map_async(wgpu::MapMode::Read, |_| {});
         ctx.wait_idle()?;
         let sums: Vec<[f32; 2]> = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| anyhow!("cannot read the time profile back: {e:?}"))?;
+            let view = slice.get_mapped_range().map_err(|e| anyhow!("cannot read the time profile back: {e:?}"))?;
             bytemuck::cast_slice(&view).to_vec()
         };
         p.staging.unmap();
@@ -477,10 +391,7 @@ impl<'a> Viewer<'a> {
         p.values = sums
             .chunks(3)
             .map(|c| {
-                let rgb: Vec<f64> = c
-                    .iter()
-                    .map(|s| (s[0] as f64 + s[1] as f64) / spp)
-                    .collect();
+                let rgb: Vec<f64> = c.iter().map(|s| (s[0] as f64 + s[1] as f64) / spp).collect();
                 (0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]) / width
             })
             .collect();
@@ -489,11 +400,7 @@ impl<'a> Viewer<'a> {
 
     fn select_pixel(&mut self, pixel: (u32, u32)) -> Result<()> {
         let bounces = self.options.max_bounces;
-        if self
-            .profile
-            .as_ref()
-            .is_some_and(|p| p.pixel == pixel && p.max_bounces == bounces)
-        {
+        if self.profile.as_ref().is_some_and(|p| p.pixel == pixel && p.max_bounces == bounces) {
             return Ok(());
         }
         if let Some(p) = self.profile.as_mut().filter(|p| p.max_bounces == bounces) {
@@ -506,19 +413,10 @@ impl<'a> Viewer<'a> {
         let per_bin = self.options.width as u64 * self.options.height as u64 * 24;
         let bins = (self.ctx.max_binding_size() / per_bin).min(128) as u32;
         if bins < 8 {
-            bail!(
-                "the time profile needs at least 8 bins per pixel; this image is too large for one binding"
-            );
+            bail!("the time profile needs at least 8 bins per pixel; this image is too large for one binding");
         }
-        let range = (
-            self.lengths.0,
-            self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)),
-        );
-        let gate = Gate::Transient {
-            start: range.0,
-            width: (range.1 - range.0) / bins as f64,
-            bins,
-        };
+        let range = (self.lengths.0, self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)));
+        let gate = Gate::Transient { start: range.0, width: (range.1 - range.0) / bins as f64, bins };
         let settings = RenderSettings {
             width: self.options.width,
             height: self.options.height,
@@ -535,30 +433,15 @@ impl<'a> Viewer<'a> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        self.profile = Some(Profile {
-            pixel,
-            max_bounces: bounces,
-            tracer,
-            range,
-            bins,
-            values: Vec::new(),
-            staging,
-        });
+        self.profile = Some(Profile { pixel, max_bounces: bounces, tracer, range, bins, values: Vec::new(), staging });
         Ok(())
     }
 
     /// Exposure (EV) that maps the 99th percentile of the image's channel values to 1.
     fn auto_exposure(&self) -> Result<Option<f32>> {
-        let Some(tracer) = &self.tracer else {
-            return Ok(None);
-        };
+        let Some(tracer) = &self.tracer else { return Ok(None) };
         let film = tracer.film()?;
-        let mut values: Vec<f32> = film
-            .data
-            .iter()
-            .map(|v| v.abs())
-            .filter(|v| *v > 0.0)
-            .collect();
+        let mut values: Vec<f32> = film.data.iter().map(|v| v.abs()).filter(|v| *v > 0.0).collect();
         if values.is_empty() {
             return Ok(None);
         }
@@ -568,9 +451,7 @@ impl<'a> Viewer<'a> {
     }
 
     fn save(&mut self, path: &Path) -> Result<()> {
-        let (Some(tracer), Some(built)) = (&self.tracer, &self.built) else {
-            bail!("nothing rendered yet")
-        };
+        let (Some(tracer), Some(built)) = (&self.tracer, &self.built) else { bail!("nothing rendered yet") };
         let film = tracer.film()?;
         let metadata: Metadata = vec![
             ("scene".into(), self.options.scene.display().to_string()),
@@ -592,36 +473,16 @@ impl<'a> Viewer<'a> {
             ui.selectable_value(&mut o.gate, GateChoice::Box, "box");
             ui.selectable_value(&mut o.gate, GateChoice::Gaussian, "gaussian");
         });
-        let (lo, hi) = (
-            self.lengths.0 * 0.95,
-            self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)),
-        );
+        let (lo, hi) = (self.lengths.0 * 0.95, self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)));
         ui.add_enabled_ui(o.gate != GateChoice::None, |ui| {
             ui.label("centre τ (m of optical path)");
             ui.add(egui::Slider::new(&mut o.tau, lo..=hi).max_decimals(5));
             ui.horizontal(|ui| {
-                ui.add(
-                    egui::DragValue::new(&mut o.tau)
-                        .speed(0.0005)
-                        .range(0.0..=1e4)
-                        .suffix(" m"),
-                );
-                ui.label(format!(
-                    "= {:.1} ps = {:.4} ns",
-                    metres_to_ps(o.tau),
-                    metres_to_ps(o.tau) / 1e3
-                ));
+                ui.add(egui::DragValue::new(&mut o.tau).speed(0.0005).range(0.0..=1e4).suffix(" m"));
+                ui.label(format!("= {:.1} ps = {:.4} ns", metres_to_ps(o.tau), metres_to_ps(o.tau) / 1e3));
             });
-            ui.label(if o.gate == GateChoice::Gaussian {
-                "σ (m)"
-            } else {
-                "width (m)"
-            });
-            ui.add(
-                egui::Slider::new(&mut o.gate_width, 1e-4..=1.0)
-                    .logarithmic(true)
-                    .max_decimals(5),
-            );
+            ui.label(if o.gate == GateChoice::Gaussian { "σ (m)" } else { "width (m)" });
+            ui.add(egui::Slider::new(&mut o.gate_width, 1e-4..=1.0).logarithmic(true).max_decimals(5));
             ui.label(format!("= {:.2} ps", metres_to_ps(o.gate_width)));
         });
         ui.separator();
@@ -651,15 +512,9 @@ impl<'a> Viewer<'a> {
         if let Some(tracer) = &self.tracer {
             ui.label(format!("{} samples per pixel", tracer.samples_done()));
         }
-        ui.label(format!(
-            "{:.3} Msamples/s",
-            self.timing.samples_per_second / 1e6
-        ));
+        ui.label(format!("{:.3} Msamples/s", self.timing.samples_per_second / 1e6));
         if let Some(l) = self.timing.last_latency {
-            ui.label(format!(
-                "gate change -> image: {:.0} ms",
-                l.as_secs_f64() * 1e3
-            ));
+            ui.label(format!("gate change -> image: {:.0} ms", l.as_secs_f64() * 1e3));
         }
         let t = &self.timing.frame_times;
         if t.len() >= 2 {
@@ -672,13 +527,7 @@ impl<'a> Viewer<'a> {
         ui.horizontal(|ui| {
             for ext in ["exr", "npy"] {
                 if ui.button(format!("save .{ext}")).clicked() {
-                    let stem = self
-                        .options
-                        .scene
-                        .file_stem()
-                        .and_then(|s| s.to_str())
-                        .unwrap_or("view")
-                        .to_owned();
+                    let stem = self.options.scene.file_stem().and_then(|s| s.to_str()).unwrap_or("view").to_owned();
                     let path = PathBuf::from(format!("{stem}_view.{ext}"));
                     self.message = match self.save(&path) {
                         Ok(()) => format!("saved {}", path.display()),
@@ -707,33 +556,20 @@ impl<'a> Viewer<'a> {
             metres_to_ps((p.range.1 - p.range.0) / p.bins as f64)
         ));
         let width = (p.range.1 - p.range.0) / p.bins as f64;
-        let points: Vec<[f64; 2]> = p
-            .values
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| [p.range.0 + (i as f64 + 0.5) * width, v])
-            .collect();
+        let points: Vec<[f64; 2]> = p.values.iter().enumerate().map(|(i, &v)| [p.range.0 + (i as f64 + 0.5) * width, v]).collect();
         let gate = self.gate();
-        Plot::new("time_profile")
-            .height(ui.available_height().max(120.0))
-            .x_axis_label("path length (m)")
-            .show(ui, |plot| {
-                plot.line(Line::new("radiance", points));
-                match gate {
-                    Gate::Box { start, end } => plot.span(
-                        Span::new("gate", start..=end)
-                            .fill(egui::Color32::from_rgba_unmultiplied(255, 200, 0, 60)),
-                    ),
-                    Gate::Gaussian { mean, .. } => plot.vline(VLine::new("gate", mean)),
-                    _ => {}
-                }
-            });
+        Plot::new("time_profile").height(ui.available_height().max(120.0)).x_axis_label("path length (m)").show(ui, |plot| {
+            plot.line(Line::new("radiance", points));
+            match gate {
+                Gate::Box { start, end } => plot.span(Span::new("gate", start..=end).fill(egui::Color32::from_rgba_unmultiplied(255, 200, 0, 60))),
+                Gate::Gaussian { mean, .. } => plot.vline(VLine::new("gate", mean)),
+                _ => {}
+            }
+        });
     }
 
     fn screenshot_mode(&mut self, ctx: &egui::Context) -> Result<()> {
-        let Some(path) = self.options.screenshot.clone() else {
-            return Ok(());
-        };
+        let Some(path) = self.options.screenshot.clone() else { return Ok(()) };
         if let Some(step) = self.options.scrub_step
             && self.frames > 0
             && self.frames % 10 == 0
@@ -750,11 +586,9 @@ impl<'a> Viewer<'a> {
         }
         if self.frames >= self.options.after_frames {
             let (tx, rx) = mpsc::channel();
-            ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(
-                egui::ScreenshotCallback::new(move |image| {
-                    let _ = tx.send(image);
-                }),
-            ));
+            ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |image| {
+                let _ = tx.send(image);
+            })));
             self.screenshot_rx = Some(rx);
         }
         Ok(())
@@ -775,8 +609,7 @@ impl<'a> Viewer<'a> {
         if let Err(e) = self.sync() {
             self.message = format!("{e:#}");
         }
-        if self.auto_exposure_pending && self.tracer.as_ref().is_some_and(|t| t.samples_done() >= 4)
-        {
+        if self.auto_exposure_pending && self.tracer.as_ref().is_some_and(|t| t.samples_done() >= 4) {
             self.auto_exposure_pending = false;
             if let Some(ev) = self.auto_exposure()? {
                 self.options.exposure_ev = (ev * 4.0).round() / 4.0;
@@ -794,31 +627,23 @@ impl<'a> Viewer<'a> {
             self.update_profile()?;
             self.frames += 1;
         }
-        egui::Panel::left("controls")
-            .resizable(false)
-            .exact_size(300.0)
-            .show(ui, |ui| {
-                egui::ScrollArea::vertical().show(ui, |ui| self.controls(ui));
-            });
+        egui::Panel::left("controls").resizable(false).exact_size(300.0).show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| self.controls(ui));
+        });
         egui::CentralPanel::default().show(ui, |ui| {
             let Some(display) = &self.display else { return };
             let (w, h) = (self.options.width as f32, self.options.height as f32);
             let room = ui.available_size() * egui::vec2(1.0, 0.62);
             let zoom = (room.x / w).min(room.y / h).floor().max(1.0);
             let size = egui::vec2(w * zoom, h * zoom);
-            let image = egui::Image::new((display.texture_id, size))
-                .fit_to_exact_size(size)
-                .sense(egui::Sense::click());
+            let image = egui::Image::new((display.texture_id, size)).fit_to_exact_size(size).sense(egui::Sense::click());
             let response = ui.add(image);
             self.image_rect = Some(response.rect);
             if response.clicked()
                 && let Some(pos) = response.interact_pointer_pos()
             {
                 let rel = (pos - response.rect.min) / zoom;
-                let pixel = (
-                    (rel.x as u32).min(self.options.width - 1),
-                    (rel.y as u32).min(self.options.height - 1),
-                );
+                let pixel = ((rel.x as u32).min(self.options.width - 1), (rel.y as u32).min(self.options.height - 1));
                 if let Err(e) = self.select_pixel(pixel) {
                     self.message = format!("{e:#}");
                 }
@@ -842,50 +667,20 @@ impl eframe::App for Viewer<'_> {
 
 /// Writes the window's pixels as PNG and, beside it (FILE.json), the image's rectangle in those
 /// pixels, its samples per pixel and the display settings, for comparison with a headless render.
-fn save_screenshot(
-    path: &Path,
-    image: &egui::ColorImage,
-    rect: Option<egui::Rect>,
-    ppp: f32,
-    viewer: &Viewer,
-) -> Result<()> {
+fn save_screenshot(path: &Path, image: &egui::ColorImage, rect: Option<egui::Rect>, ppp: f32, viewer: &Viewer) -> Result<()> {
     let [w, h] = image.size;
-    let file = std::fs::File::create(path)
-        .with_context(|| format!("{}: cannot write the screenshot", path.display()))?;
+    let file = std::fs::File::create(path).with_context(|| format!("{}: cannot write the screenshot", path.display()))?;
     let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
     encoder.set_color(png::ColorType::Rgba);
     encoder.set_depth(png::BitDepth::Eight);
-    let mut writer = encoder
-        .write_header()
-        .with_context(|| format!("{}: cannot write PNG", path.display()))?;
+    let mut writer = encoder.write_header().with_context(|| format!("{}: cannot write PNG", path.display()))?;
     let bytes: Vec<u8> = image.pixels.iter().flat_map(|c| c.to_array()).collect();
-    writer
-        .write_image_data(&bytes)
-        .with_context(|| format!("{}: cannot write PNG", path.display()))?;
+    writer.write_image_data(&bytes).with_context(|| format!("{}: cannot write PNG", path.display()))?;
     let rect = rect.ok_or_else(|| anyhow!("the image was never drawn"))?;
-    let r = [
-        rect.min.x * ppp,
-        rect.min.y * ppp,
-        rect.max.x * ppp,
-        rect.max.y * ppp,
-    ]
-    .map(|v| v.round() as i64);
-    let built = viewer
-        .built
-        .as_ref()
-        .ok_or_else(|| anyhow!("nothing rendered"))?;
-    let latencies: Vec<f64> = viewer
-        .timing
-        .latencies
-        .iter()
-        .map(|d| d.as_secs_f64() * 1e3)
-        .collect();
-    let frame_ms: Vec<f64> = viewer
-        .timing
-        .frame_times
-        .iter()
-        .map(|d| d.as_secs_f64() * 1e3)
-        .collect();
+    let r = [rect.min.x * ppp, rect.min.y * ppp, rect.max.x * ppp, rect.max.y * ppp].map(|v| v.round() as i64);
+    let built = viewer.built.as_ref().ok_or_else(|| anyhow!("nothing rendered"))?;
+    let latencies: Vec<f64> = viewer.timing.latencies.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+    let frame_ms: Vec<f64> = viewer.timing.frame_times.iter().map(|d| d.as_secs_f64() * 1e3).collect();
     let sidecar = serde_json::json!({
         "image_rect_px": r,
         "width": viewer.options.width,

@@ -23,11 +23,7 @@ fn emitter_wall(radiance: f32, facing_camera: bool, yfov: f32, name: &str) -> Pr
         &Scene {
             meshes: vec![quad_z(10.0, -1.0, facing_camera, 0)],
             materials: vec![Material::emitter(radiance)],
-            camera: Some(Camera {
-                position: [0.0; 3],
-                rotation: LOOK_DOWN_Z,
-                yfov,
-            }),
+            camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov }),
             point_lights: vec![],
         },
         name,
@@ -39,43 +35,16 @@ fn pixels_on_an_emitter_return_its_radiance() {
     // An emitter of radiance 7.5 fills the view at 1 m; every sample sees exactly 7.5.
     let scene = emitter_wall(7.5, true, 0.9, "emitter_radiance");
     let ctx = common::gpu();
-    for (bounces, gate) in [
-        (0, Gate::None),
-        (4, Gate::None),
-        (
-            0,
-            Gate::Box {
-                start: 1.0,
-                end: 1.5,
-            },
-        ),
-    ] {
-        let settings = RenderSettings {
-            width: 16,
-            height: 12,
-            max_bounces: bounces,
-            gate,
-            ..Default::default()
-        };
+    for (bounces, gate) in [(0, Gate::None), (4, Gate::None), (0, Gate::Box { start: 1.0, end: 1.5 })] {
+        let settings = RenderSettings { width: 16, height: 12, max_bounces: bounces, gate, ..Default::default() };
         let film = common::render_films(&ctx, &scene, &settings, 1, 8).remove(0);
         for v in &film.data {
             // The sum of 8 equal f32 values divided by 8 is exact.
-            assert_eq!(
-                *v, 7.5,
-                "a pixel on the emitter must read its radiance exactly ({bounces} bounces)"
-            );
+            assert_eq!(*v, 7.5, "a pixel on the emitter must read its radiance exactly ({bounces} bounces)");
         }
     }
     // A gate beyond every path length gives black, not NaN.
-    let settings = RenderSettings {
-        width: 16,
-        height: 12,
-        gate: Gate::Box {
-            start: 5.0,
-            end: 6.0,
-        },
-        ..Default::default()
-    };
+    let settings = RenderSettings { width: 16, height: 12, gate: Gate::Box { start: 5.0, end: 6.0 }, ..Default::default() };
     let film = common::render_films(&ctx, &scene, &settings, 1, 4).remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
 }
@@ -84,18 +53,7 @@ fn pixels_on_an_emitter_return_its_radiance() {
 fn one_sided_emitters_are_dark_from_behind() {
     let scene = emitter_wall(7.5, false, 0.9, "emitter_back");
     let ctx = common::gpu();
-    let film = common::render_films(
-        &ctx,
-        &scene,
-        &RenderSettings {
-            width: 8,
-            height: 8,
-            ..Default::default()
-        },
-        1,
-        4,
-    )
-    .remove(0);
+    let film = common::render_films(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 4).remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
 }
 
@@ -118,15 +76,8 @@ fn plane_lit_from_the_camera(name: &str) -> PreparedScene {
         &Scene {
             meshes: vec![quad_z(4.0, -PLANE_D as f32, true, 0)],
             materials: vec![Material::diffuse([PLANE_RHO as f32; 3])],
-            camera: Some(Camera {
-                position: [0.0; 3],
-                rotation: LOOK_DOWN_Z,
-                yfov: PLANE_FOV as f32,
-            }),
-            point_lights: vec![PointLight {
-                position: [0.0; 3],
-                intensity: PLANE_I as f32,
-            }],
+            camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: PLANE_FOV as f32 }),
+            point_lights: vec![PointLight { position: [0.0; 3], intensity: PLANE_I as f32 }],
         },
         name,
     )
@@ -151,18 +102,8 @@ fn first_return_of_a_plane_lit_from_the_camera() {
     let (w, h) = (PLANE_RES, PLANE_RES);
     // 1 cm bins from 3.955 m: 2 d = 4 m lies inside bin 4, the image corners reach bin 29.
     let (start, width, bins) = (3.955, 0.01, 40usize);
-    let gate = Gate::Transient {
-        start,
-        width,
-        bins: bins as u32,
-    };
-    let settings = RenderSettings {
-        width: w,
-        height: h,
-        max_bounces: 3,
-        gate,
-        ..Default::default()
-    };
+    let gate = Gate::Transient { start, width, bins: bins as u32 };
+    let settings = RenderSettings { width: w, height: h, max_bounces: 3, gate, ..Default::default() };
     let ctx = common::gpu();
     let batches = 16;
     let stats = common::render_batches(&ctx, &scene, &settings, batches, 16);
@@ -185,41 +126,22 @@ fn first_return_of_a_plane_lit_from_the_camera() {
                 assert_eq!(mean[i], mean[i + 1], "grey scene: channels must agree");
             }
             let z = (sum - expected) / sum_var.sqrt().max(1e-12 * expected);
-            assert!(
-                z.abs() < threshold,
-                "pixel ({x}, {y}): {sum} vs closed form {expected} (z = {z:.2}, limit {threshold:.2})"
-            );
+            assert!(z.abs() < threshold, "pixel ({x}, {y}): {sum} vs closed form {expected} (z = {z:.2}, limit {threshold:.2})");
             // Light arrives only in the bins the pixel's path lengths cover.
-            let nearest = |a: f64, b: f64| {
-                if a <= 0.0 && b >= 0.0 {
-                    0.0
-                } else {
-                    a.abs().min(b.abs())
-                }
-            };
+            let nearest = |a: f64, b: f64| if a <= 0.0 && b >= 0.0 { 0.0 } else { a.abs().min(b.abs()) };
             let r_min2 = nearest(x0, x1).powi(2) + nearest(y0, y1).powi(2);
             let r_max2 = x0.abs().max(x1.abs()).powi(2) + y0.abs().max(y1.abs()).powi(2);
-            let (shortest, longest) = (
-                2.0 * PLANE_D * (1.0 + r_min2).sqrt(),
-                2.0 * PLANE_D * (1.0 + r_max2).sqrt(),
-            );
+            let (shortest, longest) = (2.0 * PLANE_D * (1.0 + r_min2).sqrt(), 2.0 * PLANE_D * (1.0 + r_max2).sqrt());
             for b in 0..bins {
                 let (lo, hi) = (start + b as f64 * width, start + (b + 1) as f64 * width);
                 if hi < shortest - slack || lo > longest + slack {
-                    assert_eq!(
-                        mean[(p * bins + b) * 3],
-                        0.0,
-                        "pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]"
-                    );
+                    assert_eq!(mean[(p * bins + b) * 3], 0.0, "pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]");
                 }
             }
             let centre = (x == w / 2 - 1 || x == w / 2) && (y == h / 2 - 1 || y == h / 2);
             if centre {
                 let first = (0..bins).find(|&b| mean[(p * bins + b) * 3] > 0.0).unwrap();
-                assert_eq!(
-                    first, 4,
-                    "the first return of the central pixels is in the bin holding 2d = 4 m"
-                );
+                assert_eq!(first, 4, "the first return of the central pixels is in the bin holding 2d = 4 m");
             }
         }
     }
@@ -232,29 +154,11 @@ fn smooth_gates_weigh_each_path_by_its_length() {
     // 1e-6 relative, is far below the noise).
     let scene = plane_lit_from_the_camera("plane_smooth_gates");
     let ctx = common::gpu();
-    let gates = [
-        Gate::Gaussian {
-            mean: 4.08,
-            sigma: 0.05,
-        },
-        Gate::Cw {
-            frequency_hz: 1.0e9,
-            phase_deg: 40.0,
-        },
-    ];
+    let gates = [Gate::Gaussian { mean: 4.08, sigma: 0.05 }, Gate::Cw { frequency_hz: 1.0e9, phase_deg: 40.0 }];
     let batches = 16;
-    let threshold = t_critical(
-        sidak(0.01, gates.len() * (PLANE_RES * PLANE_RES) as usize),
-        (batches - 1) as f64,
-    );
+    let threshold = t_critical(sidak(0.01, gates.len() * (PLANE_RES * PLANE_RES) as usize), (batches - 1) as f64);
     for gate in gates {
-        let settings = RenderSettings {
-            width: PLANE_RES,
-            height: PLANE_RES,
-            max_bounces: 1,
-            gate: gate.clone(),
-            ..Default::default()
-        };
+        let settings = RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, gate: gate.clone(), ..Default::default() };
         let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
         let (mean, var) = (stats.mean(), stats.var_of_mean());
         let (kind, g, table) = (gate.kind(), gate.to_gpu(), gate.table());
@@ -272,17 +176,10 @@ fn smooth_gates_weigh_each_path_by_its_length() {
                         acc += w(2.0 * PLANE_D * sec) / (sec * sec * sec);
                     }
                 }
-                let expected = PLANE_RHO * PLANE_I / (std::f64::consts::PI * PLANE_D * PLANE_D)
-                    * acc
-                    / (n * n) as f64;
+                let expected = PLANE_RHO * PLANE_I / (std::f64::consts::PI * PLANE_D * PLANE_D) * acc / (n * n) as f64;
                 let i = ((y * PLANE_RES + x) * 3) as usize;
                 let z = (mean[i] - expected) / var[i].sqrt().max(1e-9 * expected.abs());
-                assert!(
-                    z.abs() < threshold,
-                    "{}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2})",
-                    gate.describe(),
-                    mean[i]
-                );
+                assert!(z.abs() < threshold, "{}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2})", gate.describe(), mean[i]);
             }
         }
     }
@@ -296,32 +193,14 @@ fn transient_bins_sum_to_the_steady_image_of_the_same_run() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let spp = 32;
-    let steady = RenderSettings {
-        width: 32,
-        height: 32,
-        max_bounces: 5,
-        seed: 3,
-        ..Default::default()
-    };
-    let transient = RenderSettings {
-        gate: Gate::Transient {
-            start: 0.0,
-            width: 0.25,
-            bins: 80,
-        },
-        ..steady.clone()
-    };
+    let steady = RenderSettings { width: 32, height: 32, max_bounces: 5, seed: 3, ..Default::default() };
+    let transient = RenderSettings { gate: Gate::Transient { start: 0.0, width: 0.25, bins: 80 }, ..steady.clone() };
     let a = common::render_films(&ctx, &scene, &steady, 1, spp).remove(0);
-    let b = common::render_films(&ctx, &scene, &transient, 1, spp)
-        .remove(0)
-        .sum_bins();
+    let b = common::render_films(&ctx, &scene, &transient, 1, spp).remove(0).sum_bins();
     let tolerance = 82.0 * f32::EPSILON;
     let mut nonzero = 0;
     for (x, y) in a.data.iter().zip(&b.data) {
-        assert!(
-            (x - y).abs() <= tolerance * x.abs() + 1e-9,
-            "steady {x} vs sum of bins {y}"
-        );
+        assert!((x - y).abs() <= tolerance * x.abs() + 1e-9, "steady {x} vs sum of bins {y}");
         nonzero += (*x > 0.0) as usize;
     }
     assert!(nonzero > a.data.len() / 2);
@@ -335,39 +214,14 @@ fn gates_no_path_can_reach_are_black_without_tracing() {
     let (shortest, _) = scene.scene.path_length_bounds(5);
     assert!((shortest - 1.9403).abs() < 1e-4, "{shortest}");
     let ctx = common::gpu();
-    for gate in [
-        Gate::Box {
-            start: 1.0,
-            end: 1.94,
-        },
-        Gate::Box {
-            start: 50.0,
-            end: 51.0,
-        },
-    ] {
-        let settings = RenderSettings {
-            width: 8,
-            height: 8,
-            max_bounces: 5,
-            gate,
-            ..Default::default()
-        };
+    for gate in [Gate::Box { start: 1.0, end: 1.94 }, Gate::Box { start: 50.0, end: 51.0 }] {
+        let settings = RenderSettings { width: 8, height: 8, max_bounces: 5, gate, ..Default::default() };
         assert!(unreachable_gate(&scene, &settings).is_some());
-        let out = render(&ctx, &scene, &settings, Budget::Samples(1_000_000), |_| {
-            panic!("nothing is traced")
-        })
-        .unwrap();
+        let out = render(&ctx, &scene, &settings, Budget::Samples(1_000_000), |_| panic!("nothing is traced")).unwrap();
         assert_eq!(out.film.spp, 0);
         assert!(out.film.data.iter().all(|&v| v == 0.0));
     }
-    let reachable = RenderSettings {
-        gate: Gate::Box {
-            start: 1.9,
-            end: 1.95,
-        },
-        max_bounces: 5,
-        ..Default::default()
-    };
+    let reachable = RenderSettings { gate: Gate::Box { start: 1.9, end: 1.95 }, max_bounces: 5, ..Default::default() };
     assert!(unreachable_gate(&scene, &reachable).is_none());
 }
 
@@ -377,52 +231,19 @@ fn cw_gates_accumulate_signed_weights() {
     // phase 0 (cos(x + pi) = -cos(x) up to f32 rounding of the argument).
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let base = RenderSettings {
-        width: 16,
-        height: 16,
-        max_bounces: 4,
-        seed: 8,
-        ..Default::default()
-    };
-    let render = |gate: Gate| {
-        common::render_films(
-            &ctx,
-            &scene,
-            &RenderSettings {
-                gate,
-                ..base.clone()
-            },
-            1,
-            8,
-        )
-        .remove(0)
-    };
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 4, seed: 8, ..Default::default() };
+    let render = |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, 8).remove(0);
     let steady = render(Gate::None);
-    let cw0 = render(Gate::Cw {
-        frequency_hz: 100e6,
-        phase_deg: 0.0,
-    });
-    let cw180 = render(Gate::Cw {
-        frequency_hz: 100e6,
-        phase_deg: 180.0,
-    });
+    let cw0 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 0.0 });
+    let cw180 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 180.0 });
     let mut negative = 0;
     for ((a, b), s) in cw0.data.iter().zip(&cw180.data).zip(&steady.data) {
         // |W| <= 1 per term; the two cosines differ by at most a few f32 ulps of the argument.
-        assert!(
-            (a + b).abs() <= 1e-5 * s + 1e-7,
-            "cw 0 deg {a} vs 180 deg {b}"
-        );
-        assert!(
-            a.abs() <= s * (1.0 + 1e-5) + 1e-7,
-            "|cw| cannot exceed the steady value"
-        );
+        assert!((a + b).abs() <= 1e-5 * s + 1e-7, "cw 0 deg {a} vs 180 deg {b}");
+        assert!(a.abs() <= s * (1.0 + 1e-5) + 1e-7, "|cw| cannot exceed the steady value");
         negative += (*a < 0.0) as usize;
     }
-    assert!(
-        negative > 0,
-        "at 100 MHz (3 m wavelength) some pixels must come out negative"
-    );
+    assert!(negative > 0, "at 100 MHz (3 m wavelength) some pixels must come out negative");
 }
 
 /// Area of the part of polygon `poly` (film coordinates) inside the pixel [x, x+1] x [y, y+1]
@@ -430,12 +251,7 @@ fn cw_gates_accumulate_signed_weights() {
 fn clipped_area(poly: &[(f64, f64)], x: f64, y: f64) -> f64 {
     let mut p = poly.to_vec();
     // Half-planes as (axis, bound, keep_greater).
-    for (axis, bound, greater) in [
-        (0, x, true),
-        (0, x + 1.0, false),
-        (1, y, true),
-        (1, y + 1.0, false),
-    ] {
+    for (axis, bound, greater) in [(0, x, true), (0, x + 1.0, false), (1, y, true), (1, y + 1.0, false)] {
         let inside = |q: &(f64, f64)| {
             let v = if axis == 0 { q.0 } else { q.1 };
             if greater { v >= bound } else { v <= bound }
@@ -457,10 +273,7 @@ fn clipped_area(poly: &[(f64, f64)], x: f64, y: f64) -> f64 {
             return 0.0;
         }
     }
-    0.5 * (0..p.len())
-        .map(|i| p[i].0 * p[(i + 1) % p.len()].1 - p[(i + 1) % p.len()].0 * p[i].1)
-        .sum::<f64>()
-        .abs()
+    0.5 * (0..p.len()).map(|i| p[i].0 * p[(i + 1) % p.len()].1 - p[(i + 1) % p.len()].0 * p[i].1).sum::<f64>().abs()
 }
 
 #[test]
@@ -478,10 +291,7 @@ fn pixels_partly_on_the_light_read_radiance_times_coverage() {
         let depth = d.dot(cam.forward.as_dvec3());
         let x_ndc = d.dot(cam.right.as_dvec3()) / depth / tan_half;
         let y_ndc = d.dot(cam.up.as_dvec3()) / depth / tan_half;
-        (
-            (x_ndc + 1.0) * 0.5 * w as f64,
-            (1.0 - y_ndc) * 0.5 * h as f64,
-        )
+        ((x_ndc + 1.0) * 0.5 * w as f64, (1.0 - y_ndc) * 0.5 * h as f64)
     };
     let lights: Vec<Vec<(f64, f64)>> = scene
         .scene
@@ -491,13 +301,7 @@ fn pixels_partly_on_the_light_read_radiance_times_coverage() {
         .map(|t| t.positions.iter().map(|&p| project(p)).collect())
         .collect();
     let radiance = 10.0;
-    let settings = RenderSettings {
-        width: w,
-        height: h,
-        max_bounces: 0,
-        seed: 21,
-        ..Default::default()
-    };
+    let settings = RenderSettings { width: w, height: h, max_bounces: 0, seed: 21, ..Default::default() };
     let ctx = common::gpu();
     let (batches, spp) = (16, 256);
     let stats = common::render_batches(&ctx, &scene, &settings, batches, spp);
@@ -509,40 +313,24 @@ fn pixels_partly_on_the_light_read_radiance_times_coverage() {
     let mut partial = 0;
     for y in 0..h {
         for x in 0..w {
-            let coverage: f64 = lights
-                .iter()
-                .map(|t| clipped_area(t, x as f64, y as f64))
-                .sum();
+            let coverage: f64 = lights.iter().map(|t| clipped_area(t, x as f64, y as f64)).sum();
             let expected = radiance * coverage;
             let i = ((y * w + x) * 3) as usize;
             let got = mean[i];
             if var[i] == 0.0 {
                 // Every sample gave the same value: all hits or all misses. Such a run must
                 // not be too unlikely under the exact coverage.
-                let p = if got == 0.0 {
-                    (1.0 - coverage).powf(samples)
-                } else {
-                    coverage.powf(samples)
-                };
+                let p = if got == 0.0 { (1.0 - coverage).powf(samples) } else { coverage.powf(samples) };
                 assert!(got == 0.0 || got == radiance, "pixel ({x}, {y}) = {got}");
-                assert!(
-                    p >= p_each,
-                    "pixel ({x}, {y}): {got} in every sample, but the coverage is {coverage:.6}"
-                );
+                assert!(p >= p_each, "pixel ({x}, {y}): {got} in every sample, but the coverage is {coverage:.6}");
             } else {
                 partial += 1;
                 let z = (got - expected) / var[i].sqrt();
-                assert!(
-                    z.abs() < limit,
-                    "pixel ({x}, {y}): {got:.5} vs {expected:.5} (coverage {coverage:.5}, z = {z:.2})"
-                );
+                assert!(z.abs() < limit, "pixel ({x}, {y}): {got:.5} vs {expected:.5} (coverage {coverage:.5}, z = {z:.2})");
             }
         }
     }
-    assert!(
-        partial >= 20,
-        "the light's outline crosses at least 20 pixels ({partial})"
-    );
+    assert!(partial >= 20, "the light's outline crosses at least 20 pixels ({partial})");
 }
 
 #[test]
@@ -552,18 +340,10 @@ fn long_renders_do_not_drift() {
     // is off by percents; the film's double-float sums are exact to about 2^-48.
     let scene = emitter_wall(0.1, true, 0.5, "long_render");
     let ctx = common::gpu();
-    let settings = RenderSettings {
-        width: 1,
-        height: 2,
-        max_bounces: 0,
-        ..Default::default()
-    };
+    let settings = RenderSettings { width: 1, height: 2, max_bounces: 0, ..Default::default() };
     let film = common::render_films(&ctx, &scene, &settings, 1, 1 << 22).remove(0);
     for v in &film.data {
-        assert!(
-            (v - 0.1).abs() <= 0.1 * f32::EPSILON,
-            "mean {v} after 2^22 samples of 0.1"
-        );
+        assert!((v - 0.1).abs() <= 0.1 * f32::EPSILON, "mean {v} after 2^22 samples of 0.1");
     }
 }
 
@@ -575,40 +355,22 @@ fn one_sided_emitters_light_only_their_front() {
     let render = |facing_floor: bool| {
         let scene = prepare(
             &Scene {
-                meshes: vec![
-                    quad_z(2.0, 0.0, true, 0),
-                    quad_z(0.3, 1.0, !facing_floor, 1),
-                ],
+                meshes: vec![quad_z(2.0, 0.0, true, 0), quad_z(0.3, 1.0, !facing_floor, 1)],
                 materials: vec![Material::diffuse([0.7; 3]), Material::emitter(5.0)],
                 // Between floor and emitter, looking down: the emitter itself is out of view.
-                camera: Some(Camera {
-                    position: [0.0, 0.0, 0.5],
-                    rotation: LOOK_DOWN_Z,
-                    yfov: 0.9,
-                }),
+                camera: Some(Camera { position: [0.0, 0.0, 0.5], rotation: LOOK_DOWN_Z, yfov: 0.9 }),
                 point_lights: vec![],
             },
             &format!("one_sided_{facing_floor}"),
         );
-        let settings = RenderSettings {
-            width: 16,
-            height: 16,
-            max_bounces: 3,
-            ..Default::default()
-        };
+        let settings = RenderSettings { width: 16, height: 16, max_bounces: 3, ..Default::default() };
         common::render_films(&ctx, &scene, &settings, 1, 16).remove(0)
     };
     let away = render(false);
-    assert!(
-        away.data.iter().all(|&v| v == 0.0),
-        "an emitter facing away lights nothing"
-    );
+    assert!(away.data.iter().all(|&v| v == 0.0), "an emitter facing away lights nothing");
     let towards = render(true);
     let lit = towards.data.iter().filter(|&&v| v > 0.0).count();
-    assert!(
-        lit > towards.data.len() / 2,
-        "an emitter facing the floor lights it ({lit} values)"
-    );
+    assert!(lit > towards.data.len() / 2, "an emitter facing the floor lights it ({lit} values)");
 }
 
 #[test]
@@ -625,44 +387,21 @@ fn a_spot_light_lights_the_plane_by_its_falloff() {
     let base = Scene {
         meshes: vec![quad_z(4.0, -PLANE_D as f32, true, 0)],
         materials: vec![Material::diffuse([PLANE_RHO as f32; 3])],
-        camera: Some(Camera {
-            position: [0.0; 3],
-            rotation: LOOK_DOWN_Z,
-            yfov: PLANE_FOV as f32,
-        }),
-        point_lights: vec![PointLight {
-            position: [0.0; 3],
-            intensity: PLANE_I as f32,
-        }],
+        camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: PLANE_FOV as f32 }),
+        point_lights: vec![PointLight { position: [0.0; 3], intensity: PLANE_I as f32 }],
     };
     let mut scene = load_gltf(&base.write(&dir, "plane_spot.gltf")).unwrap();
-    scene.point_lights[0].spot = Some(gatetrace::scene::SpotCone {
-        direction: glam::Vec3::NEG_Z,
-        inner: inner as f32,
-        outer: outer as f32,
-    });
+    scene.point_lights[0].spot =
+        Some(gatetrace::scene::SpotCone { direction: glam::Vec3::NEG_Z, inner: inner as f32, outer: outer as f32 });
     let scene = PreparedScene::new(scene).unwrap();
-    let falloff = |c: f64| {
-        ((c - outer.cos()) / (inner.cos() - outer.cos()))
-            .clamp(0.0, 1.0)
-            .powi(2)
-    };
+    let falloff = |c: f64| ((c - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2);
     let ctx = common::gpu();
     let batches = 16;
     let methods = [Method::Path, Method::Direct];
-    let threshold = t_critical(
-        sidak(0.01, methods.len() * (PLANE_RES * PLANE_RES) as usize),
-        (batches - 1) as f64,
-    );
+    let threshold = t_critical(sidak(0.01, methods.len() * (PLANE_RES * PLANE_RES) as usize), (batches - 1) as f64);
     let n = 48;
     for method in methods {
-        let settings = RenderSettings {
-            width: PLANE_RES,
-            height: PLANE_RES,
-            max_bounces: 1,
-            method,
-            ..Default::default()
-        };
+        let settings = RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, method, ..Default::default() };
         let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
         let (mean, var) = (stats.mean(), stats.var_of_mean());
         let (mut lit, mut dark, mut edge) = (0, 0, 0);
@@ -679,16 +418,11 @@ fn a_spot_light_lights_the_plane_by_its_falloff() {
                         inside += (falloff(1.0 / sec) > 0.0) as usize;
                     }
                 }
-                let expected = PLANE_RHO * PLANE_I / (std::f64::consts::PI * PLANE_D * PLANE_D)
-                    * acc
-                    / (n * n) as f64;
+                let expected = PLANE_RHO * PLANE_I / (std::f64::consts::PI * PLANE_D * PLANE_D) * acc / (n * n) as f64;
                 let i = ((y * PLANE_RES + x) * 3) as usize;
                 if expected == 0.0 {
                     // Wholly outside the cone: no light at all.
-                    assert_eq!(
-                        mean[i], 0.0,
-                        "{method:?}: pixel ({x}, {y}) lies outside the cone"
-                    );
+                    assert_eq!(mean[i], 0.0, "{method:?}: pixel ({x}, {y}) lies outside the cone");
                     dark += 1;
                     continue;
                 }
@@ -697,27 +431,16 @@ fn a_spot_light_lights_the_plane_by_its_falloff() {
                 // The cone bounds it from above: its light is that of the cone's faint edge.
                 let lit_samples = inside as f64 / (n * n) as f64 * (batches * 64) as f64;
                 if lit_samples < 100.0 {
-                    assert!(
-                        mean[i] >= 0.0 && mean[i] < 0.01 * PLANE_RHO * PLANE_I / PLANE_D.powi(2),
-                        "{method:?}: edge pixel ({x}, {y}) {}",
-                        mean[i]
-                    );
+                    assert!(mean[i] >= 0.0 && mean[i] < 0.01 * PLANE_RHO * PLANE_I / PLANE_D.powi(2), "{method:?}: edge pixel ({x}, {y}) {}", mean[i]);
                     edge += 1;
                     continue;
                 }
                 lit += 1;
                 let z = (mean[i] - expected) / var[i].sqrt().max(1e-9 * expected);
-                assert!(
-                    z.abs() < threshold,
-                    "{method:?}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2}, limit {threshold:.2})",
-                    mean[i]
-                );
+                assert!(z.abs() < threshold, "{method:?}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2}, limit {threshold:.2})", mean[i]);
             }
         }
-        assert!(
-            lit > 20 && dark > 20 && edge < 16,
-            "{method:?}: {lit} lit, {edge} edge and {dark} dark pixels"
-        );
+        assert!(lit > 20 && dark > 20 && edge < 16, "{method:?}: {lit} lit, {edge} edge and {dark} dark pixels");
     }
 }
 
@@ -735,28 +458,18 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
     let base = Scene {
         meshes: vec![quad_z(4.0, -PLANE_D as f32, true, 0)],
         materials: vec![Material::diffuse([PLANE_RHO as f32; 3])],
-        camera: Some(Camera {
-            position: [0.0; 3],
-            rotation: LOOK_DOWN_Z,
-            yfov: PLANE_FOV as f32,
-        }),
+        camera: Some(Camera { position: [0.0; 3], rotation: LOOK_DOWN_Z, yfov: PLANE_FOV as f32 }),
         point_lights: vec![],
     };
     let mut doc = base.to_json();
     doc["extensionsUsed"] = serde_json::json!(["KHR_lights_punctual"]);
-    doc["extensions"] = serde_json::json!({"KHR_lights_punctual": {"lights": [{"type": "directional", "intensity": E}]}});
-    doc["nodes"].as_array_mut().unwrap().push(
-        serde_json::json!({"name": "sun", "translation": [0.0, 0.0, 5.0],
-        "extensions": {"KHR_lights_punctual": {"light": 0}}}),
-    );
+    doc["extensions"] =
+        serde_json::json!({"KHR_lights_punctual": {"lights": [{"type": "directional", "intensity": E}]}});
+    doc["nodes"].as_array_mut().unwrap().push(serde_json::json!({"name": "sun", "translation": [0.0, 0.0, 5.0],
+        "extensions": {"KHR_lights_punctual": {"light": 0}}}));
     let count = doc["nodes"].as_array().unwrap().len();
     doc["scenes"][0]["nodes"] = serde_json::json!((0..count).collect::<Vec<_>>());
-    let scene = load_gltf(&common::gltf_builder::write_json(
-        &dir,
-        "plane_directional.gltf",
-        &doc,
-    ))
-    .unwrap();
+    let scene = load_gltf(&common::gltf_builder::write_json(&dir, "plane_directional.gltf", &doc)).unwrap();
     assert_eq!(scene.directional_lights.len(), 1);
     let (centre, radius) = scene.bounding_sphere();
     let l0 = PLANE_D + centre.z as f64 + radius as f64;
@@ -771,19 +484,8 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
     let expected = PLANE_RHO * E / std::f64::consts::PI;
     let slack = 1e-5 * (l0 + PLANE_D);
     for method in [Method::Path, Method::Direct] {
-        let gate = Gate::Transient {
-            start,
-            width,
-            bins: bins as u32,
-        };
-        let settings = RenderSettings {
-            width: w,
-            height: h,
-            max_bounces: 3,
-            gate,
-            method,
-            ..Default::default()
-        };
+        let gate = Gate::Transient { start, width, bins: bins as u32 };
+        let settings = RenderSettings { width: w, height: h, max_bounces: 3, gate, method, ..Default::default() };
         let films = common::render_films(&ctx, &scene, &settings, batches, 16);
         let mut stats = common::stats::BatchStats::new(films[0].data.len());
         for f in &films {
@@ -795,18 +497,12 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
         // them, so `direct` is judged by its image mean (about 650 splats) and per pixel only by
         // where its light arrives.
         if method == Method::Direct {
-            let image: Vec<f64> = films
-                .iter()
-                .map(|f| f.data.iter().step_by(3).map(|&v| v as f64).sum::<f64>() / (w * h) as f64)
-                .collect();
+            let image: Vec<f64> = films.iter().map(|f| f.data.iter().step_by(3).map(|&v| v as f64).sum::<f64>() / (w * h) as f64).collect();
             let n = image.len() as f64;
             let m = image.iter().sum::<f64>() / n;
             let v = image.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0) / n;
             let z = (m - expected) / v.sqrt();
-            assert!(
-                z.abs() < 4.0,
-                "direct: image mean {m} vs {expected} (z = {z:.2})"
-            );
+            assert!(z.abs() < 4.0, "direct: image mean {m} vs {expected} (z = {z:.2})");
         }
         for y in 0..h {
             for x in 0..w {
@@ -820,34 +516,17 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
                 if method == Method::Path {
                     // Next-event estimation gives every sample exactly rho E / pi (to f32 rounding
                     // of the factors, a few ulps): the variance can vanish, so allow 8 f32 ulps.
-                    let z =
-                        (sum - expected) / sum_var.sqrt().max(8.0 * f32::EPSILON as f64 * expected);
-                    assert!(
-                        z.abs() < threshold,
-                        "path: pixel ({x}, {y}) {sum} vs {expected} (z = {z:.2}, limit {threshold:.2})"
-                    );
+                    let z = (sum - expected) / sum_var.sqrt().max(8.0 * f32::EPSILON as f64 * expected);
+                    assert!(z.abs() < threshold, "path: pixel ({x}, {y}) {sum} vs {expected} (z = {z:.2}, limit {threshold:.2})");
                 }
-                let nearest = |a: f64, b: f64| {
-                    if a <= 0.0 && b >= 0.0 {
-                        0.0
-                    } else {
-                        a.abs().min(b.abs())
-                    }
-                };
+                let nearest = |a: f64, b: f64| if a <= 0.0 && b >= 0.0 { 0.0 } else { a.abs().min(b.abs()) };
                 let r_min2 = nearest(x0, x1).powi(2) + nearest(y0, y1).powi(2);
                 let r_max2 = x0.abs().max(x1.abs()).powi(2) + y0.abs().max(y1.abs()).powi(2);
-                let (shortest, longest) = (
-                    l0 + PLANE_D * (1.0 + r_min2).sqrt(),
-                    l0 + PLANE_D * (1.0 + r_max2).sqrt(),
-                );
+                let (shortest, longest) = (l0 + PLANE_D * (1.0 + r_min2).sqrt(), l0 + PLANE_D * (1.0 + r_max2).sqrt());
                 for b in 0..bins {
                     let (lo, hi) = (start + b as f64 * width, start + (b + 1) as f64 * width);
                     if hi < shortest - slack || lo > longest + slack {
-                        assert_eq!(
-                            mean[(p * bins + b) * 3],
-                            0.0,
-                            "{method:?}: pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]"
-                        );
+                        assert_eq!(mean[(p * bins + b) * 3], 0.0, "{method:?}: pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]");
                     }
                 }
             }

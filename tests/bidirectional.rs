@@ -16,38 +16,15 @@ const ALPHA: f64 = 0.01;
 const BATCHES: usize = 16;
 
 fn settings(method: Method, gate: Gate, seed: u32) -> RenderSettings {
-    RenderSettings {
-        width: 32,
-        height: 32,
-        max_bounces: 5,
-        method,
-        gate,
-        seed,
-        ..Default::default()
-    }
+    RenderSettings { width: 32, height: 32, max_bounces: 5, method, gate, seed, ..Default::default() }
 }
 
 /// Renders `scene` with `path` and with `direct` (BATCHES x spp each) and asserts agreement.
 fn assert_direct_matches_path(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {
     let ctx = common::gpu();
-    let path = common::render_films(
-        &ctx,
-        scene,
-        &settings(Method::Path, gate.clone(), seed),
-        BATCHES,
-        spp,
-    );
-    let direct = common::render_films(
-        &ctx,
-        scene,
-        &settings(Method::Direct, gate, seed + 1),
-        BATCHES,
-        spp,
-    );
-    assert!(
-        direct.iter().any(|f| f.mean_rgb()[0] != 0.0),
-        "{label}: direct renders black"
-    );
+    let path = common::render_films(&ctx, scene, &settings(Method::Path, gate.clone(), seed), BATCHES, spp);
+    let direct = common::render_films(&ctx, scene, &settings(Method::Direct, gate, seed + 1), BATCHES, spp);
+    assert!(direct.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: direct renders black");
     common::assert_films_agree(label, &direct, &path, 8, ALPHA);
 }
 
@@ -64,69 +41,27 @@ fn direct_matches_path_at_the_steady_state() {
 #[test]
 fn direct_matches_path_at_two_box_gates() {
     let scene = common::cornell_box();
-    assert_direct_matches_path(
-        "box [3.14, 3.19)",
-        &scene,
-        Gate::Box {
-            start: 3.14,
-            end: 3.19,
-        },
-        32,
-        110,
-    );
-    assert_direct_matches_path(
-        "box [2.2, 2.6)",
-        &scene,
-        Gate::Box {
-            start: 2.2,
-            end: 2.6,
-        },
-        32,
-        120,
-    );
+    assert_direct_matches_path("box [3.14, 3.19)", &scene, Gate::Box { start: 3.14, end: 3.19 }, 32, 110);
+    assert_direct_matches_path("box [2.2, 2.6)", &scene, Gate::Box { start: 2.2, end: 2.6 }, 32, 120);
 }
 
 #[test]
 fn direct_matches_path_on_the_glossy_cornell_box() {
     let scene = glossy_cornell_box();
     assert_direct_matches_path("glossy steady", &scene, Gate::None, 32, 130);
-    assert_direct_matches_path(
-        "glossy box [3.0, 3.3)",
-        &scene,
-        Gate::Box {
-            start: 3.0,
-            end: 3.3,
-        },
-        32,
-        140,
-    );
+    assert_direct_matches_path("glossy box [3.0, 3.3)", &scene, Gate::Box { start: 3.0, end: 3.3 }, 32, 140);
 }
 
 #[test]
 fn direct_matches_path_at_gaussian_cw_and_table_gates() {
     let scene = common::cornell_box();
-    assert_direct_matches_path(
-        "gaussian 3.2, 0.05",
-        &scene,
-        Gate::Gaussian {
-            mean: 3.2,
-            sigma: 0.05,
-        },
-        32,
-        150,
-    );
+    assert_direct_matches_path("gaussian 3.2, 0.05", &scene, Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 150);
     // 100 MHz: signed weights over the box's path lengths.
-    let cw = Gate::Cw {
-        frequency_hz: 1e8,
-        phase_deg: 30.0,
-    };
+    let cw = Gate::Cw { frequency_hz: 1e8, phase_deg: 30.0 };
     assert_direct_matches_path("cw 100 MHz", &scene, cw, 32, 160);
     // A trapezoid with a negative lobe (signed table weights).
     let points = vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)];
-    let table = Gate::Table {
-        points,
-        source: "trapezoid.csv".into(),
-    };
+    let table = Gate::Table { points, source: "trapezoid.csv".into() };
     assert_direct_matches_path("table trapezoid", &scene, table, 32, 165);
 }
 
@@ -136,11 +71,7 @@ fn direct_matches_path_at_gaussian_cw_and_table_gates() {
 fn modified_cornell_box(point: bool, double_sided: bool) -> PreparedScene {
     let mut scene = load_gltf(&common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
     if point {
-        scene.point_lights.push(PointLight {
-            position: glam::Vec3::new(0.2, -0.3, -0.1),
-            intensity: glam::Vec3::new(0.3, 0.2, 0.1),
-            spot: None,
-        });
+        scene.point_lights.push(PointLight { position: glam::Vec3::new(0.2, -0.3, -0.1), intensity: glam::Vec3::new(0.3, 0.2, 0.1), spot: None });
     }
     for m in &mut scene.materials {
         m.double_sided |= double_sided;
@@ -151,61 +82,24 @@ fn modified_cornell_box(point: bool, double_sided: bool) -> PreparedScene {
 #[test]
 fn direct_matches_path_with_a_point_light() {
     // Delta lights have no s = 0 strategy; area and point lights share the light CDF.
-    assert_direct_matches_path(
-        "point + area lights",
-        &modified_cornell_box(true, false),
-        Gate::None,
-        32,
-        170,
-    );
+    assert_direct_matches_path("point + area lights", &modified_cornell_box(true, false), Gate::None, 32, 170);
 }
 
 #[test]
 fn direct_matches_path_with_double_sided_materials() {
-    assert_direct_matches_path(
-        "double-sided",
-        &modified_cornell_box(false, true),
-        Gate::None,
-        32,
-        180,
-    );
+    assert_direct_matches_path("double-sided", &modified_cornell_box(false, true), Gate::None, 32, 180);
 }
 
 #[test]
 fn transient_bins_sum_to_the_box_gate_over_their_range() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let transient = Gate::Transient {
-        start: 1.94,
-        width: 0.1,
-        bins: 12,
-    };
-    let cube = common::render_films(
-        &ctx,
-        &scene,
-        &settings(Method::Direct, transient, 200),
-        BATCHES,
-        32,
-    );
+    let transient = Gate::Transient { start: 1.94, width: 0.1, bins: 12 };
+    let cube = common::render_films(&ctx, &scene, &settings(Method::Direct, transient, 200), BATCHES, 32);
     let summed: Vec<Film> = cube.iter().map(Film::sum_bins).collect();
-    let gate = Gate::Box {
-        start: 1.94,
-        end: 1.94 + 12.0 * 0.1,
-    };
-    let boxed = common::render_films(
-        &ctx,
-        &scene,
-        &settings(Method::Direct, gate, 201),
-        BATCHES,
-        32,
-    );
-    common::assert_films_agree(
-        "sum of 12 bins vs box [1.94, 3.14)",
-        &summed,
-        &boxed,
-        8,
-        ALPHA,
-    );
+    let gate = Gate::Box { start: 1.94, end: 1.94 + 12.0 * 0.1 };
+    let boxed = common::render_films(&ctx, &scene, &settings(Method::Direct, gate, 201), BATCHES, 32);
+    common::assert_films_agree("sum of 12 bins vs box [1.94, 3.14)", &summed, &boxed, 8, ALPHA);
 }
 
 #[test]
@@ -214,14 +108,7 @@ fn debug_strategy_images_sum_to_the_full_render() {
     // (each MIS-weighted) add up to the full render up to f32 rounding.
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let base = RenderSettings {
-        width: 16,
-        height: 16,
-        max_bounces: 3,
-        method: Method::Direct,
-        seed: 7,
-        ..Default::default()
-    };
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 7, ..Default::default() };
     let render = |s: &RenderSettings| {
         let mut tracer = BidirectionalTracer::new(&ctx, &scene, s).unwrap();
         tracer.render_samples(16).unwrap();
@@ -230,10 +117,7 @@ fn debug_strategy_images_sum_to_the_full_render() {
     let full = render(&base);
     let mut sum = vec![0.0f64; full.data.len()];
     for (s, t) in gatetrace::integrator::bidirectional::strategies(base.max_bounces) {
-        let single = render(&RenderSettings {
-            debug_strategy: Some((s, t)),
-            ..base.clone()
-        });
+        let single = render(&RenderSettings { debug_strategy: Some((s, t)), ..base.clone() });
         for (acc, v) in sum.iter_mut().zip(&single.data) {
             *acc += *v as f64;
         }
@@ -242,10 +126,7 @@ fn debug_strategy_images_sum_to_the_full_render() {
     assert!(total > 0.0);
     for (i, (a, b)) in sum.iter().zip(&full.data).enumerate() {
         let tolerance = 1e-4 * (*b as f64).abs() + 1e-7;
-        assert!(
-            (a - *b as f64).abs() <= tolerance,
-            "element {i}: strategies sum to {a}, full render {b}"
-        );
+        assert!((a - *b as f64).abs() <= tolerance, "element {i}: strategies sum to {a}, full render {b}");
     }
 }
 
@@ -254,47 +135,30 @@ fn zero_weight_connections_trace_no_shadow_ray() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let render = |gate: Gate| {
-        let s = RenderSettings {
-            stats: true,
-            ..settings(Method::Direct, gate, 300)
-        };
+        let s = RenderSettings { stats: true, ..settings(Method::Direct, gate, 300) };
         let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
         tracer.render_samples(4).unwrap();
         tracer.strategy_stats().unwrap().to_vec()
     };
     let steady = render(Gate::None);
-    let gated = render(Gate::Box {
-        start: 3.14,
-        end: 3.19,
-    });
-    let total = |st: &[gatetrace::integrator::StrategyStats],
-                 f: fn(&gatetrace::integrator::StrategyStats) -> u64|
-     -> u64 { st.iter().map(f).sum() };
+    let gated = render(Gate::Box { start: 3.14, end: 3.19 });
+    let total = |st: &[gatetrace::integrator::StrategyStats], f: fn(&gatetrace::integrator::StrategyStats) -> u64| -> u64 {
+        st.iter().map(f).sum()
+    };
     // Steady state: nothing is skipped; every shadow ray belongs to an evaluated connection.
     assert_eq!(total(&steady, |s| s.skipped_by_gate), 0);
     for st in steady.iter().chain(&gated) {
-        assert!(
-            st.shadow_rays + st.skipped_by_gate <= st.evaluated,
-            "{st:?}"
-        );
+        assert!(st.shadow_rays + st.skipped_by_gate <= st.evaluated, "{st:?}");
         if st.s == 0 {
             assert_eq!(st.shadow_rays, 0, "s = 0 needs no shadow ray: {st:?}");
         }
     }
     // A 5 cm gate drops most connections before their shadow rays; the direct light (1,1) and
     // (0,2) paths (at most ~2.1 m long) are all dropped.
-    let (evaluated, skipped, rays) = (
-        total(&gated, |s| s.evaluated),
-        total(&gated, |s| s.skipped_by_gate),
-        total(&gated, |s| s.shadow_rays),
-    );
-    println!(
-        "gate [3.14, 3.19): {evaluated} connections, {skipped} skipped by the gate, {rays} shadow rays"
-    );
-    assert!(
-        skipped as f64 > 0.8 * evaluated as f64,
-        "{skipped} of {evaluated} skipped"
-    );
+    let (evaluated, skipped, rays) =
+        (total(&gated, |s| s.evaluated), total(&gated, |s| s.skipped_by_gate), total(&gated, |s| s.shadow_rays));
+    println!("gate [3.14, 3.19): {evaluated} connections, {skipped} skipped by the gate, {rays} shadow rays");
+    assert!(skipped as f64 > 0.8 * evaluated as f64, "{skipped} of {evaluated} skipped");
     assert!(rays < total(&steady, |s| s.shadow_rays) / 5);
     for st in gated.iter().filter(|st| st.s + st.t == 2) {
         assert_eq!(st.skipped_by_gate, st.evaluated, "{st:?}");
@@ -306,34 +170,18 @@ fn float_atomic_and_compare_exchange_splats_agree() {
     // Both splat with exact f32 additions; only their order differs, so the images agree to
     // rounding. Lavapipe has float atomics, so CI runs both kernels.
     let ctx = common::gpu();
-    assert!(
-        ctx.has_float_atomics(),
-        "the test device should have SHADER_FLOAT32_ATOMIC (lavapipe has it)"
-    );
+    assert!(ctx.has_float_atomics(), "the test device should have SHADER_FLOAT32_ATOMIC (lavapipe has it)");
     let scene = common::cornell_box();
-    let base = RenderSettings {
-        width: 16,
-        height: 16,
-        max_bounces: 3,
-        method: Method::Direct,
-        seed: 9,
-        ..Default::default()
-    };
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 9, ..Default::default() };
     let render = |s: &RenderSettings| {
         let mut tracer = BidirectionalTracer::new(&ctx, &scene, s).unwrap();
         tracer.render_samples(16).unwrap();
         tracer.film().unwrap()
     };
     let float = render(&base);
-    let portable = render(&RenderSettings {
-        portable_atomics: true,
-        ..base.clone()
-    });
+    let portable = render(&RenderSettings { portable_atomics: true, ..base.clone() });
     for (i, (a, b)) in float.data.iter().zip(&portable.data).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-5 * a.abs().max(1e-3),
-            "element {i}: {a} vs {b}"
-        );
+        assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "element {i}: {a} vs {b}");
     }
     assert!(float.mean_rgb()[0] > 0.0);
 }
@@ -345,19 +193,9 @@ fn splat_sums_fold_to_the_host_without_changing_the_image() {
     // either way give the same image up to f32 rounding: nothing is lost or counted twice.
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let base = RenderSettings {
-        width: 4,
-        height: 4,
-        max_bounces: 3,
-        method: Method::Direct,
-        seed: 5,
-        ..Default::default()
-    };
+    let base = RenderSettings { width: 4, height: 4, max_bounces: 3, method: Method::Direct, seed: 5, ..Default::default() };
     let render = |per_pass: u32| {
-        let s = RenderSettings {
-            samples_per_pass: Some(per_pass),
-            ..base.clone()
-        };
+        let s = RenderSettings { samples_per_pass: Some(per_pass), ..base.clone() };
         let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
         tracer.render_samples(6 * 4096 + 512).unwrap();
         tracer.film().unwrap()
@@ -365,91 +203,31 @@ fn splat_sums_fold_to_the_host_without_changing_the_image() {
     let (large, small) = (render(4096), render(256));
     assert_eq!(large.spp, small.spp);
     for (i, (a, b)) in large.data.iter().zip(&small.data).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-4 * a.abs().max(1e-2),
-            "element {i}: {a} vs {b}"
-        );
+        assert!((a - b).abs() <= 1e-4 * a.abs().max(1e-2), "element {i}: {a} vs {b}");
     }
 }
 
 /// Renders `scene` with `direct` and with `ellipsoidal` (BATCHES x spp each) and asserts
 /// agreement.
-fn assert_ellipsoidal_matches_direct(
-    label: &str,
-    scene: &PreparedScene,
-    gate: Gate,
-    spp: u32,
-    seed: u32,
-) {
+fn assert_ellipsoidal_matches_direct(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {
     let ctx = common::gpu();
-    let direct = common::render_films(
-        &ctx,
-        scene,
-        &settings(Method::Direct, gate.clone(), seed),
-        BATCHES,
-        spp,
-    );
-    let ellipsoidal = common::render_films(
-        &ctx,
-        scene,
-        &settings(Method::Ellipsoidal, gate, seed + 1),
-        BATCHES,
-        spp,
-    );
-    assert!(
-        ellipsoidal.iter().any(|f| f.mean_rgb()[0] != 0.0),
-        "{label}: ellipsoidal renders black"
-    );
+    let direct = common::render_films(&ctx, scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, spp);
+    let ellipsoidal = common::render_films(&ctx, scene, &settings(Method::Ellipsoidal, gate, seed + 1), BATCHES, spp);
+    assert!(ellipsoidal.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: ellipsoidal renders black");
     common::assert_films_agree(label, &ellipsoidal, &direct, 8, ALPHA);
 }
 
 #[test]
 fn ellipsoidal_matches_direct_at_box_gates() {
     let scene = common::cornell_box();
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal box [3.14, 3.19)",
-        &scene,
-        Gate::Box {
-            start: 3.14,
-            end: 3.19,
-        },
-        32,
-        400,
-    );
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal box [2.0, 2.6)",
-        &scene,
-        Gate::Box {
-            start: 2.0,
-            end: 2.6,
-        },
-        32,
-        410,
-    );
+    assert_ellipsoidal_matches_direct("ellipsoidal box [3.14, 3.19)", &scene, Gate::Box { start: 3.14, end: 3.19 }, 32, 400);
+    assert_ellipsoidal_matches_direct("ellipsoidal box [2.0, 2.6)", &scene, Gate::Box { start: 2.0, end: 2.6 }, 32, 410);
 }
 
 #[test]
 fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal gaussian 3.2, 0.05",
-        &common::cornell_box(),
-        Gate::Gaussian {
-            mean: 3.2,
-            sigma: 0.05,
-        },
-        32,
-        420,
-    );
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal glossy box [3.0, 3.3)",
-        &glossy_cornell_box(),
-        Gate::Box {
-            start: 3.0,
-            end: 3.3,
-        },
-        32,
-        430,
-    );
+    assert_ellipsoidal_matches_direct("ellipsoidal gaussian 3.2, 0.05", &common::cornell_box(), Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 420);
+    assert_ellipsoidal_matches_direct("ellipsoidal glossy box [3.0, 3.3)", &glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 32, 430);
 }
 
 /// CW codes: a Hamiltonian code (zero over a third of its period, where connections trace no
@@ -459,20 +237,8 @@ fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
 #[test]
 fn bidirectional_methods_match_at_cw_codes() {
     let scene = common::cornell_box();
-    assert_direct_matches_path(
-        "direct cw ham3 300 MHz",
-        &scene,
-        Gate::parse("cw:300e6,40,ham3").unwrap(),
-        32,
-        480,
-    );
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal cw depthsel 4.7 GHz",
-        &scene,
-        Gate::parse("cw:4.7e9,-30,depthsel").unwrap(),
-        32,
-        490,
-    );
+    assert_direct_matches_path("direct cw ham3 300 MHz", &scene, Gate::parse("cw:300e6,40,ham3").unwrap(), 32, 480);
+    assert_ellipsoidal_matches_direct("ellipsoidal cw depthsel 4.7 GHz", &scene, Gate::parse("cw:4.7e9,-30,depthsel").unwrap(), 32, 490);
 }
 
 /// Transient gates draw target lengths bin by bin (stratified); with at least as many samples
@@ -481,57 +247,19 @@ fn bidirectional_methods_match_at_cw_codes() {
 #[test]
 fn ellipsoidal_matches_direct_per_bin_of_transient_gates() {
     let scene = common::cornell_box();
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal transient 3.0 + 6 x 0.1",
-        &scene,
-        Gate::Transient {
-            start: 3.0,
-            width: 0.1,
-            bins: 6,
-        },
-        32,
-        460,
-    );
-    assert_ellipsoidal_matches_direct(
-        "ellipsoidal transient 2.5 + 40 x 0.02",
-        &scene,
-        Gate::Transient {
-            start: 2.5,
-            width: 0.02,
-            bins: 40,
-        },
-        32,
-        470,
-    );
+    assert_ellipsoidal_matches_direct("ellipsoidal transient 3.0 + 6 x 0.1", &scene, Gate::Transient { start: 3.0, width: 0.1, bins: 6 }, 32, 460);
+    assert_ellipsoidal_matches_direct("ellipsoidal transient 2.5 + 40 x 0.02", &scene, Gate::Transient { start: 2.5, width: 0.02, bins: 40 }, 32, 470);
 }
 
 #[test]
 fn ellipsoidal_with_four_connections_per_query_matches_direct() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let gate = Gate::Box {
-        start: 3.14,
-        end: 3.19,
-    };
-    let direct = common::render_films(
-        &ctx,
-        &scene,
-        &settings(Method::Direct, gate.clone(), 440),
-        BATCHES,
-        32,
-    );
-    let four = RenderSettings {
-        connections_per_query: 4,
-        ..settings(Method::Ellipsoidal, gate, 441)
-    };
+    let gate = Gate::Box { start: 3.14, end: 3.19 };
+    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), 440), BATCHES, 32);
+    let four = RenderSettings { connections_per_query: 4, ..settings(Method::Ellipsoidal, gate, 441) };
     let ellipsoidal = common::render_films(&ctx, &scene, &four, BATCHES, 16);
-    common::assert_films_agree(
-        "ellipsoidal K = 4 box [3.14, 3.19)",
-        &ellipsoidal,
-        &direct,
-        8,
-        ALPHA,
-    );
+    common::assert_films_agree("ellipsoidal K = 4 box [3.14, 3.19)", &ellipsoidal, &direct, 8, ALPHA);
 }
 
 /// The needle guard leaves out a set of connections that grows with the guard, and every
@@ -545,45 +273,22 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
     use gatetrace::integrator::EllipsoidGuards;
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let gate = Gate::Box {
-        start: 3.14,
-        end: 3.19,
-    };
-    let direct = common::render_films(
-        &ctx,
-        &scene,
-        &settings(Method::Direct, gate.clone(), 450),
-        BATCHES,
-        32,
-    );
+    let gate = Gate::Box { start: 3.14, end: 3.19 };
+    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), 450), BATCHES, 32);
     let wide = RenderSettings {
-        ellipsoid_guards: EllipsoidGuards {
-            needle: 1e-2,
-            ..Default::default()
-        },
+        ellipsoid_guards: EllipsoidGuards { needle: 1e-2, ..Default::default() },
         stats: true,
         ..settings(Method::Ellipsoidal, gate, 451)
     };
     let mut tracer = BidirectionalTracer::new(&ctx, &scene, &wide).unwrap();
     let films = common::films_of(&mut tracer, BATCHES, 32);
     println!("{}", tracer.stats_report().unwrap().unwrap());
-    let queries: u64 = tracer
-        .strategy_stats()
-        .unwrap()
-        .iter()
-        .map(|s| s.evaluated)
-        .sum();
+    let queries: u64 = tracer.strategy_stats().unwrap().iter().map(|s| s.evaluated).sum();
     let (needles, off_length) = tracer.guarded();
     assert!(needles > 0, "the needle guard of 1e-2 left nothing out");
     assert!(
         (off_length as f64) < 1e-6 * queries as f64,
         "the length guard dropped {off_length} of {queries} connections"
     );
-    common::assert_films_agree(
-        "ellipsoidal needle guard 1e-2 box [3.14, 3.19)",
-        &films,
-        &direct,
-        8,
-        ALPHA,
-    );
+    common::assert_films_agree("ellipsoidal needle guard 1e-2 box [3.14, 3.19)", &films, &direct, 8, ALPHA);
 }

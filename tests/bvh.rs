@@ -15,13 +15,7 @@ fn bvh_triangles(soup: &[[Vec3; 3]], bvh: &Bvh) -> Vec<Triangle> {
         .iter()
         .map(|&i| {
             let [a, b, c] = soup[i as usize];
-            Triangle {
-                v0: a,
-                e1: b - a,
-                e2: c - a,
-                source: i,
-                ..Default::default()
-            }
+            Triangle { v0: a, e1: b - a, e2: c - a, source: i, ..Default::default() }
         })
         .collect()
 }
@@ -32,18 +26,9 @@ fn random_rays(n: usize, triangles: usize, seed: u32) -> Vec<(Vec3, Vec3, f32, u
     (0..n)
         .map(|i| {
             let o = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 3.0 - 1.5;
-            let d = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5)
-                .normalize_or(Vec3::X);
-            let t_max = if i % 3 == 0 {
-                0.5 + rng.next_f32()
-            } else {
-                1e30
-            };
-            let ignore = if i % 4 == 0 {
-                (rng.next_f32() * triangles as f32) as u32
-            } else {
-                NONE
-            };
+            let d = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5).normalize_or(Vec3::X);
+            let t_max = if i % 3 == 0 { 0.5 + rng.next_f32() } else { 1e30 };
+            let ignore = if i % 4 == 0 { (rng.next_f32() * triangles as f32) as u32 } else { NONE };
             (o, d, t_max, ignore)
         })
         .collect()
@@ -70,10 +55,7 @@ fn bvh_layout_is_a_valid_stackless_tree() {
             assert!(child.min.cmpge(n.min).all() && child.max.cmple(n.max).all());
             let second = &nodes[child.skip as usize];
             assert!(second.min.cmpge(n.min).all() && second.max.cmple(n.max).all());
-            assert_eq!(
-                second.skip, n.skip,
-                "second child's subtree must end where its parent's does"
-            );
+            assert_eq!(second.skip, n.skip, "second child's subtree must end where its parent's does");
         } else {
             for k in n.leaf_range().unwrap() {
                 for p in soup[bvh.order[k as usize] as usize] {
@@ -99,17 +81,10 @@ fn cpu_traversal_matches_brute_force() {
             assert_ne!(a.triangle, NONE);
         }
         let any = trace_any(&bvh.nodes, &tris, o, d, t_max, ignore, NONE);
-        assert_eq!(
-            any,
-            b.triangle != NONE,
-            "any-hit disagrees with closest-hit for ray {o} {d}"
-        );
+        assert_eq!(any, b.triangle != NONE, "any-hit disagrees with closest-hit for ray {o} {d}");
         hits += (b.triangle != NONE) as usize;
     }
-    assert!(
-        hits > 2000 && hits < 18_000,
-        "the ray set should both hit and miss ({hits} hits)"
-    );
+    assert!(hits > 2000 && hits < 18_000, "the ray set should both hit and miss ({hits} hits)");
 }
 
 #[test]
@@ -119,20 +94,8 @@ fn gpu_traversal_matches_cpu_twin() {
     // f32; the device may fuse multiply-adds, which changes t by a few ulps (allowed: 1e-5
     // relative, about 80 ulps) and can flip a hit only for rays grazing an edge or a tie.
     let ctx = common::gpu();
-    for (name, scene, scale) in [
-        ("cornell box", common::cornell_box(), 0.6f32),
-        ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4),
-    ] {
-        let tracer = PathTracer::new(
-            &ctx,
-            &scene,
-            &RenderSettings {
-                width: 8,
-                height: 8,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+    for (name, scene, scale) in [("cornell box", common::cornell_box(), 0.6f32), ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4)] {
+        let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
         let rays = random_rays(4096, scene.triangles.len(), 5);
         let mut input = Vec::new();
         for (o, d, t_max, ignore) in &rays {
@@ -147,48 +110,21 @@ fn gpu_traversal_matches_cpu_twin() {
             let (gpu_t, gpu_tri) = (out[2 * i][0], out[2 * i][1].to_bits());
             if gpu_tri != cpu.triangle {
                 // Only near-ties: both hit, at the same distance.
-                assert!(
-                    gpu_tri != NONE
-                        && cpu.triangle != NONE
-                        && (gpu_t - cpu.t).abs() <= 1e-5 * cpu.t,
-                    "{name} ray {i}: GPU triangle {gpu_tri} at {gpu_t}, CPU {} at {}",
-                    cpu.triangle,
-                    cpu.t
-                );
+                assert!(gpu_tri != NONE && cpu.triangle != NONE && (gpu_t - cpu.t).abs() <= 1e-5 * cpu.t,
+                    "{name} ray {i}: GPU triangle {gpu_tri} at {gpu_t}, CPU {} at {}", cpu.triangle, cpu.t);
                 continue;
             }
             if cpu.triangle != NONE {
                 hits += 1;
-                assert!(
-                    (gpu_t - cpu.t).abs() <= 1e-5 * cpu.t.max(1.0),
-                    "{name} ray {i}: t {gpu_t} vs {}",
-                    cpu.t
-                );
+                assert!((gpu_t - cpu.t).abs() <= 1e-5 * cpu.t.max(1.0), "{name} ray {i}: t {gpu_t} vs {}", cpu.t);
                 // Barycentrics are ratios of the same dot products: 1e-4 absolute allows for
                 // fused multiply-adds in near-degenerate (grazing) cases.
-                assert!(
-                    (out[2 * i][2] - cpu.b1).abs() < 1e-4 && (out[2 * i][3] - cpu.b2).abs() < 1e-4
-                );
+                assert!((out[2 * i][2] - cpu.b1).abs() < 1e-4 && (out[2 * i][3] - cpu.b2).abs() < 1e-4);
             }
-            let cpu_any = trace_any(
-                &scene.bvh.nodes,
-                &scene.triangles,
-                o,
-                *d,
-                *t_max,
-                *ignore,
-                NONE,
-            );
-            assert_eq!(
-                out[2 * i + 1][0] == 1.0,
-                cpu_any,
-                "{name} ray {i}: any-hit differs"
-            );
+            let cpu_any = trace_any(&scene.bvh.nodes, &scene.triangles, o, *d, *t_max, *ignore, NONE);
+            assert_eq!(out[2 * i + 1][0] == 1.0, cpu_any, "{name} ray {i}: any-hit differs");
         }
-        assert!(
-            hits > 1000,
-            "{name}: too few hits ({hits}) to test anything"
-        );
+        assert!(hits > 1000, "{name}: too few hits ({hits}) to test anything");
     }
 }
 
@@ -203,43 +139,19 @@ fn split_buffers_render_identically() {
     let (width, height) = (8u32, 8u32);
     let splits = |limit: u64, bins: u64| {
         let film = 3 * (width * height) as u64 * bins;
-        [
-            ("triangles", t, 48),
-            ("triangle_shading", t, 64),
-            ("bvh_nodes", n, 32),
-            ("bvh_node_surfaces", n, 32),
-            ("film", film, 4),
-        ]
-        .iter()
-        .all(|&(name, count, size)| {
-            ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2)
-        })
+        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("bvh_node_surfaces", n, 32), ("film", film, 4)]
+            .iter()
+            .all(|&(name, count, size)| ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2))
     };
     // It must also be small enough that a wave holds fewer slots (paths) than there are pixels.
-    let splits_waves = |limit: u64| {
-        limit / (size_of::<gatetrace::gpu::layout::PathState>() as u64) < (width * height) as u64
-    };
+    let splits_waves = |limit: u64| limit / (size_of::<gatetrace::gpu::layout::PathState>() as u64) < (width * height) as u64;
     let (limit, bins) = (64..4096u64)
         .flat_map(|l| (1..64u64).map(move |b| (l, b)))
         .find(|&(l, b)| splits(l, b) && splits_waves(l))
         .expect("some binding limit splits every array and every pass");
-    let gate = Gate::Transient {
-        start: 0.0,
-        width: 10.0 / bins as f64,
-        bins: bins as u32,
-    };
-    let base = RenderSettings {
-        width,
-        height,
-        max_bounces: 3,
-        seed: 9,
-        gate,
-        ..Default::default()
-    };
-    let split = RenderSettings {
-        binding_limit: Some(limit),
-        ..base.clone()
-    };
+    let gate = Gate::Transient { start: 0.0, width: 10.0 / bins as f64, bins: bins as u32 };
+    let base = RenderSettings { width, height, max_bounces: 3, seed: 9, gate, ..Default::default() };
+    let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
     let ctx = common::gpu();
     // The tiny limit also splits each pass into several waves of a few pixels. The film's
     // double-float sums make the different order of additions invisible at f32 precision.
@@ -248,14 +160,8 @@ fn split_buffers_render_identically() {
     drop(tiled);
     let a = common::render_films(&ctx, &scene, &base, 1, 16).remove(0);
     let b = common::render_films(&ctx, &scene, &split, 1, 16).remove(0);
-    assert!(
-        a.data.iter().filter(|&&v| v > 0.0).count() > 20,
-        "the test image is nearly black"
-    );
-    assert_eq!(
-        a.data, b.data,
-        "limit {limit} B, {bins} bins: split layout changed the image"
-    );
+    assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the test image is nearly black");
+    assert_eq!(a.data, b.data, "limit {limit} B, {bins} bins: split layout changed the image");
     // Ellipsoid queries read the split node surfaces too. Their light-tracing image is one
     // binding, so this render has a box gate (one bin) and the smallest limit that holds it.
     // Its splats add with float atomics in no fixed order, so the two images agree to f32
@@ -263,43 +169,21 @@ fn split_buffers_render_identically() {
     // the image's noise.
     let splat_image = 3 * 4 * (width * height) as u64;
     let fits = |l: u64| {
-        [
-            ("triangles", t, 48),
-            ("triangle_shading", t, 64),
-            ("bvh_nodes", n, 32),
-        ]
-        .iter()
-        .all(|&(name, count, size)| ChunkLayout::new(name, count, size, l).is_ok())
+        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32)]
+            .iter()
+            .all(|&(name, count, size)| ChunkLayout::new(name, count, size, l).is_ok())
     };
     let limit = (splat_image..1 << 20)
-        .find(|&l| {
-            fits(l) && ChunkLayout::new("bvh_node_surfaces", n, 32, l).is_ok_and(|c| c.chunks >= 2)
-        })
+        .find(|&l| fits(l) && ChunkLayout::new("bvh_node_surfaces", n, 32, l).is_ok_and(|c| c.chunks >= 2))
         .expect("a binding limit that holds the light-tracing image splits the node surfaces");
-    let gate = Gate::Box {
-        start: 0.0,
-        end: 10.0,
-    };
-    let base = RenderSettings {
-        method: Method::Ellipsoidal,
-        gate,
-        ..base
-    };
-    let split = RenderSettings {
-        binding_limit: Some(limit),
-        ..base.clone()
-    };
+    let gate = Gate::Box { start: 0.0, end: 10.0 };
+    let base = RenderSettings { method: Method::Ellipsoidal, gate, ..base };
+    let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
     let a = common::render_films(&ctx, &scene, &base, 1, 16).remove(0);
     let b = common::render_films(&ctx, &scene, &split, 1, 16).remove(0);
-    assert!(
-        a.data.iter().filter(|&&v| v > 0.0).count() > 20,
-        "the ellipsoidal test image is nearly black"
-    );
+    assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the ellipsoidal test image is nearly black");
     for (i, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
-        assert!(
-            (x - y).abs() <= 1e-5 * x.abs().max(y.abs()) + 1e-30,
-            "ellipsoidal, element {i}: {x} vs {y}"
-        );
+        assert!((x - y).abs() <= 1e-5 * x.abs().max(y.abs()) + 1e-30, "ellipsoidal, element {i}: {x} vs {y}");
     }
 }
 
@@ -311,60 +195,23 @@ fn deep_traversals_are_right_or_reported() {
     // after 65535 iterations in total; a traversal cut short must be counted, never silent.
     let n = 120_000;
     let scene = slab_field(true, "deep_traversal");
-    assert!(
-        scene.bvh.nodes.len() > 65_535,
-        "{} nodes",
-        scene.bvh.nodes.len()
-    );
-    let cpu = trace_closest(
-        &scene.bvh.nodes,
-        &scene.triangles,
-        Vec3::new(-1.0, 0.0, 0.0),
-        Vec3::X,
-        1e30,
-        NONE,
-    );
-    assert_eq!(
-        scene.triangles[cpu.triangle as usize].source, n as u32,
-        "the CPU twin hits the wall"
-    );
+    assert!(scene.bvh.nodes.len() > 65_535, "{} nodes", scene.bvh.nodes.len());
+    let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, Vec3::new(-1.0, 0.0, 0.0), Vec3::X, 1e30, NONE);
+    assert_eq!(scene.triangles[cpu.triangle as usize].source, n as u32, "the CPU twin hits the wall");
     let ctx = common::gpu();
-    let tracer = PathTracer::new(
-        &ctx,
-        &scene,
-        &RenderSettings {
-            width: 2,
-            height: 2,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 2, height: 2, ..Default::default() }).unwrap();
     // One ray does a closest-hit and an any-hit traversal: about twice the loop budget.
-    let input = [
-        [-1.0, 0.0, 0.0, 1e30],
-        [1.0, 0.0, 0.0, f32::from_bits(NONE)],
-    ];
+    let input = [[-1.0, 0.0, 0.0, 1e30], [1.0, 0.0, 0.0, f32::from_bits(NONE)]];
     let out = common::run_probe(&ctx, &tracer, "probe_trace", &[], &input, 2);
-    let right =
-        out[0][1].to_bits() == cpu.triangle && (out[0][0] - 21.0).abs() < 1e-4 && out[1][0] == 1.0;
+    let right = out[0][1].to_bits() == cpu.triangle && (out[0][0] - 21.0).abs() < 1e-4 && out[1][0] == 1.0;
     let truncated = tracer.truncated_traversals().unwrap();
-    assert!(
-        right || truncated > 0,
-        "a traversal went wrong without being reported: {out:?}"
-    );
+    assert!(right || truncated > 0, "a traversal went wrong without being reported: {out:?}");
     // A ray that starts past the slabs needs few visits and must be right either way.
-    let input = [
-        [11.0, 0.0, 0.0, 1e30],
-        [1.0, 0.0, 0.0, f32::from_bits(NONE)],
-    ];
+    let input = [[11.0, 0.0, 0.0, 1e30], [1.0, 0.0, 0.0, f32::from_bits(NONE)]];
     let out = common::run_probe(&ctx, &tracer, "probe_trace", &[], &input, 2);
     assert_eq!(out[0][1].to_bits(), cpu.triangle);
     assert_eq!(out[1][0], 1.0);
-    assert_eq!(
-        tracer.truncated_traversals().unwrap(),
-        truncated,
-        "short traversals are not cut"
-    );
+    assert_eq!(tracer.truncated_traversals().unwrap(), truncated, "short traversals are not cut");
 }
 
 /// The slab field of `deep_traversals_are_right_or_reported` (120,000 triangles whose boxes all
@@ -374,13 +221,7 @@ fn deep_traversals_are_right_or_reported() {
 fn slab_field(slabs: bool, name: &str) -> gatetrace::scene::PreparedScene {
     use common::gltf_builder::{Camera, Material, Mesh, PointLight, Scene};
     use gatetrace::scene::{PreparedScene, load_gltf};
-    let mut mesh = Mesh {
-        positions: vec![],
-        normals: None,
-        uvs: None,
-        indices: vec![],
-        material: Some(0),
-    };
+    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
     for i in 0..if slabs { 120_000 } else { 0 } {
         let x = i as f32 * 1e-4;
         for p in [[x, 1.0, -0.9], [x, 1.0, 1.0], [x, -0.9, 1.0]] {
@@ -397,21 +238,11 @@ fn slab_field(slabs: bool, name: &str) -> gatetrace::scene::PreparedScene {
     };
     let gltf = Scene {
         meshes: if slabs { vec![mesh, wall] } else { vec![wall] },
-        materials: vec![Material {
-            double_sided: true,
-            ..Material::diffuse([0.5; 3])
-        }],
+        materials: vec![Material { double_sided: true, ..Material::diffuse([0.5; 3]) }],
         // Looking along +x (-z turned by -90 degrees about y); a field of view narrow enough
         // that no camera ray meets a slab.
-        camera: Some(Camera {
-            position: [-1.0, -0.05, -0.05],
-            rotation: [0.0, -0.70710678, 0.0, 0.70710678],
-            yfov: 0.01,
-        }),
-        point_lights: vec![PointLight {
-            position: [-0.5, -0.05, -0.05],
-            intensity: 100.0,
-        }],
+        camera: Some(Camera { position: [-1.0, -0.05, -0.05], rotation: [0.0, -0.70710678, 0.0, 0.70710678], yfov: 0.01 }),
+        point_lights: vec![PointLight { position: [-0.5, -0.05, -0.05], intensity: 100.0 }],
     };
     let dir = common::scratch_dir(name);
     PreparedScene::new(load_gltf(&gltf.write(&dir, "slabs.gltf")).unwrap()).unwrap()
@@ -427,37 +258,20 @@ fn deep_traversals_resume_until_they_are_complete() {
     let ctx = common::gpu();
     let with = slab_field(true, "slabs_with");
     let without = slab_field(false, "slabs_without");
-    assert!(
-        with.bvh.nodes.len() as u32 > 4 * gatetrace::bvh::TRAVERSAL_BUDGET,
-        "{} nodes",
-        with.bvh.nodes.len()
-    );
+    assert!(with.bvh.nodes.len() as u32 > 4 * gatetrace::bvh::TRAVERSAL_BUDGET, "{} nodes", with.bvh.nodes.len());
     for method in [Method::Path, Method::Direct] {
-        let settings = RenderSettings {
-            width: 4,
-            height: 4,
-            max_bounces: 1,
-            method,
-            seed: 3,
-            ..Default::default()
-        };
+        let settings = RenderSettings { width: 4, height: 4, max_bounces: 1, method, seed: 3, ..Default::default() };
         let render = |scene| {
             let mut tracer = create_integrator(&ctx, scene, &settings).unwrap();
             tracer.render_samples(16).unwrap();
-            (
-                tracer.film().unwrap(),
-                tracer.truncated_traversals().unwrap(),
-            )
+            (tracer.film().unwrap(), tracer.truncated_traversals().unwrap())
         };
         let ((a, cut), (b, _)) = (render(&with), render(&without));
         assert_eq!(cut, 0, "{method:?}: {cut} traversals cut short");
         let mean = b.mean_rgb()[0] as f32;
         assert!(mean > 0.0, "{method:?}: the wall is black");
         for (i, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
-            assert!(
-                (x - y).abs() <= 1e-4 * y.abs().max(mean),
-                "{method:?} element {i}: {x} with the slabs, {y} without"
-            );
+            assert!((x - y).abs() <= 1e-4 * y.abs().max(mean), "{method:?} element {i}: {x} with the slabs, {y} without");
         }
         println!("{method:?}: image mean {mean:.5} with and without the slabs");
     }

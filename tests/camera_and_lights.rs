@@ -17,49 +17,25 @@ use gatetrace::scene::{PreparedScene, load_gltf};
 const BATCHES: usize = 16;
 
 fn scene(name: &str) -> PreparedScene {
-    PreparedScene::new(
-        load_gltf(&common::repo_path(&format!("assets/scenes/{name}.gltf"))).unwrap(),
-    )
-    .unwrap()
+    PreparedScene::new(load_gltf(&common::repo_path(&format!("assets/scenes/{name}.gltf"))).unwrap()).unwrap()
 }
 
 /// The peer's settings: 64x64, at most 5 bounces (max_depth 6), no Russian roulette.
 fn settings(method: Method, gate: Gate, seed: u32) -> RenderSettings {
-    RenderSettings {
-        width: 64,
-        height: 64,
-        max_bounces: 5,
-        method,
-        gate,
-        seed,
-        ..Default::default()
-    }
+    RenderSettings { width: 64, height: 64, max_bounces: 5, method, gate, seed, ..Default::default() }
 }
 
 /// Renders `name` with `method` (BATCHES x spp) and compares it with the peer's `key`.
 fn check(name: &str, method: Method, gate: Gate, spp: u32, seed: u32, key: &str) {
     let ctx = common::gpu();
-    let films = common::render_films(
-        &ctx,
-        &scene(name),
-        &settings(method, gate, seed),
-        BATCHES,
-        spp,
-    );
+    let films = common::render_films(&ctx, &scene(name), &settings(method, gate, seed), BATCHES, spp);
     let label = format!("{name}_{}_{key}", method.name());
     check_image(&label, &films, &format!("{name}_peer/{key}"));
 }
 
 #[test]
 fn thin_lens_steady_image_matches_peer() {
-    check(
-        "cornell_box_thin_lens",
-        Method::Path,
-        Gate::None,
-        64,
-        1,
-        "steady",
-    );
+    check("cornell_box_thin_lens", Method::Path, Gate::None, 64, 1, "steady");
 }
 
 /// `direct` is compared at the steady state: at the box gate, the light of a pixel on the
@@ -70,122 +46,45 @@ fn thin_lens_steady_image_matches_peer() {
 /// have the gate's lengths, samples those edges densely and is compared at the gate.
 #[test]
 fn thin_lens_steady_image_matches_peer_with_direct_connections() {
-    check(
-        "cornell_box_thin_lens",
-        Method::Direct,
-        Gate::None,
-        32,
-        2,
-        "steady",
-    );
+    check("cornell_box_thin_lens", Method::Direct, Gate::None, 32, 2, "steady");
 }
 
 #[test]
 fn thin_lens_box_gate_matches_peer_with_ellipsoidal_connections() {
-    check(
-        "cornell_box_thin_lens",
-        Method::Ellipsoidal,
-        Gate::Box {
-            start: 3.1,
-            end: 3.15,
-        },
-        16,
-        3,
-        "gate_3_1_3_15",
-    );
+    check("cornell_box_thin_lens", Method::Ellipsoidal, Gate::Box { start: 3.1, end: 3.15 }, 16, 3, "gate_3_1_3_15");
 }
 
 #[test]
 fn thin_lens_transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
-    let gate = Gate::Transient {
-        start: 1.9,
-        width: 0.1,
-        bins: 20,
-    };
-    let films = common::render_films(
-        &ctx,
-        &scene("cornell_box_thin_lens"),
-        &settings(Method::Path, gate, 4),
-        BATCHES,
-        64,
-    );
-    check_transient(
-        "cornell_box_thin_lens_transient",
-        &films,
-        "cornell_box_thin_lens_peer/transient_1_9_step_0_1",
-        20,
-    );
+    let gate = Gate::Transient { start: 1.9, width: 0.1, bins: 20 };
+    let films = common::render_films(&ctx, &scene("cornell_box_thin_lens"), &settings(Method::Path, gate, 4), BATCHES, 64);
+    check_transient("cornell_box_thin_lens_transient", &films, "cornell_box_thin_lens_peer/transient_1_9_step_0_1", 20);
 }
 
 #[test]
 fn spot_light_steady_image_matches_peer() {
-    check(
-        "cornell_box_spot",
-        Method::Path,
-        Gate::None,
-        64,
-        11,
-        "steady",
-    );
+    check("cornell_box_spot", Method::Path, Gate::None, 64, 11, "steady");
 }
 
 #[test]
 fn spot_light_box_gate_matches_peer_with_direct_connections() {
-    check(
-        "cornell_box_spot",
-        Method::Direct,
-        Gate::Box {
-            start: 3.6,
-            end: 3.65,
-        },
-        64,
-        12,
-        "gate_3_6_3_65",
-    );
+    check("cornell_box_spot", Method::Direct, Gate::Box { start: 3.6, end: 3.65 }, 64, 12, "gate_3_6_3_65");
 }
 
 #[test]
 fn spot_light_box_gate_matches_peer_with_ellipsoidal_connections() {
-    check(
-        "cornell_box_spot",
-        Method::Ellipsoidal,
-        Gate::Box {
-            start: 3.6,
-            end: 3.65,
-        },
-        16,
-        13,
-        "gate_3_6_3_65",
-    );
+    check("cornell_box_spot", Method::Ellipsoidal, Gate::Box { start: 3.6, end: 3.65 }, 16, 13, "gate_3_6_3_65");
 }
 
 #[test]
 fn spot_light_transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
-    let gate = Gate::Transient {
-        start: 2.8,
-        width: 0.1,
-        bins: 20,
-    };
-    let films = common::render_films(
-        &ctx,
-        &scene("cornell_box_spot"),
-        &settings(Method::Path, gate, 14),
-        BATCHES,
-        64,
-    );
-    let bins = check_transient(
-        "cornell_box_spot_transient",
-        &films,
-        "cornell_box_spot_peer/transient_2_8_step_0_1",
-        20,
-    );
+    let gate = Gate::Transient { start: 2.8, width: 0.1, bins: 20 };
+    let films = common::render_films(&ctx, &scene("cornell_box_spot"), &settings(Method::Path, gate, 14), BATCHES, 64);
+    let bins = check_transient("cornell_box_spot_transient", &films, "cornell_box_spot_peer/transient_2_8_step_0_1", 20);
     // Nothing arrives before the shortest path (spot -> floor -> camera).
-    assert!(
-        bins.iter().any(|b| b.0 > 0.0),
-        "the spot light lights the cube"
-    );
+    assert!(bins.iter().any(|b| b.0 > 0.0), "the spot light lights the cube");
 }
 
 /// A directional light (a plane wave through the open front of the ceiling): `path` and
@@ -193,26 +92,12 @@ fn spot_light_transient_cube_matches_peer_per_bin() {
 /// so its transients are no reference), and against each other at a box gate.
 #[test]
 fn directional_light_steady_image_matches_peer() {
-    check(
-        "cornell_box_directional",
-        Method::Path,
-        Gate::None,
-        64,
-        21,
-        "steady",
-    );
+    check("cornell_box_directional", Method::Path, Gate::None, 64, 21, "steady");
 }
 
 #[test]
 fn directional_light_steady_image_matches_peer_with_direct_connections() {
-    check(
-        "cornell_box_directional",
-        Method::Direct,
-        Gate::None,
-        32,
-        22,
-        "steady",
-    );
+    check("cornell_box_directional", Method::Direct, Gate::None, 32, 22, "steady");
 }
 
 /// Also with glossy walls (GGX, metallic 0.5, roughness 0.4), whose BSDFs depend on the
@@ -222,41 +107,19 @@ fn directional_light_steady_image_matches_peer_with_direct_connections() {
 #[test]
 fn directional_light_direct_matches_path_at_a_box_gate() {
     let ctx = common::gpu();
-    let mut glossy = load_gltf(&common::repo_path(
-        "assets/scenes/cornell_box_directional.gltf",
-    ))
-    .unwrap();
+    let mut glossy = load_gltf(&common::repo_path("assets/scenes/cornell_box_directional.gltf")).unwrap();
     for m in &mut glossy.materials {
         (m.metallic, m.roughness) = (0.5, 0.4);
     }
-    let gate = Gate::Box {
-        start: 3.6,
-        end: 3.7,
-    };
-    let small = |method, seed| RenderSettings {
-        width: 32,
-        height: 32,
-        ..settings(method, gate.clone(), seed)
-    };
+    let gate = Gate::Box { start: 3.6, end: 3.7 };
+    let small = |method, seed| RenderSettings { width: 32, height: 32, ..settings(method, gate.clone(), seed) };
     for (label, scene, seed) in [
-        (
-            "directional box [3.6, 3.7)",
-            scene("cornell_box_directional"),
-            23,
-        ),
-        (
-            "glossy directional box [3.6, 3.7)",
-            PreparedScene::new(glossy).unwrap(),
-            33,
-        ),
+        ("directional box [3.6, 3.7)", scene("cornell_box_directional"), 23),
+        ("glossy directional box [3.6, 3.7)", PreparedScene::new(glossy).unwrap(), 33),
     ] {
         let path = common::render_films(&ctx, &scene, &small(Method::Path, seed), BATCHES, 64);
-        let direct =
-            common::render_films(&ctx, &scene, &small(Method::Direct, seed + 1), BATCHES, 64);
-        assert!(
-            path.iter().any(|f| f.mean_rgb()[0] > 0.0),
-            "{label}: the gate holds light"
-        );
+        let direct = common::render_films(&ctx, &scene, &small(Method::Direct, seed + 1), BATCHES, 64);
+        assert!(path.iter().any(|f| f.mean_rgb()[0] > 0.0), "{label}: the gate holds light");
         common::assert_films_agree(label, &direct, &path, 8, common::peer::ALPHA);
     }
 }
@@ -264,22 +127,10 @@ fn directional_light_direct_matches_path_at_a_box_gate() {
 #[test]
 fn ellipsoidal_connections_refuse_directional_lights() {
     let ctx = common::gpu();
-    let s = settings(
-        Method::Ellipsoidal,
-        Gate::Box {
-            start: 3.6,
-            end: 3.7,
-        },
-        25,
-    );
-    let e =
-        match gatetrace::integrator::create_integrator(&ctx, &scene("cornell_box_directional"), &s)
-        {
-            Ok(_) => panic!("ellipsoidal connections accepted a directional light"),
-            Err(e) => format!("{e:#}"),
-        };
-    assert!(
-        e.contains("directional lights") && e.contains("cornell_box_directional.gltf"),
-        "{e}"
-    );
+    let s = settings(Method::Ellipsoidal, Gate::Box { start: 3.6, end: 3.7 }, 25);
+    let e = match gatetrace::integrator::create_integrator(&ctx, &scene("cornell_box_directional"), &s) {
+        Ok(_) => panic!("ellipsoidal connections accepted a directional light"),
+        Err(e) => format!("{e:#}"),
+    };
+    assert!(e.contains("directional lights") && e.contains("cornell_box_directional.gltf"), "{e}");
 }

@@ -7,10 +7,7 @@ use std::process::{Command, Output};
 use gatetrace::film::output::read_npy_f32;
 
 fn gatetrace(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gatetrace"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
+    Command::new(env!("CARGO_BIN_EXE_gatetrace")).args(args).output().expect("the binary runs")
 }
 
 fn stderr(o: &Output) -> String {
@@ -21,23 +18,9 @@ fn stderr(o: &Output) -> String {
 fn help_explains_units() {
     let o = gatetrace(&["render", "--help"]);
     assert!(o.status.success());
-    let text = String::from_utf8_lossy(&o.stdout)
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ");
-    for needle in [
-        "metres",
-        "ps",
-        "box:A..B",
-        "transient:START,WIDTH,BINS",
-        "--spp",
-        "--time",
-        "[H, W, T, 3]",
-    ] {
-        assert!(
-            text.contains(needle),
-            "render --help should mention `{needle}`:\n{text}"
-        );
+    let text = String::from_utf8_lossy(&o.stdout).split_whitespace().collect::<Vec<_>>().join(" ");
+    for needle in ["metres", "ps", "box:A..B", "transient:START,WIDTH,BINS", "--spp", "--time", "[H, W, T, 3]"] {
+        assert!(text.contains(needle), "render --help should mention `{needle}`:\n{text}");
     }
 }
 
@@ -45,34 +28,13 @@ fn help_explains_units() {
 fn npy_output_has_the_documented_layout_and_metadata() {
     let dir = common::scratch_dir("cli_npy");
     let out = dir.join("steady.npy");
-    let o = gatetrace(&[
-        "render",
-        "--res",
-        "12x8",
-        "--spp",
-        "4",
-        "--max-bounces",
-        "2",
-        "--seed",
-        "5",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = gatetrace(&["render", "--res", "12x8", "--spp", "4", "--max-bounces", "2", "--seed", "5", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, data) = read_npy_f32(&out).unwrap();
     assert_eq!(shape, vec![8, 12, 3], "[H, W, 3]");
     assert!(data.iter().all(|v| v.is_finite()) && data.iter().any(|&v| v > 0.0));
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("steady.json")).unwrap()).unwrap();
-    for key in [
-        "scene",
-        "method",
-        "gate",
-        "spp",
-        "seed",
-        "elapsed_seconds",
-        "adapter",
-    ] {
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("steady.json")).unwrap()).unwrap();
+    for key in ["scene", "method", "gate", "spp", "seed", "elapsed_seconds", "adapter"] {
         assert!(meta.get(key).is_some(), "metadata lacks `{key}`: {meta}");
     }
     assert_eq!(meta["spp"], "4");
@@ -80,17 +42,7 @@ fn npy_output_has_the_documented_layout_and_metadata() {
     assert_eq!(meta["method"], "path");
 
     let cube = dir.join("cube.npy");
-    let o = gatetrace(&[
-        "render",
-        "--res",
-        "6x4",
-        "--spp",
-        "2",
-        "--gate",
-        "transient:1.9,0.5,7",
-        "--out",
-        cube.to_str().unwrap(),
-    ]);
+    let o = gatetrace(&["render", "--res", "6x4", "--spp", "2", "--gate", "transient:1.9,0.5,7", "--out", cube.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, _) = read_npy_f32(&cube).unwrap();
     assert_eq!(shape, vec![4, 6, 7, 3], "[H, W, T, 3]");
@@ -101,35 +53,17 @@ fn exr_output_has_a_layer_per_bin_and_metadata() {
     use exr::prelude::*;
     let dir = common::scratch_dir("cli_exr");
     let out = dir.join("cube.exr");
-    let o = gatetrace(&[
-        "render",
-        "--res",
-        "6x4",
-        "--spp",
-        "2",
-        "--gate",
-        "transient:6.5ns,200ps,5",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = gatetrace(&["render", "--res", "6x4", "--spp", "2", "--gate", "transient:6.5ns,200ps,5", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let image = read_all_data_from_file(&out).unwrap();
     assert_eq!(image.layer_data.len(), 5, "one layer per bin");
     // Custom attributes are stored in the headers; the reader files them under the layers.
     let attribute = |key: &str| {
         let key = Text::from(key);
-        image
-            .attributes
-            .other
-            .get(&key)
-            .or_else(|| image.layer_data[0].attributes.other.get(&key))
-            .cloned()
+        image.attributes.other.get(&key).or_else(|| image.layer_data[0].attributes.other.get(&key)).cloned()
     };
     let gate = attribute("gatetrace.gate").expect("gate attribute");
-    assert!(
-        matches!(&gate, AttributeValue::Text(t) if t.to_string() == "transient:6.5ns,200ps,5"),
-        "{gate:?}"
-    );
+    assert!(matches!(&gate, AttributeValue::Text(t) if t.to_string() == "transient:6.5ns,200ps,5"), "{gate:?}");
     assert!(attribute("gatetrace.adapter").is_some());
     assert!(attribute("gatetrace.spp").is_some());
     for layer in &image.layer_data {
@@ -144,20 +78,9 @@ fn time_budget_renders_passes_sized_to_the_budget() {
     // time recorded apart from the setup's.
     let dir = common::scratch_dir("cli_time");
     let out = dir.join("timed.npy");
-    let o = gatetrace(&[
-        "render",
-        "--res",
-        "8x8",
-        "--time",
-        "0.5",
-        "--samples-per-pass",
-        "3",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = gatetrace(&["render", "--res", "8x8", "--time", "0.5", "--samples-per-pass", "3", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
     let number = |key: &str| -> f64 { meta[key].as_str().unwrap().parse().unwrap() };
     assert!(number("spp") >= 1.0, "no sample rendered");
     let rendering = number("rendering_seconds");
@@ -170,110 +93,28 @@ fn bad_input_gives_clear_errors() {
     let out = dir.join("x.npy");
     let out = out.to_str().unwrap();
     let cases: &[(&[&str], &str)] = &[
-        (
-            &["render", "/nonexistent/scene.gltf", "--out", out],
-            "/nonexistent/scene.gltf",
-        ),
-        (
-            &["render", "--gate", "box:3.2..3.1", "--out", out],
-            "must exceed",
-        ),
-        (
-            &["render", "--gate", "wobble:1", "--out", out],
-            "unknown gate kind",
-        ),
-        (
-            &["render", "--gate", "box:1x..2", "--out", out],
-            "not a length",
-        ),
-        (
-            &["render", "--gate", "table:/nonexistent.csv", "--out", out],
-            "/nonexistent.csv",
-        ),
-        (
-            &[
-                "render",
-                "--method",
-                "direct",
-                "--max-bounces",
-                "30",
-                "--out",
-                out,
-            ],
-            "at most 24 bounces",
-        ),
-        (
-            &["render", "--debug-strategy", "1,2", "--out", out],
-            "needs --method direct",
-        ),
-        (
-            &[
-                "render",
-                "--method",
-                "direct",
-                "--debug-strategy",
-                "0,1",
-                "--out",
-                out,
-            ],
-            "not a strategy",
-        ),
-        (
-            &[
-                "render",
-                "--method",
-                "direct",
-                "--debug-strategy",
-                "1",
-                "--out",
-                out,
-            ],
-            "S,T",
-        ),
-        (
-            &["render", "--method", "ellipsoidal", "--out", out],
-            "draws target path lengths from the gate",
-        ),
+        (&["render", "/nonexistent/scene.gltf", "--out", out], "/nonexistent/scene.gltf"),
+        (&["render", "--gate", "box:3.2..3.1", "--out", out], "must exceed"),
+        (&["render", "--gate", "wobble:1", "--out", out], "unknown gate kind"),
+        (&["render", "--gate", "box:1x..2", "--out", out], "not a length"),
+        (&["render", "--gate", "table:/nonexistent.csv", "--out", out], "/nonexistent.csv"),
+        (&["render", "--method", "direct", "--max-bounces", "30", "--out", out], "at most 24 bounces"),
+        (&["render", "--debug-strategy", "1,2", "--out", out], "needs --method direct"),
+        (&["render", "--method", "direct", "--debug-strategy", "0,1", "--out", out], "not a strategy"),
+        (&["render", "--method", "direct", "--debug-strategy", "1", "--out", out], "S,T"),
+        (&["render", "--method", "ellipsoidal", "--out", out], "draws target path lengths from the gate"),
         (&["render", "--out", "image.png"], ".exr or .npy"),
         (&["render", "--spp", "0", "--out", out], "at least 1"),
         (&["render", "--res", "0x4", "--out", out], "resolution"),
-        (
-            &["render", "--aperture-radius", "0.1", "--out", out],
-            "give --focus-distance",
-        ),
-        (
-            &[
-                "render",
-                "--aperture-radius",
-                "0.1",
-                "--focus-distance",
-                "-2",
-                "--out",
-                out,
-            ],
-            "focus distance -2 m is not a positive length",
-        ),
-        (
-            &[
-                "render",
-                "--aperture-radius",
-                "nan",
-                "--focus-distance",
-                "2",
-                "--out",
-                out,
-            ],
-            "aperture radius NaN m",
-        ),
+        (&["render", "--aperture-radius", "0.1", "--out", out], "give --focus-distance"),
+        (&["render", "--aperture-radius", "0.1", "--focus-distance", "-2", "--out", out], "focus distance -2 m is not a positive length"),
+        (&["render", "--aperture-radius", "nan", "--focus-distance", "2", "--out", out], "aperture radius NaN m"),
     ];
     for (args, needle) in cases {
         let o = gatetrace(args);
         assert!(!o.status.success(), "{args:?} must fail");
         let e = stderr(&o);
-        assert!(
-            e.contains(needle),
-            "{args:?}: error should mention `{needle}`, got:\n{e}"
-        );
+        assert!(e.contains(needle), "{args:?}: error should mention `{needle}`, got:\n{e}");
         assert!(!e.contains("panicked"), "{args:?} panicked:\n{e}");
     }
 }
@@ -282,15 +123,7 @@ fn bad_input_gives_clear_errors() {
 fn without_an_adapter_the_error_says_how_to_get_one() {
     // Point the Vulkan loader at no driver at all.
     let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
-        .args([
-            "render",
-            "--res",
-            "4x4",
-            "--spp",
-            "1",
-            "--out",
-            "/dev/null.npy",
-        ])
+        .args(["render", "--res", "4x4", "--spp", "1", "--out", "/dev/null.npy"])
         .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
         .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
         .env_remove("WGPU_ADAPTER_NAME")
@@ -299,10 +132,7 @@ fn without_an_adapter_the_error_says_how_to_get_one() {
         .unwrap();
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(
-        e.contains("no GPU adapter") && e.contains("mesa-vulkan-drivers"),
-        "{e}"
-    );
+    assert!(e.contains("no GPU adapter") && e.contains("mesa-vulkan-drivers"), "{e}");
 }
 
 #[test]
@@ -310,27 +140,12 @@ fn stats_report_connections_per_strategy() {
     let dir = common::scratch_dir("cli_stats");
     let out = dir.join("gated.npy");
     let o = gatetrace(&[
-        "render",
-        "--method",
-        "direct",
-        "--res",
-        "8x8",
-        "--spp",
-        "2",
-        "--max-bounces",
-        "2",
-        "--gate",
-        "box:3.14..3.19",
-        "--stats",
-        "--out",
-        out.to_str().unwrap(),
+        "render", "--method", "direct", "--res", "8x8", "--spp", "2", "--max-bounces", "2", "--gate", "box:3.14..3.19",
+        "--stats", "--out", out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout).to_string();
-    assert!(
-        text.contains("skipped by gate") && text.contains("shadow rays"),
-        "{text}"
-    );
+    assert!(text.contains("skipped by gate") && text.contains("shadow rays"), "{text}");
     // One row per strategy with at most 2 bounces, (0,2) .. (3,1), and a total.
     for st in ["( 0, 2)", "( 1, 1)", "( 2, 2)", "( 3, 1)", "total"] {
         assert!(text.contains(st), "row {st} missing:\n{text}");
@@ -341,15 +156,7 @@ fn stats_report_connections_per_strategy() {
 fn profile_reports_gpu_time_per_stage() {
     // A gate of one bin on the Cornell box traces whole paths; a transient gate runs rounds.
     check_profile("box:3.14..3.19", &["trace_paths", "accumulate"]);
-    check_profile(
-        "transient:3.0,0.05,8",
-        &[
-            "generate_camera_rays",
-            "extend_paths",
-            "accumulate",
-            "setup_dispatch(rays)",
-        ],
-    );
+    check_profile("transient:3.0,0.05,8", &["generate_camera_rays", "extend_paths", "accumulate", "setup_dispatch(rays)"]);
 }
 
 /// Renders the Cornell box with `--profile` and `gate`, and checks that each of `stages` has a
@@ -357,33 +164,16 @@ fn profile_reports_gpu_time_per_stage() {
 fn check_profile(gate: &str, stages: &[&str]) {
     let dir = common::scratch_dir("cli_profile");
     let out = dir.join("p.npy");
-    let o = gatetrace(&[
-        "render",
-        "--res",
-        "16x16",
-        "--spp",
-        "8",
-        "--max-bounces",
-        "3",
-        "--gate",
-        gate,
-        "--profile",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = gatetrace(&["render", "--res", "16x16", "--spp", "8", "--max-bounces", "3", "--gate", gate, "--profile", "--out", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     let wall_seconds: f64 = {
-        let meta: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
+        let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
         meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
     };
     let mut total_ms = 0.0;
     for stage in stages {
-        let row = text
-            .lines()
-            .find(|l| l.split_whitespace().next() == Some(stage))
-            .unwrap_or_else(|| panic!("no row for {stage} ({gate}):\n{text}"));
+        let row = text.lines().find(|l| l.split_whitespace().next() == Some(stage)).unwrap_or_else(|| panic!("no row for {stage} ({gate}):\n{text}"));
         let cols: Vec<&str> = row.split_whitespace().collect();
         let ms: f64 = cols[1].parse().unwrap();
         let dispatches: u64 = cols[3].parse().unwrap();
@@ -392,8 +182,5 @@ fn check_profile(gate: &str, stages: &[&str]) {
     }
     // A check of the timestamp units, not of speed: the stages ran inside the render's wall
     // time (a wrong tick period would put them orders of magnitude off).
-    assert!(
-        total_ms > 0.0 && total_ms / 1e3 <= wall_seconds + 1.0,
-        "{total_ms} ms of stages in a {wall_seconds} s render"
-    );
+    assert!(total_ms > 0.0 && total_ms / 1e3 <= wall_seconds + 1.0, "{total_ms} ms of stages in a {wall_seconds} s render");
 }

@@ -20,16 +20,9 @@ fn code_integral(points: &[(f64, f64)], x: f64) -> f64 {
         let at_end = a.1 + (b.1 - a.1) * (end - a.0) / (b.0 - a.0);
         0.5 * (a.1 + at_end) * (end - a.0)
     };
-    let period: f64 = points
-        .windows(2)
-        .map(|w| trapezoid(w[0], w[1], w[1].0))
-        .sum();
+    let period: f64 = points.windows(2).map(|w| trapezoid(w[0], w[1], w[1].0)).sum();
     let whole = x.floor();
-    whole * period
-        + points
-            .windows(2)
-            .map(|w| trapezoid(w[0], w[1], x - whole))
-            .sum::<f64>()
+    whole * period + points.windows(2).map(|w| trapezoid(w[0], w[1], x - whole)).sum::<f64>()
 }
 
 #[test]
@@ -41,33 +34,10 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
     // Bins of 0.1 mm over every path length the scene allows with 3 bounces.
     let width = 1e-4;
     let bins = ((longest + 0.01) / width).ceil() as u32;
-    let base = RenderSettings {
-        width: 4,
-        height: 4,
-        max_bounces: bounces,
-        method: Method::Path,
-        seed: 17,
-        ..Default::default()
-    };
+    let base = RenderSettings { width: 4, height: 4, max_bounces: bounces, method: Method::Path, seed: 17, ..Default::default() };
     let spp = 64;
-    let render = |gate: Gate| {
-        common::render_films(
-            &ctx,
-            &scene,
-            &RenderSettings {
-                gate,
-                ..base.clone()
-            },
-            1,
-            spp,
-        )
-        .remove(0)
-    };
-    let transient = render(Gate::Transient {
-        start: 0.0,
-        width,
-        bins,
-    });
+    let render = |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, spp).remove(0);
+    let transient = render(Gate::Transient { start: 0.0, width, bins });
     let pixels = 16;
     let bins = bins as usize;
     let mut steady = vec![0.0f64; pixels * 3];
@@ -83,18 +53,11 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
         CwCode::Hamiltonian4(3),
         CwCode::Hamiltonian4(4),
         CwCode::MSequence { chips: 31 },
-        CwCode::DepthSelective {
-            chips: 32,
-            neighbours: 3,
-        },
+        CwCode::DepthSelective { chips: 32, neighbours: 3 },
     ];
     for code in codes {
         for (frequency_hz, phase_deg) in [(300e6, 0.0), (450e6, 137.0)] {
-            let gate = Gate::CwCode {
-                frequency_hz,
-                phase_deg,
-                code,
-            };
+            let gate = Gate::CwCode { frequency_hz, phase_deg, code };
             let coded = render(gate.clone());
             let points = code.breakpoints();
             let per_metre = frequency_hz / SPEED_OF_LIGHT;
@@ -102,10 +65,7 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
             // The code's mean over each bin.
             let means: Vec<f64> = (0..bins)
                 .map(|b| {
-                    let (x0, x1) = (
-                        (b as f64 * width) * per_metre + phase,
-                        ((b + 1) as f64 * width) * per_metre + phase,
-                    );
+                    let (x0, x1) = ((b as f64 * width) * per_metre + phase, ((b + 1) as f64 * width) * per_metre + phase);
                     (code_integral(&points, x1) - code_integral(&points, x0)) / (x1 - x0)
                 })
                 .collect();
@@ -114,18 +74,12 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
             let mut spread = 0.0f64;
             for p in 0..pixels {
                 for c in 0..3 {
-                    let integrated: f64 = (0..bins)
-                        .map(|b| transient.data[(p * bins + b) * 3 + c] as f64 * means[b])
-                        .sum();
+                    let integrated: f64 = (0..bins).map(|b| transient.data[(p * bins + b) * 3 + c] as f64 * means[b]).sum();
                     let s = steady[p * 3 + c];
                     let ours = coded.data[p * 3 + c] as f64;
                     let bound = (within_bin + 1e-4) * s;
                     worst = worst.max((ours - integrated).abs() / bound);
-                    spread = spread.max(
-                        (ours / s - integrated / s)
-                            .abs()
-                            .max((ours / s - 1.0).abs()),
-                    );
+                    spread = spread.max((ours / s - integrated / s).abs().max((ours / s - 1.0).abs()));
                     assert!(
                         (ours - integrated).abs() <= bound,
                         "{}: pixel {p} channel {c}: {ours:.6e} vs the integrated transient {integrated:.6e} (bound {bound:.2e})",
@@ -133,21 +87,10 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
                     );
                 }
             }
-            println!(
-                "{}: largest difference {worst:.3} of its bound",
-                gate.describe()
-            );
+            println!("{}: largest difference {worst:.3} of its bound", gate.describe());
             // The bound must be small against what the code does to the image.
-            assert!(
-                within_bin + 1e-4 < 0.02,
-                "{}: bins too wide for the code",
-                gate.describe()
-            );
-            assert!(
-                spread > 0.05,
-                "{}: the code leaves the image as the steady state",
-                gate.describe()
-            );
+            assert!(within_bin + 1e-4 < 0.02, "{}: bins too wide for the code", gate.describe());
+            assert!(spread > 0.05, "{}: the code leaves the image as the steady state", gate.describe());
         }
     }
 }

@@ -25,36 +25,11 @@ fn generic_configurations_match_the_oracle() {
         assert_eq!(r.non_finite, 0, "{}: non-finite outputs", r.family);
         assert!(r.cut > 10_000, "{}: only {} sections", r.family, r.cut);
         // Validity can differ only where g is within rounding of 0.
-        assert!(
-            r.validity_mismatches <= r.configs / 1000,
-            "{}: {} validity mismatches",
-            r.family,
-            r.validity_mismatches
-        );
-        assert!(
-            r.theta_total_error.quantile(0.99) < 1e-4,
-            "{}: Theta p99 {}",
-            r.family,
-            r.theta_total_error.quantile(0.99)
-        );
-        assert!(
-            r.length_error.quantile(0.99) < 1e-6,
-            "{}: |L - tau|/tau p99 {}",
-            r.family,
-            r.length_error.quantile(0.99)
-        );
-        assert!(
-            r.jacobian_error.quantile(0.99) < 1e-4,
-            "{}: J p99 {}",
-            r.family,
-            r.jacobian_error.quantile(0.99)
-        );
-        assert!(
-            r.jacobian_error.quantile(0.5) < 1e-6,
-            "{}: J median {}",
-            r.family,
-            r.jacobian_error.quantile(0.5)
-        );
+        assert!(r.validity_mismatches <= r.configs / 1000, "{}: {} validity mismatches", r.family, r.validity_mismatches);
+        assert!(r.theta_total_error.quantile(0.99) < 1e-4, "{}: Theta p99 {}", r.family, r.theta_total_error.quantile(0.99));
+        assert!(r.length_error.quantile(0.99) < 1e-6, "{}: |L - tau|/tau p99 {}", r.family, r.length_error.quantile(0.99));
+        assert!(r.jacobian_error.quantile(0.99) < 1e-4, "{}: J p99 {}", r.family, r.jacobian_error.quantile(0.99));
+        assert!(r.jacobian_error.quantile(0.5) < 1e-6, "{}: J median {}", r.family, r.jacobian_error.quantile(0.5));
     }
 }
 
@@ -67,19 +42,9 @@ fn sliver_triangles_are_as_accurate_as_random_ones() {
     let random = run(Family::Random, 50_000, 7);
     let sliver = run(Family::Sliver, 50_000, 7);
     assert_eq!(sliver.non_finite, 0);
-    let (r99, s99) = (
-        random.jacobian_error.quantile(0.99),
-        sliver.jacobian_error.quantile(0.99),
-    );
-    assert!(
-        s99 < 2.0 * r99,
-        "sliver J p99 {s99:.2e} against random {r99:.2e}"
-    );
-    assert!(
-        sliver.jacobian_error.quantile(1.0) < 1e-4,
-        "sliver J max {:.2e}",
-        sliver.jacobian_error.quantile(1.0)
-    );
+    let (r99, s99) = (random.jacobian_error.quantile(0.99), sliver.jacobian_error.quantile(0.99));
+    assert!(s99 < 2.0 * r99, "sliver J p99 {s99:.2e} against random {r99:.2e}");
+    assert!(sliver.jacobian_error.quantile(1.0) < 1e-4, "sliver J max {:.2e}", sliver.jacobian_error.quantile(1.0));
 }
 
 #[test]
@@ -92,28 +57,18 @@ fn adversarial_configurations_stay_finite() {
     }
 }
 
+
 /// Sum of Theta over every triangle of the scene (f64 oracle, brute force) and each triangle's.
-fn oracle_thetas(
-    scene: &gatetrace::scene::PreparedScene,
-    fs: glam::Vec3,
-    fc: glam::Vec3,
-    tau_e: f32,
-) -> Vec<f64> {
+fn oracle_thetas(scene: &gatetrace::scene::PreparedScene, fs: glam::Vec3, fc: glam::Vec3, tau_e: f32) -> Vec<f64> {
     use gatetrace::ellipsoid::{Spheroid, Triangle, clip_arcs};
-    let sp = Spheroid {
-        focus_s: fs.as_dvec3(),
-        focus_c: fc.as_dvec3(),
-        length: tau_e as f64,
-    };
+    let sp = Spheroid { focus_s: fs.as_dvec3(), focus_c: fc.as_dvec3(), length: tau_e as f64 };
     scene
         .triangles
         .iter()
         .map(|t| {
             let v0 = t.v0.as_dvec3();
             let (e1, e2) = (t.e1.as_dvec3(), t.e2.as_dvec3());
-            let tri = Triangle {
-                vertices: [v0, v0 + e1, v0 + e2],
-            };
+            let tri = Triangle { vertices: [v0, v0 + e1, v0 + e2] };
             match sp.section(v0, e1.cross(e2).normalize()) {
                 Some(sec) => clip_arcs(&sec, &tri).total,
                 None => 0.0,
@@ -126,11 +81,8 @@ fn oracle_thetas(
 const EXHAUSTIVE: &[(&str, f64)] = &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64)];
 /// The exhaustive query with picks weighed by arcs times the reflection factor (render
 /// --query-weights reflection).
-const EXHAUSTIVE_REFLECTION: &[(&str, f64)] = &[
-    ("QUERY_SPLIT", 0.0),
-    ("QUERY_ALLOWANCE", u32::MAX as f64),
-    ("QUERY_REFLECTION_WEIGHTS", 1.0),
-];
+const EXHAUSTIVE_REFLECTION: &[(&str, f64)] =
+    &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64), ("QUERY_REFLECTION_WEIGHTS", 1.0)];
 
 /// Runs `probe_ellipsoid_query` with the default query settings: (triangle, the sample's weight
 /// in (triangle, theta), theta, J, point, loop iterations).
@@ -152,37 +104,12 @@ fn run_queries_with(
     let input: Vec<[f32; 4]> = queries
         .iter()
         .flat_map(|(fs, fc, tau, u, key)| {
-            [
-                [fs.x, fs.y, fs.z, *tau],
-                [fc.x, fc.y, fc.z, *u],
-                [
-                    f32::from_bits(key[0]),
-                    f32::from_bits(key[1]),
-                    f32::from_bits(key[2]),
-                    0.0,
-                ],
-            ]
+            [[fs.x, fs.y, fs.z, *tau], [fc.x, fc.y, fc.z, *u], [f32::from_bits(key[0]), f32::from_bits(key[1]), f32::from_bits(key[2]), 0.0]]
         })
         .collect();
-    let out = common::run_probe(
-        ctx,
-        tracer,
-        "probe_ellipsoid_query",
-        constants,
-        &input,
-        2 * queries.len(),
-    );
+    let out = common::run_probe(ctx, tracer, "probe_ellipsoid_query", constants, &input, 2 * queries.len());
     out.chunks(2)
-        .map(|o| {
-            (
-                o[0][0].to_bits(),
-                o[0][1],
-                o[0][2],
-                o[0][3],
-                glam::Vec3::new(o[1][0], o[1][1], o[1][2]),
-                o[1][3].to_bits(),
-            )
-        })
+        .map(|o| (o[0][0].to_bits(), o[0][1], o[0][2], o[0][3], glam::Vec3::new(o[1][0], o[1][1], o[1][2]), o[1][3].to_bits()))
         .collect()
 }
 
@@ -194,20 +121,8 @@ fn bvh_queries_find_every_intersected_triangle() {
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let mut rng = gatetrace::rng::Rng::new(3, 0, 0);
-    for (name, scene) in [
-        ("cornell box", common::cornell_box()),
-        ("soup", common::soup_scene(2000, 12, "query_soup")),
-    ] {
-        let tracer = PathTracer::new(
-            &ctx,
-            &scene,
-            &RenderSettings {
-                width: 4,
-                height: 4,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+    for (name, scene) in [("cornell box", common::cornell_box()), ("soup", common::soup_scene(2000, 12, "query_soup"))] {
+        let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
         let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
         let queries: Vec<_> = (0..400u32)
             .map(|i| {
@@ -218,9 +133,7 @@ fn bvh_queries_find_every_intersected_triangle() {
             .collect();
         let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
         let (mut cut, mut nodes) = (0, 0u64);
-        for ((fs, fc, tau, _, _), &(tri, total, _, _, point, visited)) in
-            queries.iter().zip(&results)
-        {
+        for ((fs, fc, tau, _, _), &(tri, total, _, _, point, visited)) in queries.iter().zip(&results) {
             let thetas = oracle_thetas(&scene, *fs, *fc, *tau);
             let expected: f64 = thetas.iter().sum();
             nodes += visited as u64;
@@ -231,72 +144,34 @@ fn bvh_queries_find_every_intersected_triangle() {
             );
             if expected > 1e-3 {
                 cut += 1;
-                assert_ne!(
-                    tri,
-                    gatetrace::gpu::layout::NONE,
-                    "{name}: no triangle picked (oracle sum {expected})"
-                );
-                assert!(
-                    thetas[tri as usize] > 0.0,
-                    "{name}: picked triangle {tri} is not cut"
-                );
+                assert_ne!(tri, gatetrace::gpu::layout::NONE, "{name}: no triangle picked (oracle sum {expected})");
+                assert!(thetas[tri as usize] > 0.0, "{name}: picked triangle {tri} is not cut");
                 let l = point.distance(*fs) + point.distance(*fc);
-                assert!(
-                    (l - tau).abs() < 1e-5 * tau,
-                    "{name}: sampled point has L = {l}, tau_e = {tau}"
-                );
+                assert!((l - tau).abs() < 1e-5 * tau, "{name}: sampled point has L = {l}, tau_e = {tau}");
             }
         }
-        println!(
-            "{name}: {cut} of {} queries cut the scene; {:.1} nodes visited per query of {}",
-            queries.len(),
-            nodes as f64 / queries.len() as f64,
-            scene.bvh.nodes.len()
-        );
+        println!("{name}: {cut} of {} queries cut the scene; {:.1} nodes visited per query of {}", queries.len(), nodes as f64 / queries.len() as f64, scene.bvh.nodes.len());
         assert!(cut > 100);
         use gatetrace::integrator::Integrator;
-        assert_eq!(
-            tracer.truncated_traversals().unwrap(),
-            0,
-            "{name}: queries ran out of the device's loop budget"
-        );
+        assert_eq!(tracer.truncated_traversals().unwrap(), 0, "{name}: queries ran out of the device's loop budget");
     }
 }
 
 /// Runs 40,000 exhaustive queries (`constants`) of one spheroid on a 2000-triangle soup and
 /// checks with a chi-square test that they pick triangle i with probability q_i / sum q,
 /// q_i = Theta_i times `factor(i)`; returns the triangles with q > 0.
-fn check_picks(
-    constants: &[(&'static str, f64)],
-    factor: impl Fn(&gatetrace::scene::PreparedScene, usize) -> f64,
-) -> usize {
+fn check_picks(constants: &[(&'static str, f64)], factor: impl Fn(&gatetrace::scene::PreparedScene, usize) -> f64) -> usize {
     use common::stats::chi2_test;
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let scene = common::soup_scene(2000, 12, "reservoir_soup");
-    let tracer = PathTracer::new(
-        &ctx,
-        &scene,
-        &RenderSettings {
-            width: 4,
-            height: 4,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let (fs, fc, tau) = (
-        glam::Vec3::new(-0.2, 0.1, 0.0),
-        glam::Vec3::new(0.25, -0.1, 0.1),
-        0.9f32,
-    );
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let (fs, fc, tau) = (glam::Vec3::new(-0.2, 0.1, 0.0), glam::Vec3::new(0.25, -0.1, 0.1), 0.9f32);
     let n = 40_000u32;
     let queries: Vec<_> = (0..n).map(|i| (fs, fc, tau, 0.5, [i, 99, 7])).collect();
     let results = run_queries_with(&ctx, &tracer, constants, &queries);
-    let weights: Vec<f64> = oracle_thetas(&scene, fs, fc, tau)
-        .iter()
-        .enumerate()
-        .map(|(i, theta)| theta * factor(&scene, i))
-        .collect();
+    let weights: Vec<f64> =
+        oracle_thetas(&scene, fs, fc, tau).iter().enumerate().map(|(i, theta)| theta * factor(&scene, i)).collect();
     let total: f64 = weights.iter().sum();
     let mut observed = vec![0.0; weights.len()];
     for r in &results {
@@ -306,10 +181,7 @@ fn check_picks(
     let cut = weights.iter().filter(|&&w| w > 0.0).count();
     let (stat, dof, p) = chi2_test(&observed, &expected);
     println!("{cut} triangles with weight; chi2 {stat:.1}, dof {dof}, p {p:.3}");
-    assert!(
-        p > 0.01,
-        "picks do not follow q_i / sum q: chi2 {stat:.1}, dof {dof}, p {p:.2e}"
-    );
+    assert!(p > 0.01, "picks do not follow q_i / sum q: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
     cut
 }
 
@@ -317,10 +189,7 @@ fn check_picks(
 fn reservoir_picks_triangles_in_proportion_to_their_arcs() {
     // By default the exhaustive query picks triangle i with probability Theta_i / sum Theta.
     let cut = check_picks(EXHAUSTIVE, |_, _| 1.0);
-    assert!(
-        cut > 20,
-        "the test spheroid should cut many triangles ({cut})"
-    );
+    assert!(cut > 20, "the test spheroid should cut many triangles ({cut})");
 }
 
 #[test]
@@ -340,15 +209,10 @@ fn reservoir_picks_follow_arcs_times_the_reflection_factor() {
     let cut = check_picks(EXHAUSTIVE_REFLECTION, |scene, i| {
         let t = &scene.triangles[i];
         let v0 = t.v0.as_dvec3();
-        let tri = gatetrace::ellipsoid::Triangle {
-            vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()],
-        };
+        let tri = gatetrace::ellipsoid::Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] };
         reflection_factor(&query, &tri, &scene.materials[t.material as usize])
     });
-    assert!(
-        cut > 10,
-        "the test spheroid should cut many triangles that reflect between its foci ({cut})"
-    );
+    assert!(cut > 10, "the test spheroid should cut many triangles that reflect between its foci ({cut})");
 }
 
 /// The integrand of the quad test: the geometry terms of a one-bounce path x_s -> x -> x_c over
@@ -371,8 +235,7 @@ fn quad_area_integral(fs: glam::DVec3, fc: glam::DVec3, a: f64, b: f64) -> (f64,
             for i in 0..n {
                 for j in 0..n {
                     let (u, v) = (rng.next_f32() as f64, rng.next_f32() as f64);
-                    let x =
-                        glam::DVec3::new(-0.5 + (i as f64 + u) * h, -0.5 + (j as f64 + v) * h, 0.0);
+                    let x = glam::DVec3::new(-0.5 + (i as f64 + u) * h, -0.5 + (j as f64 + v) * h, 0.0);
                     let l = x.distance(fs) + x.distance(fc);
                     if l >= a && l < b {
                         sum += quad_integrand(x, fs, fc);
@@ -406,81 +269,46 @@ fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
     use glam::DVec3;
     let (fs, fc) = (DVec3::new(0.1, 0.2, 0.6), DVec3::new(-0.2, 0.1, 0.8));
     let shortest = (0..=200)
-        .flat_map(|i| {
-            (0..=200)
-                .map(move |j| DVec3::new(-0.5 + i as f64 / 200.0, -0.5 + j as f64 / 200.0, 0.0))
-        })
+        .flat_map(|i| (0..=200).map(move |j| DVec3::new(-0.5 + i as f64 / 200.0, -0.5 + j as f64 / 200.0, 0.0)))
         .map(|x| x.distance(fs) + x.distance(fc))
         .fold(f64::INFINITY, f64::min);
     let ctx = common::gpu();
     let gltf = Scene {
         meshes: vec![quad_z(0.5, 0.0, true, 0), quad_z(0.05, 5.0, false, 1)],
         materials: vec![Material::diffuse([0.5; 3]), Material::emitter(1.0)],
-        camera: Some(Camera {
-            position: [-0.2, 0.1, 0.8],
-            rotation: [0.0, 0.0, 0.0, 1.0],
-            yfov: 0.8,
-        }),
+        camera: Some(Camera { position: [-0.2, 0.1, 0.8], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.8 }),
         point_lights: vec![],
     };
     let scene = gatetrace::scene::PreparedScene::new(
-        gatetrace::scene::load_gltf(
-            &gltf.write(&common::scratch_dir("ellipsoid_quad"), "quad.gltf"),
-        )
-        .unwrap(),
+        gatetrace::scene::load_gltf(&gltf.write(&common::scratch_dir("ellipsoid_quad"), "quad.gltf")).unwrap(),
     )
     .unwrap();
-    let tracer = PathTracer::new(
-        &ctx,
-        &scene,
-        &RenderSettings {
-            width: 4,
-            height: 4,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     // The quad's two triangles (the emitter far above is never reached by these spheroids).
     let quad: Vec<Triangle> = scene.triangles[..]
         .iter()
         .filter(|t| t.v0.z == 0.0)
         .map(|t| {
             let v0 = t.v0.as_dvec3();
-            Triangle {
-                vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()],
-            }
+            Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
         })
         .collect();
     assert_eq!(quad.len(), 2);
     let mut rng = gatetrace::rng::Rng::new(5, 0, 0);
-    for (a, b) in [
-        (shortest + 0.05, shortest + 0.0575),
-        (shortest + 0.1, shortest + 0.6),
-    ] {
+    for (a, b) in [(shortest + 0.05, shortest + 0.0575), (shortest + 0.1, shortest + 0.6)] {
         let (reference, reference_error) = quad_area_integral(fs, fc, a, b);
         let n = 40_000;
-        let taus: Vec<f64> = (0..n)
-            .map(|_| a + (b - a) * rng.next_f32() as f64)
-            .collect();
-        let us: Vec<(f64, f64)> = (0..n)
-            .map(|_| (rng.next_f32() as f64, rng.next_f32() as f64))
-            .collect();
+        let taus: Vec<f64> = (0..n).map(|_| a + (b - a) * rng.next_f32() as f64).collect();
+        let us: Vec<(f64, f64)> = (0..n).map(|_| (rng.next_f32() as f64, rng.next_f32() as f64)).collect();
         // f64 oracle: brute force over the quad's triangles.
         let oracle: Vec<f64> = taus
             .iter()
             .zip(&us)
             .map(|(&tau, &(u_pick, _))| {
-                let sp = Spheroid {
-                    focus_s: fs,
-                    focus_c: fc,
-                    length: tau,
-                };
+                let sp = Spheroid { focus_s: fs, focus_c: fc, length: tau };
                 let found: Vec<_> = quad
                     .iter()
-                    .filter_map(|t| {
-                        sp.section(t.vertices[0], t.normal())
-                            .map(|s| (s, clip_arcs(&s, t)))
-                    })
+                    .filter_map(|t| sp.section(t.vertices[0], t.normal()).map(|s| (s, clip_arcs(&s, t))))
                     .filter(|(_, arcs)| arcs.total > 0.0)
                     .collect();
                 let total: f64 = found.iter().map(|(_, arcs)| arcs.total).sum();
@@ -501,15 +329,7 @@ fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
             .iter()
             .zip(&us)
             .enumerate()
-            .map(|(i, (&tau, &(_, u_theta)))| {
-                (
-                    fs.as_vec3(),
-                    fc.as_vec3(),
-                    tau as f32,
-                    u_theta as f32,
-                    [i as u32, 5, 6],
-                )
-            })
+            .map(|(i, (&tau, &(_, u_theta)))| (fs.as_vec3(), fc.as_vec3(), tau as f32, u_theta as f32, [i as u32, 5, 6]))
             .collect();
         let device: Vec<f64> = run_queries(&ctx, &tracer, &queries)
             .iter()
@@ -526,10 +346,7 @@ fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
             println!(
                 "gate [{a:.4}, {b:.4}): {name} {mean:.6e} +- {error:.1e}, area sampling {reference:.6e} +- {reference_error:.1e}, z {z:+.2}"
             );
-            assert!(
-                z.abs() < 4.0,
-                "{name}: {mean} +- {error} vs area sampling {reference} (z = {z:.2})"
-            );
+            assert!(z.abs() < 4.0, "{name}: {mean} +- {error} vs area sampling {reference} (z = {z:.2})");
         }
     }
 }

@@ -9,9 +9,7 @@
 
 mod common;
 
-use gatetrace::ellipsoid::query::{
-    Query, QueryScene, arc_weight, pick, reached, reflection_factor,
-};
+use gatetrace::ellipsoid::query::{QueryScene, Query, arc_weight, pick, reached, reflection_factor};
 use gatetrace::ellipsoid::{Spheroid, Triangle, clip_arcs};
 use gatetrace::gpu::layout::NONE;
 use gatetrace::integrator::QuerySettings;
@@ -20,84 +18,40 @@ use glam::{DVec3, DVec4, Vec3};
 const ALPHA: f64 = 0.01;
 /// The default query with reflection weights (as NLOS captures use), which the checks below
 /// test; with arcs alone the weights are the factor-free special case (tests/ellipsoid.rs).
-const REFLECTION: QuerySettings = QuerySettings {
-    split: 1.0,
-    bottom_nodes: 31,
-    allowance: 4096,
-    reflection_weights: true,
-};
+const REFLECTION: QuerySettings = QuerySettings { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true };
 /// Triangles are compared in groups of consecutive BVH positions.
 const GROUPS: usize = 12;
 
 fn oracle_triangle(t: &gatetrace::gpu::layout::Triangle) -> Triangle {
     let v0 = t.v0.as_dvec3();
-    Triangle {
-        vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()],
-    }
+    Triangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
 }
 
 /// Every triangle's exact arcs' angle and reflection factor in a query for reflecting vertices
 /// (f64 oracle, brute force): the reservoir weight is their product.
-fn exact_arcs_and_factors(
-    scene: &gatetrace::scene::PreparedScene,
-    fs: DVec3,
-    fc: DVec3,
-    tau_e: f64,
-) -> Vec<(f64, f64)> {
-    let sp = Spheroid {
-        focus_s: fs,
-        focus_c: fc,
-        length: tau_e,
-    };
-    let query = Query {
-        focus_s: fs,
-        focus_c: fc,
-        tau_e,
-        ignore: [NONE; 2],
-        lights_only: false,
-        reach: [DVec4::ZERO; 2],
-    };
+fn exact_arcs_and_factors(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<(f64, f64)> {
+    let sp = Spheroid { focus_s: fs, focus_c: fc, length: tau_e };
+    let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
     scene
         .triangles
         .iter()
         .map(|t| {
             let tri = oracle_triangle(t);
-            let arcs = sp
-                .section(tri.vertices[0], tri.normal())
-                .map_or(0.0, |s| clip_arcs(&s, &tri).total);
-            (
-                arcs,
-                reflection_factor(&query, &tri, &scene.materials[t.material as usize]),
-            )
+            let arcs = sp.section(tri.vertices[0], tri.normal()).map_or(0.0, |s| clip_arcs(&s, &tri).total);
+            (arcs, reflection_factor(&query, &tri, &scene.materials[t.material as usize]))
         })
         .collect()
 }
 
 /// The reservoir weights q = arcs x factor (what the twin's weights and W x pick come to).
-fn exact_weights(
-    scene: &gatetrace::scene::PreparedScene,
-    fs: DVec3,
-    fc: DVec3,
-    tau_e: f64,
-) -> Vec<f64> {
-    exact_arcs_and_factors(scene, fs, fc, tau_e)
-        .iter()
-        .map(|(arcs, factor)| arcs * factor)
-        .collect()
+fn exact_weights(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
+    exact_arcs_and_factors(scene, fs, fc, tau_e).iter().map(|(arcs, factor)| arcs * factor).collect()
 }
 
 /// The arcs where the picks' density is positive (factor > 0): what a pick's weight, the
 /// inverse of its density in (triangle, theta), comes to.
-fn exact_sampled_arcs(
-    scene: &gatetrace::scene::PreparedScene,
-    fs: DVec3,
-    fc: DVec3,
-    tau_e: f64,
-) -> Vec<f64> {
-    exact_arcs_and_factors(scene, fs, fc, tau_e)
-        .iter()
-        .map(|&(arcs, factor)| if factor > 0.0 { arcs } else { 0.0 })
-        .collect()
+fn exact_sampled_arcs(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
+    exact_arcs_and_factors(scene, fs, fc, tau_e).iter().map(|&(arcs, factor)| if factor > 0.0 { arcs } else { 0.0 }).collect()
 }
 
 /// Spheroids like a render's: foci at the light's centre, the pinhole and points on the sphere
@@ -125,12 +79,7 @@ fn spheroids(scene: &gatetrace::scene::PreparedScene) -> Vec<(DVec3, DVec3, f64)
 /// their sample variance can fall far below the true one; `second_moments` (per group, when
 /// given) holds E[sample^2] from the estimator's own formula, and the variance used is the
 /// larger of the two.
-fn group_z(
-    samples: &[Vec<f64>],
-    exact: &[f64],
-    relative: f64,
-    second_moments: Option<&[f64]>,
-) -> Vec<f64> {
+fn group_z(samples: &[Vec<f64>], exact: &[f64], relative: f64, second_moments: Option<&[f64]>) -> Vec<f64> {
     let n = samples.len() as f64;
     (0..exact.len())
         .map(|g| {
@@ -170,24 +119,11 @@ fn arc_weights_from_circular_intervals_equal_the_clipped_arcs() {
     use gatetrace::ellipsoid::stress::{Family, generate};
     let mut worst = 0.0f64;
     let mut cut = 0;
-    for family in [
-        Family::Random,
-        Family::Sliver,
-        Family::PlaneThroughFocus,
-        Family::NearTangent,
-    ] {
+    for family in [Family::Random, Family::Sliver, Family::PlaneThroughFocus, Family::NearTangent] {
         for c in generate(family, 20_000, 9) {
-            let sp = Spheroid {
-                focus_s: c.focus_s.as_dvec3(),
-                focus_c: c.focus_c.as_dvec3(),
-                length: c.tau_e as f64,
-            };
-            let tri = Triangle {
-                vertices: c.triangle.map(|v| v.as_dvec3()),
-            };
-            let arcs = sp
-                .section(tri.vertices[0], tri.normal())
-                .map_or(0.0, |s| clip_arcs(&s, &tri).total);
+            let sp = Spheroid { focus_s: c.focus_s.as_dvec3(), focus_c: c.focus_c.as_dvec3(), length: c.tau_e as f64 };
+            let tri = Triangle { vertices: c.triangle.map(|v| v.as_dvec3()) };
+            let arcs = sp.section(tri.vertices[0], tri.normal()).map_or(0.0, |s| clip_arcs(&s, &tri).total);
             let q = arc_weight(&sp, &tri);
             cut += (arcs > 0.0) as usize;
             worst = worst.max((q - arcs).abs());
@@ -195,10 +131,7 @@ fn arc_weights_from_circular_intervals_equal_the_clipped_arcs() {
     }
     println!("{cut} sections with arcs; largest |q - Theta| {worst:.2e} rad");
     assert!(cut > 20_000);
-    assert!(
-        worst < 1e-9,
-        "interval form differs from clip_arcs by {worst:.2e} rad"
-    );
+    assert!(worst < 1e-9, "interval form differs from clip_arcs by {worst:.2e} rad");
 }
 
 /// Runs the CPU twin `keys` times on each spheroid and checks every group's mean weight, and
@@ -212,14 +145,7 @@ fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
     let (mut rest_used, mut total_iterations) = (0, 0u64);
     for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
         let exact = grouped(&exact_weights(&scene, fs, fc, tau_e));
-        let query = Query {
-            focus_s: fs,
-            focus_c: fc,
-            tau_e,
-            ignore: [NONE; 2],
-            lights_only: false,
-            reach: [DVec4::ZERO; 2],
-        };
+        let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
         let mut weights = Vec::new();
         let mut picks = Vec::new();
         for k in 0..keys {
@@ -241,43 +167,21 @@ fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
         // E[(W [pick in g])^2] = E[W^2 P(pick in g)] = E[W w_g], w_g the group's weight in the
         // key's traversal: estimated from every key, not only those whose pick fell in g.
         let pick_moments: Vec<f64> = (0..GROUPS)
-            .map(|g| {
-                weights
-                    .iter()
-                    .map(|w| w.iter().sum::<f64>() * w[g])
-                    .sum::<f64>()
-                    / keys as f64
-            })
+            .map(|g| weights.iter().map(|w| w.iter().sum::<f64>() * w[g]).sum::<f64>() / keys as f64)
             .collect();
-        for (what, samples, moments) in [
-            ("weights", &weights, None),
-            ("W x pick", &picks, Some(&pick_moments[..])),
-        ] {
+        for (what, samples, moments) in [("weights", &weights, None), ("W x pick", &picks, Some(&pick_moments[..]))] {
             // The twin's arcs equal the oracle's to 1e-9 rad (the test above).
             let z = group_z(samples, &exact, 1e-9, moments);
             let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
             println!("spheroid {s} {what}: worst group z {worst:.2} (limit {limit:.2})");
-            let means: Vec<f64> = (0..GROUPS)
-                .map(|g| samples.iter().map(|x| x[g]).sum::<f64>() / samples.len() as f64)
-                .collect();
-            let hits: Vec<usize> = (0..GROUPS)
-                .map(|g| samples.iter().filter(|x| x[g] != 0.0).count())
-                .collect();
-            assert!(
-                worst < limit,
-                "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:?} means {means:?} hits {hits:?}"
-            );
+            let means: Vec<f64> = (0..GROUPS).map(|g| samples.iter().map(|x| x[g]).sum::<f64>() / samples.len() as f64).collect();
+            let hits: Vec<usize> = (0..GROUPS).map(|g| samples.iter().filter(|x| x[g] != 0.0).count()).collect();
+            assert!(worst < limit, "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:?} means {means:?} hits {hits:?}");
         }
     }
-    println!(
-        "{:.1} iterations per query; {rest_used} queries went past the allowance",
-        total_iterations as f64 / (keys as f64 * spheroids.len() as f64)
-    );
+    println!("{:.1} iterations per query; {rest_used} queries went past the allowance", total_iterations as f64 / (keys as f64 * spheroids.len() as f64));
     if allowance < 100 {
-        assert!(
-            rest_used > keys,
-            "the allowance of {allowance} was hardly ever reached ({rest_used} queries)"
-        );
+        assert!(rest_used > keys, "the allowance of {allowance} was hardly ever reached ({rest_used} queries)");
     }
 }
 
@@ -288,10 +192,7 @@ fn the_descent_twin_is_unbiased() {
 
 #[test]
 fn the_descent_twin_is_unbiased_past_the_allowance() {
-    let settings = QuerySettings {
-        split: 0.2,
-        ..REFLECTION
-    };
+    let settings = QuerySettings { split: 0.2, ..REFLECTION };
     check_twin(&settings, 40, 3000);
 }
 
@@ -302,21 +203,9 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let scene = common::sphere_scene(32);
-    let tracer = PathTracer::new(
-        &ctx,
-        &scene,
-        &RenderSettings {
-            width: 4,
-            height: 4,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let spheroids = spheroids(&scene);
-    let limit = common::stats::t_critical(
-        common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)),
-        keys as f64 - 1.0,
-    );
+    let limit = common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
     let mut iterations = 0u64;
     for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
         let arcs = exact_sampled_arcs(&scene, fs, fc, tau_e);
@@ -327,11 +216,8 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
         // little (the exhaustive query: exactly).
         let weights = exact_weights(&scene, fs, fc, tau_e);
         let total_q: f64 = weights.iter().sum();
-        let per_triangle: Vec<f64> = arcs
-            .iter()
-            .zip(&weights)
-            .map(|(a, q)| if *q > 0.0 { total_q * a * a / q } else { 0.0 })
-            .collect();
+        let per_triangle: Vec<f64> =
+            arcs.iter().zip(&weights).map(|(a, q)| if *q > 0.0 { total_q * a * a / q } else { 0.0 }).collect();
         let mut moments = grouped(&per_triangle);
         moments.push(per_triangle.iter().sum());
         let mut input = Vec::new();
@@ -339,21 +225,9 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
             let (fs, fc) = (fs.as_vec3(), fc.as_vec3());
             input.push([fs.x, fs.y, fs.z, tau_e as f32]);
             input.push([fc.x, fc.y, fc.z, 0.5]);
-            input.push([
-                f32::from_bits(k),
-                f32::from_bits(s as u32),
-                f32::from_bits(0x5eed),
-                0.0,
-            ]);
+            input.push([f32::from_bits(k), f32::from_bits(s as u32), f32::from_bits(0x5eed), 0.0]);
         }
-        let out = common::run_probe(
-            &ctx,
-            &tracer,
-            "probe_ellipsoid_query",
-            constants,
-            &input,
-            2 * keys as usize,
-        );
+        let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", constants, &input, 2 * keys as usize);
         let samples: Vec<Vec<f64>> = out
             .chunks(2)
             .map(|o| {
@@ -370,21 +244,11 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
         // f32 arcs: relative error below 1e-4 (tests/ellipsoid.rs, stress-ellipsoid).
         let z = group_z(&samples, &exact, 1e-4, Some(&moments));
         let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-        println!(
-            "spheroid {s}: sum of arcs {:.4}, worst group z {worst:.2} (limit {limit:.2})",
-            exact[GROUPS]
-        );
-        assert!(
-            worst < limit,
-            "spheroid {s}: z-scores {z:.2?} (groups, then the total) against {exact:.3?}"
-        );
+        println!("spheroid {s}: sum of arcs {:.4}, worst group z {worst:.2} (limit {limit:.2})", exact[GROUPS]);
+        assert!(worst < limit, "spheroid {s}: z-scores {z:.2?} (groups, then the total) against {exact:.3?}");
     }
     use gatetrace::integrator::Integrator;
-    assert_eq!(
-        tracer.truncated_traversals().unwrap(),
-        0,
-        "queries ran out of the device's loop budget"
-    );
+    assert_eq!(tracer.truncated_traversals().unwrap(), 0, "queries ran out of the device's loop budget");
     iterations as f64 / (keys as f64 * spheroids.len() as f64)
 }
 
@@ -392,38 +256,20 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
 fn device_queries_are_unbiased() {
     let descent = check_device(&[("QUERY_REFLECTION_WEIGHTS", 1.0)], 20_000);
     let exhaustive = check_device(
-        &[
-            ("QUERY_SPLIT", 0.0),
-            ("QUERY_ALLOWANCE", u32::MAX as f64),
-            ("QUERY_REFLECTION_WEIGHTS", 1.0),
-        ],
+        &[("QUERY_SPLIT", 0.0), ("QUERY_ALLOWANCE", u32::MAX as f64), ("QUERY_REFLECTION_WEIGHTS", 1.0)],
         2_000,
     );
-    println!(
-        "loop iterations per query: {descent:.1} with the descent, {exhaustive:.1} exhaustive"
-    );
-    assert!(
-        descent < 0.5 * exhaustive,
-        "the descent ({descent:.1}) should cost far less than the exhaustive query ({exhaustive:.1})"
-    );
+    println!("loop iterations per query: {descent:.1} with the descent, {exhaustive:.1} exhaustive");
+    assert!(descent < 0.5 * exhaustive, "the descent ({descent:.1}) should cost far less than the exhaustive query ({exhaustive:.1})");
 }
 
 #[test]
 fn device_queries_are_unbiased_past_the_allowance() {
-    let iterations = check_device(
-        &[
-            ("QUERY_SPLIT", 0.2),
-            ("QUERY_ALLOWANCE", 40.0),
-            ("QUERY_REFLECTION_WEIGHTS", 1.0),
-        ],
-        20_000,
-    );
+    let iterations =
+        check_device(&[("QUERY_SPLIT", 0.2), ("QUERY_ALLOWANCE", 40.0), ("QUERY_REFLECTION_WEIGHTS", 1.0)], 20_000);
     println!("{iterations:.1} loop iterations per query");
     // Only queries that went past the allowance take more than 40 iterations.
-    assert!(
-        iterations > 40.0,
-        "the allowance of 40 was hardly ever reached ({iterations:.1} iterations per query)"
-    );
+    assert!(iterations > 40.0, "the allowance of 40 was hardly ever reached ({iterations:.1} iterations per query)");
 }
 
 #[test]
@@ -432,16 +278,7 @@ fn the_twin_and_the_device_pick_alike() {
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let scene = common::sphere_scene(32);
-    let tracer = PathTracer::new(
-        &ctx,
-        &scene,
-        &RenderSettings {
-            width: 4,
-            height: 4,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let settings = QuerySettings::default();
     let (fs, fc, tau_e) = spheroids(&scene)[2];
     let keys = 2000u32;
@@ -452,14 +289,7 @@ fn the_twin_and_the_device_pick_alike() {
         input.push([b.x, b.y, b.z, 0.5]);
         input.push([f32::from_bits(k), f32::from_bits(7), f32::from_bits(9), 0.0]);
     }
-    let out = common::run_probe(
-        &ctx,
-        &tracer,
-        "probe_ellipsoid_query",
-        &[],
-        &input,
-        2 * keys as usize,
-    );
+    let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", &[], &input, 2 * keys as usize);
     let query = Query {
         focus_s: fs.as_vec3().as_dvec3(),
         focus_c: fc.as_vec3().as_dvec3(),
@@ -470,22 +300,13 @@ fn the_twin_and_the_device_pick_alike() {
     };
     let same = (0..keys)
         .filter(|&k| {
-            let r = reached(
-                QueryScene::of(&scene),
-                &query,
-                &settings,
-                settings.allowance,
-                [k, 7, 9],
-            );
+            let r = reached(QueryScene::of(&scene), &query, &settings, settings.allowance, [k, 7, 9]);
             pick(&r, [k, 7, 9], 0).unwrap_or(NONE) == out[2 * k as usize][0].to_bits()
         })
         .count();
     println!("{same} of {keys} picks agree");
     // f32 and f64 may decide differently only at near-ties of the descent's estimates.
-    assert!(
-        same as f64 > 0.99 * keys as f64,
-        "the twin and the device agree on only {same} of {keys} picks"
-    );
+    assert!(same as f64 > 0.99 * keys as f64, "the twin and the device agree on only {same} of {keys} picks");
 }
 
 /// Points at the centroids of a triangle's 4^levels congruent sub-triangles (each standing for
@@ -495,11 +316,7 @@ fn subdivided_centroids(v: [DVec3; 3], levels: u32, out: &mut Vec<DVec3>) {
         out.push((v[0] + v[1] + v[2]) / 3.0);
         return;
     }
-    let (ab, bc, ca) = (
-        0.5 * (v[0] + v[1]),
-        0.5 * (v[1] + v[2]),
-        0.5 * (v[2] + v[0]),
-    );
+    let (ab, bc, ca) = (0.5 * (v[0] + v[1]), 0.5 * (v[1] + v[2]), 0.5 * (v[2] + v[0]));
     for sub in [[v[0], ab, ca], [ab, v[1], bc], [ca, bc, v[2]], [ab, bc, ca]] {
         subdivided_centroids(sub, levels - 1, out);
     }
@@ -520,10 +337,7 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
     let scene = common::sphere_scene(16);
     let nodes = &scene.bvh.nodes;
     // Foci outside the Cornell box, on one side of it (no node lies between them).
-    let foci = [
-        (DVec3::new(0.3, 0.2, 3.0), DVec3::new(-0.4, -0.1, 2.5)),
-        (DVec3::new(2.5, 0.1, 0.0), DVec3::new(2.5, 0.1, 0.0)),
-    ];
+    let foci = [(DVec3::new(0.3, 0.2, 3.0), DVec3::new(-0.4, -0.1, 2.5)), (DVec3::new(2.5, 0.1, 0.0), DVec3::new(2.5, 0.1, 0.0))];
     let mut checked = 0;
     for (i, node) in nodes.iter().enumerate().step_by(37) {
         let end = node.skip as usize;
@@ -536,8 +350,7 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
                     let before = points.len();
                     subdivided_centroids(t.vertices, levels, &mut points);
                     let [a, b, c] = t.vertices;
-                    let share =
-                        0.5 * (b - a).cross(c - a).length() / (points.len() - before) as f64;
+                    let share = 0.5 * (b - a).cross(c - a).length() / (points.len() - before) as f64;
                     weights.extend(std::iter::repeat_n(share, points.len() - before));
                 }
             }
@@ -547,105 +360,42 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
         let (points, weights) = quadrature(5);
         let area: f64 = weights.iter().sum();
         let surface = scene.node_surfaces[i];
-        assert!(
-            (surface.area as f64 - area).abs() <= 1e-5 * area,
-            "node {i}: area {} against {area}",
-            surface.area
-        );
+        assert!((surface.area as f64 - area).abs() <= 1e-5 * area, "node {i}: area {} against {area}", surface.area);
         // Sub-triangle centroids average to the centroid exactly.
-        let mean = points
-            .iter()
-            .zip(&weights)
-            .map(|(p, w)| *p * *w)
-            .sum::<DVec3>()
-            / area;
+        let mean = points.iter().zip(&weights).map(|(p, w)| *p * *w).sum::<DVec3>() / area;
         let (lo, hi) = (node.min.as_dvec3(), node.max.as_dvec3());
         let diagonal2 = (hi - lo).length_squared();
-        assert!(
-            (surface.centroid.as_dvec3() - mean).length() <= 1e-5 * diagonal2.sqrt(),
-            "node {i}: centroid {} against {mean}",
-            surface.centroid
-        );
+        assert!((surface.centroid.as_dvec3() - mean).length() <= 1e-5 * diagonal2.sqrt(), "node {i}: centroid {} against {mean}", surface.centroid);
         // The centroid rule misses each sub-triangle's own spread, 1/4 of it per level: two
         // levels extrapolate to the exact covariance.
         let cov_at = |points: &[DVec3], weights: &[f64], a: usize, b: usize| {
-            points
-                .iter()
-                .zip(weights)
-                .map(|(p, w)| (p[a] - mean[a]) * (p[b] - mean[b]) * w)
-                .sum::<f64>()
-                / area
+            points.iter().zip(weights).map(|(p, w)| (p[a] - mean[a]) * (p[b] - mean[b]) * w).sum::<f64>() / area
         };
-        let cov = |a: usize, b: usize| {
-            (4.0 * cov_at(&points, &weights, a, b) - cov_at(&coarse_points, &coarse_weights, a, b))
-                / 3.0
-        };
-        let stored = surface
-            .spread
-            .map(|w| unpack2x16float(w).as_dvec2() * diagonal2);
-        for (got, (a, b)) in [
-            stored[0].x,
-            stored[0].y,
-            stored[1].x,
-            stored[1].y,
-            stored[2].x,
-            stored[2].y,
-        ]
-        .into_iter()
-        .zip([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)])
+        let cov = |a: usize, b: usize| (4.0 * cov_at(&points, &weights, a, b) - cov_at(&coarse_points, &coarse_weights, a, b)) / 3.0;
+        let stored = surface.spread.map(|w| unpack2x16float(w).as_dvec2() * diagonal2);
+        for (got, (a, b)) in [stored[0].x, stored[0].y, stored[1].x, stored[1].y, stored[2].x, stored[2].y]
+            .into_iter()
+            .zip([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)])
         {
             // f16 keeps 11 significant bits (and steps of 6e-8 below 6e-5).
             let want = cov(a, b);
-            assert!(
-                (got - want).abs() <= 1e-3 * want.abs() + 1e-7 * diagonal2,
-                "node {i}: covariance ({a}, {b}) {got} against {want}"
-            );
+            assert!((got - want).abs() <= 1e-3 * want.abs() + 1e-7 * diagonal2, "node {i}: covariance ({a}, {b}) {got} against {want}");
         }
         for &(fs, fc) in &foci {
-            let lengths: Vec<f64> = points
-                .iter()
-                .map(|p| p.distance(fs) + p.distance(fc))
-                .collect();
-            let true_mean = lengths
-                .iter()
-                .zip(&weights)
-                .map(|(l, w)| l * w)
-                .sum::<f64>()
-                / area;
-            let true_sd = (lengths
-                .iter()
-                .zip(&weights)
-                .map(|(l, w)| (l - true_mean).powi(2) * w)
-                .sum::<f64>()
-                / area)
-                .sqrt();
+            let lengths: Vec<f64> = points.iter().map(|p| p.distance(fs) + p.distance(fc)).collect();
+            let true_mean = lengths.iter().zip(&weights).map(|(l, w)| l * w).sum::<f64>() / area;
+            let true_sd = (lengths.iter().zip(&weights).map(|(l, w)| (l - true_mean).powi(2) * w).sum::<f64>() / area).sqrt();
             let distance = mean.distance(fs).min(mean.distance(fc));
             if diagonal2.sqrt() > 0.1 * distance || true_sd < 1e-3 * diagonal2.sqrt() {
                 continue;
             }
-            let query = Query {
-                focus_s: fs,
-                focus_c: fc,
-                tau_e: true_mean,
-                ignore: [NONE; 2],
-                lights_only: false,
-                reach: [DVec4::ZERO; 2],
-            };
+            let query = Query { focus_s: fs, focus_c: fc, tau_e: true_mean, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
             let (m, sd) = path_length_moments(lo, hi, &surface, &query);
-            assert!(
-                (m - true_mean).abs() <= 0.01 * true_sd.max(1e-3 * diagonal2.sqrt()),
-                "node {i}: mean path length {m} against {true_mean} (sd {true_sd})"
-            );
-            assert!(
-                (sd / true_sd - 1.0).abs() <= 0.1,
-                "node {i}: path length deviation {sd} against {true_sd}"
-            );
+            assert!((m - true_mean).abs() <= 0.01 * true_sd.max(1e-3 * diagonal2.sqrt()), "node {i}: mean path length {m} against {true_mean} (sd {true_sd})");
+            assert!((sd / true_sd - 1.0).abs() <= 0.1, "node {i}: path length deviation {sd} against {true_sd}");
             checked += 1;
         }
     }
     println!("{checked} node and focus pairs checked");
-    assert!(
-        checked >= 50,
-        "only {checked} node and focus pairs were small enough to check"
-    );
+    assert!(checked >= 50, "only {checked} node and focus pairs were small enough to check");
 }

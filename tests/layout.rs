@@ -44,10 +44,8 @@ fn wgsl_structs_match_rust_structs() {
     let mut wgsl_structs = Vec::new();
     for (_, ty) in module.types.iter() {
         if let (Some(name), naga::TypeInner::Struct { members, span }) = (&ty.name, &ty.inner) {
-            let members: Vec<(String, usize)> = members
-                .iter()
-                .map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize))
-                .collect();
+            let members: Vec<(String, usize)> =
+                members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize)).collect();
             wgsl_structs.push((name.clone(), *span as usize, members));
         }
     }
@@ -57,19 +55,12 @@ fn wgsl_structs_match_rust_structs() {
             .iter()
             .find(|(n, _, _)| n == name)
             .unwrap_or_else(|| panic!("struct {name} is not in shaders/lib/layout.wesl"));
-        let rust_members: Vec<(String, usize)> =
-            members.iter().map(|(m, o)| (m.to_string(), *o)).collect();
-        assert_eq!(
-            &rust_members, wgsl_members,
-            "member names or offsets of {name} differ (Rust vs WGSL)"
-        );
+        let rust_members: Vec<(String, usize)> = members.iter().map(|(m, o)| (m.to_string(), *o)).collect();
+        assert_eq!(&rust_members, wgsl_members, "member names or offsets of {name} differ (Rust vs WGSL)");
         assert_eq!(size, wgsl_size, "size of {name} differs (Rust vs WGSL)");
     }
     let rust_names: Vec<&str> = rust.iter().map(|(n, _, _)| *n).collect();
     for (name, _, _) in &wgsl_structs {
-        assert!(
-            rust_names.contains(&name.as_str()),
-            "WGSL struct {name} has no Rust twin in src/gpu/layout.rs"
-        );
+        assert!(rust_names.contains(&name.as_str()), "WGSL struct {name} has no Rust twin in src/gpu/layout.rs");
     }
 }

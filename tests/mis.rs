@@ -34,26 +34,14 @@ fn random_path(rng: &mut Rng, k: usize, point_light: bool) -> Vec<Vertex> {
         let toward = |j: usize| (positions[j] - p).normalize();
         let vertex = if i == 0 {
             let kind = if point_light {
-                VertexKind::PointLight {
-                    select_pdf: 0.3 + 0.7 * rng.next(),
-                }
+                VertexKind::PointLight { select_pdf: 0.3 + 0.7 * rng.next() }
             } else {
-                VertexKind::AreaLight {
-                    origin_pdf: 0.5 + 3.0 * rng.next(),
-                }
+                VertexKind::AreaLight { origin_pdf: 0.5 + 3.0 * rng.next() }
             };
-            Vertex {
-                kind,
-                position: p,
-                normal: (toward(1) + 0.5 * rng.vec3()).normalize(),
-            }
+            Vertex { kind, position: p, normal: (toward(1) + 0.5 * rng.vec3()).normalize() }
         } else if i == k - 1 {
             let image_area = 0.5 + rng.next();
-            Vertex {
-                kind: VertexKind::Camera { image_area },
-                position: p,
-                normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize(),
-            }
+            Vertex { kind: VertexKind::Camera { image_area }, position: p, normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize() }
         } else {
             let bsdf = Bsdf {
                 base_color: Vec3::new(0.8, 0.5, 0.2),
@@ -61,11 +49,7 @@ fn random_path(rng: &mut Rng, k: usize, point_light: bool) -> Vec<Vertex> {
                 alpha: 0.05 + 0.9 * rng.next() * rng.next(),
             };
             let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.vec3()).normalize();
-            Vertex {
-                kind: VertexKind::Surface(bsdf),
-                position: p,
-                normal: n,
-            }
+            Vertex { kind: VertexKind::Surface(bsdf), position: p, normal: n }
         };
         path.push(vertex);
     }
@@ -78,9 +62,7 @@ fn is_valid(path: &[Vertex]) -> bool {
     let k = path.len();
     (0..k).all(|i| {
         let p = path[i].position;
-        let ok = |j: usize| {
-            (path[j].position - p).dot(path[i].normal) > 1e-3 * (path[j].position - p).length()
-        };
+        let ok = |j: usize| (path[j].position - p).dot(path[i].normal) > 1e-3 * (path[j].position - p).length();
         (i == 0 || ok(i - 1)) && (i == k - 1 || ok(i + 1))
     })
 }
@@ -134,10 +116,7 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
             );
             sum += w;
         }
-        assert!(
-            (sum - 1.0).abs() < 1e-4,
-            "path of {k} vertices: weights sum to {sum}"
-        );
+        assert!((sum - 1.0).abs() < 1e-4, "path of {k} vertices: weights sum to {sum}");
         checked += 1;
     }
     assert!(checked > 1000, "only {checked} valid random paths");
@@ -173,10 +152,7 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
             );
             sum += w;
         }
-        assert!(
-            (sum - 1.0).abs() < 1e-4,
-            "path of {k} vertices: weights sum to {sum}"
-        );
+        assert!((sum - 1.0).abs() < 1e-4, "path of {k} vertices: weights sum to {sum}");
         checked += 1;
     }
     assert!(checked > 1000, "only {checked} valid random paths");

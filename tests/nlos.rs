@@ -20,24 +20,13 @@ const ALPHA: f64 = 0.01;
 const BATCHES: usize = 16;
 
 fn example_scene() -> PreparedScene {
-    PreparedScene::new(load_gltf(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap())
-        .unwrap()
+    PreparedScene::new(load_gltf(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap()).unwrap()
 }
 
 /// The peer's setup: 16x16 sensed points, 100 bins of 12 mm from 0.9 m, a 1 W laser (rescaled
 /// per spot below).
 fn settings(aim: LaserAim, method: Method) -> RenderSettings {
-    common::example_capture(
-        16,
-        16,
-        Gate::Transient {
-            start: 0.9,
-            width: 0.012,
-            bins: 100,
-        },
-        aim,
-        method,
-    )
+    common::example_capture(16, 16, Gate::Transient { start: 0.9, width: 0.012, bins: 100 }, aim, method)
 }
 
 /// Blocks a comparison sums values over: `pixels` x `pixels` sensed points and `bins` bins.
@@ -64,9 +53,7 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
     let scene = example_scene();
     let (shape, peer_mean) = common::reference(&format!("nlos_letter_peer/{name}_mean.npy"));
     let (_, peer_var) = common::reference(&format!("nlos_letter_peer/{name}_var.npy"));
-    let (_, power) = common::reference(&format!(
-        "nlos_letter_peer/{name}_laser_power_equivalent.npy"
-    ));
+    let (_, power) = common::reference(&format!("nlos_letter_peer/{name}_laser_power_equivalent.npy"));
     assert_eq!(shape, vec![16, 16, 100, 3]);
     let per_pixel = 100 * 3;
     let scale = |i: usize| power[if power.len() == 1 { 0 } else { i / per_pixel }] as f64;
@@ -75,12 +62,7 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
     let mut stats = BatchStats::new(peer_mean.len());
     let mut totals = Vec::new();
     for film in &films {
-        let scaled: Vec<f32> = film
-            .data
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| (v as f64 * scale(i)) as f32)
-            .collect();
+        let scaled: Vec<f32> = film.data.iter().enumerate().map(|(i, &v)| (v as f64 * scale(i)) as f32).collect();
         totals.push(scaled.iter().map(|&v| v as f64).sum::<f64>());
         stats.add(&scaled);
     }
@@ -101,23 +83,13 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
 
     // Total energy: within 1 % and consistent with the noise of both sides.
     let ours: f64 = totals.iter().sum::<f64>() / BATCHES as f64;
-    let ours_var =
-        totals.iter().map(|t| (t - ours).powi(2)).sum::<f64>() / ((BATCHES - 1) * BATCHES) as f64;
+    let ours_var = totals.iter().map(|t| (t - ours).powi(2)).sum::<f64>() / ((BATCHES - 1) * BATCHES) as f64;
     let peer: f64 = peer_mean.iter().map(|&v| v as f64).sum();
     let peer_v: f64 = peer_var.iter().map(|&v| v as f64).sum();
     let z = (ours - peer) / (ours_var + peer_v).sqrt();
-    println!(
-        "{name}: total energy ours {ours:.6} peer {peer:.6} ratio {:.5} z {z:+.2}",
-        ours / peer
-    );
-    assert!(
-        (ours / peer - 1.0).abs() < 0.01,
-        "{name}: total energy ours {ours} vs peer {peer}"
-    );
-    assert!(
-        z.abs() < t_critical(ALPHA, (BATCHES - 1) as f64),
-        "{name}: total energy z = {z:.2}"
-    );
+    println!("{name}: total energy ours {ours:.6} peer {peer:.6} ratio {:.5} z {z:+.2}", ours / peer);
+    assert!((ours / peer - 1.0).abs() < 0.01, "{name}: total energy ours {ours} vs peer {peer}");
+    assert!(z.abs() < t_critical(ALPHA, (BATCHES - 1) as f64), "{name}: total energy z = {z:.2}");
 
     // Every block the peer's samples reached. Where none did, its mean and variance are both 0,
     // and a z-score against that variance is meaningless: ours, precise, would be infinitely
@@ -125,18 +97,9 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
     // `ellipsoidal` samples directly). Those blocks are checked by their energy instead: together
     // below 1e-4 of the total, a hundredth of the energy tolerance above.
     let live: Vec<usize> = (0..blocks).filter(|&i| peer_block_var[i] > 0.0).collect();
-    let unseen: f64 = (0..blocks)
-        .filter(|&i| peer_block_var[i] == 0.0)
-        .map(|i| block_mean[i])
-        .sum();
-    println!(
-        "{name}: energy in blocks the peer never reached: {:.2e} of the total",
-        unseen / ours
-    );
-    assert!(
-        unseen < 1e-4 * ours,
-        "{name}: blocks the peer never reached hold {unseen:.3e} of ours ({ours:.3e})"
-    );
+    let unseen: f64 = (0..blocks).filter(|&i| peer_block_var[i] == 0.0).map(|i| block_mean[i]).sum();
+    println!("{name}: energy in blocks the peer never reached: {:.2e} of the total", unseen / ours);
+    assert!(unseen < 1e-4 * ours, "{name}: blocks the peer never reached hold {unseen:.3e} of ours ({ours:.3e})");
     let zs: Vec<f64> = live
         .iter()
         .map(|&i| (block_mean[i] - peer_block_mean[i]) / (block_var[i] + peer_block_var[i]).sqrt())
@@ -152,24 +115,14 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
         block.pixels,
         block.bins
     );
-    assert!(
-        zs.len() > blocks / 3,
-        "{name}: only {} of {blocks} blocks saw light",
-        zs.len()
-    );
-    assert!(
-        worst < limit,
-        "{name}: a block differs from the peer (|z| = {worst:.2} >= {limit:.2})"
-    );
+    assert!(zs.len() > blocks / 3, "{name}: only {} of {blocks} blocks saw light", zs.len());
+    assert!(worst < limit, "{name}: a block differs from the peer (|z| = {worst:.2} >= {limit:.2})");
     // With variances estimated from BATCHES batches, z is close to Student's t with BATCHES - 1
     // degrees of freedom, whose rms is sqrt(dof / (dof - 2)) (1.074 for 15): an rms well outside
     // [0.9, that + 0.05] means a bias or a wrong noise model, even with every bin within its limit.
     let dof = (BATCHES - 1) as f64;
     let t_rms = (dof / (dof - 2.0)).sqrt();
-    assert!(
-        spread > 0.9 && spread < t_rms + 0.05,
-        "{name}: the z-scores' rms {spread:.3} is not that of noise"
-    );
+    assert!(spread > 0.9 && spread < t_rms + 0.05, "{name}: the z-scores' rms {spread:.3} is not that of noise");
 }
 
 const SPOT: LaserAim = LaserAim::Spot(Vec2::new(0.3, 0.6));
@@ -199,24 +152,12 @@ fn single_scan_with_ellipsoidal_connections_matches_peer() {
 
 #[test]
 fn confocal_scan_with_ellipsoidal_connections_matches_peer() {
-    compare_with_peer(
-        "confocal",
-        LaserAim::Confocal,
-        Method::Ellipsoidal,
-        1024,
-        ELLIPSOIDAL_BLOCK,
-    );
+    compare_with_peer("confocal", LaserAim::Confocal, Method::Ellipsoidal, 1024, ELLIPSOIDAL_BLOCK);
 }
 
 #[test]
 fn confocal_scan_with_direct_connections_matches_peer() {
-    compare_with_peer(
-        "confocal",
-        LaserAim::Confocal,
-        Method::Direct,
-        4096,
-        EACH_BIN,
-    );
+    compare_with_peer("confocal", LaserAim::Confocal, Method::Direct, 4096, EACH_BIN);
 }
 
 /// Sensed points lie at the cell centres of the wall's texture coordinates: on the example wall
@@ -233,32 +174,18 @@ fn wall_points_follow_the_grid() {
     for j in 0..16 {
         for i in 0..16 {
             let p = &points[j * 16 + i];
-            let expected = Vec3::new(
-                (i as f32 + 0.5) / 16.0 - 0.5,
-                (j as f32 + 0.5) / 16.0 - 0.5,
-                0.0,
-            );
-            assert!(
-                (p.position - expected).length() < 1e-5,
-                "cell ({i}, {j}) at {} not {expected}",
-                p.position
-            );
+            let expected = Vec3::new((i as f32 + 0.5) / 16.0 - 0.5, (j as f32 + 0.5) / 16.0 - 0.5, 0.0);
+            assert!((p.position - expected).length() < 1e-5, "cell ({i}, {j}) at {} not {expected}", p.position);
             assert!((p.length_offset + (p.position - capture.sensor_origin).length()).abs() < 1e-6);
             let spot = &points[256 + j * 16 + i];
             assert!((spot.position - p.position).length() < 1e-6 && spot.length_offset == 0.0);
             assert_eq!(spot.power, Vec3::ONE);
         }
     }
-    let counted = NlosCapture {
-        count_first_and_last: true,
-        ..capture
-    };
+    let counted = NlosCapture { count_first_and_last: true, ..capture };
     let points = gatetrace::nlos::wall_points(&scene, &counted, 16, 16).unwrap();
     assert_eq!(points[0].length_offset, 0.0);
-    assert!(
-        (points[256].length_offset - (points[256].position - counted.laser_origin).length()).abs()
-            < 1e-6
-    );
+    assert!((points[256].length_offset - (points[256].position - counted.laser_origin).length()).abs() < 1e-6);
 }
 
 /// A capture names its wall: a missing node, or one without texture coordinates, is a clear error.
@@ -267,17 +194,10 @@ fn a_missing_relay_wall_is_named() {
     let scene = example_scene();
     let mut capture = settings(LaserAim::Confocal, Method::Path).nlos.unwrap();
     capture.relay_wall = "no_such_wall".into();
-    let e = gatetrace::nlos::check_capture(&scene.scene, &capture)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("no node named `no_such_wall`") && e.contains("nlos_letter.gltf"),
-        "{e}"
-    );
+    let e = gatetrace::nlos::check_capture(&scene.scene, &capture).unwrap_err().to_string();
+    assert!(e.contains("no node named `no_such_wall`") && e.contains("nlos_letter.gltf"), "{e}");
     capture.relay_wall = "occluder".into();
-    let e = gatetrace::nlos::check_capture(&scene.scene, &capture)
-        .unwrap_err()
-        .to_string();
+    let e = gatetrace::nlos::check_capture(&scene.scene, &capture).unwrap_err().to_string();
     assert!(e.contains("no TEXCOORD_0"), "{e}");
 }
 
@@ -286,16 +206,10 @@ fn a_missing_relay_wall_is_named() {
 /// render, and renders the same capture bit for bit.
 #[test]
 fn a_capture_needs_no_camera_or_light() {
-    let mut doc: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap(),
-    )
-    .unwrap();
-    let origin = doc["nodes"]
-        .as_array_mut()
-        .unwrap()
-        .iter_mut()
-        .find(|n| n["name"] == "nlos_origin")
-        .unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap())
+            .unwrap();
+    let origin = doc["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n["name"] == "nlos_origin").unwrap();
     let node = origin.as_object_mut().unwrap();
     node.remove("camera");
     node.remove("extensions");
@@ -313,17 +227,8 @@ fn a_capture_needs_no_camera_or_light() {
         let s = settings(SPOT, method);
         let ours = common::render_films(&ctx, &bare, &s, 1, 64).remove(0);
         let full = common::render_films(&ctx, &example_scene(), &s, 1, 64).remove(0);
-        assert!(
-            ours.data.iter().any(|&v| v > 0.0),
-            "{}: black capture",
-            method.name()
-        );
-        assert_eq!(
-            ours.data,
-            full.data,
-            "{}: the bare scene renders another capture",
-            method.name()
-        );
+        assert!(ours.data.iter().any(|&v| v > 0.0), "{}: black capture", method.name());
+        assert_eq!(ours.data, full.data, "{}: the bare scene renders another capture", method.name());
     }
     std::fs::remove_dir_all(&dir).ok();
 }

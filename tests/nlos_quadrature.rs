@@ -42,33 +42,14 @@ const LINES: usize = 8192;
 fn letter_and_wall() -> PreparedScene {
     let mut scene = load_gltf(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap();
     let occluder = scene.node("occluder").unwrap().triangles.clone();
-    assert_eq!(
-        occluder.end,
-        scene.triangles.len(),
-        "the occluder's triangles are expected last"
-    );
+    assert_eq!(occluder.end, scene.triangles.len(), "the occluder's triangles are expected last");
     scene.triangles.truncate(occluder.start);
-    scene
-        .nodes
-        .iter_mut()
-        .find(|n| n.name == "occluder")
-        .unwrap()
-        .triangles = occluder.start..occluder.start;
+    scene.nodes.iter_mut().find(|n| n.name == "occluder").unwrap().triangles = occluder.start..occluder.start;
     PreparedScene::new(scene).unwrap()
 }
 
 fn settings(aim: LaserAim, method: Method) -> RenderSettings {
-    common::example_capture(
-        GRID,
-        GRID,
-        Gate::Transient {
-            start: START,
-            width: WIDTH,
-            bins: BINS as u32,
-        },
-        aim,
-        method,
-    )
+    common::example_capture(GRID, GRID, Gate::Transient { start: START, width: WIDTH, bins: BINS as u32 }, aim, method)
 }
 
 /// A hidden triangle: vertices (m), albedo, whether both faces reflect.
@@ -104,12 +85,8 @@ fn spheroid_crossings(p: DVec3, u: DVec3, a: DVec3, b: DVec3, c: f64) -> [Option
     let q = -0.5 * (qb + s.copysign(qb));
     let (t0, t1) = (q / qa, if q != 0.0 { qc / q } else { -qb / (2.0 * qa) });
     // Squaring admits |h - b| > c; keep the crossings of the spheroid itself.
-    let valid =
-        |t: f64| (alpha0 + alpha1 * t) >= 0.0 && ((p + t * u - b).length() <= c * (1.0 + 1e-12));
-    [
-        Some(t0).filter(|&t| valid(t)),
-        Some(t1).filter(|&t| valid(t)),
-    ]
+    let valid = |t: f64| (alpha0 + alpha1 * t) >= 0.0 && ((p + t * u - b).length() <= c * (1.0 + 1e-12));
+    [Some(t0).filter(|&t| valid(t)), Some(t1).filter(|&t| valid(t))]
 }
 
 /// Bin-integrated radiance per channel (W m^-2 sr^-1 per W of laser power) leaving `sensed`
@@ -166,10 +143,7 @@ fn quadrature(
             let (lo, hi) = (0.5 * (l0 + l1) - len, l0.max(l1));
             let first = edges.partition_point(|&e| e < lo);
             for &e in edges[first..].iter().take_while(|&&e| e <= hi) {
-                for t in spheroid_crossings(p, u, sensed, spot, e)
-                    .into_iter()
-                    .flatten()
-                {
+                for t in spheroid_crossings(p, u, sensed, spot, e).into_iter().flatten() {
                     if t > 0.0 && t < len {
                         breaks.push(t);
                     }
@@ -185,11 +159,7 @@ fn quadrature(
                 if bin < 0.0 || bin >= BINS as f64 {
                     continue;
                 }
-                let g: f64 = GAUSS
-                    .iter()
-                    .map(|&(x, wt)| wt * geometry(p + (t0 + x * (t1 - t0)) * u))
-                    .sum::<f64>()
-                    * (t1 - t0);
+                let g: f64 = GAUSS.iter().map(|&(x, wt)| wt * geometry(p + (t0 + x * (t1 - t0)) * u)).sum::<f64>() * (t1 - t0);
                 let cell = &mut bins[bin as usize];
                 for ch in 0..3 {
                     cell[ch] += scale[ch] * g * across;
@@ -231,10 +201,7 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
     let mut reference = Vec::with_capacity(pixels * BINS * 3);
     let mut quadrature_var = Vec::with_capacity(pixels * BINS * 3);
     for px in 0..pixels {
-        let (sensed, spot) = (
-            points[px].position.as_dvec3(),
-            points[pixels + px].position.as_dvec3(),
-        );
+        let (sensed, spot) = (points[px].position.as_dvec3(), points[pixels + px].position.as_dvec3());
         let power = points[pixels + px].power.as_dvec3();
         let one = quadrature(&hidden, wall_albedo, wall_normal, sensed, spot, LINES, 0);
         let other = quadrature(&hidden, wall_albedo, wall_normal, sensed, spot, LINES, 1);
@@ -246,8 +213,7 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
             for ch in 0..3 {
                 let value = 0.5 * (f[ch] + g[ch]) * power[ch];
                 reference.push(value);
-                quadrature_var
-                    .push(((f[ch] - g[ch]) * power[ch]).powi(2) + (value * resolution).powi(2));
+                quadrature_var.push(((f[ch] - g[ch]) * power[ch]).powi(2) + (value * resolution).powi(2));
             }
         }
     }
@@ -275,31 +241,18 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
 
     let total: f64 = mean.iter().sum();
     let expected: f64 = reference.iter().sum();
-    println!(
-        "{name}: total ours {total:.6e} quadrature {expected:.6e} ratio {:.5}",
-        total / expected
-    );
+    println!("{name}: total ours {total:.6e} quadrature {expected:.6e} ratio {:.5}", total / expected);
     if spp >= BINS as u32 {
-        assert!(
-            (total / expected - 1.0).abs() < 0.01,
-            "{name}: total energy {total:.6e} vs {expected:.6e}"
-        );
+        assert!((total / expected - 1.0).abs() < 0.01, "{name}: total energy {total:.6e} vs {expected:.6e}");
     } else {
         // Fewer samples than bins: which bins a batch visits moves its total by several percent,
         // so the total is tested against the spread of the batches' totals.
-        let totals: Vec<f64> = films
-            .iter()
-            .map(|f| f.data.iter().map(|&v| v as f64).sum())
-            .collect();
-        let var_of_mean = totals.iter().map(|t| (t - total).powi(2)).sum::<f64>()
-            / (BATCHES * (BATCHES - 1)) as f64;
+        let totals: Vec<f64> = films.iter().map(|f| f.data.iter().map(|&v| v as f64).sum()).collect();
+        let var_of_mean = totals.iter().map(|t| (t - total).powi(2)).sum::<f64>() / (BATCHES * (BATCHES - 1)) as f64;
         let z = (total - expected) / var_of_mean.sqrt();
         let limit = t_critical(ALPHA, (BATCHES - 1) as f64);
         println!("{name}: total's z {z:.2} (limit {limit:.2})");
-        assert!(
-            z.abs() < limit,
-            "{name}: total energy {total:.6e} vs {expected:.6e} (z {z:.2})"
-        );
+        assert!(z.abs() < limit, "{name}: total energy {total:.6e} vs {expected:.6e} (z {z:.2})");
     }
 
     // Bins with light on either side. A bin ours never reached (no variance) while the
@@ -342,32 +295,13 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
         quadrature_var[worst.1].sqrt(),
         missed / expected
     );
-    assert!(
-        zs.len() > 3 * pixels * 100 / group,
-        "{name}: only {} bins saw light",
-        zs.len()
-    );
-    assert!(
-        missed < 1e-4 * expected,
-        "{name}: bins ours never reached hold {missed:.3e} of {expected:.3e}"
-    );
-    assert!(
-        worst.0 < limit,
-        "{name}: a bin differs from the quadrature (|z| = {:.2} >= {limit:.2})",
-        worst.0
-    );
+    assert!(zs.len() > 3 * pixels * 100 / group, "{name}: only {} bins saw light", zs.len());
+    assert!(missed < 1e-4 * expected, "{name}: bins ours never reached hold {missed:.3e} of {expected:.3e}");
+    assert!(worst.0 < limit, "{name}: a bin differs from the quadrature (|z| = {:.2} >= {limit:.2})", worst.0);
     let dof = (BATCHES - 1) as f64;
     let t_rms = (dof / (dof - 2.0)).sqrt();
-    assert!(
-        noise_zs.len() > zs.len() / 2,
-        "{name}: the quadrature's error dominates {} of {} bins",
-        zs.len() - noise_zs.len(),
-        zs.len()
-    );
-    assert!(
-        rms > 0.9 && rms < t_rms + 0.05,
-        "{name}: the z-scores' rms {rms:.3} is not that of noise"
-    );
+    assert!(noise_zs.len() > zs.len() / 2, "{name}: the quadrature's error dominates {} of {} bins", zs.len() - noise_zs.len(), zs.len());
+    assert!(rms > 0.9 && rms < t_rms + 0.05, "{name}: the z-scores' rms {rms:.3} is not that of noise");
 }
 
 const SPOT: LaserAim = LaserAim::Spot(Vec2::new(0.3, 0.6));
@@ -398,11 +332,5 @@ fn confocal_scan_with_ellipsoidal_connections_at_fine_bins_matches_quadrature() 
 /// compared.
 #[test]
 fn confocal_scan_with_ellipsoidal_connections_and_fewer_samples_than_bins_matches_quadrature() {
-    compare_with_quadrature(
-        "confocal, 512 spp",
-        LaserAim::Confocal,
-        Method::Ellipsoidal,
-        512,
-        25,
-    );
+    compare_with_quadrature("confocal, 512 spp", LaserAim::Confocal, Method::Ellipsoidal, 512, 25);
 }

@@ -3,9 +3,7 @@
 
 mod common;
 
-use common::gltf_builder::{
-    Camera, Material, Mesh, PointLight, Scene, png_rgb8, quad_z, write_json,
-};
+use common::gltf_builder::{Camera, Material, Mesh, PointLight, Scene, png_rgb8, quad_z, write_json};
 use gatetrace::integrator::RenderSettings;
 use gatetrace::scene::{PreparedScene, load_gltf};
 use serde_json::json;
@@ -14,11 +12,7 @@ fn lit_quad() -> Scene {
     Scene {
         meshes: vec![quad_z(1.0, -1.0, true, 0)],
         materials: vec![Material::emitter(2.0)],
-        camera: Some(Camera {
-            position: [0.0; 3],
-            rotation: [0.0, 0.0, 0.0, 1.0],
-            yfov: 0.5,
-        }),
+        camera: Some(Camera { position: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.5 }),
         point_lights: vec![],
     }
 }
@@ -28,10 +22,7 @@ fn load_error(dir: &std::path::Path, name: &str, doc: &serde_json::Value) -> Str
     let path = write_json(dir, name, doc);
     let err = load_gltf(&path).expect_err("loading must fail");
     let message = format!("{err:#}");
-    assert!(
-        message.contains(name),
-        "the error must name the file: {message}"
-    );
+    assert!(message.contains(name), "the error must name the file: {message}");
     message
 }
 
@@ -45,16 +36,10 @@ fn cornell_box_loads_with_its_documented_conventions() {
     assert!((scene.camera.yfov - 40f32.to_radians()).abs() < 1e-6);
     let emissive: Vec<_> = scene.materials.iter().filter(|m| m.is_emissive()).collect();
     assert_eq!(emissive.len(), 1);
-    assert_eq!(
-        emissive[0].emission,
-        glam::Vec3::splat(10.0),
-        "emissiveFactor x KHR_materials_emissive_strength"
-    );
+    assert_eq!(emissive[0].emission, glam::Vec3::splat(10.0), "emissiveFactor x KHR_materials_emissive_strength");
     // The winding (front face) agrees with the authored normals everywhere.
     for t in &scene.triangles {
-        let n = (t.positions[1] - t.positions[0])
-            .cross(t.positions[2] - t.positions[0])
-            .normalize();
+        let n = (t.positions[1] - t.positions[0]).cross(t.positions[2] - t.positions[0]).normalize();
         for vn in t.normals.unwrap() {
             assert!(n.dot(vn) > 0.99);
         }
@@ -80,54 +65,27 @@ fn node_transforms_are_baked_and_the_camera_follows_its_parents() {
     for t in &scene.triangles {
         for p in t.positions {
             // Rotation maps (x, y, z) to (z, y, -x); then the translation adds 0.5 to z.
-            assert!(
-                (p.x + 1.0).abs() < 1e-5 && (p.z - 0.5).abs() < 1.0 + 1e-5,
-                "quad baked to x = -1 (got {p})"
-            );
+            assert!((p.x + 1.0).abs() < 1e-5 && (p.z - 0.5).abs() < 1.0 + 1e-5, "quad baked to x = -1 (got {p})");
         }
     }
     let ctx = common::gpu();
     let prepared = PreparedScene::new(scene).unwrap();
-    let film = common::render_films(
-        &ctx,
-        &prepared,
-        &RenderSettings {
-            width: 8,
-            height: 8,
-            ..Default::default()
-        },
-        1,
-        2,
-    )
-    .remove(0);
-    assert!(
-        film.data.iter().all(|&v| v == 2.0),
-        "the rotated camera sees the emitter in every pixel"
-    );
+    let film = common::render_films(&ctx, &prepared, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 2).remove(0);
+    assert!(film.data.iter().all(|&v| v == 2.0), "the rotated camera sees the emitter in every pixel");
 }
 
 #[test]
 fn point_lights_and_default_materials_load() {
     let mut s = lit_quad();
     s.materials = vec![Material::diffuse([0.5; 3])];
-    s.point_lights = vec![PointLight {
-        position: [0.0, 1.0, 0.0],
-        intensity: 3.0,
-    }];
-    s.meshes.push(Mesh {
-        material: None,
-        ..quad_z(0.5, -3.0, true, 0)
-    });
+    s.point_lights = vec![PointLight { position: [0.0, 1.0, 0.0], intensity: 3.0 }];
+    s.meshes.push(Mesh { material: None, ..quad_z(0.5, -3.0, true, 0) });
     let dir = common::scratch_dir("point_lights");
     let scene = load_gltf(&s.write(&dir, "point.gltf")).unwrap();
     assert_eq!(scene.point_lights.len(), 1);
     assert_eq!(scene.point_lights[0].position, glam::Vec3::Y);
     assert_eq!(scene.point_lights[0].intensity, glam::Vec3::splat(3.0));
-    assert_eq!(
-        scene.materials.len(),
-        2,
-        "glTF's default material is added for primitives without one"
-    );
+    assert_eq!(scene.materials.len(), 2, "glTF's default material is added for primitives without one");
     assert_eq!(scene.triangles[2].material, 1);
 }
 
@@ -148,17 +106,11 @@ fn bad_files_give_clear_errors() {
     let dir = common::scratch_dir("bad_files");
     let missing = dir.join("does_not_exist.gltf");
     let e = format!("{:#}", load_gltf(&missing).unwrap_err());
-    assert!(
-        e.contains("does_not_exist.gltf") && e.contains("cannot read"),
-        "{e}"
-    );
+    assert!(e.contains("does_not_exist.gltf") && e.contains("cannot read"), "{e}");
 
     std::fs::write(dir.join("malformed.gltf"), "{ this is not json").unwrap();
     let e = format!("{:#}", load_gltf(&dir.join("malformed.gltf")).unwrap_err());
-    assert!(
-        e.contains("malformed.gltf") && e.contains("not a valid glTF"),
-        "{e}"
-    );
+    assert!(e.contains("malformed.gltf") && e.contains("not a valid glTF"), "{e}");
 
     let mut doc = lit_quad().to_json();
     doc["buffers"][0]["uri"] = json!("missing.bin");
@@ -193,88 +145,46 @@ fn bad_files_give_clear_errors() {
     let mut doc = lit_quad().to_json();
     doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
     doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "spot", "spot": {"innerConeAngle": 0.6, "outerConeAngle": 0.5}}]}});
-    doc["nodes"]
-        .as_array_mut()
-        .unwrap()
-        .push(json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+    doc["nodes"].as_array_mut().unwrap().push(json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
     doc["scenes"][0]["nodes"] = json!([0, 1, 2]);
     let e = load_error(&dir, "spot.gltf", &doc);
-    assert!(
-        e.contains("spot cone angles") && e.contains("lamp") && e.contains("spot.gltf"),
-        "{e}"
-    );
+    assert!(e.contains("spot cone angles") && e.contains("lamp") && e.contains("spot.gltf"), "{e}");
 
     // Thin-lens extras on the camera node: both lengths, positive, numbers.
-    let camera_node = lit_quad().to_json()["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .position(|n| n.get("camera").is_some())
-        .unwrap();
+    let camera_node = lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
     for (extras, needle) in [
         (json!({"aperture_radius": 0.1}), "needs `focus_distance`"),
         (json!({"focus_distance": 2.0}), "needs `aperture_radius`"),
-        (
-            json!({"aperture_radius": -0.1, "focus_distance": 2.0}),
-            "aperture radius -0.1 m is not a positive length",
-        ),
-        (
-            json!({"aperture_radius": 0.1, "focus_distance": 0.0}),
-            "focus distance 0 m is not a positive length",
-        ),
-        (
-            json!({"aperture_radius": "wide", "focus_distance": 2.0}),
-            "not a number of metres",
-        ),
+        (json!({"aperture_radius": -0.1, "focus_distance": 2.0}), "aperture radius -0.1 m is not a positive length"),
+        (json!({"aperture_radius": 0.1, "focus_distance": 0.0}), "focus distance 0 m is not a positive length"),
+        (json!({"aperture_radius": "wide", "focus_distance": 2.0}), "not a number of metres"),
     ] {
         let mut doc = lit_quad().to_json();
         doc["nodes"][camera_node]["extras"] = extras.clone();
         let e = load_error(&dir, "lens.gltf", &doc);
-        assert!(
-            e.contains(needle) && e.contains("lens.gltf") && e.contains("camera extras"),
-            "{extras}: {e}"
-        );
+        assert!(e.contains(needle) && e.contains("lens.gltf") && e.contains("camera extras"), "{extras}: {e}");
     }
 }
 
 #[test]
 fn thin_lens_extras_and_spot_cones_load() {
     let dir = common::scratch_dir("lens_and_spot");
-    let camera_node = lit_quad().to_json()["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .position(|n| n.get("camera").is_some())
-        .unwrap();
+    let camera_node = lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
     let mut doc = lit_quad().to_json();
-    doc["nodes"][camera_node]["extras"] =
-        json!({"aperture_radius": 0.05, "focus_distance": 3.0, "note": "kept"});
+    doc["nodes"][camera_node]["extras"] = json!({"aperture_radius": 0.05, "focus_distance": 3.0, "note": "kept"});
     doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
     doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [
         {"type": "spot", "intensity": 2.0, "spot": {"innerConeAngle": 0.25, "outerConeAngle": 0.5}}]}});
     // The spot looks along its node's -z turned 90 degrees about +x: straight down.
     let s = std::f32::consts::FRAC_1_SQRT_2;
-    doc["nodes"]
-        .as_array_mut()
-        .unwrap()
-        .push(json!({"name": "lamp", "translation": [0.0, 1.0, 0.0],
+    doc["nodes"].as_array_mut().unwrap().push(json!({"name": "lamp", "translation": [0.0, 1.0, 0.0],
         "rotation": [-s, 0.0, 0.0, s], "extensions": {"KHR_lights_punctual": {"light": 0}}}));
     let count = doc["nodes"].as_array().unwrap().len();
     doc["scenes"][0]["nodes"] = json!((0..count).collect::<Vec<_>>());
     let scene = load_gltf(&write_json(&dir, "lens_and_spot.gltf", &doc)).unwrap();
-    assert_eq!(
-        scene.camera.lens,
-        Some(gatetrace::scene::ThinLens {
-            aperture_radius: 0.05,
-            focus_distance: 3.0
-        })
-    );
+    assert_eq!(scene.camera.lens, Some(gatetrace::scene::ThinLens { aperture_radius: 0.05, focus_distance: 3.0 }));
     let spot = scene.point_lights[0].spot.expect("a spot cone");
-    assert!(
-        (spot.direction - glam::Vec3::NEG_Y).length() < 1e-6,
-        "{}",
-        spot.direction
-    );
+    assert!((spot.direction - glam::Vec3::NEG_Y).length() < 1e-6, "{}", spot.direction);
     assert_eq!((spot.inner, spot.outer), (0.25, 0.5));
     assert_eq!(spot.falloff(glam::Vec3::NEG_Y), 1.0);
     assert_eq!(spot.falloff(glam::Vec3::X), 0.0);
@@ -284,13 +194,7 @@ fn thin_lens_extras_and_spot_cones_load() {
     assert!((spot.falloff(w) - 0.25).abs() < 1e-4, "{}", spot.falloff(w));
     // An aperture radius of 0 is a pinhole.
     doc["nodes"][camera_node]["extras"] = json!({"aperture_radius": 0.0, "focus_distance": 3.0});
-    assert_eq!(
-        load_gltf(&write_json(&dir, "pinhole.gltf", &doc))
-            .unwrap()
-            .camera
-            .lens,
-        None
-    );
+    assert_eq!(load_gltf(&write_json(&dir, "pinhole.gltf", &doc)).unwrap().camera.lens, None);
 }
 
 #[test]
@@ -302,10 +206,7 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
     std::fs::write(dir.join("checker.png"), png_rgb8(2, 2, &texels)).unwrap();
     let mut s = lit_quad();
     s.materials = vec![Material::diffuse([1.0, 0.5, 1.0])];
-    s.point_lights = vec![PointLight {
-        position: [0.0; 3],
-        intensity: 1.0,
-    }];
+    s.point_lights = vec![PointLight { position: [0.0; 3], intensity: 1.0 }];
     let mut doc = s.to_json();
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
     doc["textures"] = json!([{"source": 0, "sampler": 0}]);
@@ -315,16 +216,10 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
     let scene = load_gltf(&path).unwrap();
     assert_eq!(scene.textures.len(), 1);
     let tex = &scene.textures[0];
-    assert_eq!(
-        (tex.width, tex.height, tex.clamp_u, tex.clamp_v),
-        (2, 2, false, true)
-    );
+    assert_eq!((tex.width, tex.height, tex.clamp_u, tex.clamp_v), (2, 2, false, true));
     assert_eq!(tex.texels[0], glam::Vec3::new(1.0, 0.0, 0.0));
     let grey = gatetrace::scene::gltf_loader::srgb_to_linear(128.0 / 255.0);
-    assert!(
-        (tex.texels[3] - glam::Vec3::splat(grey)).length() < 1e-6
-            && (grey - 0.2158605).abs() < 1e-6
-    );
+    assert!((tex.texels[3] - glam::Vec3::splat(grey)).length() < 1e-6 && (grey - 0.2158605).abs() < 1e-6);
     // TEXCOORD_0 maps the quad's corners to the texture's corners.
     for tri in &scene.triangles {
         for (p, uv) in tri.positions.iter().zip(tri.uvs) {
@@ -334,60 +229,19 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
     // WGSL texture lookups against the CPU twin.
     let prepared = PreparedScene::new(scene).unwrap();
     let ctx = common::gpu();
-    let tracer = gatetrace::integrator::PathTracer::new(
-        &ctx,
-        &prepared,
-        &RenderSettings {
-            width: 4,
-            height: 4,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let tracer = gatetrace::integrator::PathTracer::new(&ctx, &prepared, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let mut rng = gatetrace::rng::Rng::new(5, 5, 5);
-    let input: Vec<[f32; 4]> = (0..2048)
-        .map(|_| {
-            [
-                f32::from_bits(0),
-                3.0 * rng.next_f32() - 1.0,
-                3.0 * rng.next_f32() - 1.0,
-                0.0,
-            ]
-        })
-        .collect();
-    let out = common::run_probe(
-        &ctx,
-        &tracer,
-        "probe_functions",
-        &[("FUNCTION", 7.0)],
-        &input,
-        input.len(),
-    );
+    let input: Vec<[f32; 4]> = (0..2048).map(|_| [f32::from_bits(0), 3.0 * rng.next_f32() - 1.0, 3.0 * rng.next_f32() - 1.0, 0.0]).collect();
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 7.0)], &input, input.len());
     for (x, g) in input.iter().zip(out) {
-        let c = texture_bilinear(
-            &prepared.texture_infos,
-            &prepared.texels,
-            0,
-            glam::Vec2::new(x[1], x[2]),
-        );
+        let c = texture_bilinear(&prepared.texture_infos, &prepared.texels, 0, glam::Vec2::new(x[1], x[2]));
         for k in 0..3 {
-            assert!(
-                (g[k] - c[k]).abs() < 1e-5,
-                "texture at {:?}: GPU {} vs CPU {}",
-                (x[1], x[2]),
-                g[k],
-                c[k]
-            );
+            assert!((g[k] - c[k]).abs() < 1e-5, "texture at {:?}: GPU {} vs CPU {}", (x[1], x[2]), g[k], c[k]);
         }
     }
     // The texel storage is half precision: the red texel's green channel is exactly 0 and the
     // grey texel is within half-float rounding (2^-11 relative).
-    let t = texture_bilinear(
-        &prepared.texture_infos,
-        &prepared.texels,
-        0,
-        glam::Vec2::new(0.75, 0.75),
-    );
+    let t = texture_bilinear(&prepared.texture_infos, &prepared.texels, 0, glam::Vec2::new(0.75, 0.75));
     assert!((t.x - grey).abs() <= grey / 2048.0);
 }
 
@@ -400,10 +254,7 @@ fn textured_albedo_renders_like_the_equal_base_color() {
     let g = gatetrace::scene::gltf_loader::srgb_to_linear(128.0 / 255.0);
     std::fs::write(dir.join("grey.png"), png_rgb8(1, 1, &[128, 128, 128])).unwrap();
     let mut s = lit_quad();
-    s.point_lights = vec![PointLight {
-        position: [0.0; 3],
-        intensity: 1.0,
-    }];
+    s.point_lights = vec![PointLight { position: [0.0; 3], intensity: 1.0 }];
     s.materials = vec![Material::diffuse([g; 3])];
     let plain = PreparedScene::new(load_gltf(&s.write(&dir, "plain.gltf")).unwrap()).unwrap();
     s.materials = vec![Material::diffuse([1.0; 3])];
@@ -411,24 +262,15 @@ fn textured_albedo_renders_like_the_equal_base_color() {
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
     doc["textures"] = json!([{"source": 0}]);
     doc["images"] = json!([{"uri": "grey.png"}]);
-    let textured =
-        PreparedScene::new(load_gltf(&write_json(&dir, "textured.gltf", &doc)).unwrap()).unwrap();
+    let textured = PreparedScene::new(load_gltf(&write_json(&dir, "textured.gltf", &doc)).unwrap()).unwrap();
     assert!(textured.has_textures() && !plain.has_textures());
     let ctx = common::gpu();
-    let settings = RenderSettings {
-        width: 16,
-        height: 16,
-        max_bounces: 2,
-        ..Default::default()
-    };
+    let settings = RenderSettings { width: 16, height: 16, max_bounces: 2, ..Default::default() };
     let a = common::render_films(&ctx, &plain, &settings, 1, 8).remove(0);
     let b = common::render_films(&ctx, &textured, &settings, 1, 8).remove(0);
     assert!(a.data.iter().all(|&v| v > 0.0));
     for (x, y) in a.data.iter().zip(&b.data) {
-        assert!(
-            (x - y).abs() <= x * (1.0 / 2048.0 + 1e-6),
-            "untextured {x} vs textured {y}"
-        );
+        assert!((x - y).abs() <= x * (1.0 / 2048.0 + 1e-6), "untextured {x} vs textured {y}");
     }
 }
 
@@ -442,28 +284,16 @@ fn example_nlos_scene_hides_the_letter_from_the_origin() {
     use glam::Vec3;
 
     let path = common::repo_path("assets/scenes/nlos_letter.gltf");
-    let doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     let o = &doc["extras"]["nlos"]["sensor_origin"];
-    let origin = Vec3::new(
-        o[0].as_f64().unwrap() as f32,
-        o[1].as_f64().unwrap() as f32,
-        o[2].as_f64().unwrap() as f32,
-    );
+    let origin = Vec3::new(o[0].as_f64().unwrap() as f32, o[1].as_f64().unwrap() as f32, o[2].as_f64().unwrap() as f32);
     let scene = PreparedScene::new(load_gltf(&path).unwrap()).unwrap();
-    assert!(
-        (scene.scene.camera.position - origin).length() < 1e-6,
-        "the camera sits at the origin"
-    );
+    assert!((scene.scene.camera.position - origin).length() < 1e-6, "the camera sits at the origin");
     let (nodes, triangles) = (&scene.bvh.nodes, &scene.triangles);
     let in_plane_z = |z: f32| -> Vec<Vec3> {
         triangles
             .iter()
-            .filter(|t| {
-                [t.v0, t.v0 + t.e1, t.v0 + t.e2]
-                    .iter()
-                    .all(|v| (v.z - z).abs() < 1e-6)
-            })
+            .filter(|t| [t.v0, t.v0 + t.e1, t.v0 + t.e2].iter().all(|v| (v.z - z).abs() < 1e-6))
             .map(|t| t.v0 + (t.e1 + t.e2) / 3.0)
             .collect()
     };
@@ -474,37 +304,18 @@ fn example_nlos_scene_hides_the_letter_from_the_origin() {
     let blocked = |from: Vec3, to: Vec3| {
         let d = to - from;
         let length = d.length();
-        trace_any(
-            nodes,
-            triangles,
-            from,
-            d / length,
-            length - 1e-4,
-            NONE,
-            NONE,
-        )
+        trace_any(nodes, triangles, from, d / length, length - 1e-4, NONE, NONE)
     };
     let wall_points: Vec<Vec3> = (0..11)
-        .flat_map(|i| {
-            (0..11).map(move |j| Vec3::new(-0.49 + 0.098 * i as f32, -0.49 + 0.098 * j as f32, 0.0))
-        })
+        .flat_map(|i| (0..11).map(move |j| Vec3::new(-0.49 + 0.098 * i as f32, -0.49 + 0.098 * j as f32, 0.0)))
         .collect();
     for &w in &wall_points {
-        assert!(
-            !blocked(origin, w),
-            "wall point {w} is hidden from the origin"
-        );
+        assert!(!blocked(origin, w), "wall point {w} is hidden from the origin");
         for &l in &letter {
-            assert!(
-                !blocked(w + Vec3::Z * 1e-4, l),
-                "wall point {w} does not see letter point {l}"
-            );
+            assert!(!blocked(w + Vec3::Z * 1e-4, l), "wall point {w} does not see letter point {l}");
         }
     }
     for &l in &letter {
-        assert!(
-            blocked(origin, l),
-            "letter point {l} is in sight of the origin"
-        );
+        assert!(blocked(origin, l), "letter point {l} is in sight of the origin");
     }
 }

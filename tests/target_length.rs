@@ -8,60 +8,20 @@
 mod common;
 
 use gatetrace::film::Gate;
-use gatetrace::film::gate::gate_weight;
 use gatetrace::film::target::{TargetSampler, target_u};
+use gatetrace::film::gate::gate_weight;
 use gatetrace::integrator::{Integrator, PathTracer, RenderSettings, target_sampler};
 
 fn gates() -> Vec<(&'static str, Gate)> {
     vec![
-        (
-            "box",
-            Gate::Box {
-                start: 3.14,
-                end: 3.1425,
-            },
-        ),
-        (
-            "wide box",
-            Gate::Box {
-                start: 2.5,
-                end: 4.0,
-            },
-        ),
-        (
-            "gaussian",
-            Gate::Gaussian {
-                mean: 3.2,
-                sigma: 0.05,
-            },
-        ),
-        (
-            "cw",
-            Gate::Cw {
-                frequency_hz: 1e8,
-                phase_deg: 30.0,
-            },
-        ),
-        (
-            "cw depth-selective",
-            Gate::parse("cw:4.7e9,-30,depthsel").unwrap(),
-        ),
+        ("box", Gate::Box { start: 3.14, end: 3.1425 }),
+        ("wide box", Gate::Box { start: 2.5, end: 4.0 }),
+        ("gaussian", Gate::Gaussian { mean: 3.2, sigma: 0.05 }),
+        ("cw", Gate::Cw { frequency_hz: 1e8, phase_deg: 30.0 }),
+        ("cw depth-selective", Gate::parse("cw:4.7e9,-30,depthsel").unwrap()),
         ("cw hamiltonian", Gate::parse("cw:300e6,75,ham4:3").unwrap()),
-        (
-            "table",
-            Gate::Table {
-                points: vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)],
-                source: "t.csv".into(),
-            },
-        ),
-        (
-            "transient",
-            Gate::Transient {
-                start: 1.94,
-                width: 0.1,
-                bins: 20,
-            },
-        ),
+        ("table", Gate::Table { points: vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)], source: "t.csv".into() }),
+        ("transient", Gate::Transient { start: 1.94, width: 0.1, bins: 20 }),
     ]
 }
 
@@ -71,50 +31,28 @@ fn weighted_target_lengths_integrate_the_gate() {
     let scene = common::cornell_box();
     let g = |l: f64| 1.0 + (3.0 * l).sin() + 0.3 * l;
     for (name, gate) in gates() {
-        let settings = RenderSettings {
-            max_bounces: 5,
-            gate: gate.clone(),
-            ..Default::default()
-        };
+        let settings = RenderSettings { max_bounces: 5, gate: gate.clone(), ..Default::default() };
         let sampler = target_sampler(&scene, &settings).unwrap();
         let (lo, hi) = (sampler.params.lo as f64, sampler.params.hi as f64);
         // Quadrature of W g over [lo, hi] (independent of the sampler's table).
         let (gp, kind, table) = (gate.to_gpu(), gate.kind(), gate.table());
         let n = 400_000;
         let h = (hi - lo) / n as f64;
-        let exact: f64 = (0..n)
-            .map(|i| {
-                let l = lo + (i as f64 + 0.5) * h;
-                gate_weight(kind, &gp, &table, l as f32) as f64 * g(l) * h
-            })
-            .sum();
+        let exact: f64 = (0..n).map(|i| {
+            let l = lo + (i as f64 + 0.5) * h;
+            gate_weight(kind, &gp, &table, l as f32) as f64 * g(l) * h
+        }).sum();
         // Estimate with stratified u.
         let m = 200_000;
-        let estimate: f64 = (0..m)
-            .map(|i| {
-                let (l, inv_pdf) = sampler.sample((i as f32 + 0.5) / m as f32);
-                let w = sampler.weight(l) * inv_pdf;
-                assert!(
-                    (lo as f32..=hi as f32).contains(&l) && w.is_finite(),
-                    "{name}: tau {l}, weight {w}"
-                );
-                w as f64 * g(l as f64)
-            })
-            .sum::<f64>()
-            / m as f64;
+        let estimate: f64 = (0..m).map(|i| {
+            let (l, inv_pdf) = sampler.sample((i as f32 + 0.5) / m as f32);
+            let w = sampler.weight(l) * inv_pdf;
+            assert!((lo as f32..=hi as f32).contains(&l) && w.is_finite(), "{name}: tau {l}, weight {w}");
+            w as f64 * g(l as f64)
+        }).sum::<f64>() / m as f64;
         println!("{name}: [{lo:.4}, {hi:.4}] m, integral {exact:.6e}, estimate {estimate:.6e}");
-        let scale: f64 = (0..n)
-            .map(|i| {
-                (gate_weight(kind, &gp, &table, (lo + (i as f64 + 0.5) * h) as f32) as f64
-                    * g(lo + (i as f64 + 0.5) * h))
-                .abs()
-                    * h
-            })
-            .sum();
-        assert!(
-            (estimate - exact).abs() <= 2e-3 * scale,
-            "{name}: estimate {estimate} vs integral {exact}"
-        );
+        let scale: f64 = (0..n).map(|i| (gate_weight(kind, &gp, &table, (lo + (i as f64 + 0.5) * h) as f32) as f64 * g(lo + (i as f64 + 0.5) * h)).abs() * h).sum();
+        assert!((estimate - exact).abs() <= 2e-3 * scale, "{name}: estimate {estimate} vs integral {exact}");
     }
 }
 
@@ -123,50 +61,18 @@ fn wgsl_target_lengths_match_cpu_twin() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     for (name, gate) in gates() {
-        let settings = RenderSettings {
-            width: 4,
-            height: 4,
-            max_bounces: 5,
-            gate: gate.clone(),
-            ..Default::default()
-        };
+        let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), ..Default::default() };
         let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
         let sampler: TargetSampler = target_sampler(&scene, &settings).unwrap();
         let input: Vec<[f32; 4]> = (0..4096u32)
-            .map(|i| {
-                [
-                    (i as f32 + 0.37) / 4096.0,
-                    f32::from_bits(i.wrapping_mul(2_246_822_519)),
-                    f32::from_bits(i % 97),
-                    0.0,
-                ]
-            })
+            .map(|i| [(i as f32 + 0.37) / 4096.0, f32::from_bits(i.wrapping_mul(2_246_822_519)), f32::from_bits(i % 97), 0.0])
             .collect();
-        let out = common::run_probe(
-            &ctx,
-            &tracer,
-            "probe_functions",
-            &[("FUNCTION", 14.0)],
-            &input,
-            input.len(),
-        );
+        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 14.0)], &input, input.len());
         for (i, (x, o)) in input.iter().zip(&out).enumerate() {
             let (l, w) = sampler.sample(x[0]);
-            assert!(
-                (o[0] - l).abs() <= 1e-6 * l,
-                "{name} record {i}: tau GPU {} CPU {l}",
-                o[0]
-            );
-            assert!(
-                (o[1] - w).abs() <= 1e-4 * w.abs() + 1e-7,
-                "{name} record {i}: 1/p GPU {} CPU {w}",
-                o[1]
-            );
-            assert_eq!(
-                o[2],
-                target_u(x[1].to_bits(), x[2].to_bits()),
-                "{name} record {i}: target_u"
-            );
+            assert!((o[0] - l).abs() <= 1e-6 * l, "{name} record {i}: tau GPU {} CPU {l}", o[0]);
+            assert!((o[1] - w).abs() <= 1e-4 * w.abs() + 1e-7, "{name} record {i}: 1/p GPU {} CPU {w}", o[1]);
+            assert_eq!(o[2], target_u(x[1].to_bits(), x[2].to_bits()), "{name} record {i}: target_u");
         }
     }
 }
@@ -188,11 +94,7 @@ fn a_pixels_target_numbers_are_uniform_and_spread() {
         for s in 0..n as u32 {
             cells[(target_u(0x1234_5678, s) * n as f32) as usize] += 1;
         }
-        assert!(
-            cells.iter().all(|&c| c <= 3),
-            "{n} samples: {:?}",
-            cells.iter().max()
-        );
+        assert!(cells.iter().all(|&c| c <= 3), "{n} samples: {:?}", cells.iter().max());
     }
 }
 
@@ -200,21 +102,9 @@ fn a_pixels_target_numbers_are_uniform_and_spread() {
 /// scene's lengths, and 4000 fine bins of which the first ~3,470 lie below them (first_bin > 0).
 fn transient_gates() -> Vec<Gate> {
     vec![
-        Gate::Transient {
-            start: 1.94,
-            width: 0.1,
-            bins: 20,
-        },
-        Gate::Transient {
-            start: 0.9,
-            width: 0.0003,
-            bins: 4000,
-        },
-        Gate::Transient {
-            start: 3.0,
-            width: 0.05,
-            bins: 1,
-        },
+        Gate::Transient { start: 1.94, width: 0.1, bins: 20 },
+        Gate::Transient { start: 0.9, width: 0.0003, bins: 4000 },
+        Gate::Transient { start: 3.0, width: 0.05, bins: 1 },
     ]
 }
 
@@ -223,25 +113,13 @@ fn transient_gates() -> Vec<Gate> {
 fn random_rows(n: u32, extra: u32, pixels: u32, rng: &mut gatetrace::rng::Rng) -> Vec<u32> {
     let mut rows = Vec::new();
     for _ in 0..pixels {
-        let weights: Vec<f64> = (0..n)
-            .map(|_| {
-                if rng.next_f32() < 0.3 {
-                    0.0
-                } else {
-                    (rng.next_f32() as f64).powi(3)
-                }
-            })
-            .collect();
+        let weights: Vec<f64> = (0..n).map(|_| if rng.next_f32() < 0.3 { 0.0 } else { (rng.next_f32() as f64).powi(3) }).collect();
         let total: f64 = weights.iter().sum::<f64>().max(1e-30);
         let mut acc = 0.0;
         rows.push(0);
         for (j, w) in weights.iter().enumerate() {
             acc += w;
-            rows.push(if j + 1 == n as usize {
-                extra
-            } else {
-                ((extra as f64 * acc / total).round() as u32).min(extra)
-            });
+            rows.push(if j + 1 == n as usize { extra } else { ((extra as f64 * acc / total).round() as u32).min(extra) });
         }
     }
     rows
@@ -253,75 +131,36 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
     use gatetrace::film::target::{golden_stride, target_visit};
     for n in 1..300u32 {
         let g = golden_stride(n);
-        assert!(
-            (1..n.max(2)).contains(&g) && (1..=g).all(|d| d == 1 || g % d != 0 || n % d != 0),
-            "stride {g} of {n}"
-        );
+        assert!((1..n.max(2)).contains(&g) && (1..=g).all(|d| d == 1 || g % d != 0 || n % d != 0), "stride {g} of {n}");
     }
     let scene = common::cornell_box();
     let mut rng = gatetrace::rng::Rng::new(5, 6, 7);
     for gate in transient_gates() {
-        let settings = RenderSettings {
-            max_bounces: 5,
-            gate: gate.clone(),
-            seed: 11,
-            ..Default::default()
-        };
+        let settings = RenderSettings { max_bounces: 5, gate: gate.clone(), seed: 11, ..Default::default() };
         let sampler = target_sampler(&scene, &settings).unwrap();
-        let Gate::Transient { start, width, bins } = gate else {
-            unreachable!()
-        };
+        let Gate::Transient { start, width, bins } = gate else { unreachable!() };
         let t = sampler.params;
-        assert!(
-            t.strata >= 1 && t.first_bin + t.strata <= bins,
-            "{gate:?}: {t:?}"
-        );
+        assert!(t.strata >= 1 && t.first_bin + t.strata <= bins, "{gate:?}: {t:?}");
         // The strata are whole bins covering the lengths the scene allows within the gate.
-        assert_eq!(
-            t.lo as f64,
-            (start + t.first_bin as f64 * width) as f32 as f64
-        );
+        assert_eq!(t.lo as f64, (start + t.first_bin as f64 * width) as f32 as f64);
         let shortest = (scene.scene.path_length_bounds(5).0 as f64).max(start);
-        assert!(
-            t.lo as f64 <= shortest + 1e-6 && t.lo as f64 > shortest - width - 1e-6,
-            "{gate:?}: lo {}",
-            t.lo
-        );
+        assert!(t.lo as f64 <= shortest + 1e-6 && t.lo as f64 > shortest - width - 1e-6, "{gate:?}: lo {}", t.lo);
         let n = t.strata;
         for _ in 0..20 {
             let pixel = (rng.next_f32() * 1e6) as u32;
-            let t = gatetrace::gpu::layout::TargetParams {
-                seed: settings.seed,
-                film_first_sample: (rng.next_f32() * 1e7) as u32,
-                ..t
-            };
-            let first = t
-                .film_first_sample
-                .wrapping_add((rng.next_f32() * 1e7) as u32);
+            let t = gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: (rng.next_f32() * 1e7) as u32, ..t };
+            let first = t.film_first_sample.wrapping_add((rng.next_f32() * 1e7) as u32);
             let mut seen = vec![0u32; n as usize];
             for sample in first..first + n {
                 let v = target_visit(&t, &[], pixel, sample);
                 seen[v.stratum as usize] += 1;
-                assert_eq!(
-                    (v.visit, v.per_cycle),
-                    ((sample - t.film_first_sample) / n, 1)
-                );
+                assert_eq!((v.visit, v.per_cycle), ((sample - t.film_first_sample) / n, 1));
                 let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, &[], pixel, sample);
                 assert_eq!(bin, t.first_bin + v.stratum);
-                assert_eq!(
-                    gate_bin(gate.kind(), &gate.to_gpu(), tau),
-                    bin as i32,
-                    "{gate:?}: tau {tau} outside bin {bin}"
-                );
-                assert!(
-                    (inv_pdf as f64 - n as f64 * width).abs() <= 1e-6 * n as f64 * width,
-                    "1/p {inv_pdf}"
-                );
+                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), tau), bin as i32, "{gate:?}: tau {tau} outside bin {bin}");
+                assert!((inv_pdf as f64 - n as f64 * width).abs() <= 1e-6 * n as f64 * width, "1/p {inv_pdf}");
             }
-            assert!(
-                seen.iter().all(|&c| c == 1),
-                "{gate:?}: {n} consecutive samples from {first} of pixel {pixel}"
-            );
+            assert!(seen.iter().all(|&c| c == 1), "{gate:?}: {n} consecutive samples from {first} of pixel {pixel}");
         }
     }
 }
@@ -333,16 +172,9 @@ fn extra_visits_follow_the_pixels_rows() {
     let scene = common::cornell_box();
     let mut rng = gatetrace::rng::Rng::new(8, 9, 10);
     for gate in transient_gates() {
-        let settings = RenderSettings {
-            max_bounces: 5,
-            gate: gate.clone(),
-            seed: 12,
-            ..Default::default()
-        };
+        let settings = RenderSettings { max_bounces: 5, gate: gate.clone(), seed: 12, ..Default::default() };
         let sampler = target_sampler(&scene, &settings).unwrap();
-        let Gate::Transient { width, .. } = gate else {
-            unreachable!()
-        };
+        let Gate::Transient { width, .. } = gate else { unreachable!() };
         let n = sampler.params.strata;
         let extra = 3 * n + 1;
         let pixels = 6u32;
@@ -362,15 +194,10 @@ fn extra_visits_follow_the_pixels_rows() {
             for start in [0u32, 1, n, cycle / 2, 5 * cycle + 3] {
                 let mut seen = vec![0u32; n as usize];
                 for s in start..start + cycle {
-                    seen[target_visit(&t, row, pixel, t.film_first_sample + s).stratum as usize] +=
-                        1;
+                    seen[target_visit(&t, row, pixel, t.film_first_sample + s).stratum as usize] += 1;
                 }
                 for j in 0..n as usize {
-                    assert_eq!(
-                        seen[j],
-                        per_cycle(j),
-                        "{gate:?} pixel {pixel}: bin {j} in the cycle from {start}"
-                    );
+                    assert_eq!(seen[j], per_cycle(j), "{gate:?} pixel {pixel}: bin {j} in the cycle from {start}");
                 }
             }
             // Over whole cycles, a bin's visits are numbered 0, 1, ... without gaps or repeats,
@@ -383,23 +210,13 @@ fn extra_visits_follow_the_pixels_rows() {
                 visits[v.stratum as usize].push(v.visit);
                 let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, row, pixel, sample);
                 assert_eq!(bin, t.first_bin + v.stratum);
-                assert_eq!(
-                    gate_bin(gate.kind(), &gate.to_gpu(), tau),
-                    bin as i32,
-                    "{gate:?}: tau {tau} outside bin {bin}"
-                );
+                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), tau), bin as i32, "{gate:?}: tau {tau} outside bin {bin}");
                 let expected = cycle as f64 * width / v.per_cycle as f64;
-                assert!(
-                    (inv_pdf as f64 - expected).abs() <= 1e-6 * expected,
-                    "1/p {inv_pdf}, expected {expected}"
-                );
+                assert!((inv_pdf as f64 - expected).abs() <= 1e-6 * expected, "1/p {inv_pdf}, expected {expected}");
             }
             for (j, v) in visits.iter_mut().enumerate() {
                 v.sort_unstable();
-                assert!(
-                    v.iter().copied().eq(0..3 * per_cycle(j)),
-                    "{gate:?} pixel {pixel} bin {j}: visits {v:?}"
-                );
+                assert!(v.iter().copied().eq(0..3 * per_cycle(j)), "{gate:?} pixel {pixel} bin {j}: visits {v:?}");
             }
         }
     }
@@ -409,49 +226,22 @@ fn extra_visits_follow_the_pixels_rows() {
 fn stratum_factors_divide_each_bin_by_its_samples() {
     use gatetrace::film::target::{golden_stride, stratum_factors, target_visit};
     let scene = common::cornell_box();
-    let settings = RenderSettings {
-        max_bounces: 5,
-        gate: transient_gates()[0].clone(),
-        seed: 3,
-        ..Default::default()
-    };
-    let plain = gatetrace::gpu::layout::TargetParams {
-        seed: 3,
-        film_first_sample: 77,
-        ..target_sampler(&scene, &settings).unwrap().params
-    };
+    let settings = RenderSettings { max_bounces: 5, gate: transient_gates()[0].clone(), seed: 3, ..Default::default() };
+    let plain = gatetrace::gpu::layout::TargetParams { seed: 3, film_first_sample: 77, ..target_sampler(&scene, &settings).unwrap().params };
     let n = plain.strata;
     let extra = 5 * n - 2;
     let mut rng = gatetrace::rng::Rng::new(1, 2, 3);
     let rows = random_rows(n, extra, 130, &mut rng);
-    let shaped = gatetrace::gpu::layout::TargetParams {
-        extra,
-        extra_stride: golden_stride(extra),
-        ..plain
-    };
+    let shaped = gatetrace::gpu::layout::TargetParams { extra, extra_stride: golden_stride(extra), ..plain };
     let mut factors = vec![0.0f32; n as usize];
     for t in [plain, shaped] {
         let cycle = (n + t.extra) as u64;
         let n = n as u64;
-        for (pixel, samples) in [
-            (0u32, n - 1),
-            (7, n),
-            (9, 3 * cycle + 5),
-            (123, 10 * cycle + cycle - 1),
-            (45, n + 3),
-            (46, cycle),
-        ] {
-            let row = if t.extra > 0 {
-                &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)]
-            } else {
-                &[][..]
-            };
+        for (pixel, samples) in [(0u32, n - 1), (7, n), (9, 3 * cycle + 5), (123, 10 * cycle + cycle - 1), (45, n + 3), (46, cycle)] {
+            let row = if t.extra > 0 { &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)] } else { &[][..] };
             let done = stratum_factors(&t, row, pixel, samples, &mut factors);
             if samples < n && t.extra == 0 {
-                assert!(
-                    done.is_none(),
-                    "{samples} samples < {n} strata, no extra visits: nothing to change"
-                );
+                assert!(done.is_none(), "{samples} samples < {n} strata, no extra visits: nothing to change");
                 continue;
             }
             if samples < n {
@@ -460,33 +250,19 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
                 assert!(done.is_some());
                 for (j, &f) in factors.iter().enumerate() {
                     let expected = (n * (1 + row[j + 1] - row[j]) as u64) as f64 / cycle as f64;
-                    assert!(
-                        (f as f64 - expected).abs() <= 1e-6 * expected,
-                        "stratum {j}: factor {f} with {samples} samples"
-                    );
+                    assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f} with {samples} samples");
                 }
                 continue;
             }
-            assert!(
-                done.is_some(),
-                "{samples} samples from the film's first visit every bin"
-            );
+            assert!(done.is_some(), "{samples} samples from the film's first visit every bin");
             let mut counts = vec![0u64; n as usize];
             for s in 0..samples {
-                counts[target_visit(&t, row, pixel, t.film_first_sample + s as u32).stratum
-                    as usize] += 1;
+                counts[target_visit(&t, row, pixel, t.film_first_sample + s as u32).stratum as usize] += 1;
             }
             for (j, (&f, &c)) in factors.iter().zip(&counts).enumerate() {
-                let per_cycle = if t.extra > 0 {
-                    1 + row[j + 1] - row[j]
-                } else {
-                    1
-                } as f64;
+                let per_cycle = if t.extra > 0 { 1 + row[j + 1] - row[j] } else { 1 } as f64;
                 let expected = samples as f64 * per_cycle / (cycle as f64 * c as f64);
-                assert!(
-                    (f as f64 - expected).abs() <= 1e-6 * expected,
-                    "stratum {j}: factor {f}, {c} samples of {samples}"
-                );
+                assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f}, {c} samples of {samples}");
             }
         }
     }
@@ -496,11 +272,7 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
 fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
     use gatetrace::film::target::{EXTRA_VISITS_PER_BIN, PILOT_CELLS, PILOT_SPREAD, visit_tables};
     let (strata, bins) = (512u32, 530usize);
-    let t = gatetrace::gpu::layout::TargetParams {
-        strata,
-        first_bin: 10,
-        ..Default::default()
-    };
+    let t = gatetrace::gpu::layout::TargetParams { strata, first_bin: 10, ..Default::default() };
     // Pixel 0: light in bins 110 .. 130 only (strata 100 .. 120); pixel 1: black; pixel 2: NaN.
     let mut film = vec![0.0f32; 3 * bins * 3];
     for bin in 110..130 {
@@ -522,11 +294,7 @@ fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
     assert_eq!(row[128], extra);
     let share = extra as f64 / 36.0;
     for j in 92..128 {
-        assert!(
-            ((row[j + 1] - row[j]) as f64 - share).abs() <= 1.0,
-            "stratum {j}: {} extra visits",
-            row[j + 1] - row[j]
-        );
+        assert!(((row[j + 1] - row[j]) as f64 - share).abs() <= 1.0, "stratum {j}: {} extra visits", row[j + 1] - row[j]);
     }
     // A pixel the pilot saw nothing in (or nothing finite) gets its extra visits evenly.
     for row in rows.chunks(strata as usize + 1).skip(1) {
@@ -544,90 +312,33 @@ fn wgsl_stratified_target_lengths_match_cpu_twin() {
     let scene = common::cornell_box();
     let mut rng = gatetrace::rng::Rng::new(4, 4, 4);
     for gate in transient_gates() {
-        let settings = RenderSettings {
-            width: 4,
-            height: 4,
-            max_bounces: 5,
-            gate: gate.clone(),
-            seed: 21,
-            ..Default::default()
-        };
+        let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), seed: 21, ..Default::default() };
         let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
         let sampler = target_sampler(&scene, &settings).unwrap();
         let n = sampler.params.strata;
         // Each bin once a cycle, then with extra visits from random rows of the 16 pixels.
-        let plain = gatetrace::gpu::layout::TargetParams {
-            seed: settings.seed,
-            film_first_sample: 123_456,
-            ..sampler.params
-        };
+        let plain = gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: 123_456, ..sampler.params };
         let extra = 2 * n + 3;
-        let shaped = gatetrace::gpu::layout::TargetParams {
-            extra,
-            extra_stride: golden_stride(extra),
-            ..plain
-        };
+        let shaped = gatetrace::gpu::layout::TargetParams { extra, extra_stride: golden_stride(extra), ..plain };
         let rows = random_rows(n, extra, 16, &mut rng);
         for t in [plain, shaped] {
             let mut resources = tracer.resources().clone();
             let mut params = tracer.wavefront().params;
             params.target_length = t;
             resources.uniform_init(&ctx, "params", &params);
-            resources
-                .storage_init(
-                    &ctx,
-                    "target_visits",
-                    if t.extra > 0 { &rows[..] } else { &[0u32][..] },
-                )
-                .unwrap();
+            resources.storage_init(&ctx, "target_visits", if t.extra > 0 { &rows[..] } else { &[0u32][..] }).unwrap();
             let input: Vec<[f32; 4]> = (0..4096u32)
-                .map(|i| {
-                    [
-                        f32::from_bits(i % 16),
-                        f32::from_bits(i.wrapping_mul(2_246_822_519) >> 12),
-                        0.0,
-                        0.0,
-                    ]
-                })
+                .map(|i| [f32::from_bits(i % 16), f32::from_bits(i.wrapping_mul(2_246_822_519) >> 12), 0.0, 0.0])
                 .collect();
-            let out = common::run_probe_with(
-                &ctx,
-                &resources,
-                tracer.constants(),
-                "probe_functions",
-                &[("FUNCTION", 15.0)],
-                &input,
-                input.len(),
-            );
+            let out = common::run_probe_with(&ctx, &resources, tracer.constants(), "probe_functions", &[("FUNCTION", 15.0)], &input, input.len());
             for (i, (x, o)) in input.iter().zip(&out).enumerate() {
                 let pixel = x[0].to_bits();
-                let row = if t.extra > 0 {
-                    &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize]
-                } else {
-                    &[][..]
-                };
+                let row = if t.extra > 0 { &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize] } else { &[][..] };
                 let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, row, pixel, x[1].to_bits());
-                assert_eq!(
-                    o[2] as u32 + t.first_bin,
-                    bin,
-                    "{gate:?} record {i}: stratum"
-                );
-                assert!(
-                    (o[0] - tau).abs() <= 2.0 * f32::EPSILON * tau,
-                    "{gate:?} record {i}: tau GPU {} CPU {tau}",
-                    o[0]
-                );
-                assert_eq!(
-                    gate_bin(gate.kind(), &gate.to_gpu(), o[0]),
-                    bin as i32,
-                    "{gate:?} record {i}: GPU tau {} outside bin {bin}",
-                    o[0]
-                );
-                assert!(
-                    (o[1] - inv_pdf).abs() <= 1e-6 * inv_pdf,
-                    "{gate:?} record {i}: 1/p GPU {} CPU {inv_pdf}",
-                    o[1]
-                );
+                assert_eq!(o[2] as u32 + t.first_bin, bin, "{gate:?} record {i}: stratum");
+                assert!((o[0] - tau).abs() <= 2.0 * f32::EPSILON * tau, "{gate:?} record {i}: tau GPU {} CPU {tau}", o[0]);
+                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), o[0]), bin as i32, "{gate:?} record {i}: GPU tau {} outside bin {bin}", o[0]);
+                assert!((o[1] - inv_pdf).abs() <= 1e-6 * inv_pdf, "{gate:?} record {i}: 1/p GPU {} CPU {inv_pdf}", o[1]);
             }
         }
     }

@@ -35,11 +35,7 @@ pub const MAX_SMALL_SCENE_TRIANGLES: usize = 16;
 /// The triangles the traversals test one by one (BVH order): all of them for a scene of at most
 /// MAX_SMALL_SCENE_TRIANGLES, else none (the BVH is traversed).
 pub fn small_scene_triangles(triangles: &[Triangle]) -> &[Triangle] {
-    if triangles.len() <= MAX_SMALL_SCENE_TRIANGLES {
-        triangles
-    } else {
-        &[]
-    }
+    if triangles.len() <= MAX_SMALL_SCENE_TRIANGLES { triangles } else { &[] }
 }
 
 /// A flattened BVH over a triangle list.
@@ -57,22 +53,11 @@ impl Bvh {
         assert!(!triangles.is_empty(), "a BVH needs at least one triangle");
         let tris: Vec<ObvhsTriangle> = triangles
             .iter()
-            .map(|t| ObvhsTriangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
-            })
+            .map(|t| ObvhsTriangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() })
             .collect();
-        let params = BvhBuildParams {
-            max_prims_per_leaf: 4,
-            ..BvhBuildParams::medium_build()
-        };
-        let bvh2 =
-            obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
-        let mut out = Bvh {
-            nodes: Vec::with_capacity(bvh2.nodes.len()),
-            order: Vec::with_capacity(triangles.len()),
-        };
+        let params = BvhBuildParams { max_prims_per_leaf: 4, ..BvhBuildParams::medium_build() };
+        let bvh2 = obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
+        let mut out = Bvh { nodes: Vec::with_capacity(bvh2.nodes.len()), order: Vec::with_capacity(triangles.len()) };
         out.flatten(&bvh2, 0);
         debug_assert_eq!(out.order.len(), triangles.len());
         out
@@ -81,21 +66,12 @@ impl Bvh {
     fn flatten(&mut self, bvh2: &obvhs::bvh2::Bvh2, id: usize) {
         let node = &bvh2.nodes[id];
         let me = self.nodes.len();
-        self.nodes.push(BvhNode {
-            min: node.aabb.min.into(),
-            max: node.aabb.max.into(),
-            ..Default::default()
-        });
+        self.nodes.push(BvhNode { min: node.aabb.min.into(), max: node.aabb.max.into(), ..Default::default() });
         if node.is_leaf() {
-            assert!(
-                node.prim_count <= MAX_LEAF_TRIANGLES,
-                "BVH leaf of {} triangles",
-                node.prim_count
-            );
+            assert!(node.prim_count <= MAX_LEAF_TRIANGLES, "BVH leaf of {} triangles", node.prim_count);
             let first = self.order.len() as u32;
             for k in 0..node.prim_count {
-                self.order
-                    .push(bvh2.primitive_indices[(node.first_index + k) as usize]);
+                self.order.push(bvh2.primitive_indices[(node.first_index + k) as usize]);
             }
             self.nodes[me].leaf = (node.prim_count << 28) | first;
         } else {
@@ -119,12 +95,7 @@ impl Bvh {
             second: DMat3,
         }
         // (Not derived: glam's default matrix is the identity.)
-        const ZERO: Sums = Sums {
-            area: 0.0,
-            light_area: 0.0,
-            first: DVec3::ZERO,
-            second: DMat3::ZERO,
-        };
+        const ZERO: Sums = Sums { area: 0.0, light_area: 0.0, first: DVec3::ZERO, second: DMat3::ZERO };
         let mut sums = vec![ZERO; self.nodes.len()];
         // Children follow their parent in depth-first order: fill from the back.
         let outer = |v: DVec3| DMat3::from_cols(v * v.x, v * v.y, v * v.z);
@@ -142,8 +113,7 @@ impl Bvh {
                         area: s.area + area,
                         light_area: s.light_area + if t.light == NONE { 0.0 } else { area },
                         first: s.first + area / 3.0 * sum,
-                        second: s.second
-                            + (outer(a) + outer(b) + outer(c) + outer(sum)) * (area / 12.0),
+                        second: s.second + (outer(a) + outer(b) + outer(c) + outer(sum)) * (area / 12.0),
                     }
                 }),
                 None => {
@@ -176,11 +146,7 @@ impl Bvh {
                     centroid: mean.as_vec3(),
                     area: s.area as f32,
                     light_area: s.light_area as f32,
-                    spread: [
-                        w(m.x_axis.x, m.y_axis.y),
-                        w(m.z_axis.z, m.y_axis.x),
-                        w(m.z_axis.x, m.z_axis.y),
-                    ],
+                    spread: [w(m.x_axis.x, m.y_axis.y), w(m.z_axis.z, m.y_axis.x), w(m.z_axis.x, m.z_axis.y)],
                 }
             })
             .collect()

@@ -6,13 +6,7 @@ use glam::Vec3;
 use crate::gpu::layout::{BvhNode, Hit, NONE, Triangle};
 
 /// Moller-Trumbore; (t, b1, b2) with t < 0 for a miss.
-pub fn intersect_triangle(
-    origin: Vec3,
-    direction: Vec3,
-    v0: Vec3,
-    e1: Vec3,
-    e2: Vec3,
-) -> (f32, f32, f32) {
+pub fn intersect_triangle(origin: Vec3, direction: Vec3, v0: Vec3, e1: Vec3, e2: Vec3) -> (f32, f32, f32) {
     let p = direction.cross(e2);
     let det = e1.dot(p);
     if det == 0.0 {
@@ -34,13 +28,7 @@ pub fn intersect_triangle(
 
 fn safe_inverse(d: Vec3) -> Vec3 {
     let tiny = 1e-30f32;
-    let fix = |x: f32| {
-        if x.abs() < tiny {
-            if x >= 0.0 { tiny } else { -tiny }
-        } else {
-            x
-        }
-    };
+    let fix = |x: f32| if x.abs() < tiny { if x >= 0.0 { tiny } else { -tiny } } else { x };
     Vec3::new(1.0 / fix(d.x), 1.0 / fix(d.y), 1.0 / fix(d.z))
 }
 
@@ -55,20 +43,8 @@ fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_max: f32) -> 
 }
 
 /// Closest hit with t in (0, t_max), ignoring triangle `ignore` (twin of `trace_closest`).
-pub fn trace_closest(
-    nodes: &[BvhNode],
-    triangles: &[Triangle],
-    origin: Vec3,
-    direction: Vec3,
-    t_max: f32,
-    ignore: u32,
-) -> Hit {
-    let mut best = Hit {
-        t: t_max,
-        triangle: NONE,
-        b1: 0.0,
-        b2: 0.0,
-    };
+pub fn trace_closest(nodes: &[BvhNode], triangles: &[Triangle], origin: Vec3, direction: Vec3, t_max: f32, ignore: u32) -> Hit {
+    let mut best = Hit { t: t_max, triangle: NONE, b1: 0.0, b2: 0.0 };
     let inv_dir = safe_inverse(direction);
     let mut i = 0usize;
     while i < nodes.len() {
@@ -88,12 +64,7 @@ pub fn trace_closest(
             let tri = &triangles[k as usize];
             let (t, b1, b2) = intersect_triangle(origin, direction, tri.v0, tri.e1, tri.e2);
             if t > 0.0 && t < best.t {
-                best = Hit {
-                    t,
-                    triangle: k,
-                    b1,
-                    b2,
-                };
+                best = Hit { t, triangle: k, b1, b2 };
             }
         }
         i = node.skip as usize;
@@ -139,31 +110,15 @@ pub fn trace_any(
 }
 
 /// Brute-force closest hit over every triangle: the oracle of the oracle.
-pub fn brute_force_closest(
-    triangles: &[Triangle],
-    origin: Vec3,
-    direction: Vec3,
-    t_max: f32,
-    ignore: u32,
-) -> Hit {
-    let mut best = Hit {
-        t: t_max,
-        triangle: NONE,
-        b1: 0.0,
-        b2: 0.0,
-    };
+pub fn brute_force_closest(triangles: &[Triangle], origin: Vec3, direction: Vec3, t_max: f32, ignore: u32) -> Hit {
+    let mut best = Hit { t: t_max, triangle: NONE, b1: 0.0, b2: 0.0 };
     for (k, tri) in triangles.iter().enumerate() {
         if k as u32 == ignore {
             continue;
         }
         let (t, b1, b2) = intersect_triangle(origin, direction, tri.v0, tri.e1, tri.e2);
         if t > 0.0 && t < best.t {
-            best = Hit {
-                t,
-                triangle: k as u32,
-                b1,
-                b2,
-            };
+            best = Hit { t, triangle: k as u32, b1, b2 };
         }
     }
     best

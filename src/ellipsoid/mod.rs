@@ -86,9 +86,7 @@ impl Spheroid {
 
     /// Unit axis from focus_s to focus_c (+z for coincident foci).
     pub fn axis(&self) -> DVec3 {
-        (self.focus_c - self.focus_s)
-            .try_normalize()
-            .unwrap_or(DVec3::Z)
+        (self.focus_c - self.focus_s).try_normalize().unwrap_or(DVec3::Z)
     }
 
     /// L(x) = |x - focus_s| + |x - focus_c| (m).
@@ -100,11 +98,7 @@ impl Spheroid {
     pub fn bounds(&self) -> (DVec3, DVec3) {
         let e = self.axis();
         let (b2, c) = (self.b2(), self.c());
-        let half = DVec3::new(
-            (b2 + c * c * e.x * e.x).sqrt(),
-            (b2 + c * c * e.y * e.y).sqrt(),
-            (b2 + c * c * e.z * e.z).sqrt(),
-        );
+        let half = DVec3::new((b2 + c * c * e.x * e.x).sqrt(), (b2 + c * c * e.y * e.y).sqrt(), (b2 + c * c * e.z * e.z).sqrt());
         (self.centre() - half, self.centre() + half)
     }
 
@@ -126,34 +120,14 @@ impl Spheroid {
         if g <= 0.0 {
             return None;
         }
-        let u = if sin_psi > 1e-12 {
-            in_plane / sin_psi
-        } else {
-            n.any_orthonormal_vector()
-        };
+        let u = if sin_psi > 1e-12 { in_plane / sin_psi } else { n.any_orthonormal_vector() };
         let v = n.cross(u);
         let m1 = a * b2.sqrt() * g.sqrt() / k;
         let m2 = b2.sqrt() * (g / k).sqrt();
         let u0 = h * c * c * cos_psi * sin_psi / k;
         let centre = m + h * n + u0 * u;
-        let shape = SectionShape {
-            a,
-            b2,
-            c,
-            h,
-            cos_psi,
-            sin_psi,
-            k,
-            g,
-        };
-        Some(Section {
-            centre,
-            u,
-            v,
-            m1,
-            m2,
-            shape,
-        })
+        let shape = SectionShape { a, b2, c, h, cos_psi, sin_psi, k, g };
+        Some(Section { centre, u, v, m1, m2, shape })
     }
 }
 
@@ -171,24 +145,12 @@ impl Section {
     /// The closed-form Jacobian J (m) of (target length, theta) -> surface point:
     /// dA = J dtau dtheta (DESIGN.md section 5).
     pub fn jacobian(&self, theta: f64) -> f64 {
-        let SectionShape {
-            a,
-            b2,
-            c,
-            h,
-            cos_psi,
-            sin_psi,
-            k,
-            g,
-        } = self.shape;
+        let SectionShape { a, b2, c, h, cos_psi, sin_psi, k, g } = self.shape;
         let u0_prime = -a * h * c * c * cos_psi * sin_psi / (k * k);
-        let m1_sq_prime =
-            a / (k * k) * (b2 * g + a * a * g + a * a * b2 - 2.0 * a * a * b2 * g / k);
+        let m1_sq_prime = a / (k * k) * (b2 * g + a * a * g + a * a * b2 - 2.0 * a * a * b2 * g / k);
         let m2_sq_prime = a * (g * k + b2 * h * h) / (k * k);
         let (ct, st) = (theta.cos(), theta.sin());
-        u0_prime * self.m2 * ct
-            + m1_sq_prime * (k.sqrt() / (2.0 * a)) * ct * ct
-            + m2_sq_prime * (a / (2.0 * k.sqrt())) * st * st
+        u0_prime * self.m2 * ct + m1_sq_prime * (k.sqrt() / (2.0 * a)) * ct * ct + m2_sq_prime * (a / (2.0 * k.sqrt())) * st * st
     }
 }
 
@@ -285,10 +247,7 @@ pub fn clip_arcs(section: &Section, triangle: &Triangle) -> Arcs {
         }
         let mid = 0.5 * (a + b);
         let (cm, sm) = (mid.cos(), mid.sin());
-        if edges
-            .iter()
-            .all(|&(alpha, beta, gamma)| alpha * cm + beta * sm >= gamma)
-        {
+        if edges.iter().all(|&(alpha, beta, gamma)| alpha * cm + beta * sm >= gamma) {
             match arcs.last_mut() {
                 Some(last) if last.1 == a => last.1 = b,
                 _ => arcs.push((a, b)),

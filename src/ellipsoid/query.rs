@@ -113,19 +113,12 @@ pub fn path_length_range(lo: DVec3, hi: DVec3, fs: DVec3, fc: DVec3) -> (f64, f6
         )
         .distance(f)
     };
-    (
-        distance_to_box(fs, lo, hi) + distance_to_box(fc, lo, hi),
-        far(fs) + far(fc),
-    )
+    (distance_to_box(fs, lo, hi) + distance_to_box(fc, lo, hi), far(fs) + far(fc))
 }
 
 /// The spheroid's axis-aligned bounds, widened by 1e-5 as on the device.
 fn spheroid_bounds(q: &Query) -> (DVec3, DVec3) {
-    let sp = Spheroid {
-        focus_s: q.focus_s,
-        focus_c: q.focus_c,
-        length: q.tau_e,
-    };
+    let sp = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
     let (lo, hi) = sp.bounds();
     let (m, half) = (0.5 * (lo + hi), 0.5 * (hi - lo) * (1.0 + 1e-5));
     (m - half, m + half)
@@ -133,18 +126,8 @@ fn spheroid_bounds(q: &Query) -> (DVec3, DVec3) {
 
 /// Estimate of the arc measure below a node with box [lo, hi] and surface `surface` (twin of
 /// `node_estimate`): zero exactly when the box cannot hold a counted point of the spheroid.
-pub fn node_estimate(
-    lo: DVec3,
-    hi: DVec3,
-    surface: &NodeSurface,
-    q: &Query,
-    bounds: (DVec3, DVec3),
-) -> f64 {
-    let area = if q.lights_only {
-        surface.light_area
-    } else {
-        surface.area
-    } as f64;
+pub fn node_estimate(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Query, bounds: (DVec3, DVec3)) -> f64 {
+    let area = if q.lights_only { surface.light_area } else { surface.area } as f64;
     if area <= 0.0
         || hi.cmplt(bounds.0).any()
         || lo.cmpgt(bounds.1).any()
@@ -180,14 +163,8 @@ pub fn node_estimate(
 pub fn path_length_moments(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Query) -> (f64, f64) {
     use crate::scene::materials::unpack2x16float;
     let scale = (hi - lo).length_squared();
-    let [a, b, c] = surface
-        .spread
-        .map(|w| unpack2x16float(w).as_dvec2() * scale);
-    let cov = glam::DMat3::from_cols(
-        DVec3::new(a.x, b.y, c.x),
-        DVec3::new(b.y, a.y, c.y),
-        DVec3::new(c.x, c.y, b.x),
-    );
+    let [a, b, c] = surface.spread.map(|w| unpack2x16float(w).as_dvec2() * scale);
+    let cov = glam::DMat3::from_cols(DVec3::new(a.x, b.y, c.x), DVec3::new(b.y, a.y, c.y), DVec3::new(c.x, c.y, b.x));
     let centroid = surface.centroid.as_dvec3();
     let trace = a.x + a.y + b.x;
     let floor = 1e-6 * q.tau_e;
@@ -201,10 +178,7 @@ pub fn path_length_moments(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Quer
         // The Hessian of |x - f| is (I - u u^T) / r, and E[delta^T H delta] = tr(H cov).
         mean += r + 0.5 * (trace - u.dot(cov * u)) / r;
     }
-    (
-        mean,
-        gradient.dot(cov * gradient).max(0.0).sqrt().max(floor),
-    )
+    (mean, gradient.dot(cov * gradient).max(0.0).sqrt().max(floor))
 }
 
 /// The circular interval of eccentric angle an edge from p along `edge` allows (twin of
@@ -233,9 +207,7 @@ fn edge_interval(section: &super::Section, n: DVec3, p: DVec3, edge: DVec3) -> (
 pub fn arc_weight(spheroid: &Spheroid, triangle: &OracleTriangle) -> f64 {
     use std::f64::consts::{PI, TAU};
     let n = triangle.normal();
-    let Some(section) = spheroid.section(triangle.vertices[0], n) else {
-        return 0.0;
-    };
+    let Some(section) = spheroid.section(triangle.vertices[0], n) else { return 0.0 };
     let mut intervals: Vec<(f64, f64)> = (0..3)
         .map(|i| {
             let p = triangle.vertices[i];
@@ -283,9 +255,7 @@ pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Materi
         return 0.0;
     }
     let nearest = 0.5 * (q.tau_e - q.focus_s.distance(q.focus_c));
-    material.base_color.max_element() as f64
-        * (hs.abs() / nearest).min(1.0)
-        * (hc.abs() / nearest).min(1.0)
+    material.base_color.max_element() as f64 * (hs.abs() / nearest).min(1.0) * (hc.abs() / nearest).min(1.0)
 }
 
 /// A focus nearer a triangle's plane than this times tau_e lies in it for `reflection_factor`
@@ -295,17 +265,8 @@ pub const PLANE_GUARD: f64 = 1e-6;
 /// A triangle's reservoir weight in query `q` (twin of the device's): its arcs' total angle,
 /// times `reflection_factor` unless the query counts emitters only or
 /// `settings.reflection_weights` is false.
-pub fn pick_weight(
-    q: &Query,
-    triangle: &OracleTriangle,
-    material: &Material,
-    settings: &QuerySettings,
-) -> f64 {
-    let spheroid = Spheroid {
-        focus_s: q.focus_s,
-        focus_c: q.focus_c,
-        length: q.tau_e,
-    };
+pub fn pick_weight(q: &Query, triangle: &OracleTriangle, material: &Material, settings: &QuerySettings) -> f64 {
+    let spheroid = Spheroid { focus_s: q.focus_s, focus_c: q.focus_c, length: q.tau_e };
     let weight = arc_weight(&spheroid, triangle);
     if q.lights_only || !settings.reflection_weights || weight <= 0.0 {
         weight
@@ -316,9 +277,7 @@ pub fn pick_weight(
 
 fn oracle_triangle(t: &Triangle) -> OracleTriangle {
     let v0 = t.v0.as_dvec3();
-    OracleTriangle {
-        vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()],
-    }
+    OracleTriangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
 }
 
 fn is_bottom(i: usize, node: &BvhNode, settings: &QuerySettings) -> bool {
@@ -328,13 +287,7 @@ fn is_bottom(i: usize, node: &BvhNode, settings: &QuerySettings) -> bool {
 /// Everything one query reaches (twin of `query_ellipsoid`), in the device's order: the
 /// traversal with `settings` and at most `allowance` traversal iterations before the final
 /// descent, with the random numbers of `key`.
-pub fn reached(
-    scene: QueryScene<'_>,
-    q: &Query,
-    settings: &QuerySettings,
-    allowance: u32,
-    key: [u32; 3],
-) -> Reached {
+pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allowance: u32, key: [u32; 3]) -> Reached {
     let mut out = Reached::default();
     if q.tau_e <= q.focus_s.distance(q.focus_c) {
         return out;
@@ -342,19 +295,9 @@ pub fn reached(
     let bounds = spheroid_bounds(q);
     let nodes = scene.nodes;
     let count = nodes.len();
-    let estimate = |i: usize| {
-        node_estimate(
-            nodes[i].min.as_dvec3(),
-            nodes[i].max.as_dvec3(),
-            &scene.node_surfaces[i],
-            q,
-            bounds,
-        )
-    };
-    let step_key =
-        |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0]);
-    let rest_key =
-        |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0]);
+    let estimate = |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), &scene.node_surfaces[i], q, bounds);
+    let step_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0]);
+    let rest_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0]);
     let split_size = settings.split as f64 * 0.5 * q.tau_e;
     let mut leaves: Vec<(u32, f64)> = Vec::new();
     let flush = |leaves: &mut Vec<(u32, f64)>, out: &mut Reached| {
@@ -390,11 +333,7 @@ pub fn reached(
             if total <= 0.0 {
                 return None;
             }
-            let (chosen, weight) = if step_key(i) * total >= wa {
-                (b, wb)
-            } else {
-                (a, wa)
-            };
+            let (chosen, weight) = if step_key(i) * total >= wa { (b, wb) } else { (a, wa) };
             inv_p *= total / weight;
             i = chosen;
             if is_bottom(i, &nodes[i], settings) {
@@ -403,11 +342,7 @@ pub fn reached(
         }
     };
     // Visits the subtree [i, end) whole with 1 / P = inv_p, batching its leaves.
-    let visit = |start: usize,
-                 end: usize,
-                 inv_p: f64,
-                 iterations: &mut u32,
-                 leaves: &mut Vec<(u32, f64)>| {
+    let visit = |start: usize, end: usize, inv_p: f64, iterations: &mut u32, leaves: &mut Vec<(u32, f64)>| {
         let mut i = start;
         while i < end {
             *iterations += 1;
@@ -446,19 +381,9 @@ pub fn reached(
             }
             if let Some((j, w)) = chosen {
                 let inv_p = total / w;
-                let bottom = if is_bottom(j, &nodes[j], settings) {
-                    Some((j, inv_p))
-                } else {
-                    descend(j, inv_p, &mut iterations)
-                };
+                let bottom = if is_bottom(j, &nodes[j], settings) { Some((j, inv_p)) } else { descend(j, inv_p, &mut iterations) };
                 if let Some((r, inv_p)) = bottom {
-                    visit(
-                        r,
-                        nodes[r].skip as usize,
-                        inv_p,
-                        &mut iterations,
-                        &mut leaves,
-                    );
+                    visit(r, nodes[r].skip as usize, inv_p, &mut iterations, &mut leaves);
                 }
             }
             break;
@@ -469,17 +394,9 @@ pub fn reached(
         } else if node.leaf != 0 {
             leaves.push((node.leaf, 1.0));
             i = node.skip as usize;
-        } else if !is_bottom(i, node, settings)
-            && (node.max - node.min).as_dvec3().length() <= split_size
-        {
+        } else if !is_bottom(i, node, settings) && (node.max - node.min).as_dvec3().length() <= split_size {
             if let Some((r, inv_p)) = descend(i, 1.0, &mut iterations) {
-                visit(
-                    r,
-                    nodes[r].skip as usize,
-                    inv_p,
-                    &mut iterations,
-                    &mut leaves,
-                );
+                visit(r, nodes[r].skip as usize, inv_p, &mut iterations, &mut leaves);
             }
             i = node.skip as usize;
         } else {

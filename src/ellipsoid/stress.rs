@@ -49,12 +49,7 @@ impl Family {
     pub fn all() -> Vec<Family> {
         let mut v = vec![Family::Random];
         v.extend([1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7].map(Family::NearDegenerate));
-        v.extend([
-            Family::NearTangent,
-            Family::PlaneThroughFocus,
-            Family::FociOnPlane,
-            Family::Sliver,
-        ]);
+        v.extend([Family::NearTangent, Family::PlaneThroughFocus, Family::FociOnPlane, Family::Sliver]);
         v.extend([1e-3, 1e3].map(Family::Scaled));
         v
     }
@@ -122,21 +117,13 @@ fn surface_point(sp: &Spheroid, w: DVec3) -> DVec3 {
 
 /// A triangle in the plane through `x` with unit normal `n`, around x, of size `size`,
 /// counter-clockwise about n.
-fn triangle_in_plane(
-    rng: &mut Rng,
-    x: DVec3,
-    n: DVec3,
-    size: f64,
-    sliver: Option<f64>,
-) -> [DVec3; 3] {
+fn triangle_in_plane(rng: &mut Rng, x: DVec3, n: DVec3, size: f64, sliver: Option<f64>) -> [DVec3; 3] {
     let t = n.any_orthonormal_vector();
     let b = n.cross(t);
     let mut corners = [DVec3::ZERO; 3];
     for (k, c) in corners.iter_mut().enumerate() {
         let angle = std::f64::consts::TAU * (k as f64 + 0.8 * rng.next()) / 3.0;
-        *c = x
-            + size * (0.3 + rng.next()) * (angle.cos() * t + angle.sin() * b)
-            + 0.2 * size * (rng.next() - 0.5) * t;
+        *c = x + size * (0.3 + rng.next()) * (angle.cos() * t + angle.sin() * b) + 0.2 * size * (rng.next() - 0.5) * t;
     }
     if let Some(aspect) = sliver {
         // Squash across the first edge: height = aspect x base.
@@ -167,11 +154,7 @@ pub fn generate(family: Family, count: usize, seed: u64) -> Vec<Config> {
             Family::NearDegenerate(e) => 1.0 + e,
             _ => 1.01 + 2.0 * rng.next(),
         };
-        let sp = Spheroid {
-            focus_s: s,
-            focus_c: c,
-            length: d * ratio,
-        };
+        let sp = Spheroid { focus_s: s, focus_c: c, length: d * ratio };
         let x = surface_point(&sp, rng.unit());
         let grad = ((x - s).normalize() + (x - c).normalize()).normalize();
         let size = sp.a() * rng.log_uniform(0.01, 1.0);
@@ -245,12 +228,7 @@ pub fn run_on_device(ctx: &GpuContext, configs: &[Config]) -> Result<Vec<DeviceR
             .collect();
         let mut r = Resources::default();
         r.storage_init(ctx, "probe_input", &input)?;
-        r.storage_zeroed(
-            ctx,
-            "probe_output",
-            32 * chunk.len() as u64,
-            wgpu::BufferUsages::empty(),
-        )?;
+        r.storage_zeroed(ctx, "probe_output", 32 * chunk.len() as u64, wgpu::BufferUsages::empty())?;
         let bind_group = kernel.bind(ctx, &r);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
@@ -316,33 +294,20 @@ pub struct Report {
 
 /// Compares device results with the f64 oracle evaluated on the same (f32) inputs.
 pub fn compare(family: &str, configs: &[Config], device: &[DeviceResult]) -> Report {
-    let mut report = Report {
-        family: family.into(),
-        configs: configs.len(),
-        ..Default::default()
-    };
+    let mut report = Report { family: family.into(), configs: configs.len(), ..Default::default() };
     let (mut theta_err, mut len_err, mut jac_err) = (Vec::new(), Vec::new(), Vec::new());
     let mut with_arcs = 0usize;
     let mut guarded = 0usize;
     for (c, d) in configs.iter().zip(device) {
-        let finite = d.theta_total.is_finite()
-            && d.theta.is_finite()
-            && d.jacobian.is_finite()
-            && d.point.is_finite();
+        let finite = d.theta_total.is_finite() && d.theta.is_finite() && d.jacobian.is_finite() && d.point.is_finite();
         if !finite {
             report.non_finite += 1;
             continue;
         }
-        let sp = Spheroid {
-            focus_s: c.focus_s.as_dvec3(),
-            focus_c: c.focus_c.as_dvec3(),
-            length: c.tau_e as f64,
-        };
+        let sp = Spheroid { focus_s: c.focus_s.as_dvec3(), focus_c: c.focus_c.as_dvec3(), length: c.tau_e as f64 };
         // The triangle its f32 vertices define, exactly (the device gets v0 and f32 edges, and the
         // plane's normal from an f64 cross product, as the scene's triangles do).
-        let tri = Triangle {
-            vertices: c.triangle.map(|v| v.as_dvec3()),
-        };
+        let tri = Triangle { vertices: c.triangle.map(|v| v.as_dvec3()) };
         let v0 = tri.vertices[0];
         let n = tri.normal();
         let section = sp.section(v0, n);
@@ -352,9 +317,7 @@ pub fn compare(family: &str, configs: &[Config], device: &[DeviceResult]) -> Rep
         if section.is_some() != d.valid {
             report.validity_mismatches += 1;
         }
-        let (Some(sec), true) = (section, d.valid) else {
-            continue;
-        };
+        let (Some(sec), true) = (section, d.valid) else { continue };
         let arcs = clip_arcs(&sec, &tri);
         theta_err.push((d.theta_total as f64 - arcs.total).abs());
         if d.theta_total > 0.0 {
@@ -377,14 +340,7 @@ pub fn compare(family: &str, configs: &[Config], device: &[DeviceResult]) -> Rep
 impl Report {
     /// One table row: family, counts, median / p99 / max of each error.
     pub fn row(&self) -> String {
-        let q = |d: &Distribution| {
-            format!(
-                "{:.1e} {:.1e} {:.1e}",
-                d.quantile(0.5),
-                d.quantile(0.99),
-                d.quantile(1.0)
-            )
-        };
+        let q = |d: &Distribution| format!("{:.1e} {:.1e} {:.1e}", d.quantile(0.5), d.quantile(0.99), d.quantile(1.0));
         format!(
             "{:<24} {:>8} {:>8} {:>6} {:>4} | {} | {} | {} | {:.1e}",
             self.family,
@@ -403,15 +359,8 @@ impl Report {
     pub fn header() -> String {
         format!(
             "{:<24} {:>8} {:>8} {:>6} {:>4} | {:<25} | {:<25} | {:<25} | {}",
-            "family",
-            "configs",
-            "cut",
-            "diff",
-            "NaN",
-            "Theta abs err (p50 p99 max)",
-            "|L-tau|/tau (p50 p99 max)",
-            "J rel err (p50 p99 max)",
-            "guard"
+            "family", "configs", "cut", "diff", "NaN", "Theta abs err (p50 p99 max)", "|L-tau|/tau (p50 p99 max)",
+            "J rel err (p50 p99 max)", "guard"
         )
     }
 }

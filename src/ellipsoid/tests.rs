@@ -34,11 +34,7 @@ impl Rng {
 fn random_case(rng: &mut Rng) -> (Spheroid, DVec3, DVec3) {
     let (s, c) = (rng.vec3(), rng.vec3());
     let d = s.distance(c);
-    let spheroid = Spheroid {
-        focus_s: s,
-        focus_c: c,
-        length: d * (1.01 + 2.0 * rng.next()),
-    };
+    let spheroid = Spheroid { focus_s: s, focus_c: c, length: d * (1.01 + 2.0 * rng.next()) };
     let n = rng.unit();
     let point = spheroid.centre() + rng.vec3() * 0.5 * spheroid.length * 0.5;
     (spheroid, point, n)
@@ -50,25 +46,13 @@ fn section_points_lie_on_the_spheroid_and_the_plane() {
     let mut checked = 0;
     for _ in 0..2000 {
         let (sp, point, n) = random_case(&mut rng);
-        let Some(sec) = sp.section(point, n) else {
-            continue;
-        };
+        let Some(sec) = sp.section(point, n) else { continue };
         for k in 0..16 {
             let x = sec.point(k as f64 * TAU / 16.0);
-            assert!(
-                (sp.path_length(x) - sp.length).abs() < 1e-12 * sp.length,
-                "L = {} vs {}",
-                sp.path_length(x),
-                sp.length
-            );
+            assert!((sp.path_length(x) - sp.length).abs() < 1e-12 * sp.length, "L = {} vs {}", sp.path_length(x), sp.length);
             assert!(n.dot(x - point).abs() < 1e-12, "off the plane");
         }
-        assert!(
-            sec.m1 >= sec.m2 * (1.0 - 1e-12),
-            "m1 {} < m2 {}",
-            sec.m1,
-            sec.m2
-        );
+        assert!(sec.m1 >= sec.m2 * (1.0 - 1e-12), "m1 {} < m2 {}", sec.m1, sec.m2);
         checked += 1;
     }
     assert!(checked > 1000);
@@ -80,9 +64,7 @@ fn closed_form_jacobian_matches_coarea_form_and_finite_differences() {
     let mut checked = 0;
     for _ in 0..2000 {
         let (sp, point, n) = random_case(&mut rng);
-        let Some(sec) = sp.section(point, n) else {
-            continue;
-        };
+        let Some(sec) = sp.section(point, n) else { continue };
         if sec.shape.g < 1e-3 * sec.shape.k {
             continue; // near tangency the finite differences lose accuracy; tested separately
         }
@@ -90,26 +72,15 @@ fn closed_form_jacobian_matches_coarea_form_and_finite_differences() {
             let theta = (k as f64 + 0.37) * TAU / 8.0;
             let j = sec.jacobian(theta);
             let coarea = coarea_jacobian(&sp, &sec, n, theta);
-            assert!(
-                (j - coarea).abs() < 1e-9 * coarea,
-                "closed form {j} vs coarea {coarea}"
-            );
+            assert!((j - coarea).abs() < 1e-9 * coarea, "closed form {j} vs coarea {coarea}");
             // dA = |dx/dtau x dx/dtheta| dtau dtheta, by central differences.
             let dt = 1e-6 * sp.length;
-            let at = |length: f64, theta: f64| {
-                Spheroid { length, ..sp }
-                    .section(point, n)
-                    .unwrap()
-                    .point(theta)
-            };
+            let at = |length: f64, theta: f64| Spheroid { length, ..sp }.section(point, n).unwrap().point(theta);
             let dx_dtau = (at(sp.length + dt, theta) - at(sp.length - dt, theta)) / (2.0 * dt);
             let dth = 1e-6;
             let dx_dtheta = (sec.point(theta + dth) - sec.point(theta - dth)) / (2.0 * dth);
             let fd = dx_dtau.cross(dx_dtheta).length();
-            assert!(
-                (j - fd).abs() < 1e-5 * fd,
-                "closed form {j} vs finite differences {fd}"
-            );
+            assert!((j - fd).abs() < 1e-5 * fd, "closed form {j} vs finite differences {fd}");
         }
         checked += 1;
     }
@@ -119,24 +90,14 @@ fn closed_form_jacobian_matches_coarea_form_and_finite_differences() {
 #[test]
 fn jacobian_limits() {
     // Coincident foci (a sphere): J = tau / 4 at every theta and plane.
-    let sp = Spheroid {
-        focus_s: DVec3::new(0.1, 0.2, 0.3),
-        focus_c: DVec3::new(0.1, 0.2, 0.3),
-        length: 2.0,
-    };
-    let sec = sp
-        .section(DVec3::new(0.1, 0.2, 0.7), DVec3::new(0.0, 0.6, 0.8))
-        .unwrap();
+    let sp = Spheroid { focus_s: DVec3::new(0.1, 0.2, 0.3), focus_c: DVec3::new(0.1, 0.2, 0.3), length: 2.0 };
+    let sec = sp.section(DVec3::new(0.1, 0.2, 0.7), DVec3::new(0.0, 0.6, 0.8)).unwrap();
     for k in 0..8 {
         let j = sec.jacobian(k as f64);
         assert!((j - 0.5).abs() < 1e-12, "J = {j}");
     }
     // Tangency: J -> a^2 b^2 / (2 K^1.5) as g -> 0.
-    let sp = Spheroid {
-        focus_s: DVec3::new(-0.3, 0.0, 0.0),
-        focus_c: DVec3::new(0.4, 0.1, 0.0),
-        length: 1.5,
-    };
+    let sp = Spheroid { focus_s: DVec3::new(-0.3, 0.0, 0.0), focus_c: DVec3::new(0.4, 0.1, 0.0), length: 1.5 };
     let n = DVec3::new(0.3, 0.4, 0.5).normalize();
     let probe = sp.section(sp.centre(), n).unwrap().shape;
     let h = probe.k.sqrt() * (1.0 - 1e-10);
@@ -145,10 +106,7 @@ fn jacobian_limits() {
     let limit = s.a * s.a * s.b2 / (2.0 * s.k.powf(1.5));
     for k in 0..8 {
         let j = sec.jacobian(k as f64);
-        assert!(
-            (j - limit).abs() < 1e-4 * limit,
-            "J = {j} vs tangency limit {limit}"
-        );
+        assert!((j - limit).abs() < 1e-4 * limit, "J = {j} vs tangency limit {limit}");
     }
 }
 
@@ -162,42 +120,23 @@ fn clipped_arcs_match_a_dense_scan_of_the_ellipse() {
         // A triangle around a point near the spheroid's surface, of random size and shape.
         let x0 = sp.centre() + rng.unit() * 0.5 * sp.length * 0.8;
         let scale = 0.05 + rng.next() * sp.length;
-        let tri = Triangle {
-            vertices: [
-                x0 + scale * rng.vec3(),
-                x0 + scale * rng.vec3(),
-                x0 + scale * rng.vec3(),
-            ],
-        };
-        let area = (tri.vertices[1] - tri.vertices[0])
-            .cross(tri.vertices[2] - tri.vertices[0])
-            .length();
+        let tri = Triangle { vertices: [x0 + scale * rng.vec3(), x0 + scale * rng.vec3(), x0 + scale * rng.vec3()] };
+        let area = (tri.vertices[1] - tri.vertices[0]).cross(tri.vertices[2] - tri.vertices[0]).length();
         if area < 1e-4 {
             continue;
         }
         let n = tri.normal();
-        let Some(sec) = sp.section(tri.vertices[0], n) else {
-            continue;
-        };
+        let Some(sec) = sp.section(tri.vertices[0], n) else { continue };
         let arcs = clip_arcs(&sec, &tri);
         // Dense scan: the fraction of theta inside the triangle.
         let steps = 20_000;
-        let inside = (0..steps)
-            .filter(|&k| tri.contains(sec.point((k as f64 + 0.5) * TAU / steps as f64)))
-            .count();
+        let inside = (0..steps).filter(|&k| tri.contains(sec.point((k as f64 + 0.5) * TAU / steps as f64))).count();
         let scanned = inside as f64 * TAU / steps as f64;
         // The scan errs by at most one step per arc end (<= 6 ends).
-        assert!(
-            (arcs.total - scanned).abs() <= 6.0 * TAU / steps as f64 + 1e-12,
-            "Theta {} vs scan {scanned}",
-            arcs.total
-        );
+        assert!((arcs.total - scanned).abs() <= 6.0 * TAU / steps as f64 + 1e-12, "Theta {} vs scan {scanned}", arcs.total);
         for &(a, b) in &arcs.arcs {
             assert!(0.0 <= a && a < b && b <= TAU + 1e-12);
-            assert!(
-                tri.contains(sec.point(0.5 * (a + b))),
-                "arc midpoint outside the triangle"
-            );
+            assert!(tri.contains(sec.point(0.5 * (a + b))), "arc midpoint outside the triangle");
         }
         // Samples uniform over the arcs lie inside (up to rounding at the ends).
         for k in 0..32 {
@@ -205,28 +144,20 @@ fn clipped_arcs_match_a_dense_scan_of_the_ellipse() {
             if arcs.total > 0.0 {
                 let b = tri.vertices;
                 let slack = 1e-9 * scale;
-                let inside_with_slack = (0..3)
-                    .all(|i| (b[(i + 1) % 3] - b[i]).cross(x - b[i]).dot(n) >= -slack * scale);
+                let inside_with_slack = (0..3).all(|i| (b[(i + 1) % 3] - b[i]).cross(x - b[i]).dot(n) >= -slack * scale);
                 assert!(inside_with_slack, "sample outside the triangle");
             }
         }
         partial += (arcs.total > 0.0 && arcs.total < TAU) as usize;
         checked += 1;
     }
-    assert!(
-        checked > 300 && partial > 100,
-        "{checked} cases, {partial} with partial arcs"
-    );
+    assert!(checked > 300 && partial > 100, "{checked} cases, {partial} with partial arcs");
 }
 
 #[test]
 fn sections_of_a_plane_through_the_centre_have_the_expected_axes() {
     // Plane containing the axis: the section is the spheroid's meridian ellipse (a, b).
-    let sp = Spheroid {
-        focus_s: DVec3::new(-0.5, 0.0, 0.0),
-        focus_c: DVec3::new(0.5, 0.0, 0.0),
-        length: 1.6,
-    };
+    let sp = Spheroid { focus_s: DVec3::new(-0.5, 0.0, 0.0), focus_c: DVec3::new(0.5, 0.0, 0.0), length: 1.6 };
     let sec = sp.section(DVec3::ZERO, DVec3::Z).unwrap();
     assert!((sec.m1 - 0.8).abs() < 1e-12 && (sec.m2 - sp.b2().sqrt()).abs() < 1e-12);
     assert!(sec.centre.length() < 1e-12);
@@ -236,13 +167,7 @@ fn sections_of_a_plane_through_the_centre_have_the_expected_axes() {
     // Bounds contain every section point.
     let (lo, hi) = sp.bounds();
     for k in 0..64 {
-        let x = sp
-            .section(
-                DVec3::new(0.1, 0.2, 0.0),
-                DVec3::new(0.2, 0.5, 0.8).normalize(),
-            )
-            .unwrap()
-            .point(k as f64 * 0.1);
+        let x = sp.section(DVec3::new(0.1, 0.2, 0.0), DVec3::new(0.2, 0.5, 0.8).normalize()).unwrap().point(k as f64 * 0.1);
         assert!(x.cmpge(lo - 1e-12).all() && x.cmple(hi + 1e-12).all());
     }
 }

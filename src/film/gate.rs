@@ -127,12 +127,7 @@ pub enum CwCode {
 pub const MAX_CHIPS: u32 = 4096;
 
 /// The Hamiltonian K = 4 demodulations (bits of twelfths of the period).
-const HAMILTONIAN4: [&str; 4] = [
-    "000001111110",
-    "001111110000",
-    "111000011100",
-    "100011000111",
-];
+const HAMILTONIAN4: [&str; 4] = ["000001111110", "001111110000", "111000011100", "100011000111"];
 
 impl CwCode {
     /// Parses `square`, `ham3`, `ham4:I`, `mseq[:CHIPS]` and `depthsel[:CHIPS[:NEIGHBOURS]]`
@@ -144,9 +139,7 @@ impl CwCode {
         let number = |i: usize, default: u32, what: &str| -> Result<u32> {
             match args.get(i) {
                 None => Ok(default),
-                Some(a) => a.trim().parse::<u32>().with_context(|| {
-                    format!("cw code `{spec}`: {what} `{a}` is not a whole number")
-                }),
+                Some(a) => a.trim().parse::<u32>().with_context(|| format!("cw code `{spec}`: {what} `{a}` is not a whole number")),
             }
         };
         let most = |n: usize| -> Result<()> {
@@ -169,34 +162,21 @@ impl CwCode {
             "ham4" => {
                 most(1)?;
                 let i = number(0, 0, "measurement")?;
-                ensure!(
-                    (1..=4).contains(&i),
-                    "cw code `{spec}`: give the K = 4 measurement 1 to 4, e.g. ham4:2"
-                );
+                ensure!((1..=4).contains(&i), "cw code `{spec}`: give the K = 4 measurement 1 to 4, e.g. ham4:2");
                 CwCode::Hamiltonian4(i as u8)
             }
             "mseq" => {
                 most(1)?;
-                CwCode::MSequence {
-                    chips: number(0, 32, "chips")?,
-                }
+                CwCode::MSequence { chips: number(0, 32, "chips")? }
             }
             "depthsel" => {
                 most(2)?;
-                CwCode::DepthSelective {
-                    chips: number(0, 32, "chips")?,
-                    neighbours: number(1, 3, "neighbours")?,
-                }
+                CwCode::DepthSelective { chips: number(0, 32, "chips")?, neighbours: number(1, 3, "neighbours")? }
             }
-            other => bail!(
-                "unknown cw code `{other}`: use sine, square, ham3, ham4:I, mseq[:CHIPS] or depthsel[:CHIPS[:NEIGHBOURS]]"
-            ),
+            other => bail!("unknown cw code `{other}`: use sine, square, ham3, ham4:I, mseq[:CHIPS] or depthsel[:CHIPS[:NEIGHBOURS]]"),
         };
         match code {
-            CwCode::MSequence { chips } => ensure!(
-                chips >= 2,
-                "cw code `{spec}`: an m-sequence needs at least 2 chips"
-            ),
+            CwCode::MSequence { chips } => ensure!(chips >= 2, "cw code `{spec}`: an m-sequence needs at least 2 chips"),
             CwCode::DepthSelective { chips, neighbours } => ensure!(
                 neighbours >= 1 && chips > neighbours && chips <= MAX_CHIPS,
                 "cw code `{spec}`: depth selection needs 1 <= neighbours < chips <= {MAX_CHIPS}"
@@ -204,10 +184,7 @@ impl CwCode {
             _ => {}
         }
         if let CwCode::MSequence { chips } = code {
-            ensure!(
-                chips <= MAX_CHIPS,
-                "cw code `{spec}`: at most {MAX_CHIPS} chips"
-            );
+            ensure!(chips <= MAX_CHIPS, "cw code `{spec}`: at most {MAX_CHIPS} chips");
         }
         Ok(Some(code))
     }
@@ -219,19 +196,14 @@ impl CwCode {
             CwCode::Hamiltonian3 => "ham3".into(),
             CwCode::Hamiltonian4(i) => format!("ham4:{i}"),
             CwCode::MSequence { chips } => format!("mseq:{chips}"),
-            CwCode::DepthSelective { chips, neighbours } => {
-                format!("depthsel:{chips}:{neighbours}")
-            }
+            CwCode::DepthSelective { chips, neighbours } => format!("depthsel:{chips}:{neighbours}"),
         }
     }
 
     /// The largest |dC/dx| (per period) over the code's linear pieces.
     pub fn steepest_slope(&self) -> f64 {
         let p = self.breakpoints();
-        p.windows(2)
-            .filter(|w| w[1].0 > w[0].0)
-            .map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs())
-            .fold(0.0, f64::max)
+        p.windows(2).filter(|w| w[1].0 > w[0].0).map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs()).fold(0.0, f64::max)
     }
 
     /// One period of C as (x, C(x)) points from x = 0 to x = 1 (C(1) = C(0)), x in periods,
@@ -239,39 +211,19 @@ impl CwCode {
     pub fn breakpoints(&self) -> Vec<(f64, f64)> {
         match *self {
             CwCode::Square => vec![(0.0, 1.0), (0.5, -1.0), (1.0, 1.0)],
-            CwCode::Hamiltonian3 => vec![
-                (0.0, 0.0),
-                (1.0 / 6.0, 1.0),
-                (0.5, 1.0),
-                (2.0 / 3.0, 0.0),
-                (1.0, 0.0),
-            ],
+            CwCode::Hamiltonian3 => vec![(0.0, 0.0), (1.0 / 6.0, 1.0), (0.5, 1.0), (2.0 / 3.0, 0.0), (1.0, 0.0)],
             CwCode::Hamiltonian4(i) => {
-                let bits: Vec<f64> = HAMILTONIAN4[i as usize - 1]
-                    .bytes()
-                    .map(|b| (b - b'0') as f64)
-                    .collect();
+                let bits: Vec<f64> = HAMILTONIAN4[i as usize - 1].bytes().map(|b| (b - b'0') as f64).collect();
                 (0..=12).map(|k| (k as f64 / 12.0, bits[k % 12])).collect()
             }
             CwCode::MSequence { chips } => {
                 let (p, floor) = (chips as f64, 1.0 / chips as f64);
-                vec![
-                    (0.0, 1.0),
-                    (1.0 / p, floor),
-                    (1.0 - 1.0 / p, floor),
-                    (1.0, 1.0),
-                ]
+                vec![(0.0, 1.0), (1.0 / p, floor), (1.0 - 1.0 / p, floor), (1.0, 1.0)]
             }
             CwCode::DepthSelective { chips, neighbours } => {
                 let (p, n) = (chips as f64, neighbours as f64);
                 let floor = 1.0 / p;
-                vec![
-                    (0.0, 1.0),
-                    ((n - 1.0) / p, 1.0),
-                    (n / p, floor),
-                    (1.0 - 1.0 / p, floor),
-                    (1.0, 1.0),
-                ]
+                vec![(0.0, 1.0), ((n - 1.0) / p, 1.0), (n / p, floor), (1.0 - 1.0 / p, floor), (1.0, 1.0)]
             }
         }
     }
@@ -286,65 +238,36 @@ impl Gate {
             "none" if args.is_empty() => Gate::None,
             "none" => bail!("the `none` gate takes no parameters (got `{args}`)"),
             "box" => {
-                let (a, b) = args
-                    .split_once("..")
-                    .context("box gate: expected box:START..END, e.g. box:3.14..3.19")?;
-                Gate::Box {
-                    start: parse_length(a)?,
-                    end: parse_length(b)?,
-                }
+                let (a, b) = args.split_once("..").context("box gate: expected box:START..END, e.g. box:3.14..3.19")?;
+                Gate::Box { start: parse_length(a)?, end: parse_length(b)? }
             }
             "gaussian" => {
                 let [mu, sigma] = split_n(args, "gaussian:MEAN,SIGMA")?;
-                Gate::Gaussian {
-                    mean: parse_length(mu)?,
-                    sigma: parse_length(sigma)?,
-                }
+                Gate::Gaussian { mean: parse_length(mu)?, sigma: parse_length(sigma)? }
             }
             "cw" => {
                 let (f, phase, code) = match args.split(',').collect::<Vec<_>>()[..] {
                     [f, phase] => (f, phase, None),
                     [f, phase, code] => (f, phase, CwCode::parse(code)?),
-                    _ => bail!(
-                        "cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:4.7e9,0,depthsel, got `cw:{args}`"
-                    ),
+                    _ => bail!("cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:4.7e9,0,depthsel, got `cw:{args}`"),
                 };
                 let frequency_hz = parse_number(f, "cw frequency (Hz)")?;
                 let phase_deg = parse_number(phase, "cw phase (degrees)")?;
                 match code {
-                    None => Gate::Cw {
-                        frequency_hz,
-                        phase_deg,
-                    },
-                    Some(code) => Gate::CwCode {
-                        frequency_hz,
-                        phase_deg,
-                        code,
-                    },
+                    None => Gate::Cw { frequency_hz, phase_deg },
+                    Some(code) => Gate::CwCode { frequency_hz, phase_deg, code },
                 }
             }
             "table" => {
                 let path = Path::new(args.trim());
-                Gate::Table {
-                    points: read_gate_table(path)?,
-                    source: path.to_owned(),
-                }
+                Gate::Table { points: read_gate_table(path)?, source: path.to_owned() }
             }
             "transient" => {
                 let [start, width, bins] = split_n(args, "transient:START,WIDTH,BINS")?;
-                let bins = bins
-                    .trim()
-                    .parse::<u32>()
-                    .ok()
-                    .filter(|&b| b > 0)
-                    .with_context(|| {
-                        format!("transient gate: `{bins}` is not a positive number of bins")
-                    })?;
-                Gate::Transient {
-                    start: parse_length(start)?,
-                    width: parse_length(width)?,
-                    bins,
-                }
+                let bins = bins.trim().parse::<u32>().ok().filter(|&b| b > 0).with_context(|| {
+                    format!("transient gate: `{bins}` is not a positive number of bins")
+                })?;
+                Gate::Transient { start: parse_length(start)?, width: parse_length(width)?, bins }
             }
             other => bail!(
                 "unknown gate kind `{other}`: use none, box:A..B, gaussian:MU,SIGMA, cw:FREQ_HZ,PHASE_DEG[,CODE], \
@@ -363,42 +286,22 @@ impl Gate {
                 bail!("box gate [{start}, {end}) m is narrower than f32 resolution at that length")
             }
             Gate::Gaussian { mean, sigma } if sigma > 0.0 && sigma < 1e-6 * mean.abs().max(1.0) => {
-                bail!(
-                    "gaussian gate: sigma {sigma} m is below f32 resolution (1e-6 of the mean, or of 1 m)"
-                )
+                bail!("gaussian gate: sigma {sigma} m is below f32 resolution (1e-6 of the mean, or of 1 m)")
             }
-            Gate::Transient { start, width, .. }
-                if width > 0.0 && !f32_distinct(start, start + width) =>
-            {
-                bail!(
-                    "transient gate: bins of {width} m are narrower than f32 resolution at {start} m"
-                )
+            Gate::Transient { start, width, .. } if width > 0.0 && !f32_distinct(start, start + width) => {
+                bail!("transient gate: bins of {width} m are narrower than f32 resolution at {start} m")
             }
-            Gate::Box { start, end } if !(end > start) => {
-                bail!("box gate: end {end} m must exceed start {start} m")
-            }
-            Gate::Box { start, .. } if start < 0.0 => {
-                bail!("box gate: start {start} m is negative")
-            }
-            Gate::Gaussian { sigma, .. } if !(sigma > 0.0) => {
-                bail!("gaussian gate: sigma {sigma} m must be positive")
-            }
-            Gate::Cw { frequency_hz, .. } | Gate::CwCode { frequency_hz, .. }
-                if !(frequency_hz > 0.0 && frequency_hz.is_finite()) =>
-            {
+            Gate::Box { start, end } if !(end > start) => bail!("box gate: end {end} m must exceed start {start} m"),
+            Gate::Box { start, .. } if start < 0.0 => bail!("box gate: start {start} m is negative"),
+            Gate::Gaussian { sigma, .. } if !(sigma > 0.0) => bail!("gaussian gate: sigma {sigma} m must be positive"),
+            Gate::Cw { frequency_hz, .. } | Gate::CwCode { frequency_hz, .. } if !(frequency_hz > 0.0 && frequency_hz.is_finite()) => {
                 bail!("cw gate: frequency {frequency_hz} Hz must be positive")
             }
-            Gate::Cw { phase_deg, .. } | Gate::CwCode { phase_deg, .. }
-                if !phase_deg.is_finite() =>
-            {
+            Gate::Cw { phase_deg, .. } | Gate::CwCode { phase_deg, .. } if !phase_deg.is_finite() => {
                 bail!("cw gate: phase {phase_deg} degrees must be finite")
             }
-            Gate::Transient { width, .. } if !(width > 0.0) => {
-                bail!("transient gate: bin width {width} m must be positive")
-            }
-            Gate::Transient { start, .. } if start < 0.0 => {
-                bail!("transient gate: start {start} m is negative")
-            }
+            Gate::Transient { width, .. } if !(width > 0.0) => bail!("transient gate: bin width {width} m must be positive"),
+            Gate::Transient { start, .. } if start < 0.0 => bail!("transient gate: start {start} m is negative"),
             _ => Ok(()),
         }
     }
@@ -409,50 +312,23 @@ impl Gate {
     pub fn shifted(&self, d: f64) -> Result<Self> {
         let gate = match self.clone() {
             Gate::None if d == 0.0 => Gate::None,
-            Gate::None => {
-                bail!("the `none` gate (steady state) cannot be shifted; give a gate to step")
+            Gate::None => bail!("the `none` gate (steady state) cannot be shifted; give a gate to step"),
+            Gate::Box { start, end } => Gate::Box { start: start + d, end: end + d },
+            Gate::Gaussian { mean, sigma } => Gate::Gaussian { mean: mean + d, sigma },
+            Gate::Cw { frequency_hz, phase_deg } => {
+                Gate::Cw { frequency_hz, phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT }
             }
-            Gate::Box { start, end } => Gate::Box {
-                start: start + d,
-                end: end + d,
-            },
-            Gate::Gaussian { mean, sigma } => Gate::Gaussian {
-                mean: mean + d,
-                sigma,
-            },
-            Gate::Cw {
-                frequency_hz,
-                phase_deg,
-            } => Gate::Cw {
-                frequency_hz,
-                phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT,
-            },
-            Gate::CwCode {
-                frequency_hz,
-                phase_deg,
-                code,
-            } => Gate::CwCode {
-                frequency_hz,
-                phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT,
-                code,
-            },
+            Gate::CwCode { frequency_hz, phase_deg, code } => {
+                Gate::CwCode { frequency_hz, phase_deg: phase_deg - 360.0 * frequency_hz * d / SPEED_OF_LIGHT, code }
+            }
             Gate::Table { points, source } => {
                 let points: Vec<(f64, f64)> = points.iter().map(|&(l, w)| (l + d, w)).collect();
-                ensure!(
-                    points[0].0 >= 0.0,
-                    "table gate {} shifted by {d} m starts below zero length",
-                    source.display()
-                );
+                ensure!(points[0].0 >= 0.0, "table gate {} shifted by {d} m starts below zero length", source.display());
                 Gate::Table { points, source }
             }
-            Gate::Transient { start, width, bins } => Gate::Transient {
-                start: start + d,
-                width,
-                bins,
-            },
+            Gate::Transient { start, width, bins } => Gate::Transient { start: start + d, width, bins },
         };
-        gate.validate()
-            .with_context(|| format!("{} shifted by {d} m", self.describe()))?;
+        gate.validate().with_context(|| format!("{} shifted by {d} m", self.describe()))?;
         Ok(gate)
     }
 
@@ -480,9 +356,7 @@ impl Gate {
     /// [start, end) of bin `i` (m), transient gates only.
     pub fn bin_range(&self, i: u32) -> Option<(f64, f64)> {
         match *self {
-            Gate::Transient { start, width, .. } => {
-                Some((start + width * i as f64, start + width * (i + 1) as f64))
-            }
+            Gate::Transient { start, width, .. } => Some((start + width * i as f64, start + width * (i + 1) as f64)),
             _ => None,
         }
     }
@@ -510,14 +384,8 @@ impl Gate {
     /// ((phase in periods, weight)); empty for the other gates.
     pub fn table(&self) -> Vec<[f32; 2]> {
         match self {
-            Gate::Table { points, .. } => {
-                points.iter().map(|&(l, w)| [l as f32, w as f32]).collect()
-            }
-            Gate::CwCode { code, .. } => code
-                .breakpoints()
-                .iter()
-                .map(|&(x, w)| [x as f32, w as f32])
-                .collect(),
+            Gate::Table { points, .. } => points.iter().map(|&(l, w)| [l as f32, w as f32]).collect(),
+            Gate::CwCode { code, .. } => code.breakpoints().iter().map(|&(x, w)| [x as f32, w as f32]).collect(),
             _ => Vec::new(),
         }
     }
@@ -528,22 +396,11 @@ impl Gate {
             Gate::None => (0.0, 0.0),
             Gate::Box { start, end } => (start, end),
             Gate::Gaussian { mean, sigma } => (mean, sigma),
-            Gate::Cw {
-                frequency_hz,
-                phase_deg,
-            } => (
-                2.0 * std::f64::consts::PI * frequency_hz / SPEED_OF_LIGHT,
-                phase_deg.to_radians(),
-            ),
+            Gate::Cw { frequency_hz, phase_deg } => {
+                (2.0 * std::f64::consts::PI * frequency_hz / SPEED_OF_LIGHT, phase_deg.to_radians())
+            }
             // Periods per metre and the phase in periods, in [0, 1).
-            Gate::CwCode {
-                frequency_hz,
-                phase_deg,
-                ..
-            } => (
-                frequency_hz / SPEED_OF_LIGHT,
-                (phase_deg / 360.0).rem_euclid(1.0),
-            ),
+            Gate::CwCode { frequency_hz, phase_deg, .. } => (frequency_hz / SPEED_OF_LIGHT, (phase_deg / 360.0).rem_euclid(1.0)),
             Gate::Table { ref points, .. } => (points[0].0, points[points.len() - 1].0),
             Gate::Transient { start, width, .. } => (start, width),
         };
@@ -575,50 +432,26 @@ impl Gate {
                 ps(end - start)
             ),
             Gate::Gaussian { mean, sigma } => {
-                format!(
-                    "gaussian mean {} m, sigma {} m ({:.2} ps)",
-                    short(*mean),
-                    short(*sigma),
-                    ps(*sigma)
-                )
+                format!("gaussian mean {} m, sigma {} m ({:.2} ps)", short(*mean), short(*sigma), ps(*sigma))
             }
-            Gate::Cw {
-                frequency_hz,
-                phase_deg,
-            } => format!("cw {frequency_hz} Hz, phase {} deg", short(*phase_deg)),
-            Gate::CwCode {
-                frequency_hz,
-                phase_deg,
-                code,
-            } => format!(
+            Gate::Cw { frequency_hz, phase_deg } => format!("cw {frequency_hz} Hz, phase {} deg", short(*phase_deg)),
+            Gate::CwCode { frequency_hz, phase_deg, code } => format!(
                 "cw {frequency_hz} Hz, phase {} deg, code {} (period {:.4} m = {:.2} ps)",
                 short(*phase_deg),
                 code.name(),
                 SPEED_OF_LIGHT / frequency_hz,
                 ps(SPEED_OF_LIGHT / frequency_hz)
             ),
-            Gate::Table { points, source } => {
-                format!("table {} ({} points)", source.display(), points.len())
-            }
+            Gate::Table { points, source } => format!("table {} ({} points)", source.display(), points.len()),
             Gate::Transient { start, width, bins } => {
-                format!(
-                    "transient {bins} bins of {} m ({:.2} ps) from {} m",
-                    short(*width),
-                    ps(*width),
-                    short(*start)
-                )
+                format!("transient {bins} bins of {} m ({:.2} ps) from {} m", short(*width), ps(*width), short(*start))
             }
         }
     }
 }
 
 /// CPU twin of the kernels' gate for a given GPU parameter block and kind.
-pub fn gate_weight(
-    kind: GateKind,
-    g: &layout::GateParams,
-    table: &[[f32; 2]],
-    path_length: f32,
-) -> f32 {
+pub fn gate_weight(kind: GateKind, g: &layout::GateParams, table: &[[f32; 2]], path_length: f32) -> f32 {
     match kind {
         GateKind::None => 1.0,
         GateKind::Box => (path_length >= g.p0 && path_length < g.p1) as u32 as f32,
@@ -642,11 +475,7 @@ pub fn gate_bin(kind: GateKind, g: &layout::GateParams, path_length: f32) -> i32
         return 0;
     }
     let x = gate_bin_position(g, path_length);
-    if x < 0.0 || x >= g.bins as f32 {
-        -1
-    } else {
-        x as i32
-    }
+    if x < 0.0 || x >= g.bins as f32 { -1 } else { x as i32 }
 }
 
 /// CPU twin of `gate_bin_position`: floor((path_length - start) / width) of a transient gate.
@@ -672,8 +501,7 @@ fn gate_table_lookup(table: &[[f32; 2]], l: f32) -> f32 {
 /// length; `#` comments and one header line are allowed.
 pub fn read_gate_table(path: &Path) -> Result<Vec<(f64, f64)>> {
     let name = path.display();
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{name}: cannot read the gate table"))?;
+    let text = std::fs::read_to_string(path).with_context(|| format!("{name}: cannot read the gate table"))?;
     let mut points = Vec::new();
     let mut first_row = true;
     for (i, line) in text.lines().enumerate() {
@@ -684,10 +512,7 @@ pub fn read_gate_table(path: &Path) -> Result<Vec<(f64, f64)>> {
         let header_allowed = std::mem::replace(&mut first_row, false);
         let mut fields = line.split([',', ';', '\t']).map(str::trim);
         let (Some(l), Some(w), None) = (fields.next(), fields.next(), fields.next()) else {
-            bail!(
-                "{name}:{}: expected two columns `length,weight`, got `{line}`",
-                i + 1
-            );
+            bail!("{name}:{}: expected two columns `length,weight`, got `{line}`", i + 1);
         };
         match (parse_length(l), w.parse::<f64>()) {
             (Ok(l), Ok(w)) if w.is_finite() => points.push((l, w)),
@@ -706,17 +531,11 @@ pub fn read_gate_table(path: &Path) -> Result<Vec<(f64, f64)>> {
 
 fn split_n<'a, const N: usize>(args: &'a str, usage: &str) -> Result<[&'a str; N]> {
     let parts: Vec<&str> = args.split(',').collect();
-    parts
-        .try_into()
-        .map_err(|_| anyhow::anyhow!("expected {usage}, got `{args}`"))
+    parts.try_into().map_err(|_| anyhow::anyhow!("expected {usage}, got `{args}`"))
 }
 
 fn parse_number(s: &str, what: &str) -> Result<f64> {
-    s.trim()
-        .parse::<f64>()
-        .ok()
-        .filter(|v| v.is_finite())
-        .with_context(|| format!("{what}: `{s}` is not a number"))
+    s.trim().parse::<f64>().ok().filter(|v| v.is_finite()).with_context(|| format!("{what}: `{s}` is not a number"))
 }
 
 #[cfg(test)]
@@ -726,54 +545,13 @@ mod tests {
     #[test]
     fn specs_parse_into_gates() {
         assert_eq!(Gate::parse("none").unwrap(), Gate::None);
-        assert_eq!(
-            Gate::parse("box:3.14..3.19").unwrap(),
-            Gate::Box {
-                start: 3.14,
-                end: 3.19
-            }
-        );
-        assert_eq!(
-            Gate::parse("gaussian:3,0.01").unwrap(),
-            Gate::Gaussian {
-                mean: 3.0,
-                sigma: 0.01
-            }
-        );
-        assert_eq!(
-            Gate::parse("cw:20e6,90").unwrap(),
-            Gate::Cw {
-                frequency_hz: 20e6,
-                phase_deg: 90.0
-            }
-        );
-        assert_eq!(
-            Gate::parse("transient:1.94,0.1,20").unwrap(),
-            Gate::Transient {
-                start: 1.94,
-                width: 0.1,
-                bins: 20
-            }
-        );
-        let Gate::Transient { start, width, .. } = Gate::parse("transient:10ns,12.5ps,8").unwrap()
-        else {
-            panic!()
-        };
+        assert_eq!(Gate::parse("box:3.14..3.19").unwrap(), Gate::Box { start: 3.14, end: 3.19 });
+        assert_eq!(Gate::parse("gaussian:3,0.01").unwrap(), Gate::Gaussian { mean: 3.0, sigma: 0.01 });
+        assert_eq!(Gate::parse("cw:20e6,90").unwrap(), Gate::Cw { frequency_hz: 20e6, phase_deg: 90.0 });
+        assert_eq!(Gate::parse("transient:1.94,0.1,20").unwrap(), Gate::Transient { start: 1.94, width: 0.1, bins: 20 });
+        let Gate::Transient { start, width, .. } = Gate::parse("transient:10ns,12.5ps,8").unwrap() else { panic!() };
         assert!((start - 2.99792458).abs() < 1e-12 && (width - 3.747405725e-3).abs() < 1e-12);
-        for bad in [
-            "none:foo",
-            "box:3.14..3.140000001",
-            "gaussian:3,1e-50",
-            "transient:1000,1e-9,3",
-            "box:3",
-            "box:3..2",
-            "gaussian:1",
-            "gaussian:1,0",
-            "cw:-5,0",
-            "transient:0,0.1,0",
-            "transient:0,0,3",
-            "x",
-        ] {
+        for bad in ["none:foo", "box:3.14..3.140000001", "gaussian:3,1e-50", "transient:1000,1e-9,3", "box:3", "box:3..2", "gaussian:1", "gaussian:1,0", "cw:-5,0", "transient:0,0.1,0", "transient:0,0,3", "x"] {
             assert!(Gate::parse(bad).is_err(), "`{bad}` must be rejected");
         }
     }
@@ -782,10 +560,7 @@ mod tests {
     fn cpu_weights_follow_the_definitions() {
         let eval = |g: &Gate, l: f32| gate_weight(g.kind(), &g.to_gpu(), &g.table(), l);
         let b = Gate::parse("box:1..2").unwrap();
-        assert_eq!(
-            (eval(&b, 0.99), eval(&b, 1.0), eval(&b, 1.99), eval(&b, 2.0)),
-            (0.0, 1.0, 1.0, 0.0)
-        );
+        assert_eq!((eval(&b, 0.99), eval(&b, 1.0), eval(&b, 1.99), eval(&b, 2.0)), (0.0, 1.0, 1.0, 0.0));
         let g = Gate::parse("gaussian:3,0.5").unwrap();
         assert_eq!(eval(&g, 3.0), 1.0);
         assert!((eval(&g, 3.5) - (-0.5f32).exp()).abs() < 1e-6);
@@ -794,14 +569,7 @@ mod tests {
         assert!(eval(&c, 0.5).abs() < 1e-5 && (eval(&c, 1.0) + 1.0).abs() < 1e-5);
         let t = Gate::parse("transient:1,0.5,4").unwrap();
         let g = t.to_gpu();
-        assert_eq!(
-            (
-                gate_bin(t.kind(), &g, 0.99),
-                gate_bin(t.kind(), &g, 1.0),
-                gate_bin(t.kind(), &g, 2.99)
-            ),
-            (-1, 0, 3)
-        );
+        assert_eq!((gate_bin(t.kind(), &g, 0.99), gate_bin(t.kind(), &g, 1.0), gate_bin(t.kind(), &g, 2.99)), (-1, 0, 3));
         assert_eq!(gate_bin(t.kind(), &g, 3.0), -1);
         assert_eq!(t.max_length(), Some(3.0));
         assert_eq!(t.bin_range(1), Some((1.5, 2.0)));
@@ -812,177 +580,70 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("gatetrace_gate_table_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let good = dir.join("good.csv");
-        std::fs::write(
-            &good,
-            "# trapezoid\nlength,weight\n1.0,0\n2.0,1\n3.0,1\n4,0\n",
-        )
-        .unwrap();
+        std::fs::write(&good, "# trapezoid\nlength,weight\n1.0,0\n2.0,1\n3.0,1\n4,0\n").unwrap();
         let t = Gate::parse(&format!("table:{}", good.display())).unwrap();
         let eval = |l: f32| gate_weight(t.kind(), &t.to_gpu(), &t.table(), l);
-        assert_eq!(
-            (eval(0.5), eval(1.5), eval(2.5), eval(3.75), eval(4.5)),
-            (0.0, 0.5, 1.0, 0.25, 0.0)
-        );
+        assert_eq!((eval(0.5), eval(1.5), eval(2.5), eval(3.75), eval(4.5)), (0.0, 0.5, 1.0, 0.25, 0.0));
         let bad = dir.join("bad.csv");
         std::fs::write(&bad, "1.0,0\n2.0\n").unwrap();
-        let e = format!(
-            "{:#}",
-            Gate::parse(&format!("table:{}", bad.display())).unwrap_err()
-        );
+        let e = format!("{:#}", Gate::parse(&format!("table:{}", bad.display())).unwrap_err());
         assert!(e.contains("bad.csv:2"), "{e}");
         std::fs::write(&bad, "1.0,0\n0.5,1\n").unwrap();
-        assert!(
-            format!(
-                "{:#}",
-                Gate::parse(&format!("table:{}", bad.display())).unwrap_err()
-            )
-            .contains("increase")
-        );
+        assert!(format!("{:#}", Gate::parse(&format!("table:{}", bad.display())).unwrap_err()).contains("increase"));
     }
 
     #[test]
     fn cw_codes_parse_and_have_their_shapes() {
         let code = |spec: &str| match Gate::parse(spec).unwrap() {
-            Gate::CwCode {
-                code,
-                frequency_hz,
-                phase_deg,
-            } => {
+            Gate::CwCode { code, frequency_hz, phase_deg } => {
                 assert_eq!((frequency_hz, phase_deg), (1e9, 30.0));
                 code
             }
             other => panic!("{spec}: {other:?}"),
         };
-        assert_eq!(
-            Gate::parse("cw:1e9,30,sine").unwrap(),
-            Gate::Cw {
-                frequency_hz: 1e9,
-                phase_deg: 30.0
-            }
-        );
+        assert_eq!(Gate::parse("cw:1e9,30,sine").unwrap(), Gate::Cw { frequency_hz: 1e9, phase_deg: 30.0 });
         assert_eq!(code("cw:1e9,30,square"), CwCode::Square);
         assert_eq!(code("cw:1e9,30,ham3"), CwCode::Hamiltonian3);
         assert_eq!(code("cw:1e9,30,ham4:3"), CwCode::Hamiltonian4(3));
         assert_eq!(code("cw:1e9,30,mseq"), CwCode::MSequence { chips: 32 });
-        assert_eq!(
-            code("cw:1e9,30,depthsel"),
-            CwCode::DepthSelective {
-                chips: 32,
-                neighbours: 3
-            }
-        );
-        assert_eq!(
-            code("cw:1e9,30,depthsel:64:5"),
-            CwCode::DepthSelective {
-                chips: 64,
-                neighbours: 5
-            }
-        );
-        for bad in [
-            "cw:1e9,30,ham4",
-            "cw:1e9,30,ham4:0",
-            "cw:1e9,30,mseq:1",
-            "cw:1e9,30,depthsel:4:4",
-            "cw:1e9,30,depthsel:4:0",
-            "cw:1e9,30,cosine",
-            "cw:1e9,30,ham3:1",
-            "cw:0,30,square",
-            "cw:1e9,inf,square",
-            "cw:1e9,30,square,1",
-        ] {
+        assert_eq!(code("cw:1e9,30,depthsel"), CwCode::DepthSelective { chips: 32, neighbours: 3 });
+        assert_eq!(code("cw:1e9,30,depthsel:64:5"), CwCode::DepthSelective { chips: 64, neighbours: 5 });
+        for bad in ["cw:1e9,30,ham4", "cw:1e9,30,ham4:0", "cw:1e9,30,mseq:1", "cw:1e9,30,depthsel:4:4", "cw:1e9,30,depthsel:4:0",
+                    "cw:1e9,30,cosine", "cw:1e9,30,ham3:1", "cw:0,30,square", "cw:1e9,inf,square", "cw:1e9,30,square,1"] {
             assert!(Gate::parse(bad).is_err(), "{bad} should not parse");
         }
         let at = |c: CwCode, x: f64| -> f64 {
             let p = c.breakpoints();
             let i = p.partition_point(|q| q.0 <= x) - 1;
-            if i + 1 == p.len() {
-                p[i].1
-            } else {
-                p[i].1 + (p[i + 1].1 - p[i].1) * (x - p[i].0) / (p[i + 1].0 - p[i].0)
-            }
+            if i + 1 == p.len() { p[i].1 } else { p[i].1 + (p[i + 1].1 - p[i].1) * (x - p[i].0) / (p[i + 1].0 - p[i].0) }
         };
-        let integral = |c: CwCode| {
-            c.breakpoints()
-                .windows(2)
-                .map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0))
-                .sum::<f64>()
-        };
-        for c in [
-            CwCode::Square,
-            CwCode::Hamiltonian3,
-            CwCode::Hamiltonian4(1),
-            CwCode::Hamiltonian4(4),
-            CwCode::MSequence { chips: 7 },
-            CwCode::DepthSelective {
-                chips: 32,
-                neighbours: 3,
-            },
-        ] {
+        let integral = |c: CwCode| c.breakpoints().windows(2).map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0)).sum::<f64>();
+        for c in [CwCode::Square, CwCode::Hamiltonian3, CwCode::Hamiltonian4(1), CwCode::Hamiltonian4(4), CwCode::MSequence { chips: 7 },
+                  CwCode::DepthSelective { chips: 32, neighbours: 3 }] {
             let p = c.breakpoints();
-            assert_eq!(
-                (p[0].0, p[p.len() - 1].0),
-                (0.0, 1.0),
-                "{c:?} spans one period"
-            );
+            assert_eq!((p[0].0, p[p.len() - 1].0), (0.0, 1.0), "{c:?} spans one period");
             assert_eq!(p[0].1, p[p.len() - 1].1, "{c:?} is periodic");
-            assert!(
-                p.windows(2).all(|w| w[0].0 <= w[1].0),
-                "{c:?}: x nondecreasing"
-            );
-            assert_eq!(
-                p.iter().map(|q| q.1).fold(f64::MIN, f64::max),
-                1.0,
-                "{c:?}: peak 1"
-            );
+            assert!(p.windows(2).all(|w| w[0].0 <= w[1].0), "{c:?}: x nondecreasing");
+            assert_eq!(p.iter().map(|q| q.1).fold(f64::MIN, f64::max), 1.0, "{c:?}: peak 1");
             assert_eq!(CwCode::parse(&c.name()).unwrap(), Some(c));
         }
         // Square: a triangle of zero mean.
-        assert_eq!(
-            (
-                at(CwCode::Square, 0.25),
-                at(CwCode::Square, 0.5),
-                integral(CwCode::Square)
-            ),
-            (0.0, -1.0, 0.0)
-        );
+        assert_eq!((at(CwCode::Square, 0.25), at(CwCode::Square, 0.5), integral(CwCode::Square)), (0.0, -1.0, 0.0));
         // Hamiltonian K = 3: a third of a period at 1, ramps of a sixth.
-        assert_eq!(
-            (
-                at(CwCode::Hamiltonian3, 1.0 / 12.0),
-                at(CwCode::Hamiltonian3, 0.4),
-                at(CwCode::Hamiltonian3, 0.8)
-            ),
-            (0.5, 1.0, 0.0)
-        );
+        assert_eq!((at(CwCode::Hamiltonian3, 1.0 / 12.0), at(CwCode::Hamiltonian3, 0.4), at(CwCode::Hamiltonian3, 0.8)), (0.5, 1.0, 0.0));
         assert!((integral(CwCode::Hamiltonian3) - 0.5).abs() < 1e-12);
         // Hamiltonian K = 4: at every twelfth the four measurements form a code word, and
         // neighbouring words differ in one measurement (a Hamiltonian cycle of 12 words).
         let words: Vec<u32> = (0..12)
-            .map(|k| {
-                (1..=4u8)
-                    .map(|i| at(CwCode::Hamiltonian4(i), k as f64 / 12.0) as u32)
-                    .fold(0, |w, b| 2 * w + b)
-            })
+            .map(|k| (1..=4u8).map(|i| at(CwCode::Hamiltonian4(i), k as f64 / 12.0) as u32).fold(0, |w, b| 2 * w + b))
             .collect();
-        assert!(
-            (0..12).all(|k| (words[k] ^ words[(k + 1) % 12]).count_ones() == 1),
-            "{words:?}"
-        );
-        assert_eq!(
-            words.iter().collect::<std::collections::HashSet<_>>().len(),
-            12
-        );
+        assert!((0..12).all(|k| (words[k] ^ words[(k + 1) % 12]).count_ones() == 1), "{words:?}");
+        assert_eq!(words.iter().collect::<std::collections::HashSet<_>>().len(), 12);
         // m-sequence and depth selection: a floor of 1/chips; depth selection's period integral
         // is (n + 1 - n/P) / P and its top (n - 1) chips wide.
         assert_eq!(at(CwCode::MSequence { chips: 8 }, 0.5), 0.125);
-        let ds = CwCode::DepthSelective {
-            chips: 32,
-            neighbours: 3,
-        };
-        assert_eq!(
-            (at(ds, 1.5 / 32.0), at(ds, 2.5 / 32.0), at(ds, 0.5)),
-            (1.0, (1.0 + 1.0 / 32.0) / 2.0, 1.0 / 32.0)
-        );
+        let ds = CwCode::DepthSelective { chips: 32, neighbours: 3 };
+        assert_eq!((at(ds, 1.5 / 32.0), at(ds, 2.5 / 32.0), at(ds, 0.5)), (1.0, (1.0 + 1.0 / 32.0) / 2.0, 1.0 / 32.0));
         assert!((integral(ds) - (4.0 - 3.0 / 32.0) / 32.0).abs() < 1e-12);
         // W(l) = C(f l / c + phase / 360), on the CPU twin.
         let gate = Gate::parse("cw:299792458,90,ham3").unwrap();
@@ -990,17 +651,11 @@ mod tests {
         assert_eq!(kind, GateKind::CwCode);
         for l in [0.1f32, 0.35, 2.6, 7.95] {
             let x = (l as f64 + 0.25).fract();
-            assert!(
-                (gate_weight(kind, &g, &table, l) as f64 - at(CwCode::Hamiltonian3, x)).abs()
-                    < 1e-5,
-                "W({l})"
-            );
+            assert!((gate_weight(kind, &g, &table, l) as f64 - at(CwCode::Hamiltonian3, x)).abs() < 1e-5, "W({l})");
         }
         // Shifting a code later by d is a phase change of -360 f d / c, as for the sine.
         let later = gate.shifted(0.25).unwrap();
         let (g2, t2) = (later.to_gpu(), later.table());
-        assert!(
-            (gate_weight(kind, &g2, &t2, 2.85) - gate_weight(kind, &g, &table, 2.6)).abs() < 1e-5
-        );
+        assert!((gate_weight(kind, &g2, &t2, 2.85) - gate_weight(kind, &g, &table, 2.6)).abs() < 1e-5);
     }
 }

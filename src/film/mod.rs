@@ -39,13 +39,7 @@ pub fn compensated_add(acc: [f32; 2], value: f32) -> [f32; 2] {
 impl Film {
     /// A black film of `width` x `height` pixels and `bins` bins.
     pub fn zeroed(width: u32, height: u32, bins: u32) -> Self {
-        Self {
-            width,
-            height,
-            bins,
-            spp: 0,
-            data: vec![0.0; (width * height * bins * 3) as usize],
-        }
+        Self { width, height, bins, spp: 0, data: vec![0.0; (width * height * bins * 3) as usize] }
     }
 
     /// Estimate of pixel (x, y), bin `bin`.
@@ -99,14 +93,8 @@ mod tests {
             acc = compensated_add(acc, 0.1);
         }
         let exact = n as f64 * 0.1f32 as f64;
-        assert!(
-            ((plain as f64 - exact) / exact).abs() > 1e-3,
-            "the plain sum should drift"
-        );
+        assert!(((plain as f64 - exact) / exact).abs() > 1e-3, "the plain sum should drift");
         let total = acc[0] as f64 + acc[1] as f64;
-        assert!(
-            ((total - exact) / exact).abs() < 2.0 * f32::EPSILON as f64,
-            "{total} vs {exact}"
-        );
+        assert!(((total - exact) / exact).abs() < 2.0 * f32::EPSILON as f64, "{total} vs {exact}");
     }
 }

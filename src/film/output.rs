@@ -23,18 +23,10 @@ pub enum OutputFormat {
 impl OutputFormat {
     /// The format of `path` (`.exr` or `.npy`, any case).
     pub fn of(path: &Path) -> Result<Self> {
-        match path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .as_deref()
-        {
+        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("exr") => Ok(Self::Exr),
             Some("npy") => Ok(Self::Npy),
-            _ => bail!(
-                "{}: unknown output format: the file name must end in .exr or .npy",
-                path.display()
-            ),
+            _ => bail!("{}: unknown output format: the file name must end in .exr or .npy", path.display()),
         }
     }
 }
@@ -43,8 +35,7 @@ impl OutputFormat {
 /// (a file that did not exist is removed again).
 pub fn check_writable(path: &Path) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
     }
     let existed = path.exists();
     std::fs::OpenOptions::new()
@@ -60,12 +51,7 @@ pub fn check_writable(path: &Path) -> Result<()> {
 
 /// Writes `film` to `path`; the format follows the extension (`.exr` or `.npy`).
 /// `bin_ranges` are the [start, end) lengths (m) of transient bins, for EXR layer attributes.
-pub fn write_film(
-    path: &Path,
-    film: &Film,
-    metadata: &Metadata,
-    bin_ranges: &[(f64, f64)],
-) -> Result<()> {
+pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, f64)]) -> Result<()> {
     write_film_with(path, film, metadata, bin_ranges, &serde_json::Map::new())
 }
 
@@ -79,14 +65,10 @@ pub fn write_film_with(
     extras: &serde_json::Map<String, serde_json::Value>,
 ) -> Result<()> {
     if !film.all_finite() {
-        bail!(
-            "refusing to write {}: the film holds non-finite values",
-            path.display()
-        );
+        bail!("refusing to write {}: the film holds non-finite values", path.display());
     }
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
     }
     match OutputFormat::of(path)? {
         OutputFormat::Exr => {
@@ -102,16 +84,10 @@ pub fn write_film_with(
 }
 
 /// Writes the JSON sidecar of `npy`: `metadata` as strings and `extras` as they are.
-pub fn write_sidecar(
-    npy: &Path,
-    metadata: &Metadata,
-    extras: &serde_json::Map<String, serde_json::Value>,
-) -> Result<()> {
+pub fn write_sidecar(npy: &Path, metadata: &Metadata, extras: &serde_json::Map<String, serde_json::Value>) -> Result<()> {
     let sidecar = sidecar_path(npy);
-    let mut map: serde_json::Map<String, serde_json::Value> = metadata
-        .iter()
-        .map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone())))
-        .collect();
+    let mut map: serde_json::Map<String, serde_json::Value> =
+        metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
     map.extend(extras.clone());
     std::fs::write(&sidecar, serde_json::to_string_pretty(&map)? + "\n")
         .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
@@ -122,38 +98,23 @@ pub fn sidecar_path(npy: &Path) -> PathBuf {
     npy.with_extension("json")
 }
 
-fn write_exr(
-    path: &Path,
-    film: &Film,
-    metadata: &Metadata,
-    bin_ranges: &[(f64, f64)],
-) -> Result<()> {
+fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, f64)]) -> Result<()> {
     use exr::prelude::*;
     let (w, h) = (film.width as usize, film.height as usize);
     let mut attributes = ImageAttributes::new(IntegerBounds::from_dimensions((w, h)));
     for (k, v) in metadata {
-        attributes.other.insert(
-            Text::from(format!("gatetrace.{k}").as_str()),
-            AttributeValue::Text(Text::from(v.as_str())),
-        );
+        attributes.other.insert(Text::from(format!("gatetrace.{k}").as_str()), AttributeValue::Text(Text::from(v.as_str())));
     }
     let bins = film.bins as usize;
     let layers: Vec<_> = (0..bins)
         .map(|b| {
-            let channel = |c: usize| -> Vec<f32> {
-                (0..w * h)
-                    .map(|p| film.data[(p * bins + b) * 3 + c])
-                    .collect()
-            };
+            let channel = |c: usize| -> Vec<f32> { (0..w * h).map(|p| film.data[(p * bins + b) * 3 + c]).collect() };
             let mut layer_attributes = LayerAttributes::default();
             if bins > 1 {
                 layer_attributes.layer_name = Some(Text::from(format!("bin{b:05}").as_str()));
                 if let Some(&(start, end)) = bin_ranges.get(b) {
                     let range = format!("[{start}, {end}) m of optical path");
-                    layer_attributes.other.insert(
-                        Text::from("gatetrace.bin_range"),
-                        AttributeValue::Text(Text::from(range.as_str())),
-                    );
+                    layer_attributes.other.insert(Text::from("gatetrace.bin_range"), AttributeValue::Text(Text::from(range.as_str())));
                 }
             }
             Layer::new(
@@ -180,12 +141,7 @@ pub fn write_npy(path: &Path, film: &Film) -> Result<()> {
     let shape = if film.bins == 1 {
         vec![film.height as usize, film.width as usize, 3]
     } else {
-        vec![
-            film.height as usize,
-            film.width as usize,
-            film.bins as usize,
-            3,
-        ]
+        vec![film.height as usize, film.width as usize, film.bins as usize, 3]
     };
     write_npy_f32(path, &shape, &film.data)
 }
@@ -194,11 +150,7 @@ pub fn write_npy(path: &Path, film: &Film) -> Result<()> {
 pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     assert_eq!(shape.iter().product::<usize>(), data.len());
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let tuple = if dims.len() == 1 {
-        format!("({},)", dims[0])
-    } else {
-        format!("({})", dims.join(", "))
-    };
+    let tuple = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
     let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {tuple}, }}");
     // Magic (6) + version (2) + length (2) + header + '\n' is a multiple of 64.
     let total = 10 + header.len() + 1;
@@ -223,45 +175,22 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
     }
     let (header_len, start) = match bytes[6] {
         1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 => (
-            u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize,
-            12,
-        ),
+        2 | 3 => (u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize, 12),
         v => bail!("{name}: unsupported .npy version {v}"),
     };
     let header = std::str::from_utf8(&bytes[start..start + header_len]).context("npy header")?;
     if header.contains("'fortran_order': True") {
         bail!("{name}: Fortran-order arrays are not supported");
     }
-    let descr = header
-        .split("'descr':")
-        .nth(1)
-        .and_then(|s| s.split('\'').nth(1))
-        .context("npy descr")?;
-    let shape_text = header
-        .split("'shape':")
-        .nth(1)
-        .and_then(|s| s.split(['(', ')']).nth(1))
-        .context("npy shape")?;
-    let shape: Vec<usize> = shape_text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse())
-        .collect::<Result<_, _>>()?;
+    let descr = header.split("'descr':").nth(1).and_then(|s| s.split('\'').nth(1)).context("npy descr")?;
+    let shape_text = header.split("'shape':").nth(1).and_then(|s| s.split(['(', ')']).nth(1)).context("npy shape")?;
+    let shape: Vec<usize> =
+        shape_text.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse()).collect::<Result<_, _>>()?;
     let body = &bytes[start + header_len..];
     let count: usize = shape.iter().product();
     let data: Vec<f32> = match descr {
-        "<f4" => body
-            .chunks_exact(4)
-            .take(count)
-            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-            .collect(),
-        "<f8" => body
-            .chunks_exact(8)
-            .take(count)
-            .map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32)
-            .collect(),
+        "<f4" => body.chunks_exact(4).take(count).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect(),
+        "<f8" => body.chunks_exact(8).take(count).map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32).collect(),
         other => bail!("{name}: unsupported dtype {other}"),
     };
     if data.len() != count {
@@ -278,13 +207,7 @@ mod tests {
     fn npy_round_trips() {
         let dir = std::env::temp_dir().join(format!("gatetrace_npy_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let film = Film {
-            width: 3,
-            height: 2,
-            bins: 4,
-            spp: 1,
-            data: (0..72).map(|i| i as f32 * 0.5).collect(),
-        };
+        let film = Film { width: 3, height: 2, bins: 4, spp: 1, data: (0..72).map(|i| i as f32 * 0.5).collect() };
         let path = dir.join("cube.npy");
         write_npy(&path, &film).unwrap();
         let bytes = std::fs::read(&path).unwrap();
@@ -292,18 +215,9 @@ mod tests {
         let (shape, data) = read_npy_f32(&path).unwrap();
         assert_eq!(shape, vec![2, 3, 4, 3]);
         assert_eq!(data, film.data);
-        let bad = Film {
-            data: vec![f32::NAN; 72],
-            ..film
-        };
-        assert!(
-            write_film(&path, &bad, &vec![], &[]).is_err(),
-            "non-finite films are refused"
-        );
-        assert_eq!(
-            OutputFormat::of(Path::new("A.EXR")).unwrap(),
-            OutputFormat::Exr
-        );
+        let bad = Film { data: vec![f32::NAN; 72], ..film };
+        assert!(write_film(&path, &bad, &vec![], &[]).is_err(), "non-finite films are refused");
+        assert_eq!(OutputFormat::of(Path::new("A.EXR")).unwrap(), OutputFormat::Exr);
         assert!(OutputFormat::of(Path::new("a.png")).is_err());
     }
 }

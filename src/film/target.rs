@@ -26,9 +26,9 @@
 //! keeps a visit a cycle, and `stratum_factors` still divides each bin by its own visits.
 
 use super::gate::{Gate, gate_bin_position, gate_weight};
+use crate::units::SPEED_OF_LIGHT;
 use crate::gpu::layout::{GateParams, TargetParams};
 use crate::rng::pcg4d;
-use crate::units::SPEED_OF_LIGHT;
 
 /// Cells of the target table (fewest, for cw codes).
 pub const TARGET_CELLS: u32 = 1024;
@@ -95,27 +95,14 @@ impl TargetSampler {
         // and each cell's exact bound (the largest |W| at its ends and at the code's
         // breakpoints within it).
         let code = match gate {
-            Gate::CwCode {
-                frequency_hz,
-                phase_deg,
-                code,
-            } => Some((
-                frequency_hz / SPEED_OF_LIGHT,
-                phase_deg / 360.0,
-                code.breakpoints(),
-            )),
+            Gate::CwCode { frequency_hz, phase_deg, code } => Some((frequency_hz / SPEED_OF_LIGHT, phase_deg / 360.0, code.breakpoints())),
             _ => None,
         };
         let cells = match &code {
             Some((per_metre, _, points)) => {
-                let narrowest = points
-                    .windows(2)
-                    .map(|p| p[1].0 - p[0].0)
-                    .filter(|&d| d > 0.0)
-                    .fold(1.0, f64::min);
+                let narrowest = points.windows(2).map(|p| p[1].0 - p[0].0).filter(|&d| d > 0.0).fold(1.0, f64::min);
                 let periods = (hi - lo) * per_metre;
-                ((periods * 2.0 / narrowest).ceil() as u64)
-                    .clamp(TARGET_CELLS as u64, MAX_TARGET_CELLS as u64) as u32
+                ((periods * 2.0 / narrowest).ceil() as u64).clamp(TARGET_CELLS as u64, MAX_TARGET_CELLS as u64) as u32
             }
             None => TARGET_CELLS,
         };
@@ -125,11 +112,7 @@ impl TargetSampler {
                 let a = lo + i as f64 * h;
                 let sampled = w(a).max(w(a + 0.5 * h)).max(w(a + h));
                 match &code {
-                    Some((per_metre, phase, points)) => sampled.max(largest_between(
-                        points,
-                        a * per_metre + phase,
-                        (a + h) * per_metre + phase,
-                    )),
+                    Some((per_metre, phase, points)) => sampled.max(largest_between(points, a * per_metre + phase, (a + h) * per_metre + phase)),
                     None => sampled,
                 }
             })
@@ -160,13 +143,7 @@ impl TargetSampler {
             stride: golden_stride(strata),
             ..Default::default()
         };
-        Some(Self {
-            params,
-            cdf,
-            gate: g,
-            kind,
-            table,
-        })
+        Some(Self { params, cdf, gate: g, kind, table })
     }
 
     /// Target length tau (m) and 1 / p(tau) (m) for u in [0, 1) (twin of `sample_target_length`);
@@ -201,13 +178,7 @@ impl TargetSampler {
     /// sampler is stratified, with parameters `t` (this sampler's plus the film's seed, first
     /// sample and extra visits) and the pixel's row of `target_visits` (`row`, empty without
     /// extra visits), and the bin tau lies in (twin of `stratified_target_length`).
-    pub fn stratified_sample(
-        &self,
-        t: &TargetParams,
-        row: &[u32],
-        pixel: u32,
-        sample: u32,
-    ) -> (f32, f32, u32) {
+    pub fn stratified_sample(&self, t: &TargetParams, row: &[u32], pixel: u32, sample: u32) -> (f32, f32, u32) {
         let v = target_visit(t, row, pixel, sample);
         let bin = t.first_bin + v.stratum;
         // The r-th visit of the bin takes the r-th low-discrepancy number.
@@ -219,17 +190,9 @@ impl TargetSampler {
             if x == bin as f32 {
                 break;
             }
-            tau = f32::from_bits(if x < bin as f32 {
-                tau.to_bits() + 1
-            } else {
-                tau.to_bits() - 1
-            });
+            tau = f32::from_bits(if x < bin as f32 { tau.to_bits() + 1 } else { tau.to_bits() - 1 });
         }
-        (
-            tau,
-            (t.strata + t.extra) as f32 * p1 / v.per_cycle as f32,
-            bin,
-        )
+        (tau, (t.strata + t.extra) as f32 * p1 / v.per_cycle as f32, bin)
     }
 }
 
@@ -260,10 +223,7 @@ pub fn golden_stride(n: u32) -> u32 {
         a
     };
     let g = (n as f64 * 0.618_033_988_749_894_8).round() as u32;
-    (0..n)
-        .flat_map(|d| [g + d, g.wrapping_sub(d)])
-        .find(|&c| c > 0 && c < n && gcd(c, n) == 1)
-        .unwrap_or(1)
+    (0..n).flat_map(|d| [g + d, g.wrapping_sub(d)]).find(|&c| c > 0 && c < n && gcd(c, n) == 1).unwrap_or(1)
 }
 
 /// The stratum (0 .. strata, a bin after `first_bin`) of base visit `visit` of pixel `pixel`:
@@ -297,11 +257,7 @@ pub fn target_visit(t: &TargetParams, row: &[u32], pixel: u32, sample: u32) -> T
     let cycle = n + t.extra;
     let (round, q) = (s / cycle, s % cycle);
     if t.extra == 0 {
-        return TargetVisit {
-            stratum: stratum(t, t.seed, pixel, s),
-            visit: round,
-            per_cycle: 1,
-        };
+        return TargetVisit { stratum: stratum(t, t.seed, pixel, s), visit: round, per_cycle: 1 };
     }
     let (j, k) = if q < n {
         (stratum(t, t.seed, pixel, round * n + q), 0)
@@ -311,11 +267,7 @@ pub fn target_visit(t: &TargetParams, row: &[u32], pixel: u32, sample: u32) -> T
     };
     let per_cycle = 1 + row[j as usize + 1] - row[j as usize];
     let visit = round * per_cycle + if q >= n { 1 + k - row[j as usize] } else { 0 };
-    TargetVisit {
-        stratum: j,
-        visit,
-        per_cycle,
-    }
+    TargetVisit { stratum: j, visit, per_cycle }
 }
 
 /// Position (0 .. t.extra) of extra visit `i` of a cycle of pixel `pixel`.
@@ -339,13 +291,7 @@ fn extra_stratum(row: &[u32], k: u32) -> u32 {
 /// without extra visits that factor is 1 and this returns None (nothing to change). `row`: the
 /// pixel's row of `target_visits` (empty without extra visits). Writes the factors into
 /// `factors` (strata values).
-pub fn stratum_factors(
-    t: &TargetParams,
-    row: &[u32],
-    pixel: u32,
-    samples: u64,
-    factors: &mut [f32],
-) -> Option<()> {
+pub fn stratum_factors(t: &TargetParams, row: &[u32], pixel: u32, samples: u64, factors: &mut [f32]) -> Option<()> {
     let n = t.strata as u64;
     let cycle = n + t.extra as u64;
     if n == 0 || (samples < n && t.extra == 0) {
@@ -362,8 +308,7 @@ pub fn stratum_factors(
     let mut counts: Vec<u64> = (0..n as usize).map(|j| rounds * per_cycle(j)).collect();
     // Any cycle-long run of samples meets stratum j per_cycle_j times; the rest are counted.
     for s in rounds * cycle..samples {
-        counts[target_visit(t, row, pixel, t.film_first_sample.wrapping_add(s as u32)).stratum
-            as usize] += 1;
+        counts[target_visit(t, row, pixel, t.film_first_sample.wrapping_add(s as u32)).stratum as usize] += 1;
     }
     if counts.contains(&0) {
         return None;
@@ -415,16 +360,10 @@ pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u3
         masses.iter_mut().for_each(|m| *m = 0.0);
         for j in 0..n {
             let base = (first + j) * 3;
-            masses[cell_of(j)] += pixel[base..base + 3]
-                .iter()
-                .map(|v| v.abs() as f64)
-                .sum::<f64>();
+            masses[cell_of(j)] += pixel[base..base + 3].iter().map(|v| v.abs() as f64).sum::<f64>();
         }
         for (c, m) in spread.iter_mut().enumerate() {
-            *m = masses[c.saturating_sub(PILOT_SPREAD)..(c + PILOT_SPREAD + 1).min(cells)]
-                .iter()
-                .cloned()
-                .fold(0.0, f64::max);
+            *m = masses[c.saturating_sub(PILOT_SPREAD)..(c + PILOT_SPREAD + 1).min(cells)].iter().cloned().fold(0.0, f64::max);
         }
         // Bin j's share of the pixel's extra visits, their running sum rounded: the row.
         let share = |j: usize| spread[cell_of(j)] / bins_in_cell[cell_of(j)] as f64;
@@ -435,11 +374,7 @@ pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u3
         for j in 0..n {
             acc += if even { 1.0 } else { share(j) };
             let whole = if even { n as f64 } else { total };
-            rows.push(if j + 1 == n {
-                extra
-            } else {
-                ((extra as f64 * acc / whole).round() as u32).min(extra)
-            });
+            rows.push(if j + 1 == n { extra } else { ((extra as f64 * acc / whole).round() as u32).min(extra) });
         }
     }
     (extra, rows)

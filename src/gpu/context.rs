@@ -56,16 +56,7 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter `{}`", adapter_info.name))?;
-        Ok(Self {
-            instance,
-            adapter,
-            device,
-            queue,
-            adapter_info,
-            limits,
-            features,
-            profiler: None,
-        })
+        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None })
     }
 
     /// "name (backend, device type)", as recorded with every output.
@@ -83,28 +74,20 @@ impl GpuContext {
     /// True when kernels may add floats atomically in storage buffers (SHADER_FLOAT32_ATOMIC;
     /// lavapipe has it).
     pub fn has_float_atomics(&self) -> bool {
-        self.features
-            .contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
+        self.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
     }
 
     /// Largest storage-buffer binding the device allows (bytes).
     pub fn max_binding_size(&self) -> u64 {
-        self.limits
-            .max_storage_buffer_binding_size
-            .min(self.limits.max_buffer_size)
+        self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size)
     }
 
     /// Blocks until all submitted work has finished (and adds the finished dispatches' times to
     /// the profiler, when there is one).
     pub fn wait_idle(&self) -> Result<()> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .context("GPU device lost while waiting")?;
+        self.device.poll(wgpu::PollType::wait_indefinitely()).context("GPU device lost while waiting")?;
         if let Some(profiler) = &self.profiler {
-            profiler
-                .lock()
-                .unwrap()
-                .collect(&self.device, &self.queue)?;
+            profiler.lock().unwrap().collect(&self.device, &self.queue)?;
         }
         Ok(())
     }
@@ -118,13 +101,9 @@ impl GpuContext {
 
     /// The per-stage table of the profiler (None unless profiling).
     pub fn profile_report(&self) -> Result<Option<String>> {
-        let Some(profiler) = &self.profiler else {
-            return Ok(None);
-        };
+        let Some(profiler) = &self.profiler else { return Ok(None) };
         self.wait_idle()?;
-        Ok(Some(
-            profiler.lock().unwrap().report(&self.adapter_description()),
-        ))
+        Ok(Some(profiler.lock().unwrap().report(&self.adapter_description())))
     }
 }
 
@@ -139,10 +118,7 @@ fn choose_adapter(adapters: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter> {
             .into_iter()
             .find(|a| a.get_info().name.to_lowercase().contains(&wanted_lower))
             .with_context(|| {
-                format!(
-                    "WGPU_ADAPTER_NAME={wanted:?} matches no adapter; available: {}",
-                    names.join(", ")
-                )
+                format!("WGPU_ADAPTER_NAME={wanted:?} matches no adapter; available: {}", names.join(", "))
             });
     }
     let rank = |a: &wgpu::Adapter| match a.get_info().device_type {
@@ -152,8 +128,5 @@ fn choose_adapter(adapters: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter> {
         wgpu::DeviceType::Other => 3,
         wgpu::DeviceType::Cpu => 4,
     };
-    Ok(adapters
-        .into_iter()
-        .min_by_key(rank)
-        .expect("adapters is not empty"))
+    Ok(adapters.into_iter().min_by_key(rank).expect("adapters is not empty"))
 }

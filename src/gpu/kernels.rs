@@ -78,53 +78,28 @@ impl Kernel {
     /// are ignored, so callers can pass one set of specialisation constants to every kernel.
     /// The pipeline label is the kernel's name, with `variant` in parentheses when one kernel
     /// serves several stages (e.g. `setup_dispatch(rays)`).
-    pub fn new(
-        ctx: &GpuContext,
-        name: &str,
-        variant: Option<&str>,
-        constants: &[(&str, f64)],
-    ) -> Self {
+    pub fn new(ctx: &GpuContext, name: &str, variant: Option<&str>, constants: &[(&str, f64)]) -> Self {
         Self::from_source(ctx, kernel_source(name), variant, constants)
     }
 
     /// Like [`Kernel::new`], from the variant composed with WESL feature flag `feature`; the
     /// label is `name(feature)`.
-    pub fn with_feature(
-        ctx: &GpuContext,
-        name: &str,
-        feature: &str,
-        constants: &[(&str, f64)],
-    ) -> Self {
-        Self::from_source(
-            ctx,
-            kernel_variant(name, Some(feature)),
-            Some(feature),
-            constants,
-        )
+    pub fn with_feature(ctx: &GpuContext, name: &str, feature: &str, constants: &[(&str, f64)]) -> Self {
+        Self::from_source(ctx, kernel_variant(name, Some(feature)), Some(feature), constants)
     }
 
-    fn from_source(
-        ctx: &GpuContext,
-        source: &'static KernelSource,
-        variant: Option<&str>,
-        constants: &[(&str, f64)],
-    ) -> Self {
+    fn from_source(ctx: &GpuContext, source: &'static KernelSource, variant: Option<&str>, constants: &[(&str, f64)]) -> Self {
         let name = source.name;
-        let used: Vec<(&str, f64)> = constants
-            .iter()
-            .filter(|(k, _)| source.overrides.contains(k))
-            .copied()
-            .collect();
+        let used: Vec<(&str, f64)> =
+            constants.iter().filter(|(k, _)| source.overrides.contains(k)).copied().collect();
         let label = match variant {
             Some(v) => format!("{name}({v})"),
             None => name.to_owned(),
         };
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(name),
-                source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(source.wgsl)),
-            });
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(name),
+            source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(source.wgsl)),
+        });
         let entries: Vec<wgpu::BindGroupLayoutEntry> = source
             .bindings
             .iter()
@@ -134,12 +109,8 @@ impl Kernel {
                 ty: wgpu::BindingType::Buffer {
                     ty: match b.kind {
                         BindingKind::Uniform => wgpu::BufferBindingType::Uniform,
-                        BindingKind::StorageRead => {
-                            wgpu::BufferBindingType::Storage { read_only: true }
-                        }
-                        BindingKind::StorageReadWrite => {
-                            wgpu::BufferBindingType::Storage { read_only: false }
-                        }
+                        BindingKind::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
+                        BindingKind::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
                     },
                     has_dynamic_offset: false,
                     min_binding_size: None,
@@ -147,39 +118,26 @@ impl Kernel {
                 count: None,
             })
             .collect();
-        let bind_group_layout =
-            ctx.device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some(&label),
-                    entries: &entries,
-                });
-        let layout = ctx
+        let bind_group_layout = ctx
             .device
-            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(&label),
-                bind_group_layouts: &[Some(&bind_group_layout)],
-                immediate_size: 0,
-            });
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(&label),
-                layout: Some(&layout),
-                module: &module,
-                entry_point: Some(name),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &used,
-                    zero_initialize_workgroup_memory: false,
-                },
-                cache: None,
-            });
-        Self {
-            label,
-            source,
-            pipeline,
-            bind_group_layout,
-            profiler: ctx.profiler.clone(),
-        }
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&label), entries: &entries });
+        let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(&label),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(&label),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some(name),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &used,
+                zero_initialize_workgroup_memory: false,
+            },
+            cache: None,
+        });
+        Self { label, source, pipeline, bind_group_layout, profiler: ctx.profiler.clone() }
     }
 
     /// A bind group with every binding of the kernel taken from `resources` by name.
@@ -190,15 +148,9 @@ impl Kernel {
             .iter()
             .map(|b| wgpu::BindGroupEntry {
                 binding: b.binding,
-                resource: resources
-                    .get(b.name)
-                    .unwrap_or_else(|| {
-                        panic!(
-                            "kernel `{}` binds `{}`, which was never created",
-                            self.label, b.name
-                        )
-                    })
-                    .as_entire_binding(),
+                resource: resources.get(b.name).unwrap_or_else(|| {
+                    panic!("kernel `{}` binds `{}`, which was never created", self.label, b.name)
+                }).as_entire_binding(),
             })
             .collect();
         ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -209,16 +161,8 @@ impl Kernel {
     }
 
     /// Records a dispatch of `invocations` invocations along x.
-    pub fn dispatch(
-        &self,
-        pass: &mut wgpu::ComputePass,
-        bind_group: &wgpu::BindGroup,
-        invocations: u32,
-    ) {
-        let pair = self
-            .profiler
-            .as_ref()
-            .and_then(|p| p.lock().unwrap().begin(pass, &self.label));
+    pub fn dispatch(&self, pass: &mut wgpu::ComputePass, bind_group: &wgpu::BindGroup, invocations: u32) {
+        let pair = self.profiler.as_ref().and_then(|p| p.lock().unwrap().begin(pass, &self.label));
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(invocations.div_ceil(self.source.workgroup_size[0]), 1, 1);
@@ -235,10 +179,7 @@ impl Kernel {
         args: &wgpu::Buffer,
         offset: u64,
     ) {
-        let pair = self
-            .profiler
-            .as_ref()
-            .and_then(|p| p.lock().unwrap().begin(pass, &self.label));
+        let pair = self.profiler.as_ref().and_then(|p| p.lock().unwrap().begin(pass, &self.label));
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups_indirect(args, offset);

@@ -42,12 +42,9 @@ pub type SharedProfiler = Arc<Mutex<Profiler>>;
 impl Profiler {
     /// A profiler on `device`, or an error naming the missing feature.
     pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Self> {
-        let needed =
-            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES;
+        let needed = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES;
         if !device.features().contains(needed) {
-            return Err(anyhow!(
-                "--profile needs timestamp queries inside compute passes, which this device lacks"
-            ));
+            return Err(anyhow!("--profile needs timestamp queries inside compute passes, which this device lacks"));
         }
         let bytes = 2 * CAPACITY as u64 * 8;
         let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -103,21 +100,15 @@ impl Profiler {
         if n == 0 {
             return Ok(());
         }
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("profiler"),
-        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("profiler") });
         encoder.resolve_query_set(&self.queries, 0..2 * n, &self.resolved, 0);
         encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, 2 * n as u64 * 8);
         queue.submit([encoder.finish()]);
         let slice = self.readback.slice(..2 * n as u64 * 8);
         slice.map_async(wgpu::MapMode::Read, |_| {});
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .context("GPU device lost while reading timestamps")?;
+        device.poll(wgpu::PollType::wait_indefinitely()).context("GPU device lost while reading timestamps")?;
         {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| anyhow!("cannot read timestamps back: {e:?}"))?;
+            let view = slice.get_mapped_range().map_err(|e| anyhow!("cannot read timestamps back: {e:?}"))?;
             let ticks: &[u64] = bytemuck::cast_slice(&view);
             for (label, pair) in self.pending.iter().zip(ticks.chunks(2)) {
                 let t = self.totals.entry(label.clone()).or_default();
@@ -155,10 +146,7 @@ impl Profiler {
             );
         }
         if self.missed > 0 {
-            out += &format!(
-                "({} dispatches were not measured: more than {CAPACITY} between waits)\n",
-                self.missed
-            );
+            out += &format!("({} dispatches were not measured: more than {CAPACITY} between waits)\n", self.missed);
         }
         out
     }

@@ -36,24 +36,15 @@ impl Resources {
 
     /// Creates storage buffer `name` holding `data` (at least one element and 16 bytes, so empty
     /// tables still bind).
-    pub fn storage_init<T: bytemuck::Pod>(
-        &mut self,
-        ctx: &GpuContext,
-        name: &'static str,
-        data: &[T],
-    ) -> Result<()> {
+    pub fn storage_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, data: &[T]) -> Result<()> {
         let mut bytes = bytemuck::cast_slice::<T, u8>(data).to_vec();
         check_size(ctx, name, bytes.len() as u64)?;
         bytes.resize(bytes.len().max(16).max(size_of::<T>()), 0);
-        let buffer = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(name),
-                contents: &bytes,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST
-                    | wgpu::BufferUsages::COPY_SRC,
-            });
+        let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(name),
+            contents: &bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        });
         self.insert(name, buffer);
         Ok(())
     }
@@ -70,10 +61,7 @@ impl Resources {
         let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(name),
             size: size.max(16),
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_DST
-                | wgpu::BufferUsages::COPY_SRC
-                | extra,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC | extra,
             mapped_at_creation: false,
         });
         self.insert(name, buffer);
@@ -81,29 +69,17 @@ impl Resources {
     }
 
     /// Creates uniform buffer `name` holding the array `values`.
-    pub fn uniform_slice_init<T: bytemuck::Pod>(
-        &mut self,
-        ctx: &GpuContext,
-        name: &'static str,
-        values: &[T],
-    ) {
-        let buffer = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(name),
-                contents: bytemuck::cast_slice(values),
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            });
+    pub fn uniform_slice_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, values: &[T]) {
+        let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(name),
+            contents: bytemuck::cast_slice(values),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        });
         self.insert(name, buffer);
     }
 
     /// Creates uniform buffer `name` holding `value`.
-    pub fn uniform_init<T: bytemuck::Pod>(
-        &mut self,
-        ctx: &GpuContext,
-        name: &'static str,
-        value: &T,
-    ) {
+    pub fn uniform_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, value: &T) {
         self.uniform_slice_init(ctx, name, std::slice::from_ref(value));
     }
 }
@@ -137,10 +113,7 @@ impl ChunkLayout {
                 limit as f64 / 1048576.0
             );
         }
-        Ok(Self {
-            bits,
-            chunks: chunks as u32,
-        })
+        Ok(Self { bits, chunks: chunks as u32 })
     }
 
     /// Element range of chunk `c` for an array of `count` elements.
@@ -157,19 +130,11 @@ impl ChunkLayout {
 pub fn chunk_names(name: &'static str) -> [&'static str; 4] {
     match name {
         "triangles" => ["triangles", "triangles_1", "triangles_2", "triangles_3"],
-        "triangle_shading" => [
-            "triangle_shading",
-            "triangle_shading_1",
-            "triangle_shading_2",
-            "triangle_shading_3",
-        ],
+        "triangle_shading" => ["triangle_shading", "triangle_shading_1", "triangle_shading_2", "triangle_shading_3"],
         "bvh_nodes" => ["bvh_nodes", "bvh_nodes_1", "bvh_nodes_2", "bvh_nodes_3"],
-        "bvh_node_surfaces" => [
-            "bvh_node_surfaces",
-            "bvh_node_surfaces_1",
-            "bvh_node_surfaces_2",
-            "bvh_node_surfaces_3",
-        ],
+        "bvh_node_surfaces" => {
+            ["bvh_node_surfaces", "bvh_node_surfaces_1", "bvh_node_surfaces_2", "bvh_node_surfaces_3"]
+        }
         "film" => ["film", "film_1", "film_2", "film_3"],
         other => panic!("`{other}` is not a split array"),
     }
@@ -205,12 +170,7 @@ impl Resources {
         let layout = ChunkLayout::new(name, count, element_size, limit)?;
         for (c, chunk_name) in chunk_names(name).into_iter().enumerate() {
             let r = layout.range(c as u32, count);
-            self.storage_zeroed(
-                ctx,
-                chunk_name,
-                (r.end - r.start) * element_size,
-                wgpu::BufferUsages::empty(),
-            )?;
+            self.storage_zeroed(ctx, chunk_name, (r.end - r.start) * element_size, wgpu::BufferUsages::empty())?;
         }
         Ok(layout)
     }
@@ -226,11 +186,7 @@ impl Resources {
         let mut out = Vec::with_capacity(count as usize);
         for c in 0..layout.chunks {
             let r = layout.range(c, count);
-            out.extend(read_buffer::<T>(
-                ctx,
-                &self.buffers[chunk_names(name)[c as usize]],
-                (r.end - r.start) as usize,
-            )?);
+            out.extend(read_buffer::<T>(ctx, &self.buffers[chunk_names(name)[c as usize]], (r.end - r.start) as usize)?);
         }
         Ok(out)
     }
@@ -258,11 +214,7 @@ fn check_size(ctx: &GpuContext, name: &str, size: u64) -> Result<()> {
 }
 
 /// Reads a buffer back to the host (blocking). The buffer needs COPY_SRC.
-pub fn read_buffer<T: bytemuck::Pod>(
-    ctx: &GpuContext,
-    buffer: &wgpu::Buffer,
-    count: usize,
-) -> Result<Vec<T>> {
+pub fn read_buffer<T: bytemuck::Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, count: usize) -> Result<Vec<T>> {
     let size = (count * std::mem::size_of::<T>()) as u64;
     if size == 0 {
         return Ok(Vec::new());
@@ -273,11 +225,7 @@ pub fn read_buffer<T: bytemuck::Pod>(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let mut encoder = ctx
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("readback"),
-        });
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
     encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
     ctx.queue.submit([encoder.finish()]);
     let slice = staging.slice(..);
@@ -298,21 +246,11 @@ mod tests {
 
     #[test]
     fn chunk_layouts_cover_the_array_in_power_of_two_chunks() {
-        assert_eq!(
-            ChunkLayout::new("a", 10, 4, 40).unwrap(),
-            ChunkLayout { bits: 0, chunks: 1 }
-        );
+        assert_eq!(ChunkLayout::new("a", 10, 4, 40).unwrap(), ChunkLayout { bits: 0, chunks: 1 });
         let l = ChunkLayout::new("a", 60, 48, 1000).unwrap();
-        assert_eq!(
-            l,
-            ChunkLayout { bits: 4, chunks: 4 },
-            "20 fit, 16 per chunk"
-        );
+        assert_eq!(l, ChunkLayout { bits: 4, chunks: 4 }, "20 fit, 16 per chunk");
         let covered: Vec<u64> = (0..l.chunks).flat_map(|c| l.range(c, 60)).collect();
         assert_eq!(covered, (0..60).collect::<Vec<_>>());
-        assert!(
-            ChunkLayout::new("a", 1000, 48, 1000).is_err(),
-            "more than four chunks"
-        );
+        assert!(ChunkLayout::new("a", 1000, 48, 1000).is_err(), "more than four chunks");
     }
 }

@@ -44,9 +44,7 @@ use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
 use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::film::Film;
-use crate::gpu::layout::{
-    Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams,
-};
+use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
@@ -79,11 +77,7 @@ pub const DEFAULT_NLOS_TARGET_PILOT: u32 = 256;
 /// DEFAULT_CONNECTIONS_PER_QUERY for `ellipsoidal` and for `auto` (whose `ellipsoidal` pilot and
 /// render use it), 1 (the only value they take) for the others.
 pub fn default_connections_per_query(method: Method) -> u32 {
-    if matches!(method, Method::Ellipsoidal | Method::Auto) {
-        DEFAULT_CONNECTIONS_PER_QUERY
-    } else {
-        1
-    }
+    if matches!(method, Method::Ellipsoidal | Method::Auto) { DEFAULT_CONNECTIONS_PER_QUERY } else { 1 }
 }
 
 /// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
@@ -107,9 +101,7 @@ pub struct StrategyStats {
 /// The (s, t) strategies with at most `max_bounces` scattering vertices and t >= 1, in the
 /// order of `strategy_stats` (depth d = s + t - 2, then s).
 pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
-    (0..=max_bounces)
-        .flat_map(|d| (0..=d + 1).map(move |s| (s, d + 2 - s)))
-        .collect()
+    (0..=max_bounces).flat_map(|d| (0..=d + 1).map(move |s| (s, d + 2 - s))).collect()
 }
 
 /// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
@@ -118,10 +110,7 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
         // Both candidates must be valid, ellipsoidal only where it applies (it needs a gate).
         check_settings(&super::auto::candidate_settings(settings, Method::Direct))?;
         if !matches!(settings.gate, crate::film::Gate::None) {
-            check_settings(&super::auto::candidate_settings(
-                settings,
-                Method::Ellipsoidal,
-            ))?;
+            check_settings(&super::auto::candidate_settings(settings, Method::Ellipsoidal))?;
         }
         return Ok(());
     }
@@ -138,10 +127,7 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
              transient), not `{}`",
             settings.gate.describe()
         );
-        ensure!(
-            settings.debug_strategy.is_none(),
-            "--debug-strategy needs --method direct"
-        );
+        ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
         let k = settings.connections_per_query;
         ensure!(
             (1..=MAX_CONNECTIONS_PER_QUERY).contains(&k),
@@ -161,8 +147,7 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
             g.length
         );
         ensure!(
-            settings.target_pilot_spp == 0
-                || matches!(settings.gate, crate::film::Gate::Transient { .. }),
+            settings.target_pilot_spp == 0 || matches!(settings.gate, crate::film::Gate::Transient { .. }),
             "--target-pilot shapes the target lengths of a transient gate: give --gate transient:... or --target-pilot 0"
         );
         // Light-tracing connections (t = 1) land in other pixels, whose bins cannot be divided by
@@ -180,10 +165,7 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
         );
     }
     if settings.method != Method::Ellipsoidal {
-        ensure!(
-            settings.target_pilot_spp == 0,
-            "--target-pilot applies to --method ellipsoidal only"
-        );
+        ensure!(settings.target_pilot_spp == 0, "--target-pilot applies to --method ellipsoidal only");
     }
     if let Some((s, t)) = settings.debug_strategy {
         ensure!(
@@ -261,11 +243,7 @@ pub struct BidirectionalTracer<'a> {
 
 impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
-    pub fn new(
-        ctx: &'a GpuContext,
-        scene: &PreparedScene,
-        settings: &RenderSettings,
-    ) -> Result<Self> {
+    pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
         ensure!(
             settings.method != Method::Ellipsoidal || scene.scene.directional_lights.is_empty(),
@@ -275,10 +253,7 @@ impl<'a> BidirectionalTracer<'a> {
             scene.scene.source
         );
         let b = super::kernel_bounces(settings);
-        let limit = settings
-            .binding_limit
-            .unwrap_or(u64::MAX)
-            .min(ctx.max_binding_size());
+        let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;
         let light_vertices = b as u64 + 1;
         let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
@@ -292,20 +267,11 @@ impl<'a> BidirectionalTracer<'a> {
         let k = settings.connections_per_query as u64;
         let resumable = crate::bvh::traversals_can_stop(scene.bvh.nodes.len());
         let inline_shadow_rays = ellipsoidal && !resumable;
-        let contributions_per_slot =
-            contributions_per_slot * if inline_shadow_rays { 1 } else { k };
+        let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
         let splats_per_slot = light_vertices * k;
-        let queued_rays_per_slot = if inline_shadow_rays {
-            0
-        } else {
-            rays_per_connection * (contributions_per_slot + splats_per_slot)
-        };
+        let queued_rays_per_slot = if inline_shadow_rays { 0 } else { rays_per_connection * (contributions_per_slot + splats_per_slot) };
         // Ellipsoid queries of a slot: the pairs (s, t) with s, t >= 1 and s + t <= B + 1.
-        let queries_per_slot = if ellipsoidal {
-            (b as u64 * (b as u64 + 1) / 2).max(1)
-        } else {
-            1
-        };
+        let queries_per_slot = if ellipsoidal { (b as u64 * (b as u64 + 1) / 2).max(1) } else { 1 };
         // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
         let per_slot = [
             (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
@@ -326,8 +292,7 @@ impl<'a> BidirectionalTracer<'a> {
         let slots = slots_per_wave;
 
         let params = super::render_params(scene, settings);
-        let (mut r, mut constants, film) =
-            super::upload_scene(ctx, scene, settings, &params, limit)?;
+        let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         if ellipsoidal {
             ensure!(
                 params.target_length.cells > 0,
@@ -340,18 +305,10 @@ impl<'a> BidirectionalTracer<'a> {
         let pixels = settings.width as u64 * settings.height as u64;
         let strata = params.target_length.strata as u64;
         let visits_bytes = pixels * (strata + 1) * 4;
-        let target_pilot_spp = if ellipsoidal && strata > 0 && visits_bytes <= limit {
-            settings.target_pilot_spp
-        } else {
-            0
-        };
+        let target_pilot_spp =
+            if ellipsoidal && strata > 0 && visits_bytes <= limit { settings.target_pilot_spp } else { 0 };
         if target_pilot_spp > 0 {
-            r.storage_zeroed(
-                ctx,
-                "target_visits",
-                visits_bytes,
-                wgpu::BufferUsages::empty(),
-            )?;
+            r.storage_zeroed(ctx, "target_visits", visits_bytes, wgpu::BufferUsages::empty())?;
         }
         let splat_film_bytes = super::film_elements(settings)? * 4;
         ensure!(
@@ -364,12 +321,7 @@ impl<'a> BidirectionalTracer<'a> {
             settings.gate.bins()
         );
         let none = wgpu::BufferUsages::empty();
-        r.storage_zeroed(
-            ctx,
-            "paths",
-            2 * slots * size_of::<PathState>() as u64,
-            none,
-        )?;
+        r.storage_zeroed(ctx, "paths", 2 * slots * size_of::<PathState>() as u64, none)?;
         r.storage_zeroed(ctx, "hits", 2 * slots * size_of::<Hit>() as u64, none)?;
         r.storage_zeroed(ctx, "ray_queue", 2 * slots * 4, none)?;
         r.storage_zeroed(ctx, "next_ray_queue", 2 * slots * 4, none)?;
@@ -379,47 +331,14 @@ impl<'a> BidirectionalTracer<'a> {
         // Only the path tracer sums contributions per path (accumulate SUM_PER_PATH).
         r.storage_zeroed(ctx, "path_radiance", 4, none)?;
         // With shadow rays traced on the spot, light-tracing contributions go straight to splat_film.
-        r.storage_zeroed(
-            ctx,
-            "splats",
-            if inline_shadow_rays {
-                per_slot[2]
-            } else {
-                slots * per_slot[2]
-            },
-            none,
-        )?;
-        r.storage_zeroed(
-            ctx,
-            "shadow_queue",
-            if inline_shadow_rays {
-                per_slot[3]
-            } else {
-                slots * per_slot[3]
-            },
-            none,
-        )?;
+        r.storage_zeroed(ctx, "splats", if inline_shadow_rays { per_slot[2] } else { slots * per_slot[2] }, none)?;
+        r.storage_zeroed(ctx, "shadow_queue", if inline_shadow_rays { per_slot[3] } else { slots * per_slot[3] }, none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
-        r.storage_zeroed(
-            ctx,
-            "dispatch_args",
-            DISPATCH_ARGS_BYTES,
-            wgpu::BufferUsages::INDIRECT,
-        )?;
-        r.storage_zeroed(
-            ctx,
-            "ellipsoid_queries",
-            if ellipsoidal { slots * per_slot[5] } else { 16 },
-            none,
-        )?;
+        r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
+        r.storage_zeroed(ctx, "ellipsoid_queries", if ellipsoidal { slots * per_slot[5] } else { 16 }, none)?;
         r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
         // Three counters per strategy, then five for the ellipsoid queries' work and guards.
-        r.storage_zeroed(
-            ctx,
-            "strategy_stats",
-            4 * (3 * strategy_count + QUERY_COUNTERS as u64),
-            none,
-        )?;
+        r.storage_zeroed(ctx, "strategy_stats", 4 * (3 * strategy_count + QUERY_COUNTERS as u64), none)?;
         r.storage_zeroed(ctx, "targets", 8 * slots, none)?;
 
         constants.push(("CAMERA_VERTICES", camera_vertices as f64));
@@ -429,10 +348,7 @@ impl<'a> BidirectionalTracer<'a> {
         // deeper vertices are never used, so their rays are not traced.
         let (camera_traced, light_traced) = if ellipsoidal {
             let t_min = if settings.nlos.is_some() { 2 } else { 1 };
-            (
-                (b as u64).max(t_min),
-                (b as u64 + 1).saturating_sub(t_min).max(1),
-            )
+            ((b as u64).max(t_min), (b as u64 + 1).saturating_sub(t_min).max(1))
         } else {
             (camera_vertices, light_vertices)
         };
@@ -447,10 +363,7 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("QUERY_SPLIT", settings.query.split as f64));
             constants.push(("QUERY_BOTTOM_NODES", settings.query.bottom_nodes as f64));
             constants.push(("QUERY_ALLOWANCE", settings.query.allowance as f64));
-            constants.push((
-                "QUERY_REFLECTION_WEIGHTS",
-                settings.query.reflection_weights as u32 as f64,
-            ));
+            constants.push(("QUERY_REFLECTION_WEIGHTS", settings.query.reflection_weights as u32 as f64));
         }
         constants.push(("STATS", settings.stats as u32 as f64));
         constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));
@@ -466,30 +379,16 @@ impl<'a> BidirectionalTracer<'a> {
         // Kernels that add to splat_film: with the device's float atomics where it has them.
         let float_atomics = ctx.has_float_atomics() && !settings.portable_atomics;
         let splatting = |name: &str| {
-            if float_atomics {
-                Kernel::with_feature(ctx, name, "float_atomics", &constants)
-            } else {
-                Kernel::new(ctx, name, None, &constants)
-            }
+            if float_atomics { Kernel::with_feature(ctx, name, "float_atomics", &constants) } else { Kernel::new(ctx, name, None, &constants) }
         };
         // With shadow rays traced on the spot, the ellipsoidal kernels splat straight into splat_film.
-        let connect_kernel = |name: &str| {
-            if inline_shadow_rays {
-                splatting(name)
-            } else {
-                Kernel::new(ctx, name, None, &constants)
-            }
-        };
+        let connect_kernel = |name: &str| if inline_shadow_rays { splatting(name) } else { Kernel::new(ctx, name, None, &constants) };
         let stages = Stages {
             generate_subpaths: Kernel::new(ctx, "generate_subpaths", None, &constants),
             setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
             intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
             extend_subpaths: Kernel::new(ctx, "extend_subpaths", None, &constants),
-            connect: connect_kernel(if ellipsoidal {
-                "connect_ellipsoidal"
-            } else {
-                "connect_direct"
-            }),
+            connect: connect_kernel(if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }),
             ellipsoidal: ellipsoidal.then(|| {
                 [
                     connect_kernel("connect_spherical"),
@@ -510,37 +409,17 @@ impl<'a> BidirectionalTracer<'a> {
             intersect_closest: both(&stages.intersect_closest),
             extend_subpaths: both(&stages.extend_subpaths),
             connect: stages.connect.bind(ctx, &even),
-            ellipsoidal: stages
-                .ellipsoidal
-                .as_ref()
-                .map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
+            ellipsoidal: stages.ellipsoidal.as_ref().map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
             accumulate: stages.accumulate.bind(ctx, &even),
             splat_light_paths: stages.splat_light_paths.bind(ctx, &even),
         };
         let stats = settings.stats.then(|| {
-            strategies(b)
-                .into_iter()
-                .map(|(s, t)| StrategyStats {
-                    s,
-                    t,
-                    ..Default::default()
-                })
-                .collect()
+            strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
         });
-        let wf = Wavefront::new(
-            ctx,
-            params,
-            r,
-            film,
-            constants,
-            (samples_per_pass, slots_per_wave),
-        );
+        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
         let additions_per_pass = samples_per_pass as u64 * splats_per_slot;
-        let fold_interval = if settings.keep_splats_on_device {
-            u32::MAX
-        } else {
-            (65536 / additions_per_pass).clamp(1, 4096) as u32
-        };
+        let fold_interval =
+            if settings.keep_splats_on_device { u32::MAX } else { (65536 / additions_per_pass).clamp(1, 4096) as u32 };
         let splat_sums = vec![0.0; super::film_elements(settings)? as usize];
         Ok(Self {
             wf,
@@ -572,11 +451,7 @@ impl<'a> BidirectionalTracer<'a> {
         let (extra, rows) = crate::film::target::visit_tables(&t, &pilot.data, pilot.bins as usize);
         self.wf.params.target_length.extra = extra;
         self.wf.params.target_length.extra_stride = crate::film::target::golden_stride(extra);
-        self.wf.ctx.queue.write_buffer(
-            self.wf.resources.get("target_visits").unwrap(),
-            0,
-            bytemuck::cast_slice(&rows),
-        );
+        self.wf.ctx.queue.write_buffer(self.wf.resources.get("target_visits").unwrap(), 0, bytemuck::cast_slice(&rows));
         self.wf.target_visits = rows;
         // Writes the parameters with a new seed and the film's first sample.
         self.reset_film();
@@ -588,12 +463,7 @@ impl<'a> BidirectionalTracer<'a> {
     /// and triangles tested (None without `stats` or before any query).
     pub fn query_cost(&self) -> Option<(f64, f64)> {
         let queries: u64 = self.stats.as_ref()?.iter().map(|s| s.evaluated).sum();
-        (queries > 0).then(|| {
-            (
-                self.query_work[0] as f64 / queries as f64,
-                self.query_work[1] as f64 / queries as f64,
-            )
-        })
+        (queries > 0).then(|| (self.query_work[0] as f64 / queries as f64, self.query_work[1] as f64 / queries as f64))
     }
 
     /// Strategy counters so far (None unless the settings asked for statistics).
@@ -614,11 +484,7 @@ impl<'a> BidirectionalTracer<'a> {
         for (sum, &x) in self.splat_sums.iter_mut().zip(&splats) {
             *sum += x as f64;
         }
-        let mut encoder = self
-            .wf
-            .ctx
-            .device
-            .create_command_encoder(&Default::default());
+        let mut encoder = self.wf.ctx.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(buffer, 0, None);
         self.wf.ctx.queue.submit([encoder.finish()]);
         self.passes_since_fold = 0;
@@ -633,33 +499,20 @@ impl<'a> BidirectionalTracer<'a> {
         // ---- trace the subpaths ----
         self.wf.trace_rounds(
             1,
-            |pass| {
-                s.generate_subpaths
-                    .dispatch(pass, &b.generate_subpaths, wave.slot_count)
-            },
+            |pass| s.generate_subpaths.dispatch(pass, &b.generate_subpaths, wave.slot_count),
             |pass, r| {
                 let parity = (r % 2) as usize;
-                s.setup_dispatch_rays
-                    .dispatch(pass, &b.setup_dispatch_rays[parity], 1);
+                s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
                 if self.resumable {
-                    s.intersect_closest.dispatch_indirect(
-                        pass,
-                        &b.intersect_closest[parity],
-                        args,
-                        0,
-                    );
+                    s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
                 }
-                s.extend_subpaths
-                    .dispatch_indirect(pass, &b.extend_subpaths[parity], args, 0);
+                s.extend_subpaths.dispatch_indirect(pass, &b.extend_subpaths[parity], args, 0);
             },
         )?;
         // ---- connect, test visibility, accumulate ----
         self.wf.submit_pass("connect", |pass| {
             match (&s.ellipsoidal, &b.ellipsoidal) {
-                (
-                    Some([spherical, queue, setup]),
-                    Some([spherical_group, queue_group, setup_group]),
-                ) => {
+                (Some([spherical, queue, setup]), Some([spherical_group, queue_group, setup_group])) => {
                     spherical.dispatch(pass, spherical_group, wave.slot_count);
                     queue.dispatch(pass, queue_group, wave.slot_count);
                     setup.dispatch(pass, setup_group, 1);
@@ -671,14 +524,12 @@ impl<'a> BidirectionalTracer<'a> {
         });
         // Shadow rays that stopped at the traversal budget resume until every one is decided.
         while self.wf.counters()?.unfinished_shadow_rays > 0 {
-            self.wf
-                .submit_pass("resume", |pass| s.shadow_rays.encode_resume(pass, args));
+            self.wf.submit_pass("resume", |pass| s.shadow_rays.encode_resume(pass, args));
         }
         self.wf.submit_pass("accumulate", |pass| {
             s.accumulate.dispatch(pass, &b.accumulate, wave.pixel_count);
             if !self.inline_shadow_rays {
-                s.splat_light_paths
-                    .dispatch(pass, &b.splat_light_paths, wave.slot_count);
+                s.splat_light_paths.dispatch(pass, &b.splat_light_paths, wave.slot_count);
             }
         });
         ctx.wait_idle()?;
@@ -727,11 +578,7 @@ impl Integrator for BidirectionalTracer<'_> {
         if self.method == Method::Ellipsoidal {
             self.wf.divide_by_stratum_counts(&mut film);
         }
-        let splats: Vec<f32> = read_buffer(
-            self.wf.ctx,
-            self.wf.resources.get("splat_film").unwrap(),
-            film.data.len(),
-        )?;
+        let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), film.data.len())?;
         let spp = self.wf.samples_in_film.max(1) as f64;
         for ((v, &splat), sum) in film.data.iter_mut().zip(&splats).zip(&self.splat_sums) {
             *v = (*v as f64 + (sum + splat as f64) / spp) as f32;
@@ -740,11 +587,7 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn target_pilot_spp(&self) -> u32 {
-        if self.target_pilot_ran {
-            self.target_pilot_spp
-        } else {
-            0
-        }
+        if self.target_pilot_ran { self.target_pilot_spp } else { 0 }
     }
 
     fn prepare(&mut self) -> Result<()> {
@@ -774,8 +617,7 @@ impl Integrator for BidirectionalTracer<'_> {
             // The extra visits were shaped for the old gate (wf.set_gate dropped them).
             // A new pilot shapes them again where the new gate's tables fit the buffer.
             let t = &self.wf.params.target_length;
-            let bytes =
-                (settings.width as u64 * settings.height as u64) * (t.strata as u64 + 1) * 4;
+            let bytes = (settings.width as u64 * settings.height as u64) * (t.strata as u64 + 1) * 4;
             let room = self.wf.resources.get("target_visits").unwrap().size();
             self.target_pilot_pending = self.target_pilot_spp > 0 && t.strata > 0 && bytes <= room;
             self.target_pilot_ran = false;
@@ -785,9 +627,7 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn stats_report(&self) -> Result<Option<String>> {
-        let Some(stats) = &self.stats else {
-            return Ok(None);
-        };
+        let Some(stats) = &self.stats else { return Ok(None) };
         let ellipsoidal = self.method == Method::Ellipsoidal;
         let mut out = if ellipsoidal {
             String::from(

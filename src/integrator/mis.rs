@@ -52,10 +52,7 @@ pub struct Vertex {
 
 impl Vertex {
     fn has_area_measure(&self) -> bool {
-        matches!(
-            self.kind,
-            VertexKind::Surface(_) | VertexKind::AreaLight { .. }
-        )
+        matches!(self.kind, VertexKind::Surface(_) | VertexKind::AreaLight { .. })
     }
 
     fn is_delta_light(&self) -> bool {
@@ -93,11 +90,7 @@ pub fn vertex_pdf(v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
     let pdf_dir = match v.kind {
         VertexKind::Camera { image_area } => {
             let c = w.dot(v.normal);
-            if c <= 0.0 {
-                0.0
-            } else {
-                1.0 / (image_area * c * c * c)
-            }
+            if c <= 0.0 { 0.0 } else { 1.0 / (image_area * c * c * c) }
         }
         VertexKind::AreaLight { .. } => w.dot(v.normal).max(0.0) * FRAC_1_PI,
         VertexKind::PointLight { .. } => 0.25 * FRAC_1_PI,
@@ -135,11 +128,7 @@ fn stored_subpath(vertices: &[Vertex]) -> Vec<Stored> {
             },
             _ => vertex_pdf(&vertices[i - 1], i.checked_sub(2).map(|j| &vertices[j]), v),
         };
-        out.push(Stored {
-            vertex: *v,
-            pdf_fwd,
-            pdf_rev: 0.0,
-        });
+        out.push(Stored { vertex: *v, pdf_fwd, pdf_rev: 0.0 });
         if i >= 2 {
             // Vertex i - 1 sampled vertex i: it also sets the reverse density of vertex i - 2.
             out[i - 2].pdf_rev = vertex_pdf(&vertices[i - 1], Some(v), &vertices[i - 2]);

@@ -43,9 +43,7 @@ use anyhow::{Result, ensure};
 
 use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
 use super::{Integrator, RenderSettings, Wavefront};
-use crate::gpu::layout::{
-    Contribution, Hit, PathState, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams,
-};
+use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::MAX_CHUNKS;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
@@ -97,10 +95,7 @@ enum Tracing {
     /// then raised it from 5.31 to 6.26 M.
     /// In BVH scenes it traced no faster than rounds (sphere_5120.glb: 0.36 against 0.38 M),
     /// and there traversal loops would share lavapipe's loop budget.
-    WholePaths {
-        trace_paths: Kernel,
-        binding: wgpu::BindGroup,
-    },
+    WholePaths { trace_paths: Kernel, binding: wgpu::BindGroup },
 }
 
 /// A path tracer bound to one scene and one set of settings, accumulating into its film.
@@ -122,72 +117,36 @@ const MAX_SHADOW_RESUMES: u32 = 8;
 
 impl<'a> PathTracer<'a> {
     /// Uploads the scene, creates the wavefront state and builds the specialised kernels.
-    pub fn new(
-        ctx: &'a GpuContext,
-        scene: &PreparedScene,
-        settings: &RenderSettings,
-    ) -> Result<Self> {
-        let limit = settings
-            .binding_limit
-            .unwrap_or(u64::MAX)
-            .min(ctx.max_binding_size());
+    pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
+        let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let params = super::render_params(scene, settings);
         let resumable = crate::bvh::traversals_can_stop(params.node_count as usize);
         let sum_per_path = settings.gate.kind() != crate::film::GateKind::Transient && !resumable;
-        let whole_paths =
-            sum_per_path && !crate::bvh::small_scene_triangles(&scene.triangles).is_empty();
+        let whole_paths = sum_per_path && !crate::bvh::small_scene_triangles(&scene.triangles).is_empty();
 
         // Slots per wave: within the largest per-slot buffer's binding.
-        let largest_per_slot = if whole_paths {
-            3 * 4
-        } else {
-            size_of::<PathState>().max(size_of::<ShadowRay>()) as u64
-        };
-        let (samples_per_pass, slots_per_wave) =
-            plan_waves(settings, limit / largest_per_slot, TARGET_SLOTS_PER_WAVE)?;
+        let largest_per_slot =
+            if whole_paths { 3 * 4 } else { size_of::<PathState>().max(size_of::<ShadowRay>()) as u64 };
+        let (samples_per_pass, slots_per_wave) = plan_waves(settings, limit / largest_per_slot, TARGET_SLOTS_PER_WAVE)?;
         // Whole paths keep their state in registers: the rounds' per-slot buffers get one element.
         let slots = if whole_paths { 1 } else { slots_per_wave };
 
-        let (mut r, mut constants, film) =
-            super::upload_scene(ctx, scene, settings, &params, limit)?;
+        let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         let none = wgpu::BufferUsages::empty();
         r.storage_zeroed(ctx, "paths", size_of::<PathState>() as u64 * slots, none)?;
         r.storage_zeroed(ctx, "hits", size_of::<Hit>() as u64 * slots, none)?;
         r.storage_zeroed(ctx, "ray_queue", 4 * slots, none)?;
         r.storage_zeroed(ctx, "next_ray_queue", 4 * slots, none)?;
-        r.storage_zeroed(
-            ctx,
-            "shadow_queue",
-            size_of::<ShadowRay>() as u64 * slots,
-            none,
-        )?;
+        r.storage_zeroed(ctx, "shadow_queue", size_of::<ShadowRay>() as u64 * slots, none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
-        r.storage_zeroed(
-            ctx,
-            "dispatch_args",
-            DISPATCH_ARGS_BYTES,
-            wgpu::BufferUsages::INDIRECT,
-        )?;
+        r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
         let contribution_slots = if sum_per_path { 1 } else { slots };
-        r.storage_zeroed(
-            ctx,
-            "contributions",
-            2 * size_of::<Contribution>() as u64 * contribution_slots,
-            none,
-        )?;
-        let path_radiance_bytes = if sum_per_path {
-            3 * 4 * slots_per_wave
-        } else {
-            4
-        };
+        r.storage_zeroed(ctx, "contributions", 2 * size_of::<Contribution>() as u64 * contribution_slots, none)?;
+        let path_radiance_bytes = if sum_per_path { 3 * 4 * slots_per_wave } else { 4 };
         r.storage_zeroed(ctx, "path_radiance", path_radiance_bytes, none)?;
         // trace_shadow_rays can clear light-tracing splats; the path tracer has none.
         r.storage_zeroed(ctx, "splats", size_of::<Splat>() as u64, none)?;
-        let vertices_per_round = if sum_per_path {
-            VERTICES_PER_ROUND_SUMMING
-        } else {
-            1
-        };
+        let vertices_per_round = if sum_per_path { VERTICES_PER_ROUND_SUMMING } else { 1 };
         constants.push(("LIGHT_STRATEGY", settings.light_strategy as u32 as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", 2.0));
         constants.push(("SUM_PER_PATH", sum_per_path as u32 as f64));
@@ -198,10 +157,7 @@ impl<'a> PathTracer<'a> {
         let tracing = if whole_paths {
             let trace_paths = Kernel::new(ctx, "trace_paths", None, &constants);
             let binding = trace_paths.bind(ctx, &r);
-            Tracing::WholePaths {
-                trace_paths,
-                binding,
-            }
+            Tracing::WholePaths { trace_paths, binding }
         } else {
             let with = |queue: f64| {
                 let mut c = constants.clone();
@@ -232,21 +188,8 @@ impl<'a> PathTracer<'a> {
                 vertices_per_round,
             }))
         };
-        let wf = Wavefront::new(
-            ctx,
-            params,
-            r,
-            film,
-            constants,
-            (samples_per_pass, slots_per_wave),
-        );
-        Ok(Self {
-            wf,
-            tracing,
-            accumulate,
-            accumulate_binding,
-            sum_per_path,
-        })
+        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
+        Ok(Self { wf, tracing, accumulate, accumulate_binding, sum_per_path })
     }
 
     /// Waves a full pass takes (more than one when the image does not fit one wave).
@@ -257,24 +200,15 @@ impl<'a> PathTracer<'a> {
     fn render_wave(&self, mut wave: WaveParams) -> Result<()> {
         let ctx = self.wf.ctx;
         match &self.tracing {
-            Tracing::WholePaths {
-                trace_paths,
-                binding,
-            } => {
-                let target = if ctx.is_cpu() {
-                    TARGET_TRACERS_CPU
-                } else {
-                    TARGET_TRACERS_GPU
-                };
-                wave.tracers_per_pixel =
-                    tracers_per_pixel(&wave, self.wf.params.max_bounces, target);
+            Tracing::WholePaths { trace_paths, binding } => {
+                let target = if ctx.is_cpu() { TARGET_TRACERS_CPU } else { TARGET_TRACERS_GPU };
+                wave.tracers_per_pixel = tracers_per_pixel(&wave, self.wf.params.max_bounces, target);
                 self.wf.write_wave(&wave);
                 self.wf.submit_pass("trace_paths", |pass| {
                     trace_paths.dispatch(pass, binding, wave.pixel_count * wave.tracers_per_pixel);
                     // With one tracer per pixel, trace_paths adds to the film itself.
                     if wave.tracers_per_pixel > 1 {
-                        self.accumulate
-                            .dispatch(pass, &self.accumulate_binding, wave.pixel_count);
+                        self.accumulate.dispatch(pass, &self.accumulate_binding, wave.pixel_count);
                     }
                 });
             }
@@ -283,26 +217,11 @@ impl<'a> PathTracer<'a> {
                 let args = self.wf.resources.get("dispatch_args").unwrap();
                 self.wf.trace_rounds(
                     s.vertices_per_round,
-                    |pass| {
-                        s.generate_camera_rays.dispatch(
-                            pass,
-                            &s.generate_camera_rays_binding,
-                            wave.slot_count,
-                        )
-                    },
+                    |pass| s.generate_camera_rays.dispatch(pass, &s.generate_camera_rays_binding, wave.slot_count),
                     |pass, r| {
                         let parity = (r % 2) as usize;
-                        s.setup_dispatch_rays.dispatch(
-                            pass,
-                            &s.setup_dispatch_rays_bindings[parity],
-                            1,
-                        );
-                        s.extend_paths.dispatch_indirect(
-                            pass,
-                            &s.extend_paths_bindings[parity],
-                            args,
-                            0,
-                        );
+                        s.setup_dispatch_rays.dispatch(pass, &s.setup_dispatch_rays_bindings[parity], 1);
+                        s.extend_paths.dispatch_indirect(pass, &s.extend_paths_bindings[parity], args, 0);
                         if s.shadow_resumes > 0 {
                             s.shadow_rays.encode(pass, args);
                             for _ in 0..s.shadow_resumes {
@@ -311,18 +230,13 @@ impl<'a> PathTracer<'a> {
                             s.shadow_rays.encode_cut(pass);
                         }
                         if !self.sum_per_path {
-                            self.accumulate.dispatch(
-                                pass,
-                                &self.accumulate_binding,
-                                wave.pixel_count,
-                            );
+                            self.accumulate.dispatch(pass, &self.accumulate_binding, wave.pixel_count);
                         }
                     },
                 )?;
                 if self.sum_per_path {
                     self.wf.submit_pass("accumulate", |pass| {
-                        self.accumulate
-                            .dispatch(pass, &self.accumulate_binding, wave.pixel_count)
+                        self.accumulate.dispatch(pass, &self.accumulate_binding, wave.pixel_count)
                     });
                 }
             }
@@ -349,9 +263,7 @@ fn tracers_per_pixel(wave: &WaveParams, max_bounces: u32, target_tracers: u32) -
     let paths_per_tracer = (MOST_VERTICES_PER_TRACER / (max_bounces as u64 + 1)).max(1);
     let for_loop_limit = (wave.samples as u64).div_ceil(paths_per_tracer);
     let for_parallelism = target_tracers.div_ceil(wave.pixel_count.max(1)) as u64;
-    for_loop_limit
-        .max(for_parallelism)
-        .clamp(1, wave.samples.max(1) as u64) as u32
+    for_loop_limit.max(for_parallelism).clamp(1, wave.samples.max(1) as u64) as u32
 }
 
 impl Integrator for PathTracer<'_> {
@@ -371,11 +283,7 @@ impl Integrator for PathTracer<'_> {
         self.wf.reset_film(&[]);
     }
 
-    fn set_gate(
-        &mut self,
-        scene: &crate::scene::PreparedScene,
-        settings: &RenderSettings,
-    ) -> Result<bool> {
+    fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &RenderSettings) -> Result<bool> {
         let moved = self.wf.set_gate(scene, settings)?;
         if moved {
             self.reset_film();
@@ -389,22 +297,13 @@ impl Integrator for PathTracer<'_> {
 /// bindings hold).
 pub(super) fn plan_waves(settings: &RenderSettings, fit: u64, target: u64) -> Result<(u32, u64)> {
     let (width, height) = (settings.width, settings.height);
-    ensure!(
-        width > 0 && height > 0,
-        "the resolution must be at least 1x1"
-    );
+    ensure!(width > 0 && height > 0, "the resolution must be at least 1x1");
     let pixels = width as u64 * height as u64;
-    ensure!(
-        pixels <= u32::MAX as u64,
-        "{width}x{height} has more than 2^32 pixels"
-    );
+    ensure!(pixels <= u32::MAX as u64, "{width}x{height} has more than 2^32 pixels");
     let fit = fit.clamp(1, MAX_SLOTS_PER_DISPATCH);
     let samples_per_pass = match settings.samples_per_pass {
         Some(k) => {
-            ensure!(
-                k <= MAX_SAMPLES_PER_PASS,
-                "at most {MAX_SAMPLES_PER_PASS} samples per pass (got {k})"
-            );
+            ensure!(k <= MAX_SAMPLES_PER_PASS, "at most {MAX_SAMPLES_PER_PASS} samples per pass (got {k})");
             ensure!(
                 k <= 1 || pixels * k as u64 <= fit,
                 "{k} samples per pass of {width}x{height} need {} path slots, more than the {fit} one wave \
@@ -416,20 +315,12 @@ pub(super) fn plan_waves(settings: &RenderSettings, fit: u64, target: u64) -> Re
         None => (target.min(fit) / pixels).clamp(1, MAX_SAMPLES_PER_PASS as u64) as u32,
     };
     // One wave per pass when it fits; otherwise a pass of one sample runs as several waves.
-    Ok((
-        samples_per_pass,
-        (pixels * samples_per_pass as u64).min(fit),
-    ))
+    Ok((samples_per_pass, (pixels * samples_per_pass as u64).min(fit)))
 }
 
 /// The waves of a pass of `samples` samples per pixel starting at sample `next_sample`: each
 /// holds `samples` samples of a block of pixels (all pixels when they fit `slots_per_wave`).
-pub(super) fn waves_of_pass(
-    params: &RenderParams,
-    slots_per_wave: u64,
-    next_sample: u64,
-    samples: u32,
-) -> Result<Vec<WaveParams>> {
+pub(super) fn waves_of_pass(params: &RenderParams, slots_per_wave: u64, next_sample: u64, samples: u32) -> Result<Vec<WaveParams>> {
     let sample_base = u32::try_from(next_sample + samples as u64 - 1)
         .map(|_| next_sample as u32)
         .map_err(|_| anyhow::anyhow!("more than 2^32 samples per pixel"))?;
@@ -473,42 +364,21 @@ mod tests {
     use super::*;
 
     fn wave(pixel_count: u32, samples: u32) -> WaveParams {
-        WaveParams {
-            samples,
-            pixel_count,
-            slot_count: pixel_count * samples,
-            ..Default::default()
-        }
+        WaveParams { samples, pixel_count, slot_count: pixel_count * samples, ..Default::default() }
     }
 
     /// Every sample has a tracer, no tracer is given more vertices than lavapipe's loop budget
     /// allows (where one path fits it), and small waves still get about TARGET_TRACERS.
     #[test]
     fn tracers_cover_the_wave_within_the_loop_budget() {
-        for (pixels, samples) in [
-            (1, 1),
-            (16, 4096),
-            (4096, 64),
-            (65536, 4),
-            (1 << 20, 1),
-            (7, 3000),
-        ] {
+        for (pixels, samples) in [(1, 1), (16, 4096), (4096, 64), (65536, 4), (1 << 20, 1), (7, 3000)] {
             for max_bounces in [0, 5, 64, 1000, 70000] {
                 let w = wave(pixels, samples);
                 let k = tracers_per_pixel(&w, max_bounces, TARGET_TRACERS_GPU);
-                assert!(
-                    k >= 1 && k <= samples,
-                    "{pixels} px, {samples} spp, {max_bounces}: {k}"
-                );
+                assert!(k >= 1 && k <= samples, "{pixels} px, {samples} spp, {max_bounces}: {k}");
                 let vertices = samples.div_ceil(k) as u64 * (max_bounces as u64 + 1);
-                assert!(
-                    vertices <= MOST_VERTICES_PER_TRACER || k == samples,
-                    "{pixels} px, {samples} spp, {max_bounces}: {k}"
-                );
-                assert!(
-                    pixels * k >= TARGET_TRACERS_GPU.min(pixels * samples),
-                    "{pixels} px, {samples} spp: {k}"
-                );
+                assert!(vertices <= MOST_VERTICES_PER_TRACER || k == samples, "{pixels} px, {samples} spp, {max_bounces}: {k}");
+                assert!(pixels * k >= TARGET_TRACERS_GPU.min(pixels * samples), "{pixels} px, {samples} spp: {k}");
             }
         }
     }

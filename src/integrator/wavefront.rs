@@ -34,31 +34,11 @@ impl ShadowRayStages {
             c
         };
         let kernels = [
-            Kernel::new(
-                ctx,
-                "setup_dispatch",
-                Some("shadow_rays"),
-                &with("QUEUE", 1.0),
-            ),
+            Kernel::new(ctx, "setup_dispatch", Some("shadow_rays"), &with("QUEUE", 1.0)),
             Kernel::new(ctx, "trace_shadow_rays", None, constants),
-            Kernel::new(
-                ctx,
-                "setup_dispatch",
-                Some("shadow_resume"),
-                &with("QUEUE", 3.0),
-            ),
-            Kernel::new(
-                ctx,
-                "trace_shadow_rays",
-                Some("resume"),
-                &with("RESUME", 1.0),
-            ),
-            Kernel::new(
-                ctx,
-                "setup_dispatch",
-                Some("shadow_cut"),
-                &with("QUEUE", 4.0),
-            ),
+            Kernel::new(ctx, "setup_dispatch", Some("shadow_resume"), &with("QUEUE", 3.0)),
+            Kernel::new(ctx, "trace_shadow_rays", Some("resume"), &with("RESUME", 1.0)),
+            Kernel::new(ctx, "setup_dispatch", Some("shadow_cut"), &with("QUEUE", 4.0)),
         ];
         let groups = kernels.each_ref().map(|k| k.bind(ctx, resources));
         Self { kernels, groups }
@@ -136,22 +116,11 @@ impl<'a> Wavefront<'a> {
     /// rewrites the params uniform (gate, target-length sampling), the gate table and the
     /// target-length CDF. Returns false, changing nothing, when the integrator must be rebuilt.
     /// The film is not cleared (see `Integrator::set_gate`).
-    pub fn set_gate(
-        &mut self,
-        scene: &crate::scene::PreparedScene,
-        settings: &super::RenderSettings,
-    ) -> Result<bool> {
+    pub fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &super::RenderSettings) -> Result<bool> {
         let gate = &settings.gate;
-        let kind = self
-            .constants
-            .iter()
-            .find(|(n, _)| *n == "GATE_KIND")
-            .map(|c| c.1);
+        let kind = self.constants.iter().find(|(n, _)| *n == "GATE_KIND").map(|c| c.1);
         let new = gate.to_gpu();
-        if kind != Some(gate.kind() as u32 as f64)
-            || new.bins != self.params.gate.bins
-            || new.table_len != self.params.gate.table_len
-        {
+        if kind != Some(gate.kind() as u32 as f64) || new.bins != self.params.gate.bins || new.table_len != self.params.gate.table_len {
             return Ok(false);
         }
         let sampler = super::target_sampler(scene, settings);
@@ -164,29 +133,14 @@ impl<'a> Wavefront<'a> {
         queue.write_buffer(cdf_buffer, 0, bytemuck::cast_slice(&cdf));
         let table = gate.table();
         if !table.is_empty() {
-            queue.write_buffer(
-                self.resources.get("gate_table").unwrap(),
-                0,
-                bytemuck::cast_slice(&table),
-            );
+            queue.write_buffer(self.resources.get("gate_table").unwrap(), 0, bytemuck::cast_slice(&table));
         }
         self.params.gate = new;
-        let (seed, film_first_sample) = (
-            self.params.target_length.seed,
-            self.params.target_length.film_first_sample,
-        );
+        let (seed, film_first_sample) = (self.params.target_length.seed, self.params.target_length.film_first_sample);
         // Extra visits were shaped for the old gate: each bin gets one a cycle again.
-        self.params.target_length = TargetParams {
-            seed,
-            film_first_sample,
-            ..sampler.map(|t| t.params).unwrap_or_default()
-        };
+        self.params.target_length = TargetParams { seed, film_first_sample, ..sampler.map(|t| t.params).unwrap_or_default() };
         self.target_visits.clear();
-        queue.write_buffer(
-            self.resources.get("params").unwrap(),
-            0,
-            bytemuck::bytes_of(&self.params),
-        );
+        queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         Ok(true)
     }
 
@@ -211,11 +165,7 @@ impl<'a> Wavefront<'a> {
 
     /// Uploads the wave's parameters (before its kernels are encoded).
     pub fn write_wave(&self, wave: &WaveParams) {
-        self.ctx.queue.write_buffer(
-            self.resources.get("wave").unwrap(),
-            0,
-            bytemuck::bytes_of(wave),
-        );
+        self.ctx.queue.write_buffer(self.resources.get("wave").unwrap(), 0, bytemuck::bytes_of(wave));
     }
 
     /// Encodes `start` and then `round(pass, r)` for rounds r = 0, 1, ... in submissions of
@@ -232,31 +182,19 @@ impl<'a> Wavefront<'a> {
         round: impl Fn(&mut wgpu::ComputePass, u32),
     ) -> Result<()> {
         let ctx = self.ctx;
-        let rounds =
-            (self.params.max_bounces as u64 + 1).div_ceil(vertices_per_round.max(1) as u64);
+        let rounds = (self.params.max_bounces as u64 + 1).div_ceil(vertices_per_round.max(1) as u64);
         // Each stop resumes at least TRAVERSAL_BUDGET nodes further on: a bound that only a bug
         // can reach.
         let most = rounds * (self.params.node_count as u64 / TRAVERSAL_BUDGET as u64 + 2);
         let mut first = 0u64;
         loop {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("wave"),
-                });
+            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
             {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("wave"),
-                    timestamp_writes: None,
-                });
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
                 if first == 0 {
                     start(&mut pass);
                 }
-                let end = if first == 0 {
-                    rounds.min(ROUNDS_PER_SUBMISSION as u64)
-                } else {
-                    first + ROUNDS_PER_SUBMISSION as u64
-                };
+                let end = if first == 0 { rounds.min(ROUNDS_PER_SUBMISSION as u64) } else { first + ROUNDS_PER_SUBMISSION as u64 };
                 for r in first..end {
                     round(&mut pass, (r % 2) as u32);
                 }
@@ -266,25 +204,16 @@ impl<'a> Wavefront<'a> {
             if self.counters()?.next_rays == 0 {
                 break;
             }
-            ensure!(
-                first < most,
-                "paths still queued after {first} rounds: a traversal does not end"
-            );
+            ensure!(first < most, "paths still queued after {first} rounds: a traversal does not end");
         }
         Ok(())
     }
 
     /// Records `encode` into one compute pass labelled `label` and submits it.
     pub fn submit_pass(&self, label: &str, encode: impl FnOnce(&mut wgpu::ComputePass)) {
-        let mut encoder = self
-            .ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: None,
-            });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
             encode(&mut pass);
         }
         self.ctx.queue.submit([encoder.finish()]);
@@ -298,17 +227,9 @@ impl<'a> Wavefront<'a> {
     /// The per-pixel film (compensated sums divided by the samples per pixel).
     pub fn film(&self) -> Result<Film> {
         let mut film = Film::zeroed(self.params.width, self.params.height, self.params.gate.bins);
-        let sums: Vec<[f32; 2]> = self.resources.read_chunked(
-            self.ctx,
-            "film",
-            self.film_layout,
-            film.data.len() as u64,
-        )?;
+        let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, film.data.len() as u64)?;
         let n = self.samples_in_film.max(1) as f64;
-        film.data = sums
-            .iter()
-            .map(|s| ((s[0] as f64 + s[1] as f64) / n) as f32)
-            .collect();
+        film.data = sums.iter().map(|s| ((s[0] as f64 + s[1] as f64) / n) as f32).collect();
         film.spp = self.samples_in_film;
         Ok(film)
     }
@@ -330,11 +251,7 @@ impl<'a> Wavefront<'a> {
         let mut factors = vec![0.0f32; n];
         let bins = film.bins as usize;
         for pixel in 0..(film.width * film.height) as usize {
-            let row = if t.extra > 0 {
-                &self.target_visits[pixel * (n + 1)..(pixel + 1) * (n + 1)]
-            } else {
-                &[][..]
-            };
+            let row = if t.extra > 0 { &self.target_visits[pixel * (n + 1)..(pixel + 1) * (n + 1)] } else { &[][..] };
             // None when there is nothing to change (no extra visits and fewer samples than bins).
             if stratum_factors(t, row, pixel as u32, self.samples_in_film, &mut factors).is_none() {
                 continue;
@@ -349,12 +266,7 @@ impl<'a> Wavefront<'a> {
     /// Clears the film and the further buffers `also` (e.g. a splat film), and draws the next
     /// film's target-length seed.
     pub fn reset_film(&mut self, also: &[&str]) {
-        let mut encoder = self
-            .ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("reset_film"),
-            });
+        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
         self.resources.clear_chunked(&mut encoder, "film");
         for name in also {
             encoder.clear_buffer(self.resources.get(name).unwrap(), 0, None);
@@ -362,11 +274,7 @@ impl<'a> Wavefront<'a> {
         self.params.target_length.seed = next_target_seed(self.params.target_length.seed);
         // The film's cycles of target-length visits start at its first sample.
         self.params.target_length.film_first_sample = self.next_sample as u32;
-        self.ctx.queue.write_buffer(
-            self.resources.get("params").unwrap(),
-            0,
-            bytemuck::bytes_of(&self.params),
-        );
+        self.ctx.queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;
     }

@@ -18,51 +18,31 @@ pub fn sample_animations(
     buffers: &[gltf::buffer::Data],
     time: f64,
 ) -> Result<HashMap<usize, Mat4>> {
-    ensure!(
-        time.is_finite(),
-        "{name}: animation time {time} s is not finite"
-    );
+    ensure!(time.is_finite(), "{name}: animation time {time} s is not finite");
     let mut trs: HashMap<usize, (Vec3, Quat, Vec3)> = HashMap::new();
     let mut animated = false;
     for animation in doc.animations() {
-        let anim_name = animation
-            .name()
-            .map(|n| format!("animation `{n}`"))
-            .unwrap_or(format!("animation {}", animation.index()));
+        let anim_name = animation.name().map(|n| format!("animation `{n}`")).unwrap_or(format!("animation {}", animation.index()));
         for channel in animation.channels() {
             animated = true;
             let what = format!("{name}: {anim_name}, channel {}", channel.index());
             let node = channel.target().node();
             let reader = channel.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let times: Vec<f32> = reader
-                .read_inputs()
-                .ok_or_else(|| anyhow!("{what}: cannot read the key times"))?
-                .collect();
+            let times: Vec<f32> = reader.read_inputs().ok_or_else(|| anyhow!("{what}: cannot read the key times"))?.collect();
             ensure!(!times.is_empty(), "{what}: no keys");
             ensure!(
                 times.iter().all(|t| t.is_finite()) && times.windows(2).all(|w| w[1] > w[0]),
                 "{what}: key times must be finite and strictly increasing"
             );
-            let outputs: Vec<Vec4> = match reader
-                .read_outputs()
-                .ok_or_else(|| anyhow!("{what}: cannot read the key values"))?
-            {
-                ReadOutputs::Translations(it) | ReadOutputs::Scales(it) => {
-                    it.map(|v| Vec3::from(v).extend(0.0)).collect()
-                }
+            let outputs: Vec<Vec4> = match reader.read_outputs().ok_or_else(|| anyhow!("{what}: cannot read the key values"))? {
+                ReadOutputs::Translations(it) | ReadOutputs::Scales(it) => it.map(|v| Vec3::from(v).extend(0.0)).collect(),
                 ReadOutputs::Rotations(r) => r.into_f32().map(Vec4::from).collect(),
                 ReadOutputs::MorphTargetWeights(_) => {
-                    bail!(
-                        "{what}: morph-target animations are not supported (only translation, rotation, scale)"
-                    )
+                    bail!("{what}: morph-target animations are not supported (only translation, rotation, scale)")
                 }
             };
             let interpolation = channel.sampler().interpolation();
-            let per_key = if interpolation == Interpolation::CubicSpline {
-                3
-            } else {
-                1
-            };
+            let per_key = if interpolation == Interpolation::CubicSpline { 3 } else { 1 };
             ensure!(
                 outputs.len() == per_key * times.len(),
                 "{what}: {} values for {} keys (expected {})",
@@ -70,10 +50,7 @@ pub fn sample_animations(
                 times.len(),
                 per_key * times.len()
             );
-            ensure!(
-                outputs.iter().all(|v| v.is_finite()),
-                "{what}: non-finite key values"
-            );
+            ensure!(outputs.iter().all(|v| v.is_finite()), "{what}: non-finite key values");
             let rotation = channel.target().property() == Property::Rotation;
             let value = sample(&times, &outputs, interpolation, time as f32, rotation);
             let entry = trs.entry(node.index()).or_insert_with(|| {
@@ -83,10 +60,7 @@ pub fn sample_animations(
             match channel.target().property() {
                 Property::Translation => entry.0 = value.truncate(),
                 Property::Rotation => {
-                    ensure!(
-                        value.length() > 0.0,
-                        "{what}: zero rotation quaternion at {time} s"
-                    );
+                    ensure!(value.length() > 0.0, "{what}: zero rotation quaternion at {time} s");
                     entry.1 = Quat::from_vec4(value).normalize();
                 }
                 Property::Scale => entry.2 = value.truncate(),
@@ -94,33 +68,15 @@ pub fn sample_animations(
             }
         }
     }
-    ensure!(
-        animated,
-        "{name}: --anim-time given, but the file has no animation"
-    );
-    Ok(trs
-        .into_iter()
-        .map(|(node, (t, r, s))| (node, Mat4::from_scale_rotation_translation(s, r, t)))
-        .collect())
+    ensure!(animated, "{name}: --anim-time given, but the file has no animation");
+    Ok(trs.into_iter().map(|(node, (t, r, s))| (node, Mat4::from_scale_rotation_translation(s, r, t))).collect())
 }
 
 /// The value of one channel at time t: keys `times`, values `values` (three per key for
 /// CUBICSPLINE: in-tangent, value, out-tangent). Rotations are unit quaternions (x, y, z, w).
-pub fn sample(
-    times: &[f32],
-    values: &[Vec4],
-    interpolation: Interpolation,
-    t: f32,
-    rotation: bool,
-) -> Vec4 {
+pub fn sample(times: &[f32], values: &[Vec4], interpolation: Interpolation, t: f32, rotation: bool) -> Vec4 {
     let n = times.len();
-    let key = |i: usize| {
-        if interpolation == Interpolation::CubicSpline {
-            values[3 * i + 1]
-        } else {
-            values[i]
-        }
-    };
+    let key = |i: usize| if interpolation == Interpolation::CubicSpline { values[3 * i + 1] } else { values[i] };
     if t <= times[0] {
         return key(0);
     }
@@ -134,10 +90,7 @@ pub fn sample(
     match interpolation {
         Interpolation::Step => key(i),
         Interpolation::Linear if rotation => {
-            let (a, b) = (
-                Quat::from_vec4(key(i)).normalize(),
-                Quat::from_vec4(key(i + 1)).normalize(),
-            );
+            let (a, b) = (Quat::from_vec4(key(i)).normalize(), Quat::from_vec4(key(i + 1)).normalize());
             Vec4::from(a.slerp(b, s))
         }
         Interpolation::Linear => key(i).lerp(key(i + 1), s),
@@ -161,56 +114,30 @@ mod tests {
     #[test]
     fn linear_keys_interpolate_and_clamp() {
         let times = [0.0, 1.0, 3.0];
-        let values = [
-            Vec4::ZERO,
-            Vec4::new(2.0, 0.0, 0.0, 0.0),
-            Vec4::new(2.0, 4.0, 0.0, 0.0),
-        ];
+        let values = [Vec4::ZERO, Vec4::new(2.0, 0.0, 0.0, 0.0), Vec4::new(2.0, 4.0, 0.0, 0.0)];
         let at = |t| sample(&times, &values, Interpolation::Linear, t, false);
         assert_eq!(at(-1.0), values[0]);
         assert_eq!(at(0.5), Vec4::new(1.0, 0.0, 0.0, 0.0));
         assert_eq!(at(2.0), Vec4::new(2.0, 2.0, 0.0, 0.0));
         assert_eq!(at(5.0), values[2]);
-        assert_eq!(
-            sample(&times, &values, Interpolation::Step, 2.9, false),
-            values[1]
-        );
+        assert_eq!(sample(&times, &values, Interpolation::Step, 2.9, false), values[1]);
     }
 
     #[test]
     fn rotations_slerp_at_constant_speed() {
         let a = Quat::IDENTITY;
         let b = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
-        let q = Quat::from_vec4(sample(
-            &[0.0, 1.0],
-            &[Vec4::from(a), Vec4::from(b)],
-            Interpolation::Linear,
-            0.5,
-            true,
-        ));
+        let q = Quat::from_vec4(sample(&[0.0, 1.0], &[Vec4::from(a), Vec4::from(b)], Interpolation::Linear, 0.5, true));
         assert!(q.angle_between(Quat::from_rotation_y(std::f32::consts::FRAC_PI_4)) < 1e-5);
     }
 
     #[test]
     fn cubic_splines_pass_through_their_keys_with_their_tangents() {
         // x(t) = t^3 on [0, 2]: keys at 0, 1, 2 with tangents 3 t^2.
-        let key = |t: f32| {
-            [
-                Vec4::splat(3.0 * t * t),
-                Vec4::splat(t * t * t),
-                Vec4::splat(3.0 * t * t),
-            ]
-        };
+        let key = |t: f32| [Vec4::splat(3.0 * t * t), Vec4::splat(t * t * t), Vec4::splat(3.0 * t * t)];
         let values: Vec<Vec4> = [0.0, 1.0, 2.0].into_iter().flat_map(key).collect();
         for t in [0.0f32, 0.25, 0.5, 1.0, 1.7, 2.0] {
-            let x = sample(
-                &[0.0, 1.0, 2.0],
-                &values,
-                Interpolation::CubicSpline,
-                t,
-                false,
-            )
-            .x;
+            let x = sample(&[0.0, 1.0, 2.0], &values, Interpolation::CubicSpline, t, false).x;
             assert!((x - t * t * t).abs() < 1e-5, "t {t}: {x}");
         }
     }

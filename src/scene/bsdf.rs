@@ -35,11 +35,7 @@ fn ggx_lambda(w: Vec3, a2: f32) -> f32 {
 pub fn ggx_sample_visible_normal(wo: Vec3, alpha: f32, u: Vec2) -> Vec3 {
     let vh = Vec3::new(alpha * wo.x, alpha * wo.y, wo.z).normalize();
     let len2 = vh.x * vh.x + vh.y * vh.y;
-    let t1 = if len2 > 0.0 {
-        Vec3::new(-vh.y, vh.x, 0.0) / len2.sqrt()
-    } else {
-        Vec3::X
-    };
+    let t1 = if len2 > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / len2.sqrt() } else { Vec3::X };
     let t2 = vh.cross(t1);
     let r = u.x.sqrt();
     let phi = 2.0 * PI * u.y;
@@ -116,16 +112,8 @@ impl Bsdf {
         };
         let pdf = self.pdf(wo, wi);
         if wo.z <= 0.0 || wi.z <= 0.0 || pdf.is_nan() || pdf <= 0.0 {
-            return BsdfSample {
-                wi,
-                pdf: 0.0,
-                f: Vec3::ZERO,
-            };
+            return BsdfSample { wi, pdf: 0.0, f: Vec3::ZERO };
         }
-        BsdfSample {
-            wi,
-            pdf,
-            f: self.eval(wo, wi),
-        }
+        BsdfSample { wi, pdf, f: self.eval(wo, wi) }
     }
 }

@@ -40,10 +40,7 @@ impl ThinLens {
         if !(focus_distance.is_finite() && focus_distance > 0.0) {
             anyhow::bail!("focus distance {focus_distance} m is not a positive length");
         }
-        Ok(Self {
-            aperture_radius,
-            focus_distance,
-        })
+        Ok(Self { aperture_radius, focus_distance })
     }
 }
 
@@ -93,21 +90,14 @@ pub fn camera_direction(camera: &Camera, film: Vec2, width: u32, height: u32) ->
 /// pinhole ray, or for a thin lens the ray from the lens point that `u_lens` in [0, 1)^2 picks
 /// uniformly on the disk to where the pinhole ray meets the plane in focus (twin of
 /// `camera_path`).
-pub fn camera_ray(
-    camera: &Camera,
-    film: Vec2,
-    u_lens: Vec2,
-    width: u32,
-    height: u32,
-) -> (Vec3, Vec3) {
+pub fn camera_ray(camera: &Camera, film: Vec2, u_lens: Vec2, width: u32, height: u32) -> (Vec3, Vec3) {
     let direction = camera_direction(camera, film, width, height);
     if camera.lens_radius <= 0.0 {
         return (camera.position, direction);
     }
     let disk = camera.lens_radius * sample_disk(u_lens);
     let origin = camera.position + disk.x * camera.right + disk.y * camera.up;
-    let in_focus =
-        camera.position + direction * (camera.focus_distance / direction.dot(camera.forward));
+    let in_focus = camera.position + direction * (camera.focus_distance / direction.dot(camera.forward));
     (origin, (in_focus - origin).normalize())
 }
 

@@ -8,10 +8,7 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use super::camera::ThinLens;
-use super::{
-    CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone,
-    TextureData,
-};
+use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, TextureData};
 
 /// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
@@ -33,10 +30,8 @@ pub fn load_gltf_for_capture(path: &Path) -> Result<Scene> {
 
 fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
     let name = path.display().to_string();
-    let bytes =
-        std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
-    let gltf = gltf::Gltf::from_slice(&bytes)
-        .map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
+    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = gltf::import_buffers(&gltf.document, Some(base), gltf.blob.clone())
         .map_err(|e| anyhow!("{name}: cannot load a buffer: {e}"))?;
@@ -46,14 +41,7 @@ fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
         Some(t) => super::animation::sample_animations(&name, &gltf.document, &buffers, t)?,
         None => Default::default(),
     };
-    Loader {
-        name: &name,
-        buffers: &buffers,
-        images: &images,
-        pose,
-        capture,
-    }
-    .load(&gltf.document)
+    Loader { name: &name, buffers: &buffers, images: &images, pose, capture }.load(&gltf.document)
 }
 
 struct Loader<'a> {
@@ -112,13 +100,10 @@ impl Loader<'_> {
         let camera = match c.camera {
             Some(camera) => camera,
             None if self.capture => {
-                let (lo, hi) = c
-                    .triangles
-                    .iter()
-                    .flat_map(|t| t.positions)
-                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                        (lo.min(p), hi.max(p))
-                    });
+                let (lo, hi) = c.triangles.iter().flat_map(|t| t.positions).fold(
+                    (Vec3::INFINITY, Vec3::NEG_INFINITY),
+                    |(lo, hi), p| (lo.min(p), hi.max(p)),
+                );
                 CameraDesc {
                     position: 0.5 * (lo + hi),
                     right: Vec3::X,
@@ -133,15 +118,8 @@ impl Loader<'_> {
                  capture, --nlos, needs none)"
             ),
         };
-        let emissive = c
-            .triangles
-            .iter()
-            .any(|t| materials[t.material as usize].is_emissive());
-        if !emissive
-            && c.point_lights.is_empty()
-            && c.directional_lights.is_empty()
-            && !self.capture
-        {
+        let emissive = c.triangles.iter().any(|t| materials[t.material as usize].is_emissive());
+        if !emissive && c.point_lights.is_empty() && c.directional_lights.is_empty() && !self.capture {
             bail!(
                 "{name}: no light: add an emissive material (emissiveFactor, KHR_materials_emissive_strength) \
                  or a KHR_lights_punctual light (an NLOS capture, --nlos, needs none)"
@@ -151,17 +129,10 @@ impl Loader<'_> {
             bail!("{name}: the scene has no triangles");
         }
         if c.triangles.len() > crate::gpu::layout::MAX_TRIANGLES as usize {
-            bail!(
-                "{name}: {} triangles exceed the supported {}",
-                c.triangles.len(),
-                crate::gpu::layout::MAX_TRIANGLES
-            );
+            bail!("{name}: {} triangles exceed the supported {}", c.triangles.len(), crate::gpu::layout::MAX_TRIANGLES);
         }
         if c.dropped_degenerate > 0 {
-            eprintln!(
-                "warning: {name}: dropped {} zero-area triangles",
-                c.dropped_degenerate
-            );
+            eprintln!("warning: {name}: dropped {} zero-area triangles", c.dropped_degenerate);
         }
         Ok(Scene {
             source: name.to_owned(),
@@ -185,10 +156,7 @@ impl Loader<'_> {
         c: &mut Collected,
     ) -> Result<()> {
         let name = self.name;
-        let node_name = node
-            .name()
-            .map(|n| format!("node `{n}`"))
-            .unwrap_or(format!("node {}", node.index()));
+        let node_name = node.name().map(|n| format!("node `{n}`")).unwrap_or(format!("node {}", node.index()));
         let local = match self.pose.get(&node.index()) {
             Some(&m) => m,
             None => Mat4::from_cols_array_2d(&node.transform().matrix()),
@@ -225,18 +193,10 @@ impl Loader<'_> {
         Ok(())
     }
 
-    fn camera(
-        &self,
-        camera: &gltf::Camera,
-        node: &gltf::Node,
-        world: Mat4,
-        node_name: &str,
-    ) -> Result<CameraDesc> {
+    fn camera(&self, camera: &gltf::Camera, node: &gltf::Node, world: Mat4, node_name: &str) -> Result<CameraDesc> {
         let name = self.name;
         let gltf::camera::Projection::Perspective(p) = camera.projection() else {
-            bail!(
-                "{name}: {node_name}: orthographic cameras are not supported (use a perspective camera)"
-            );
+            bail!("{name}: {node_name}: orthographic cameras are not supported (use a perspective camera)");
         };
         let yfov = p.yfov();
         if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
@@ -253,13 +213,9 @@ impl Loader<'_> {
             lens: thin_lens(node.extras().as_deref().or(camera.extras().as_deref()))
                 .map_err(|e| anyhow!("{name}: {node_name}: camera extras: {e}"))?,
         };
-        let finite = [camera.position, camera.right, camera.up, camera.forward]
-            .iter()
-            .all(|v| v.is_finite());
+        let finite = [camera.position, camera.right, camera.up, camera.forward].iter().all(|v| v.is_finite());
         if !finite || scale.min_element().abs() < 1e-12 {
-            bail!(
-                "{name}: {node_name}: the camera's transform is degenerate (zero scale or non-finite)"
-            );
+            bail!("{name}: {node_name}: the camera's transform is degenerate (zero scale or non-finite)");
         }
         Ok(camera)
     }
@@ -273,24 +229,15 @@ impl Loader<'_> {
     ) -> Result<()> {
         let name = self.name;
         match light.kind() {
-            kind @ (gltf::khr_lights_punctual::Kind::Point
-            | gltf::khr_lights_punctual::Kind::Spot { .. }) => {
+            kind @ (gltf::khr_lights_punctual::Kind::Point | gltf::khr_lights_punctual::Kind::Spot { .. }) => {
                 let intensity = Vec3::from(light.color()) * light.intensity();
                 if !intensity.is_finite() || intensity.min_element() < 0.0 {
-                    bail!(
-                        "{name}: {node_name}: light intensity {intensity} is not finite and non-negative"
-                    );
+                    bail!("{name}: {node_name}: light intensity {intensity} is not finite and non-negative");
                 }
                 let spot = match kind {
-                    gltf::khr_lights_punctual::Kind::Spot {
-                        inner_cone_angle,
-                        outer_cone_angle,
-                    } => {
+                    gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
                         let (inner, outer) = (inner_cone_angle, outer_cone_angle);
-                        if !(inner.is_finite()
-                            && outer.is_finite()
-                            && 0.0 <= inner
-                            && inner < outer
+                        if !(inner.is_finite() && outer.is_finite() && 0.0 <= inner && inner < outer
                             && outer <= std::f32::consts::FRAC_PI_2 + 1e-6)
                         {
                             bail!(
@@ -298,33 +245,20 @@ impl Loader<'_> {
                                  needs 0 <= inner < outer <= pi/2"
                             );
                         }
-                        Some(SpotCone {
-                            direction: light_direction(world, name, node_name)?,
-                            inner,
-                            outer,
-                        })
+                        Some(SpotCone { direction: light_direction(world, name, node_name)?, inner, outer })
                     }
                     _ => None,
                 };
-                c.point_lights.push(PointLight {
-                    position: world.transform_point3(Vec3::ZERO),
-                    intensity,
-                    spot,
-                });
+                c.point_lights.push(PointLight { position: world.transform_point3(Vec3::ZERO), intensity, spot });
                 Ok(())
             }
             gltf::khr_lights_punctual::Kind::Directional => {
                 let irradiance = Vec3::from(light.color()) * light.intensity();
                 if !irradiance.is_finite() || irradiance.min_element() < 0.0 {
-                    bail!(
-                        "{name}: {node_name}: directional light irradiance {irradiance} is not finite and non-negative"
-                    );
+                    bail!("{name}: {node_name}: directional light irradiance {irradiance} is not finite and non-negative");
                 }
                 let direction = light_direction(world, name, node_name)?;
-                c.directional_lights.push(DirectionalLight {
-                    direction,
-                    irradiance,
-                });
+                c.directional_lights.push(DirectionalLight { direction, irradiance });
                 Ok(())
             }
         }
@@ -341,17 +275,11 @@ impl Loader<'_> {
     ) -> Result<()> {
         let name = self.name;
         let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
-        let mesh_name = mesh
-            .name()
-            .map(|n| format!("mesh `{n}`"))
-            .unwrap_or(format!("mesh {}", mesh.index()));
+        let mesh_name = mesh.name().map(|n| format!("mesh `{n}`")).unwrap_or(format!("mesh {}", mesh.index()));
         for (pi, prim) in mesh.primitives().enumerate() {
             let what = format!("{node_name}, {mesh_name}, primitive {pi}");
             if prim.mode() != gltf::mesh::Mode::Triangles {
-                bail!(
-                    "{name}: {what}: primitive mode {:?} is not supported (triangles only)",
-                    prim.mode()
-                );
+                bail!("{name}: {what}: primitive mode {:?} is not supported (triangles only)", prim.mode());
             }
             let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
             let positions: Vec<Vec3> = reader
@@ -362,31 +290,21 @@ impl Loader<'_> {
             if let Some(bad) = positions.iter().position(|p| !p.is_finite()) {
                 bail!("{name}: {what}: vertex {bad} is not finite");
             }
-            let normals: Option<Vec<Vec3>> = reader.read_normals().map(|it| {
-                it.map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
-                    .collect()
-            });
-            let material = prim
-                .material()
-                .index()
-                .map_or(default_material, |i| i as u32);
-            let uv_set = materials[material as usize].base_color_texture.and(
-                prim.material()
-                    .pbr_metallic_roughness()
-                    .base_color_texture()
-                    .map(|t| t.tex_coord()),
-            );
-            let uvs: Option<Vec<Vec2>> = uv_set
-                .and_then(|set| reader.read_tex_coords(set))
-                .map(|it| it.into_f32().map(Vec2::from).collect());
+            let normals: Option<Vec<Vec3>> = reader
+                .read_normals()
+                .map(|it| it.map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero()).collect());
+            let material = prim.material().index().map_or(default_material, |i| i as u32);
+            let uv_set = materials[material as usize]
+                .base_color_texture
+                .and(prim.material().pbr_metallic_roughness().base_color_texture().map(|t| t.tex_coord()));
+            let uvs: Option<Vec<Vec2>> =
+                uv_set.and_then(|set| reader.read_tex_coords(set)).map(|it| it.into_f32().map(Vec2::from).collect());
             // A named node's TEXCOORD_0, whatever the material: an NLOS capture lays its grid on the
             // relay wall's (the base-colour set again when that is set 0).
             let texcoord0: Option<Vec<Vec2>> = match (&c.texcoords, uv_set) {
                 (None, _) => None,
                 (Some(_), Some(0)) => uvs.clone(),
-                (Some(_), _) => reader
-                    .read_tex_coords(0)
-                    .map(|it| it.into_f32().map(Vec2::from).collect()),
+                (Some(_), _) => reader.read_tex_coords(0).map(|it| it.into_f32().map(Vec2::from).collect()),
             }
             .filter(|t| t.len() == positions.len());
             if texcoord0.is_none() {
@@ -397,16 +315,10 @@ impl Loader<'_> {
                 None => (0..positions.len() as u32).collect(),
             };
             if indices.len() % 3 != 0 {
-                bail!(
-                    "{name}: {what}: {} indices is not a multiple of 3",
-                    indices.len()
-                );
+                bail!("{name}: {what}: {} indices is not a multiple of 3", indices.len());
             }
             if let Some(&i) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-                bail!(
-                    "{name}: {what}: index {i} is out of range ({} vertices)",
-                    positions.len()
-                );
+                bail!("{name}: {what}: index {i} is out of range ({} vertices)", positions.len());
             }
             if normals.as_ref().is_some_and(|n| n.len() != positions.len())
                 || uvs.as_ref().is_some_and(|u| u.len() != positions.len())
@@ -418,16 +330,12 @@ impl Loader<'_> {
                 let t = SceneTriangle {
                     positions: [positions[a], positions[b], positions[cc]],
                     normals: normals.as_ref().map(|n| [n[a], n[b], n[cc]]),
-                    uvs: uvs
-                        .as_ref()
-                        .map_or([Vec2::ZERO; 3], |u| [u[a], u[b], u[cc]]),
+                    uvs: uvs.as_ref().map_or([Vec2::ZERO; 3], |u| [u[a], u[b], u[cc]]),
                     material,
                 };
                 let area = t.area();
                 if !area.is_finite() {
-                    bail!(
-                        "{name}: {what}: a triangle's area overflows f32 (coordinates too large)"
-                    );
+                    bail!("{name}: {what}: a triangle's area overflows f32 (coordinates too large)");
                 }
                 if area <= 0.0 {
                     c.dropped_degenerate += 1;
@@ -449,10 +357,7 @@ impl Loader<'_> {
         texture_of_image: &mut std::collections::HashMap<(usize, bool, bool), u32>,
     ) -> Result<MaterialDesc> {
         let name = self.name;
-        let label = m
-            .name()
-            .map(|n| format!("material `{n}`"))
-            .unwrap_or(format!("material {:?}", m.index()));
+        let label = m.name().map(|n| format!("material `{n}`")).unwrap_or(format!("material {:?}", m.index()));
         let pbr = m.pbr_metallic_roughness();
         let [r, g, b, _] = pbr.base_color_factor();
         let base_color = Vec3::new(r, g, b);
@@ -464,16 +369,12 @@ impl Loader<'_> {
             bail!("{name}: {label}: emission {emission} is not finite and non-negative");
         }
         if m.emissive_texture().is_some() {
-            eprintln!(
-                "warning: {name}: {label}: emissiveTexture is ignored (uniform emission only)"
-            );
+            eprintln!("warning: {name}: {label}: emissiveTexture is ignored (uniform emission only)");
         }
         let metallic = pbr.metallic_factor();
         let roughness = pbr.roughness_factor();
         if !(0.0..=1.0).contains(&metallic) || !(0.0..=1.0).contains(&roughness) {
-            bail!(
-                "{name}: {label}: metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]"
-            );
+            bail!("{name}: {label}: metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]");
         }
         if metallic > 0.0 && roughness * roughness < crate::gpu::layout::MIN_ALPHA {
             eprintln!(
@@ -483,9 +384,7 @@ impl Loader<'_> {
             );
         }
         if pbr.metallic_roughness_texture().is_some() {
-            eprintln!(
-                "warning: {name}: {label}: metallicRoughnessTexture is ignored (factors only)"
-            );
+            eprintln!("warning: {name}: {label}: metallicRoughnessTexture is ignored (factors only)");
         }
         let base_color_texture = match pbr.base_color_texture() {
             None => None,
@@ -499,12 +398,8 @@ impl Loader<'_> {
                 if let Some(&t) = texture_of_image.get(&key) {
                     Some(t)
                 } else {
-                    let data = self
-                        .images
-                        .get(image)
-                        .ok_or_else(|| anyhow!("{name}: {label}: image {image} is missing"))?;
-                    let mut tex = decode_srgb_image(data)
-                        .with_context(|| format!("{name}: {label}: image {image}"))?;
+                    let data = self.images.get(image).ok_or_else(|| anyhow!("{name}: {label}: image {image} is missing"))?;
+                    let mut tex = decode_srgb_image(data).with_context(|| format!("{name}: {label}: image {image}"))?;
                     tex.clamp_u = clamp_u;
                     tex.clamp_v = clamp_v;
                     textures.push(tex);
@@ -543,19 +438,13 @@ fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
     };
     let texel_count = (data.width * data.height) as usize;
     if data.pixels.len() < texel_count * channels * bytes_per_channel {
-        bail!(
-            "pixel data is shorter than {}x{} texels",
-            data.width,
-            data.height
-        );
+        bail!("pixel data is shorter than {}x{} texels", data.width, data.height);
     }
     let channel = |i: usize| -> f32 {
         let o = i * bytes_per_channel;
         match (bytes_per_channel, float) {
             (1, _) => srgb_to_linear(data.pixels[o] as f32 / 255.0),
-            (2, _) => srgb_to_linear(
-                u16::from_le_bytes([data.pixels[o], data.pixels[o + 1]]) as f32 / 65535.0,
-            ),
+            (2, _) => srgb_to_linear(u16::from_le_bytes([data.pixels[o], data.pixels[o + 1]]) as f32 / 65535.0),
             _ => f32::from_le_bytes(data.pixels[o..o + 4].try_into().unwrap()),
         }
     };
@@ -568,22 +457,12 @@ fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
             }
         })
         .collect();
-    Ok(TextureData {
-        width: data.width,
-        height: data.height,
-        texels,
-        clamp_u: false,
-        clamp_v: false,
-    })
+    Ok(TextureData { width: data.width, height: data.height, texels, clamp_u: false, clamp_v: false })
 }
 
 /// sRGB transfer function, encoded [0, 1] to linear.
 pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }
 
 /// The unit direction a KHR_lights_punctual spot or directional light points in: its node's -z

@@ -7,9 +7,7 @@
 use glam::{Vec2, Vec3};
 
 use super::Scene;
-use crate::gpu::layout::{
-    LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_POINT, Light, NONE, Triangle,
-};
+use crate::gpu::layout::{LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_POINT, Light, NONE, Triangle};
 use crate::sampling::sample_triangle_barycentrics;
 
 /// Lights with their selection CDF.
@@ -42,11 +40,7 @@ impl LightTable {
                 emission: m.emission,
                 triangle: bvh_position[i],
                 area,
-                flags: if m.double_sided {
-                    LIGHT_DOUBLE_SIDED
-                } else {
-                    0
-                },
+                flags: if m.double_sided { LIGHT_DOUBLE_SIDED } else { 0 },
                 ..Default::default()
             });
             source_triangle.push(i as u32);
@@ -58,8 +52,7 @@ impl LightTable {
                 None => (Vec3::Z, -1.0, -1.0),
             };
             // Power over the cone, the falloff's ramp counted as half (4 pi I for a point).
-            let solid_angle =
-                2.0 * std::f64::consts::PI * (1.0 - 0.5 * (cos_outer as f64 + cos_inner as f64));
+            let solid_angle = 2.0 * std::f64::consts::PI * (1.0 - 0.5 * (cos_outer as f64 + cos_inner as f64));
             power.push(solid_angle * mean(p.intensity));
             lights.push(Light {
                 position: p.position,
@@ -106,11 +99,7 @@ impl LightTable {
         if let Some(last) = cdf.last_mut() {
             *last = 1.0;
         }
-        Self {
-            lights,
-            cdf,
-            source_triangle,
-        }
+        Self { lights, cdf, source_triangle }
     }
 
     /// Index of the light whose CDF interval holds `u` in [0, 1) (as `select_light` in WGSL).
@@ -118,11 +107,7 @@ impl LightTable {
         let (mut lo, mut hi) = (0usize, self.cdf.len() - 1);
         while lo < hi {
             let mid = (lo + hi) / 2;
-            if u < self.cdf[mid] {
-                hi = mid
-            } else {
-                lo = mid + 1
-            }
+            if u < self.cdf[mid] { hi = mid } else { lo = mid + 1 }
         }
         lo
     }

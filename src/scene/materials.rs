@@ -16,11 +16,7 @@ pub fn gpu_materials(scene: &Scene) -> Vec<Material> {
             base_color: m.base_color,
             base_color_texture: m.base_color_texture.unwrap_or(NONE),
             emission: m.emission,
-            flags: if m.double_sided {
-                MATERIAL_DOUBLE_SIDED
-            } else {
-                0
-            },
+            flags: if m.double_sided { MATERIAL_DOUBLE_SIDED } else { 0 },
             metallic: m.metallic,
             alpha: (m.roughness * m.roughness).max(MIN_ALPHA),
             reserved0: 0,
@@ -38,14 +34,9 @@ pub fn gpu_textures(scene: &Scene) -> (Vec<TextureInfo>, Vec<[u32; 2]>) {
             offset: texels.len() as u32,
             width: t.width,
             height: t.height,
-            wrap: if t.clamp_u { TEXTURE_CLAMP_U } else { 0 }
-                | if t.clamp_v { TEXTURE_CLAMP_V } else { 0 },
+            wrap: if t.clamp_u { TEXTURE_CLAMP_U } else { 0 } | if t.clamp_v { TEXTURE_CLAMP_V } else { 0 },
         });
-        texels.extend(
-            t.texels
-                .iter()
-                .map(|c| [pack2x16float(c.x, c.y), pack2x16float(c.z, 1.0)]),
-        );
+        texels.extend(t.texels.iter().map(|c| [pack2x16float(c.x, c.y), pack2x16float(c.z, 1.0)]));
     }
     (infos, texels)
 }
@@ -97,13 +88,7 @@ fn f16_to_f32(h: u16) -> f32 {
     let mant = (h & 0x3ff) as f32;
     match exp {
         0 => sign * mant * 2f32.powi(-24),
-        0x1f => {
-            if mant == 0.0 {
-                sign * f32::INFINITY
-            } else {
-                f32::NAN
-            }
-        }
+        0x1f => if mant == 0.0 { sign * f32::INFINITY } else { f32::NAN },
         e => sign * (1.0 + mant / 1024.0) * 2f32.powi(e as i32 - 15),
     }
 }
@@ -116,22 +101,12 @@ pub fn texture_bilinear(infos: &[TextureInfo], texels: &[[u32; 2]], index: u32, 
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let wrap = |i: i32, n: u32, clamp: bool| -> u32 {
-        if clamp {
-            i.clamp(0, n as i32 - 1) as u32
-        } else {
-            i.rem_euclid(n as i32) as u32
-        }
+        if clamp { i.clamp(0, n as i32 - 1) as u32 } else { i.rem_euclid(n as i32) as u32 }
     };
     let cu = info.wrap & TEXTURE_CLAMP_U != 0;
     let cv = info.wrap & TEXTURE_CLAMP_V != 0;
-    let (xa, xb) = (
-        wrap(x0 as i32, info.width, cu),
-        wrap(x0 as i32 + 1, info.width, cu),
-    );
-    let (ya, yb) = (
-        wrap(y0 as i32, info.height, cv),
-        wrap(y0 as i32 + 1, info.height, cv),
-    );
+    let (xa, xb) = (wrap(x0 as i32, info.width, cu), wrap(x0 as i32 + 1, info.width, cu));
+    let (ya, yb) = (wrap(y0 as i32, info.height, cv), wrap(y0 as i32 + 1, info.height, cv));
     let texel = |x: u32, y: u32| {
         let w = texels[(info.offset + y * info.width + x) as usize];
         let rg = unpack2x16float(w[0]);
@@ -151,23 +126,12 @@ mod tests {
         for v in [0.0f32, 1.0, -2.5, 0.21586, 65504.0, 6.1e-5, 3.0e-7, 1e-8] {
             let back = unpack2x16float(pack2x16float(v, -v));
             let tol = v.abs() / 2048.0 + 6e-8;
-            assert!(
-                (back.x - v).abs() <= tol && (back.y + v).abs() <= tol,
-                "{v} -> {back}"
-            );
+            assert!((back.x - v).abs() <= tol && (back.y + v).abs() <= tol, "{v} -> {back}");
         }
         assert_eq!(pack2x16float(1.0, 0.0), 0x3c00);
         // One half-float ulp at 1 is 4/4096.
-        assert_eq!(
-            pack2x16float(1.0 + 2.0 / 4096.0, 0.0),
-            0x3c00,
-            "a tie rounds to even"
-        );
-        assert_eq!(
-            pack2x16float(1.0 + 6.0 / 4096.0, 0.0),
-            0x3c02,
-            "a tie rounds to even"
-        );
+        assert_eq!(pack2x16float(1.0 + 2.0 / 4096.0, 0.0), 0x3c00, "a tie rounds to even");
+        assert_eq!(pack2x16float(1.0 + 6.0 / 4096.0, 0.0), 0x3c02, "a tie rounds to even");
         assert_eq!(pack2x16float(1.0 + 3.0 / 4096.0, 0.0), 0x3c01);
         assert!(unpack2x16float(pack2x16float(1e6, 0.0)).x.is_infinite());
     }

@@ -312,39 +312,12 @@ mod tests {
     #[test]
     fn point_triangle_distance_covers_every_region() {
         let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
-        assert_eq!(
-            distance_to_triangle(Vec3::new(0.2, 0.2, 3.0), t),
-            3.0,
-            "face"
-        );
-        assert_eq!(
-            distance_to_triangle(Vec3::new(-1.0, -1.0, 0.0), t),
-            2f32.sqrt(),
-            "vertex a"
-        );
-        assert_eq!(
-            distance_to_triangle(Vec3::new(2.0, 0.0, 0.0), t),
-            1.0,
-            "vertex b"
-        );
-        assert_eq!(
-            distance_to_triangle(Vec3::new(0.0, 3.0, 0.0), t),
-            2.0,
-            "vertex c"
-        );
-        assert_eq!(
-            distance_to_triangle(Vec3::new(0.5, -2.0, 0.0), t),
-            2.0,
-            "edge ab"
-        );
-        assert_eq!(
-            distance_to_triangle(Vec3::new(-2.0, 0.5, 0.0), t),
-            2.0,
-            "edge ac"
-        );
-        assert!(
-            (distance_to_triangle(Vec3::new(1.0, 1.0, 0.0), t) - 0.5f32.sqrt()).abs() < 1e-6,
-            "edge bc"
-        );
+        assert_eq!(distance_to_triangle(Vec3::new(0.2, 0.2, 3.0), t), 3.0, "face");
+        assert_eq!(distance_to_triangle(Vec3::new(-1.0, -1.0, 0.0), t), 2f32.sqrt(), "vertex a");
+        assert_eq!(distance_to_triangle(Vec3::new(2.0, 0.0, 0.0), t), 1.0, "vertex b");
+        assert_eq!(distance_to_triangle(Vec3::new(0.0, 3.0, 0.0), t), 2.0, "vertex c");
+        assert_eq!(distance_to_triangle(Vec3::new(0.5, -2.0, 0.0), t), 2.0, "edge ab");
+        assert_eq!(distance_to_triangle(Vec3::new(-2.0, 0.5, 0.0), t), 2.0, "edge ac");
+        assert!((distance_to_triangle(Vec3::new(1.0, 1.0, 0.0), t) - 0.5f32.sqrt()).abs() < 1e-6, "edge bc");
     }
 }

@@ -7,9 +7,7 @@ use super::Scene;
 use super::lights::LightTable;
 use super::materials::{gpu_materials, gpu_textures};
 use crate::bvh::Bvh;
-use crate::gpu::layout::{
-    Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading,
-};
+use crate::gpu::layout::{Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
 
 /// Everything the kernels read about a scene.
 #[derive(Clone, Debug)]
@@ -80,11 +78,7 @@ impl PreparedScene {
                 u2: t.uvs[2].x,
                 v2: t.uvs[2].y,
                 flags: match t.normals {
-                    Some(n)
-                        if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) =>
-                    {
-                        SHADING_HAS_NORMALS
-                    }
+                    Some(n) if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) => SHADING_HAS_NORMALS,
                     _ => 0,
                 },
             });
@@ -110,9 +104,7 @@ impl PreparedScene {
     /// True when some triangle has vertex normals that differ from its geometric normal
     /// (SHADING_HAS_NORMALS): else the kernels never read the shading normals.
     pub fn has_shading_normals(&self) -> bool {
-        self.shading
-            .iter()
-            .any(|s| s.flags & SHADING_HAS_NORMALS != 0)
+        self.shading.iter().any(|s| s.flags & SHADING_HAS_NORMALS != 0)
     }
 
     /// True when some material has a base-colour texture.
@@ -135,9 +127,7 @@ impl PreparedScene {
 /// shading, as in most CAD and box scenes): interpolating them gives the geometric normal back,
 /// so the triangle is shaded without them.
 fn normals_are_flat(normals: [glam::Vec3; 3], geometric: glam::Vec3) -> bool {
-    normals
-        .iter()
-        .all(|n| (n.normalize_or_zero() - geometric).abs().max_element() <= 4.0 * f32::EPSILON)
+    normals.iter().all(|n| (n.normalize_or_zero() - geometric).abs().max_element() <= 4.0 * f32::EPSILON)
 }
 
 #[cfg(test)]

@@ -28,10 +28,7 @@ pub fn octahedral_encode(n: DVec3) -> [f32; 2] {
     if p.z >= 0.0 {
         [p.x as f32, p.y as f32]
     } else {
-        [
-            ((1.0 - p.y.abs()) * sign(p.x)) as f32,
-            ((1.0 - p.x.abs()) * sign(p.y)) as f32,
-        ]
+        [((1.0 - p.y.abs()) * sign(p.x)) as f32, ((1.0 - p.x.abs()) * sign(p.y)) as f32]
     }
 }
 
@@ -40,11 +37,7 @@ pub fn octahedral_decode(o: [f32; 2]) -> Vec3 {
     let mut n = Vec3::new(o[0], o[1], 1.0 - o[0].abs() - o[1].abs());
     if n.z < 0.0 {
         let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
-        n = Vec3::new(
-            (1.0 - n.y.abs()) * sign(n.x),
-            (1.0 - n.x.abs()) * sign(n.y),
-            n.z,
-        );
+        n = Vec3::new((1.0 - n.y.abs()) * sign(n.x), (1.0 - n.x.abs()) * sign(n.y), n.z);
     }
     n.normalize()
 }
@@ -57,12 +50,7 @@ pub fn triangle_normal(p: [Vec3; 3]) -> [f32; 2] {
 }
 
 /// The surface point of `hit` (twin of `surface_at`; `normals` as `triangle_normals`).
-pub fn surface_at(
-    triangles: &[Triangle],
-    shading: &[TriangleShading],
-    normals: &[[f32; 2]],
-    hit: &Hit,
-) -> Surface {
+pub fn surface_at(triangles: &[Triangle], shading: &[TriangleShading], normals: &[[f32; 2]], hit: &Hit) -> Surface {
     let tri = &triangles[hit.triangle as usize];
     let sh = &shading[hit.triangle as usize];
     let b0 = 1.0 - hit.b1 - hit.b2;
@@ -75,17 +63,8 @@ pub fn surface_at(
             ns = n.normalize();
         }
     }
-    let uv = b0 * Vec2::new(sh.u0, sh.v0)
-        + hit.b1 * Vec2::new(sh.u1, sh.v1)
-        + hit.b2 * Vec2::new(sh.u2, sh.v2);
-    Surface {
-        position,
-        geometric_normal: ng,
-        shading_normal: ns,
-        uv,
-        material: tri.material,
-        light: tri.light,
-    }
+    let uv = b0 * Vec2::new(sh.u0, sh.v0) + hit.b1 * Vec2::new(sh.u1, sh.v1) + hit.b2 * Vec2::new(sh.u2, sh.v2);
+    Surface { position, geometric_normal: ng, shading_normal: ns, uv, material: tri.material, light: tri.light }
 }
 
 /// Ray origin just off the surface (twin of `offset_ray_origin`).

@@ -23,21 +23,11 @@ pub struct Material {
 
 impl Material {
     pub fn diffuse(albedo: [f32; 3]) -> Self {
-        Self {
-            base_color: albedo,
-            emissive: [0.0; 3],
-            emissive_strength: None,
-            double_sided: false,
-        }
+        Self { base_color: albedo, emissive: [0.0; 3], emissive_strength: None, double_sided: false }
     }
 
     pub fn emitter(radiance: f32) -> Self {
-        Self {
-            base_color: [0.0; 3],
-            emissive: [1.0; 3],
-            emissive_strength: Some(radiance),
-            double_sided: false,
-        }
+        Self { base_color: [0.0; 3], emissive: [1.0; 3], emissive_strength: Some(radiance), double_sided: false }
     }
 }
 
@@ -64,24 +54,9 @@ pub struct Scene {
 /// An axis-aligned quad in the plane z = `z` spanning [-h, h]^2, facing +z when `facing_plus_z`.
 pub fn quad_z(h: f32, z: f32, facing_plus_z: bool, material: usize) -> Mesh {
     let positions = vec![[-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z]];
-    let indices = if facing_plus_z {
-        vec![0, 1, 2, 0, 2, 3]
-    } else {
-        vec![0, 2, 1, 0, 3, 2]
-    };
-    let uvs = Some(
-        positions
-            .iter()
-            .map(|p| [0.5 * (p[0] / h + 1.0), 0.5 * (p[1] / h + 1.0)])
-            .collect(),
-    );
-    Mesh {
-        positions,
-        normals: None,
-        uvs,
-        indices,
-        material: Some(material),
-    }
+    let indices = if facing_plus_z { vec![0, 1, 2, 0, 2, 3] } else { vec![0, 2, 1, 0, 3, 2] };
+    let uvs = Some(positions.iter().map(|p| [0.5 * (p[0] / h + 1.0), 0.5 * (p[1] / h + 1.0)]).collect());
+    Mesh { positions, normals: None, uvs, indices, material: Some(material) }
 }
 
 impl Scene {
@@ -89,11 +64,7 @@ impl Scene {
         let mut bin: Vec<u8> = Vec::new();
         let mut views = Vec::new();
         let mut accessors = Vec::new();
-        let mut push = |data: Vec<u8>,
-                        count: usize,
-                        component: u32,
-                        kind: &str,
-                        min_max: Option<(Vec<f32>, Vec<f32>)>| {
+        let mut push = |data: Vec<u8>, count: usize, component: u32, kind: &str, min_max: Option<(Vec<f32>, Vec<f32>)>| {
             while bin.len() % 4 != 0 {
                 bin.push(0);
             }
@@ -110,36 +81,11 @@ impl Scene {
         let mut meshes = Vec::new();
         let mut nodes = Vec::new();
         for m in &self.meshes {
-            let pos: Vec<u8> = m
-                .positions
-                .iter()
-                .flatten()
-                .flat_map(|v| v.to_le_bytes())
-                .collect();
-            let lo: Vec<f32> = (0..3)
-                .map(|i| {
-                    m.positions
-                        .iter()
-                        .map(|p| p[i])
-                        .fold(f32::INFINITY, f32::min)
-                })
-                .collect();
-            let hi: Vec<f32> = (0..3)
-                .map(|i| {
-                    m.positions
-                        .iter()
-                        .map(|p| p[i])
-                        .fold(f32::NEG_INFINITY, f32::max)
-                })
-                .collect();
+            let pos: Vec<u8> = m.positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+            let lo: Vec<f32> = (0..3).map(|i| m.positions.iter().map(|p| p[i]).fold(f32::INFINITY, f32::min)).collect();
+            let hi: Vec<f32> = (0..3).map(|i| m.positions.iter().map(|p| p[i]).fold(f32::NEG_INFINITY, f32::max)).collect();
             let finite = lo.iter().chain(&hi).all(|v| v.is_finite());
-            let p = push(
-                pos,
-                m.positions.len(),
-                5126,
-                "VEC3",
-                finite.then_some((lo, hi)),
-            );
+            let p = push(pos, m.positions.len(), 5126, "VEC3", finite.then_some((lo, hi)));
             let mut attributes = json!({"POSITION": p});
             if let Some(n) = &m.normals {
                 let data: Vec<u8> = n.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
@@ -160,15 +106,12 @@ impl Scene {
         }
         let mut cameras = Vec::new();
         if let Some(c) = &self.camera {
-            cameras.push(
-                json!({"type": "perspective", "perspective": {"yfov": c.yfov, "znear": 1e-5}}),
-            );
+            cameras.push(json!({"type": "perspective", "perspective": {"yfov": c.yfov, "znear": 1e-5}}));
             nodes.push(json!({"camera": 0, "translation": c.position, "rotation": c.rotation}));
         }
         let mut lights = Vec::new();
         for l in &self.point_lights {
-            lights
-                .push(json!({"type": "point", "color": [1.0, 1.0, 1.0], "intensity": l.intensity}));
+            lights.push(json!({"type": "point", "color": [1.0, 1.0, 1.0], "intensity": l.intensity}));
             nodes.push(json!({"translation": l.position, "extensions": {"KHR_lights_punctual": {"light": lights.len() - 1}}}));
         }
         let materials: Vec<Value> = self
@@ -225,11 +168,7 @@ fn base64(data: &[u8]) -> String {
     const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::new();
     for chunk in data.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
+        let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
         let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
         for i in 0..4 {
             if i <= chunk.len() {
@@ -250,11 +189,7 @@ pub fn png_rgb8(width: u32, height: u32, rgb: &[u8]) -> Vec<u8> {
         for &b in data {
             c ^= b as u32;
             for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    0xedb8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
+                c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
             }
         }
         !c

@@ -59,11 +59,7 @@ pub fn render_films(
 }
 
 /// `batches` independent films of `spp` samples per pixel from an existing integrator.
-pub fn films_of(
-    tracer: &mut dyn gatetrace::integrator::Integrator,
-    batches: usize,
-    spp: u32,
-) -> Vec<Film> {
+pub fn films_of(tracer: &mut dyn gatetrace::integrator::Integrator, batches: usize, spp: u32) -> Vec<Film> {
     (0..batches)
         .map(|_| {
             tracer.render_samples(spp as u64).unwrap();
@@ -82,26 +78,12 @@ pub fn reference(relative: &str) -> (Vec<usize>, Vec<f32>) {
 
 /// Writes actual, reference and difference arrays of a failing image test to
 /// target/test-failures/NAME_{actual,reference,difference}.npy and returns the directory.
-pub fn write_failure_images(
-    name: &str,
-    shape: &[usize],
-    actual: &[f32],
-    reference: &[f32],
-) -> PathBuf {
+pub fn write_failure_images(name: &str, shape: &[usize], actual: &[f32], reference: &[f32]) -> PathBuf {
     let dir = repo_path("target/test-failures");
     std::fs::create_dir_all(&dir).unwrap();
     let diff: Vec<f32> = actual.iter().zip(reference).map(|(a, b)| a - b).collect();
-    for (suffix, data) in [
-        ("actual", actual),
-        ("reference", reference),
-        ("difference", &diff[..]),
-    ] {
-        gatetrace::film::output::write_npy_f32(
-            &dir.join(format!("{name}_{suffix}.npy")),
-            shape,
-            data,
-        )
-        .unwrap();
+    for (suffix, data) in [("actual", actual), ("reference", reference), ("difference", &diff[..])] {
+        gatetrace::film::output::write_npy_f32(&dir.join(format!("{name}_{suffix}.npy")), shape, data).unwrap();
     }
     dir
 }
@@ -124,15 +106,7 @@ pub fn run_probe(
     input: &[[f32; 4]],
     outputs: usize,
 ) -> Vec<[f32; 4]> {
-    run_probe_with(
-        ctx,
-        tracer.resources(),
-        tracer.constants(),
-        kernel,
-        extra,
-        input,
-        outputs,
-    )
+    run_probe_with(ctx, tracer.resources(), tracer.constants(), kernel, extra, input, outputs)
 }
 
 /// `run_probe` with the resources and specialisation constants given (e.g. a tracer's, some
@@ -149,14 +123,7 @@ pub fn run_probe_with(
     use gatetrace::gpu::{Kernel, resources::read_buffer};
     let mut resources = resources.clone();
     resources.storage_init(ctx, "probe_input", input).unwrap();
-    resources
-        .storage_zeroed(
-            ctx,
-            "probe_output",
-            16 * outputs as u64,
-            wgpu::BufferUsages::empty(),
-        )
-        .unwrap();
+    resources.storage_zeroed(ctx, "probe_output", 16 * outputs as u64, wgpu::BufferUsages::empty()).unwrap();
     let mut constants = constants.to_vec();
     constants.extend_from_slice(extra);
     let k = Kernel::new(ctx, kernel, None, &constants);
@@ -174,12 +141,7 @@ pub fn run_probe_with(
 /// (`group(i)` of element i, None: left out), the mean over films of the group's mean, for
 /// `a` and `b`, and the z-score of their difference with the variance measured over the films
 /// of each side (so correlations between pixels are included).
-pub fn compare_films(
-    a: &[Film],
-    b: &[Film],
-    groups: usize,
-    group: impl Fn(usize) -> Option<usize>,
-) -> Vec<(f64, f64, f64)> {
+pub fn compare_films(a: &[Film], b: &[Film], groups: usize, group: impl Fn(usize) -> Option<usize>) -> Vec<(f64, f64, f64)> {
     let means = |films: &[Film]| -> Vec<Vec<f64>> {
         films
             .iter()
@@ -219,17 +181,8 @@ pub fn assert_films_agree(label: &str, a: &[Film], b: &[Film], block: u32, alpha
     let per_pixel = (bins * 3) as usize;
     let images = compare_films(a, b, per_pixel, |i| Some(i % per_pixel));
     for (g, (xa, xb, z)) in images.iter().enumerate() {
-        println!(
-            "{label}: bin {} channel {}: {xa:.6} vs {xb:.6}, z {z:+.2}",
-            g / 3,
-            g % 3
-        );
-        assert!(
-            z.abs() < 4.0,
-            "{label}: image mean of bin {} channel {}: {xa} vs {xb} (z = {z:.2})",
-            g / 3,
-            g % 3
-        );
+        println!("{label}: bin {} channel {}: {xa:.6} vs {xb:.6}, z {z:+.2}", g / 3, g % 3);
+        assert!(z.abs() < 4.0, "{label}: image mean of bin {} channel {}: {xa} vs {xb} (z = {z:.2})", g / 3, g % 3);
     }
     let (bx, by) = (w.div_ceil(block), h.div_ceil(block));
     let blocks = (bx * by) as usize * per_pixel;
@@ -238,19 +191,9 @@ pub fn assert_films_agree(label: &str, a: &[Film], b: &[Film], block: u32, alpha
         let (x, y) = (p as u32 % w, p as u32 / w);
         Some(((y / block) * bx + x / block) as usize * per_pixel + k)
     });
-    let limit = stats::t_critical(
-        stats::sidak(alpha, blocks),
-        (a.len().min(b.len()) - 1) as f64,
-    );
-    let worst = result
-        .iter()
-        .enumerate()
-        .max_by(|p, q| p.1.2.abs().total_cmp(&q.1.2.abs()))
-        .unwrap();
-    println!(
-        "{label}: worst of {blocks} blocks |z| {:.2} (limit {limit:.2})",
-        worst.1.2.abs()
-    );
+    let limit = stats::t_critical(stats::sidak(alpha, blocks), (a.len().min(b.len()) - 1) as f64);
+    let worst = result.iter().enumerate().max_by(|p, q| p.1.2.abs().total_cmp(&q.1.2.abs())).unwrap();
+    println!("{label}: worst of {blocks} blocks |z| {:.2} (limit {limit:.2})", worst.1.2.abs());
     assert!(
         worst.1.2.abs() < limit,
         "{label}: block {} differs: {} vs {} (|z| = {:.2} >= {limit:.2})",
@@ -269,26 +212,17 @@ pub fn random_soup(n: usize, seed: u32) -> Vec<[glam::Vec3; 3]> {
         .map(|i| {
             let centre = v() * 2.0 - 1.0;
             let size = 0.01 + 0.3 * (i % 7) as f32 / 7.0;
-            [
-                centre + (v() - 0.5) * size,
-                centre + (v() - 0.5) * size,
-                centre + (v() - 0.5) * size,
-            ]
+            [centre + (v() - 0.5) * size, centre + (v() - 0.5) * size, centre + (v() - 0.5) * size]
         })
         .collect()
 }
 
+
 /// A soup of `n` random triangles (half-size 0.5) in front of an emitter, seen from +z.
 pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::PreparedScene {
-    use gatetrace::scene::{PreparedScene, load_gltf};
     use gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
-    let mut mesh = Mesh {
-        positions: vec![],
-        normals: None,
-        uvs: None,
-        indices: vec![],
-        material: Some(0),
-    };
+    use gatetrace::scene::{PreparedScene, load_gltf};
+    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
     for t in &random_soup(n, seed) {
         for p in t {
             mesh.indices.push(mesh.positions.len() as u32);
@@ -297,23 +231,14 @@ pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::Prepared
     }
     let gltf = Scene {
         meshes: vec![mesh, quad_z(1.0, -1.0, true, 1)],
-        materials: vec![
-            Material {
-                double_sided: true,
-                ..Material::diffuse([0.7, 0.6, 0.5])
-            },
-            Material::emitter(3.0),
-        ],
-        camera: Some(Camera {
-            position: [0.0, 0.0, 3.0],
-            rotation: [0.0, 0.0, 0.0, 1.0],
-            yfov: 0.8,
-        }),
+        materials: vec![Material { double_sided: true, ..Material::diffuse([0.7, 0.6, 0.5]) }, Material::emitter(3.0)],
+        camera: Some(Camera { position: [0.0, 0.0, 3.0], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.8 }),
         point_lights: vec![],
     };
     let dir = scratch_dir(name);
     PreparedScene::new(load_gltf(&gltf.write(&dir, "soup.gltf")).unwrap()).unwrap()
 }
+
 
 /// The Cornell box holding a white geodesic sphere (radius 0.25 m, 5 cm above the floor) of
 /// 20 f^2 flat triangles, each vertex pushed along its radius by +-4 % bumps: the scene
@@ -321,50 +246,19 @@ pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::Prepared
 pub fn sphere_scene(frequency: u32) -> PreparedScene {
     use glam::Vec3;
     let mut scene = load_gltf(&repo_path("assets/scenes/cornell_box.gltf")).unwrap();
-    let white = scene
-        .materials
-        .iter()
-        .position(|m| m.name == "white")
-        .unwrap() as u32;
+    let white = scene.materials.iter().position(|m| m.name == "white").unwrap() as u32;
     let p = (1.0 + 5f32.sqrt()) / 2.0;
     let ico: Vec<Vec3> = [
-        (-1.0, p, 0.0),
-        (1.0, p, 0.0),
-        (-1.0, -p, 0.0),
-        (1.0, -p, 0.0),
-        (0.0, -1.0, p),
-        (0.0, 1.0, p),
-        (0.0, -1.0, -p),
-        (0.0, 1.0, -p),
-        (p, 0.0, -1.0),
-        (p, 0.0, 1.0),
-        (-p, 0.0, -1.0),
-        (-p, 0.0, 1.0),
+        (-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0), (0.0, -1.0, p), (0.0, 1.0, p),
+        (0.0, -1.0, -p), (0.0, 1.0, -p), (p, 0.0, -1.0), (p, 0.0, 1.0), (-p, 0.0, -1.0), (-p, 0.0, 1.0),
     ]
     .iter()
     .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
     .collect();
     let faces = [
-        (0, 11, 5),
-        (0, 5, 1),
-        (0, 1, 7),
-        (0, 7, 10),
-        (0, 10, 11),
-        (1, 5, 9),
-        (5, 11, 4),
-        (11, 10, 2),
-        (10, 7, 6),
-        (7, 1, 8),
-        (3, 9, 4),
-        (3, 4, 2),
-        (3, 2, 6),
-        (3, 6, 8),
-        (3, 8, 9),
-        (4, 9, 5),
-        (2, 4, 11),
-        (6, 2, 10),
-        (8, 6, 7),
-        (9, 8, 1),
+        (0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
+        (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10),
+        (8, 6, 7), (9, 8, 1),
     ];
     let centre = Vec3::new(0.0, -0.5 + 0.05 + 0.25, -0.05);
     let waves = [
@@ -375,17 +269,13 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
     ];
     let point = |d: Vec3| {
         let d = d.normalize();
-        let bump: f32 = waves
-            .iter()
-            .map(|&(w, k, phase, weight)| weight * (k * w.dot(d) + phase).sin())
-            .sum();
+        let bump: f32 = waves.iter().map(|&(w, k, phase, weight)| weight * (k * w.dot(d) + phase).sin()).sum();
         centre + 0.25 * (1.0 + 0.04 * bump) * d
     };
     let f = frequency as f32;
     for &(a, b, c) in &faces {
         let (a, b, c) = (ico[a], ico[b], ico[c]);
-        let lattice =
-            |i: u32, j: u32| point(a * (f - (i + j) as f32) + b * i as f32 + c * j as f32);
+        let lattice = |i: u32, j: u32| point(a * (f - (i + j) as f32) + b * i as f32 + c * j as f32);
         for i in 0..frequency {
             for j in 0..frequency - i {
                 let mut add = |p: [Vec3; 3]| {
@@ -409,13 +299,8 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
 /// An NLOS capture of assets/scenes/nlos_letter.gltf as the peer data was made: sensor and laser
 /// origins at (-1.2, 0, 0.6) m, a 1 W laser aimed by `aim`, a `width` x `height` grid of sensed
 /// points, three bounces, reflection-weighted ellipsoid queries (as `render --nlos` by default).
-pub fn example_capture(
-    width: u32,
-    height: u32,
-    gate: gatetrace::film::Gate,
-    aim: gatetrace::nlos::LaserAim,
-    method: gatetrace::integrator::Method,
-) -> RenderSettings {
+pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim: gatetrace::nlos::LaserAim,
+                       method: gatetrace::integrator::Method) -> RenderSettings {
     let origin = glam::Vec3::new(-1.2, 0.0, 0.6);
     RenderSettings {
         width,
@@ -431,10 +316,7 @@ pub fn example_capture(
             laser_power: 1.0,
             count_first_and_last: false,
         }),
-        query: gatetrace::integrator::QuerySettings {
-            reflection_weights: true,
-            ..Default::default()
-        },
+        query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },
         // The command line's defaults for captures.
         target_pilot_spp: if method == gatetrace::integrator::Method::Ellipsoidal {
             gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT

@@ -20,11 +20,7 @@ pub fn batch_mean(films: &[Film]) -> Vec<f32> {
 }
 
 /// Sums over groups of elements: `group(i)` gives the group of element i (None: skip).
-pub fn group_sums(
-    values: &[f64],
-    groups: usize,
-    group: impl Fn(usize) -> Option<usize>,
-) -> Vec<f64> {
+pub fn group_sums(values: &[f64], groups: usize, group: impl Fn(usize) -> Option<usize>) -> Vec<f64> {
     let mut out = vec![0.0; groups];
     for (i, v) in values.iter().enumerate() {
         if let Some(g) = group(i) {
@@ -38,44 +34,26 @@ pub fn group_sums(
 /// peer's; returns the z-scores. The variance of a group mean is the variance over batches of
 /// the group's batch means (so pixel correlations are included); the peer's variance of a group
 /// mean adds its per-pixel variances (independent pixels).
-pub fn group_z(
-    films: &[Film],
-    peer_mean: &[f32],
-    peer_var: &[f32],
-    groups: usize,
-    group: impl Fn(usize) -> Option<usize> + Copy,
-) -> Vec<(f64, f64, f64)> {
+pub fn group_z(films: &[Film], peer_mean: &[f32], peer_var: &[f32], groups: usize, group: impl Fn(usize) -> Option<usize> + Copy) -> Vec<(f64, f64, f64)> {
     let n = films.len() as f64;
     let count = group_sums(&vec![1.0; peer_mean.len()], groups, group);
     let ours: Vec<Vec<f64>> = films
         .iter()
         .map(|f| {
             let data: Vec<f64> = f.data.iter().map(|&v| v as f64).collect();
-            group_sums(&data, groups, group)
-                .iter()
-                .zip(&count)
-                .map(|(s, c)| s / c)
-                .collect()
+            group_sums(&data, groups, group).iter().zip(&count).map(|(s, c)| s / c).collect()
         })
         .collect();
-    let peer: Vec<f64> = group_sums(
-        &peer_mean.iter().map(|&v| v as f64).collect::<Vec<_>>(),
-        groups,
-        group,
-    )
-    .iter()
-    .zip(&count)
-    .map(|(s, c)| s / c)
-    .collect();
-    let peer_v: Vec<f64> = group_sums(
-        &peer_var.iter().map(|&v| v as f64).collect::<Vec<_>>(),
-        groups,
-        group,
-    )
-    .iter()
-    .zip(&count)
-    .map(|(s, c)| s / (c * c))
-    .collect();
+    let peer: Vec<f64> = group_sums(&peer_mean.iter().map(|&v| v as f64).collect::<Vec<_>>(), groups, group)
+        .iter()
+        .zip(&count)
+        .map(|(s, c)| s / c)
+        .collect();
+    let peer_v: Vec<f64> = group_sums(&peer_var.iter().map(|&v| v as f64).collect::<Vec<_>>(), groups, group)
+        .iter()
+        .zip(&count)
+        .map(|(s, c)| s / (c * c))
+        .collect();
     (0..groups)
         .map(|g| {
             let mean = ours.iter().map(|o| o[g]).sum::<f64>() / n;
@@ -90,20 +68,13 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
     let (shape, peer_mean) = super::reference(&format!("{reference}_mean.npy"));
     let (_, peer_var) = super::reference(&format!("{reference}_var.npy"));
     assert_eq!(shape, vec![64, 64, 3]);
-    let write_failure = || {
-        super::write_failure_images(name, &shape, &batch_mean(films), &peer_mean)
-            .display()
-            .to_string()
-    };
+    let write_failure = || super::write_failure_images(name, &shape, &batch_mean(films), &peer_mean).display().to_string();
     // Image mean per channel: |z| < 4 (the acceptance criterion).
     let channel = group_z(films, &peer_mean, &peer_var, 3, |i| Some(i % 3));
     for (c, (ours, peer, z)) in channel.iter().enumerate() {
         println!("{name} channel {c}: ours {ours:.6} peer {peer:.6} z {z:+.2}");
         if z.abs() >= 4.0 {
-            panic!(
-                "{name}: channel {c} mean {ours} vs peer {peer}, z = {z:.2}; images in {}",
-                write_failure()
-            );
+            panic!("{name}: channel {c} mean {ours} vs peer {peer}, z = {z:.2}; images in {}", write_failure());
         }
     }
     // 8x8-pixel blocks per channel (192 comparisons), Sidak-corrected.
@@ -113,11 +84,7 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
         Some(((y / 8) * 8 + x / 8) * 3 + c)
     });
     let limit = t_critical(sidak(ALPHA, blocks.len()), (films.len() - 1) as f64);
-    let (at, worst) = blocks
-        .iter()
-        .enumerate()
-        .map(|(i, b)| (i, b.2.abs()))
-        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    let (at, worst) = blocks.iter().enumerate().map(|(i, b)| (i, b.2.abs())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     let (ours, peer) = (blocks[at].0, blocks[at].1);
     println!(
         "{name}: worst block |z| {worst:.2} (limit {limit:.2}): block row {}, column {}, channel {}: ours {ours:.6}, peer {peer:.6}",
@@ -126,22 +93,15 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
         at % 3
     );
     if worst >= limit {
-        panic!(
-            "{name}: a block differs from the peer (|z| = {worst:.2} >= {limit:.2}); images in {}",
-            write_failure()
-        );
+        panic!("{name}: a block differs from the peer (|z| = {worst:.2} >= {limit:.2}); images in {}", write_failure());
     }
 }
+
 
 /// Compares a transient cube of `bins` bins with the peer's `{reference}_mean.npy` (and
 /// `_var`): the image mean of every bin and channel, Sidak-corrected. Returns the z-scores
 /// (ours, peer, z) per bin and channel.
-pub fn check_transient(
-    name: &str,
-    films: &[Film],
-    reference: &str,
-    bins: usize,
-) -> Vec<(f64, f64, f64)> {
+pub fn check_transient(name: &str, films: &[Film], reference: &str, bins: usize) -> Vec<(f64, f64, f64)> {
     let (shape, peer_mean) = super::reference(&format!("{reference}_mean.npy"));
     let (_, peer_var) = super::reference(&format!("{reference}_var.npy"));
     assert_eq!(shape[2..], [bins, 3]);

@@ -6,16 +6,13 @@
 pub fn erfc(x: f64) -> f64 {
     let z = x.abs();
     let t = 1.0 / (1.0 + 0.5 * z);
-    let r = t
-        * (-z * z - 1.26551223
-            + t * (1.00002368
-                + t * (0.37409196
-                    + t * (0.09678418
-                        + t * (-0.18628806
-                            + t * (0.27886807
-                                + t * (-1.13520398
-                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
-            .exp();
+    let r = t * (-z * z - 1.26551223
+        + t * (1.00002368
+            + t * (0.37409196
+                + t * (0.09678418
+                    + t * (-0.18628806
+                        + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
+        .exp();
     if x >= 0.0 { r } else { 2.0 - r }
 }
 
@@ -101,8 +98,7 @@ pub fn beta_inc(a: f64, b: f64, x: f64) -> f64 {
     if x >= 1.0 {
         return 1.0;
     }
-    let front =
-        (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
+    let front = (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
     if x < (a + 1.0) / (a + b + 2.0) {
         front * beta_cf(a, b, x) / a
     } else {
@@ -150,11 +146,7 @@ pub fn t_critical(p: f64, dof: f64) -> f64 {
     let (mut lo, mut hi) = (0.0, 1e3);
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if t_two_sided_p(mid, dof) > p {
-            lo = mid
-        } else {
-            hi = mid
-        }
+        if t_two_sided_p(mid, dof) > p { lo = mid } else { hi = mid }
     }
     0.5 * (lo + hi)
 }
@@ -174,11 +166,7 @@ pub struct BatchStats {
 
 impl BatchStats {
     pub fn new(len: usize) -> Self {
-        Self {
-            batches: 0,
-            mean: vec![0.0; len],
-            m2: vec![0.0; len],
-        }
+        Self { batches: 0, mean: vec![0.0; len], m2: vec![0.0; len] }
     }
 
     pub fn add(&mut self, values: &[f32]) {
@@ -206,11 +194,7 @@ impl BatchStats {
 /// Pearson chi-square goodness of fit of `observed` counts against `expected` counts, pooling
 /// cells with expected count below 5 (Mitsuba's recipe). Returns (statistic, dof, p-value).
 pub fn chi2_test(observed: &[f64], expected: &[f64]) -> (f64, usize, f64) {
-    let mut cells: Vec<(f64, f64)> = observed
-        .iter()
-        .copied()
-        .zip(expected.iter().copied())
-        .collect();
+    let mut cells: Vec<(f64, f64)> = observed.iter().copied().zip(expected.iter().copied()).collect();
     cells.sort_by(|a, b| a.1.partial_cmp(&b.1).unwrap());
     let (mut pooled_o, mut pooled_e) = (0.0, 0.0);
     let mut stat = 0.0;
