@@ -73,8 +73,8 @@ struct RenderArgs {
     /// variance x time per sample; the pilot renders a smaller image (down to 32x32) from a seed
     /// of its own, takes 5 % of a --time budget (half where one method is 8x ahead after half
     /// its batches), or the work of 1/16 of --spp per method, and is discarded, so the image is
-    /// the chosen method's with the same seed; `direct` without a pilot in the steady state or
-    /// with directional lights; the metadata records the choice and the pilot's figures).
+    /// the chosen method's with the same seed; `direct` without a pilot in the steady state; the
+    /// metadata records the choice and the pilot's figures).
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):

@@ -1,8 +1,10 @@
 //! The multiple-importance weights of bidirectional path tracing (CPU twin of the kernels'
-//! code): on random paths with Lambertian and glossy vertices, area and point lights, the weights
-//! of all strategies sum to one, and each equals the power heuristic computed independently from
-//! the full path densities p_s = prod(light-side densities of x_0..x_{s-1}) x prod(camera-side
-//! densities of x_s..x_{k-2}).
+//! code): on random paths with Lambertian and glossy vertices, area, point and directional
+//! lights, the weights of all strategies sum to one, and each equals the power heuristic
+//! computed independently from the full path densities p_s = prod(light-side densities of
+//! x_0..x_{s-1}) x prod(camera-side densities of x_s..x_{k-2}); likewise the paper's approximate
+//! weights of ellipsoidal connections (with a directional light, e = 1 weighs the next-event
+//! connection that replaces the spheroid next to the light).
 
 use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
 use gatetrace::scene::bsdf::Bsdf;
@@ -24,21 +26,41 @@ impl Rng {
     }
 }
 
-/// A random path of `k` vertices: a light (area or point), k - 2 surfaces whose normals face
-/// both neighbours, and a pinhole looking roughly at its neighbour.
-fn random_path(rng: &mut Rng, k: usize, point_light: bool) -> Vec<Vertex> {
+/// The kinds of light a random path starts on.
+#[derive(Clone, Copy, PartialEq)]
+enum Light {
+    Area,
+    Point,
+    /// Travelling from the path's first point towards its second.
+    Directional,
+}
+
+/// The light of trial `i`: point, directional, then two area lights in turn.
+fn light_of_trial(i: usize) -> Light {
+    [Light::Point, Light::Directional, Light::Area, Light::Area][i % 4]
+}
+
+/// A random path of `k` vertices: a light, k - 2 surfaces whose normals face both neighbours,
+/// and a pinhole looking roughly at its neighbour.
+fn random_path(rng: &mut Rng, k: usize, light: Light) -> Vec<Vertex> {
     let positions: Vec<Vec3> = (0..k).map(|_| rng.vec3() * 2.0).collect();
     let mut path = Vec::with_capacity(k);
     for i in 0..k {
         let p = positions[i];
         let toward = |j: usize| (positions[j] - p).normalize();
         let vertex = if i == 0 {
-            let kind = if point_light {
-                VertexKind::PointLight { select_pdf: 0.3 + 0.7 * rng.next() }
-            } else {
-                VertexKind::AreaLight { origin_pdf: 0.5 + 3.0 * rng.next() }
+            let (kind, normal) = match light {
+                Light::Point => (VertexKind::PointLight { select_pdf: 0.3 + 0.7 * rng.next() }, toward(1)),
+                Light::Directional => {
+                    let (select_pdf, beam_area) = (0.3 + 0.7 * rng.next(), 5.0 + 20.0 * rng.next());
+                    (VertexKind::DirectionalLight { select_pdf, beam_area }, toward(1))
+                }
+                Light::Area => (VertexKind::AreaLight { origin_pdf: 0.5 + 3.0 * rng.next() }, toward(1)),
             };
-            Vertex { kind, position: p, normal: (toward(1) + 0.5 * rng.vec3()).normalize() }
+            // An area light's normal varies about the direction to x_1; a directional light's is
+            // its direction of travel, exactly towards x_1.
+            let normal = if light == Light::Directional { normal } else { (normal + 0.5 * rng.vec3()).normalize() };
+            Vertex { kind, position: p, normal }
         } else if i == k - 1 {
             let image_area = 0.5 + rng.next();
             Vertex { kind: VertexKind::Camera { image_area }, position: p, normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize() }
@@ -71,7 +93,7 @@ fn is_valid(path: &[Vertex]) -> bool {
 /// camera side x_{k-2}..x_s backwards (the pinhole x_{k-1} is not sampled).
 fn strategy_pdf(path: &[Vertex], s: usize) -> f64 {
     let k = path.len();
-    if s == 0 && matches!(path[0].kind, VertexKind::PointLight { .. }) {
+    if s == 0 && path[0].is_delta_light() {
         return 0.0;
     }
     let mut p = 1.0f64;
@@ -95,12 +117,12 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
     let mut checked = 0;
     for trial in 0..4000 {
         let k = 2 + trial % 6;
-        let point_light = trial % 3 == 0;
-        let path = random_path(&mut rng, k, point_light);
+        let light = light_of_trial(trial);
+        let path = random_path(&mut rng, k, light);
         if !is_valid(&path) {
             continue;
         }
-        let strategies = if point_light { 1..k } else { 0..k };
+        let strategies = if light == Light::Area { 0..k } else { 1..k };
         let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
         let norm: f64 = pdfs.iter().map(|p| p * p).sum();
         if !(norm.is_finite() && norm > 0.0) {
@@ -132,7 +154,7 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
     let mut checked = 0;
     for trial in 0..4000 {
         let k = 3 + trial % 5;
-        let path = random_path(&mut rng, k, trial % 3 == 0);
+        let path = random_path(&mut rng, k, light_of_trial(trial));
         if !is_valid(&path) {
             continue;
         }

@@ -169,16 +169,11 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
     }
 }
 
-/// Why `ellipsoidal` cannot render `settings` on `scene`, if it cannot (then `auto` takes
-/// `direct` without a pilot).
-fn ellipsoidal_unavailable(
-    scene: &PreparedScene,
-    settings: &RenderSettings,
-) -> Option<&'static str> {
+/// Why `ellipsoidal` cannot render `settings`, if it cannot (then `auto` takes `direct` without
+/// a pilot).
+fn ellipsoidal_unavailable(settings: &RenderSettings) -> Option<&'static str> {
     if matches!(settings.gate, Gate::None) {
         Some("ellipsoidal connections need a gate; the steady state has none")
-    } else if !scene.scene.directional_lights.is_empty() {
-        Some("ellipsoidal connections do not support directional lights")
     } else {
         None
     }
@@ -203,7 +198,7 @@ pub fn choose(
         "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal"
     );
     let resolution = (settings.width, settings.height);
-    if let Some(why) = ellipsoidal_unavailable(scene, settings) {
+    if let Some(why) = ellipsoidal_unavailable(settings) {
         let (candidates, reason) = (vec![], why.into());
         return Ok(MethodChoice {
             chosen: Method::Direct,

@@ -16,7 +16,8 @@
 //!                                       stop; in smaller ones extend_subpaths traces them)
 //!     extend_subpaths                   store the vertex, sample the BSDF, next ray
 //! connect_direct                        every (s, t): contribution, MIS, shadow_queue
-//! | connect_spherical                   (ellipsoidal) lights seen directly: splat, shadow_queue
+//! | connect_spherical                   (ellipsoidal) lights seen directly, and camera vertices
+//!                                       joined to directional lights: splat, shadow_queue
 //!   queue_ellipsoid_queries             every (s, t) with a spheroid -> ellipsoid_queries
 //!   setup_dispatch(ellipsoid_queries)
 //!   connect_ellipsoidal                 one query per entry: contribution, MIS, shadow_queue
@@ -245,13 +246,6 @@ impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
-        ensure!(
-            settings.method != Method::Ellipsoidal || scene.scene.directional_lights.is_empty(),
-            "{}: --method ellipsoidal does not support directional lights yet (with the light at infinity, the \
-             paths of one length through a scattering vertex lie on a paraboloid, not a spheroid); use --method \
-             direct or path",
-            scene.scene.source
-        );
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;
@@ -259,6 +253,10 @@ impl<'a> BidirectionalTracer<'a> {
         let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
         let strategy_count = strategies(b).len() as u64;
         let ellipsoidal = settings.method == Method::Ellipsoidal;
+        // Ellipsoidal connections join camera vertices 1 ..= b to directional lights directly
+        // (connect_spherical; a capture has none): one more splat per vertex, and one more
+        // camera vertex traced.
+        let directional = ellipsoidal && settings.nlos.is_none() && !scene.scene.directional_lights.is_empty();
         // Ellipsoidal connections need two shadow rays each, and K slots per strategy. In BVHs
         // whose traversals cannot stop, connect_ellipsoidal traces its shadow rays itself and
         // sums a query's K camera-subpath contributions into one (see connections.wesl
@@ -268,7 +266,7 @@ impl<'a> BidirectionalTracer<'a> {
         let resumable = crate::bvh::traversals_can_stop(scene.bvh.nodes.len());
         let inline_shadow_rays = ellipsoidal && !resumable;
         let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
-        let splats_per_slot = light_vertices * k;
+        let splats_per_slot = light_vertices * k + if directional { b as u64 } else { 0 };
         let queued_rays_per_slot = if inline_shadow_rays { 0 } else { rays_per_connection * (contributions_per_slot + splats_per_slot) };
         // Ellipsoid queries of a slot: the pairs (s, t) with s, t >= 1 and s + t <= B + 1.
         let queries_per_slot = if ellipsoidal { (b as u64 * (b as u64 + 1) / 2).max(1) } else { 1 };
@@ -345,10 +343,12 @@ impl<'a> BidirectionalTracer<'a> {
         constants.push(("LIGHT_VERTICES", light_vertices as f64));
         // Ellipsoidal queries join camera vertex t - 1 and light vertex s - 1 with s, t >= 1
         // (t >= 2 in a capture, whose sensed point is camera vertex 1) and s + t <= b + 1:
-        // deeper vertices are never used, so their rays are not traced.
+        // deeper vertices are never used, so their rays are not traced. Connections to a
+        // directional light use camera vertices up to b.
         let (camera_traced, light_traced) = if ellipsoidal {
             let t_min = if settings.nlos.is_some() { 2 } else { 1 };
-            ((b as u64).max(t_min), (b as u64 + 1).saturating_sub(t_min).max(1))
+            let camera_traced = if directional { b as u64 + 1 } else { (b as u64).max(t_min) };
+            (camera_traced, (b as u64 + 1).saturating_sub(t_min).max(1))
         } else {
             (camera_vertices, light_vertices)
         };

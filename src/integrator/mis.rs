@@ -35,6 +35,16 @@ pub enum VertexKind {
         /// Selection probability.
         select_pdf: f32,
     },
+    /// A directional light chosen with probability `select_pdf`, whose light subpaths start
+    /// uniformly on a disk of area `beam_area` (m^2) across the beam; the vertex's `normal` is
+    /// the direction of travel. The first vertex it reaches has area density cos / beam_area,
+    /// with no fall-off over distance.
+    DirectionalLight {
+        /// Selection probability.
+        select_pdf: f32,
+        /// Area (m^2) of the disk light subpaths start on.
+        beam_area: f32,
+    },
     /// A surface point with a material.
     Surface(Bsdf),
 }
@@ -55,15 +65,18 @@ impl Vertex {
         matches!(self.kind, VertexKind::Surface(_) | VertexKind::AreaLight { .. })
     }
 
-    fn is_delta_light(&self) -> bool {
-        matches!(self.kind, VertexKind::PointLight { .. })
+    /// A point or directional light: no camera subpath reaches it.
+    pub fn is_delta_light(&self) -> bool {
+        matches!(self.kind, VertexKind::PointLight { .. } | VertexKind::DirectionalLight { .. })
     }
 
-    /// Area density (m^-2) of the point itself when a light sampler picks it.
+    /// Area density (m^-2) of the point itself when a light sampler picks it (a directional
+    /// light's: on its disk, which cancels in every ratio of strategies' densities).
     pub fn light_origin_pdf(&self) -> f32 {
         match self.kind {
             VertexKind::AreaLight { origin_pdf } => origin_pdf,
             VertexKind::PointLight { select_pdf } => select_pdf,
+            VertexKind::DirectionalLight { select_pdf, beam_area } => select_pdf / beam_area,
             _ => 0.0,
         }
     }
@@ -87,6 +100,11 @@ fn solid_angle_to_area(pdf_dir: f32, origin: Vec3, to: &Vertex) -> f32 {
 /// been reached from `prev` (ignored by the camera and lights).
 pub fn vertex_pdf(v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
     let w = (next.position - v.position).normalize();
+    if let VertexKind::DirectionalLight { beam_area, .. } = v.kind {
+        // A planar density across the beam, times the cosine at `next`.
+        let cos = if next.has_area_measure() { next.normal.dot(v.normal).abs() } else { 1.0 };
+        return cos / beam_area;
+    }
     let pdf_dir = match v.kind {
         VertexKind::Camera { image_area } => {
             let c = w.dot(v.normal);
@@ -94,6 +112,7 @@ pub fn vertex_pdf(v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
         }
         VertexKind::AreaLight { .. } => w.dot(v.normal).max(0.0) * FRAC_1_PI,
         VertexKind::PointLight { .. } => 0.25 * FRAC_1_PI,
+        VertexKind::DirectionalLight { .. } => unreachable!("returned above"),
         VertexKind::Surface(bsdf) => {
             if w.dot(v.normal) <= 0.0 {
                 return 0.0;
@@ -199,11 +218,13 @@ pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
 }
 
 /// The paper's approximate MIS weight of an ellipsoidal vertex at x_e = path[e] (1 <= e <=
-/// k - 2), computed as `ellipsoidal_mis_weight` in connect_ellipsoidal.wesl does: with p_j the
+/// k - 2), computed as `ellipsoidal_mis_weight` in ellipsoidal_mis.wesl does: with p_j the
 /// density of the path sampled by a direct connection across edge (x_{j-1}, x_j),
 /// w_e = (p_e + p_{e+1}) / 2 / sum_{j=1}^{k-1} c_j p_j (c_1 = c_{k-1} = 1/2, else 1), from ratios
 /// to p_e of each vertex's light-side and camera-side densities, using the densities the
-/// subpaths store and those the connection computes next to x_e.
+/// subpaths store and those the connection computes next to x_e. With a directional light,
+/// e = 1 is the weight of the next-event connection from camera vertex x_1 to the light, which
+/// takes the place of the spheroid next to it.
 pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
     let k = path.len();
     assert!(e >= 1 && e + 2 <= k);
