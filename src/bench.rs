@@ -248,11 +248,17 @@ fn query_cost(
     Ok(tracer.query_cost())
 }
 
+/// The ellipsoid query's work as printed: (loop iterations, triangles tested), empty for methods
+/// without queries.
+fn cost_columns(cost: Option<(f64, f64)>) -> (String, String) {
+    cost.map_or((String::new(), String::new()), |(n, t)| (format!("{n:.2}"), format!("{t:.2}")))
+}
+
 /// Renders every gate of every scene with every method for equal wall time and prints, per
 /// method, the mean squared error against a reference rendered much longer (its own estimated
 /// noise variance is subtracted), with the ratio of MSEs to the first method, and the
-/// ellipsoid queries' work. Repeat r of every method renders from the same seed. Writes one CSV
-/// row per render.
+/// ellipsoid queries' work. Repeat r of every method renders from the same seed, and every
+/// method's repeat r runs before any repeat r + 1. Writes one CSV row per render.
 pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings) -> Result<()> {
     use std::fmt::Write as _;
     let ctx = GpuContext::new()?;
@@ -346,20 +352,24 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 "tri/query",
                 "chosen"
             );
-            let mut first = None;
+            // Repeat-major: repeat r of every method before repeat r + 1 of any, so that a
+            // stretch where the device runs slower (other load, clocks) falls on all methods
+            // alike instead of on one method's repeats.
+            let mut bases = Vec::new();
             for variant in &s.methods {
-                let mut mses = Vec::new();
-                let mut spps = Vec::new();
-                let mut choices = Vec::new();
                 let base = RenderSettings {
                     gate: gate.clone(),
                     ..variant.settings(b)
                 };
                 let cost = query_cost(&ctx, &scene, &base)?;
-                let (iterations, tested) = cost.map_or((String::new(), String::new()), |(n, t)| {
-                    (format!("{n:.2}"), format!("{t:.2}"))
-                });
-                for repeat in 0..s.repeats {
+                bases.push((base, cost));
+            }
+            let mut results: Vec<(Vec<f64>, Vec<u64>, Vec<&str>)> = vec![Default::default(); s.methods.len()];
+            for repeat in 0..s.repeats {
+                for ((variant, (base, cost)), (mses, spps, choices)) in
+                    s.methods.iter().zip(&bases).zip(&mut results)
+                {
+                    let (iterations, tested) = cost_columns(*cost);
                     let settings = RenderSettings {
                         seed: REPEAT_SEEDS + repeat,
                         ..base.clone()
@@ -390,6 +400,10 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                         choices.push(chosen);
                     }
                 }
+            }
+            let mut first = None;
+            for ((variant, (_, cost)), (mses, spps, choices)) in s.methods.iter().zip(&bases).zip(&results) {
+                let (iterations, tested) = cost_columns(*cost);
                 let mse = mses.iter().sum::<f64>() / mses.len() as f64;
                 let first_mse = *first.get_or_insert(mse);
                 // auto: the methods its pilots chose, e.g. `direct x2, ellipsoidal x1`.

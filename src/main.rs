@@ -362,6 +362,8 @@ struct EqualTimeArgs {
     seconds: f64,
     /// Renders per method and gate; repeat r of every method renders from the same seed (common
     /// random numbers: `auto` then shows just what its pilot costs), references from others.
+    /// Every method's repeat r runs before any method's repeat r + 1, so a slower stretch of the
+    /// device falls on all methods alike.
     #[arg(long, default_value_t = 3)]
     repeats: u32,
     /// Method of the reference images (same syntax as --methods).

@@ -632,7 +632,9 @@ impl Integrator for BidirectionalTracer<'_> {
         let mut out = if ellipsoidal {
             String::from(
                 "(s,t) of the full path: s light-subpath vertices, the ellipsoidal vertex and t - 1 camera-subpath \
-                 vertices; (1,1): spherical connections to lights seen directly\n\
+                 vertices; (1,1): spherical connections to lights seen directly; with directional lights, (1,t) also \
+                 counts camera vertex t - 1 joined to the light along its beam (`no intersection`: the gate weighs \
+                 its length zero)\n\
                  strategy (s,t)      queries  no intersection  shadow rays\n",
             )
         } else {
