@@ -6,12 +6,12 @@ use std::time::Duration;
 use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
-use gatetrace::film::output::{Metadata, OutputFormat, check_writable, write_film};
+use gatetrace::film::output::{OutputFormat, check_writable, write_film};
 use gatetrace::frames::{
     FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range,
 };
 use gatetrace::gpu::GpuContext;
-use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render};
+use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render, render_metadata};
 use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
 
 /// The scene rendered when none is given.
@@ -1068,16 +1068,7 @@ fn render_one(
     let film = &output.film;
     let secs = output.elapsed.as_secs_f64();
     let mut metadata = render_metadata(ctx, scene_path, gate_spec, settings, &output);
-    metadata.push((
-        "camera".into(),
-        match scene.scene.camera.lens {
-            None => "pinhole".into(),
-            Some(l) => format!(
-                "thin lens: aperture radius {} m, focus distance {} m",
-                l.aperture_radius, l.focus_distance
-            ),
-        },
-    ));
+    metadata.push(("camera".into(), scene.scene.camera.describe()));
     if let Some((index, plan)) = frame {
         metadata.push(("frame".into(), index.to_string()));
         metadata.push(("frames".into(), plan.count.to_string()));
@@ -1145,84 +1136,6 @@ fn print_stats(settings: &RenderSettings, output: &gatetrace::integrator::Render
             settings.method.name()
         );
     }
-}
-
-/// What every output records about its render (scene, settings, timing, device).
-fn render_metadata(
-    ctx: &GpuContext,
-    scene_path: &Path,
-    gate_spec: &str,
-    settings: &RenderSettings,
-    output: &gatetrace::integrator::RenderOutput,
-) -> Metadata {
-    let film = &output.film;
-    let secs = output.elapsed.as_secs_f64();
-    let gate = &settings.gate;
-    let mut metadata: Metadata = vec![
-        ("scene".into(), scene_path.display().to_string()),
-        ("method".into(), settings.method.name().into()),
-        ("gate".into(), gate_spec.to_owned()),
-        ("gate_description".into(), gate.describe()),
-        ("spp".into(), film.spp.to_string()),
-        ("seed".into(), settings.seed.to_string()),
-        ("max_bounces".into(), settings.max_bounces.to_string()),
-        ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
-        ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
-        ("elapsed_seconds".into(), format!("{secs:.3}")),
-        ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
-        ("adapter".into(), ctx.adapter_description()),
-        ("truncated_traversals".into(), output.truncated_traversals.to_string()),
-        ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
-        ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
-    ];
-    if let Some((s, t)) = settings.debug_strategy {
-        metadata.push(("debug_strategy".into(), format!("{s},{t}")));
-    }
-    if let Some(choice) = &output.choice {
-        metadata.push(("chosen_method".into(), choice.chosen.name().into()));
-        metadata.push(("auto_reason".into(), choice.reason.clone()));
-        for c in &choice.candidates {
-            metadata.push((
-                format!("auto_pilot_{}", c.method.name()),
-                format!(
-                    "{} spp of {}x{} in {:.3} s, variance per sample {:.4e}, variance x seconds per sample (of the \
-                     image) {:.4e}",
-                    c.spp,
-                    choice.pilot_resolution.0,
-                    choice.pilot_resolution.1,
-                    c.seconds,
-                    c.variance_per_sample,
-                    c.cost()
-                ),
-            ));
-        }
-    }
-    if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
-        let g = settings.ellipsoid_guards;
-        metadata.push((
-            "connections_per_query".into(),
-            settings.connections_per_query.to_string(),
-        ));
-        metadata.push(("query_split".into(), settings.query.split.to_string()));
-        metadata.push((
-            "query_weights".into(),
-            if settings.query.reflection_weights {
-                "reflection"
-            } else {
-                "arcs"
-            }
-            .into(),
-        ));
-        metadata.push((
-            "ellipsoid_guards".into(),
-            format!("needle {:e}, length {:e}", g.needle, g.length),
-        ));
-        metadata.push((
-            "target_pilot_spp".into(),
-            output.target_pilot_spp.to_string(),
-        ));
-    }
-    metadata
 }
 
 /// Prints a line to stdout, above the progress bars when they are shown.

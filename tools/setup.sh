@@ -4,7 +4,8 @@
 #     (mesa-vulkan-drivers) is installed with apt-get (through sudo when not root);
 #   - a C toolchain (build-essential: cargo needs a linker) and curl;
 #   - a Rust toolchain (1.95 or newer), with rustup, when cargo is missing;
-#   - for the viewer's test (tools/test.sh): xvfb-run and the X11 libraries a window needs.
+#   - for the viewer's test (tools/test.sh): xvfb-run and the X11 libraries a window needs;
+#   - for the Python package's tests (tools/test.sh): python3 with venv and pip.
 # tools/render.sh and tools/test.sh source this file, so cargo is on PATH for them afterwards.
 # Running it directly does the same installs. Safe to repeat: it does nothing when all is there.
 
@@ -59,6 +60,17 @@ gatetrace_setup_display() {
                 libXi.so.6:libxi6 libxkbcommon-x11.so.0:libxkbcommon-x11-0; do
         ldconfig -p 2>/dev/null | grep -q "${pair%%:*}" || missing+=("${pair#*:}")
     done
+    if [ ${#missing[@]} -gt 0 ]; then
+        gatetrace_apt_install "${missing[@]}" || return 1
+    fi
+}
+
+# The Python package's tests (tools/test.sh): python3 with venv (and pip) support, to build and
+# install the package into a virtual environment.
+gatetrace_setup_python() {
+    local missing=()
+    command -v python3 >/dev/null 2>&1 || missing+=(python3)
+    python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || missing+=(python3-venv python3-pip)
     if [ ${#missing[@]} -gt 0 ]; then
         gatetrace_apt_install "${missing[@]}" || return 1
     fi

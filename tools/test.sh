@@ -1,9 +1,27 @@
 #!/usr/bin/env bash
-# Installs what is missing (tools/setup.sh) and runs the whole test suite; GPU tests run on the
-# Vulkan device (lavapipe when there is no GPU). Extra arguments go to `cargo test`.
+# Installs what is missing (tools/setup.sh) and runs the whole test suite: `cargo test` (GPU
+# tests run on the Vulkan device, lavapipe when there is no GPU; extra arguments go to it, e.g.
+# --release), then the Python package's tests: the package is built and installed with
+# `pip install .` into a virtual environment in target/python-env, and pytest runs
+# python/tests against it and against the command line built by `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . tools/setup.sh
 gatetrace_setup
 gatetrace_setup_display
-exec cargo test "$@"
+gatetrace_setup_python
+cargo test "$@"
+
+profile=debug
+maturin_profile=dev
+for arg in "$@"; do
+    if [ "$arg" = "--release" ]; then profile=release; maturin_profile=release; fi
+done
+env_dir=target/python-env
+if [ ! -x "$env_dir/bin/python" ]; then
+    python3 -m venv "$env_dir"
+fi
+# The extension module is built in the profile cargo test just used, so it reuses its build
+# of the renderer.
+MATURIN_PEP517_ARGS="--profile $maturin_profile" "$env_dir/bin/python" -m pip install --quiet --disable-pip-version-check ".[test]"
+GATETRACE_BIN="$PWD/target/$profile/gatetrace" "$env_dir/bin/python" -m pytest -q python/tests

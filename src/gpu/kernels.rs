@@ -61,6 +61,15 @@ pub fn kernel_variant(name: &str, feature: Option<&str>) -> &'static KernelSourc
         .unwrap_or_else(|| panic!("no kernel named `{name}` with feature {feature:?} in shaders/"))
 }
 
+/// Compute pipelines built in this process so far (every [`Kernel`]): the Python package's
+/// tests check that a gate sweep on one renderer builds none after its first render.
+static KERNELS_BUILT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How many compute pipelines (kernels) this process has built so far.
+pub fn kernels_built() -> u64 {
+    KERNELS_BUILT.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// A compute pipeline with its bind-group layout.
 pub struct Kernel {
     /// Pipeline label (the kernel's name, with a variant in parentheses).
@@ -137,6 +146,7 @@ impl Kernel {
             },
             cache: None,
         });
+        KERNELS_BUILT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Self { label, source, pipeline, bind_group_layout, profiler: ctx.profiler.clone() }
     }
 

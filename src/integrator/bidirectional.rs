@@ -459,6 +459,15 @@ impl<'a> BidirectionalTracer<'a> {
         Ok(())
     }
 
+    /// Whether the render has a target pilot and the current gate's visit tables (strata + 1
+    /// counts per pixel) fit the buffer built for them.
+    fn target_pilot_fits(&self) -> bool {
+        let t = &self.wf.params.target_length;
+        let bytes = (self.wf.params.width as u64 * self.wf.params.height as u64) * (t.strata as u64 + 1) * 4;
+        let room = self.wf.resources.get("target_visits").map_or(0, |b| b.size());
+        self.target_pilot_spp > 0 && t.strata > 0 && bytes <= room
+    }
+
     /// Mean work of one ellipsoid query so far: loop iterations over BVH nodes and triangles,
     /// and triangles tested (None without `stats` or before any query).
     pub fn query_cost(&self) -> Option<(f64, f64)> {
@@ -599,8 +608,9 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn warm_up(&mut self) -> Result<()> {
         let pilot = std::mem::take(&mut self.target_pilot_pending);
+        let seed = self.wf.params.seed;
         self.render_pass(1)?;
-        self.reset_film();
+        self.restart(seed);
         self.target_pilot_pending = pilot;
         Ok(())
     }
@@ -611,15 +621,21 @@ impl Integrator for BidirectionalTracer<'_> {
         self.passes_since_fold = 0;
     }
 
+    fn restart(&mut self, seed: u32) {
+        self.wf.restart(seed, &["splat_film"]);
+        self.splat_sums.iter_mut().for_each(|s| *s = 0.0);
+        self.passes_since_fold = 0;
+        // As a new tracer: the pilot (where the gate's tables fit) shapes the extra visits again.
+        self.target_pilot_pending = self.target_pilot_fits();
+        self.target_pilot_ran = false;
+    }
+
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
         let moved = self.wf.set_gate(scene, settings)?;
         if moved {
             // The extra visits were shaped for the old gate (wf.set_gate dropped them).
             // A new pilot shapes them again where the new gate's tables fit the buffer.
-            let t = &self.wf.params.target_length;
-            let bytes = (settings.width as u64 * settings.height as u64) * (t.strata as u64 + 1) * 4;
-            let room = self.wf.resources.get("target_visits").unwrap().size();
-            self.target_pilot_pending = self.target_pilot_spp > 0 && t.strata > 0 && bytes <= room;
+            self.target_pilot_pending = self.target_pilot_fits();
             self.target_pilot_ran = false;
             self.reset_film();
         }

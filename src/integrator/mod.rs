@@ -9,11 +9,13 @@ pub mod mis;
 pub mod path;
 pub mod wavefront;
 
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
 
 use crate::film::target::TargetSampler;
+use crate::film::output::Metadata;
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
 use crate::gpu::Resources;
@@ -211,7 +213,7 @@ impl Default for RenderSettings {
 }
 
 /// A renderer bound to one scene and one set of settings, accumulating into its film.
-pub trait Integrator {
+pub trait Integrator: Send {
     /// The state every wavefront method keeps.
     fn wavefront(&self) -> &Wavefront<'_>;
     /// Traces `samples` (1 ..= `samples_per_pass`) more samples of every pixel and adds them to
@@ -221,6 +223,11 @@ pub trait Integrator {
     /// seed (`film::target::next_target_seed`), so the next estimate is independent of the
     /// previous one (for batch statistics).
     fn reset_film(&mut self);
+    /// Starts afresh from `seed`: clears the film and restarts the random sequence and the
+    /// target lengths exactly as a newly built integrator with that seed would, so the next
+    /// passes give its image bit for bit, without rebuilding kernels or buffers (the Python
+    /// package's renders reuse one integrator).
+    fn restart(&mut self, seed: u32);
     /// Moves to `settings.gate` (everything else as when built) and clears the film, without
     /// rebuilding kernels or buffers when the gate has the same kind, bins and table length
     /// (the viewer scrubbing tau). Returns false, changing nothing, when a new integrator is
@@ -267,11 +274,13 @@ pub trait Integrator {
         Ok(())
     }
     /// Traces one sample per pixel and discards it, so that a device that compiles kernels at
-    /// their first dispatch (lavapipe does) does so before a time budget starts. Work that
-    /// belongs to the render (a pilot) is left for its first pass.
+    /// their first dispatch (lavapipe does) does so before a time budget starts; then restarts
+    /// from the render's seed, so the render that follows is the one it would have been without.
+    /// Work that belongs to the render (a pilot) is left for its first pass.
     fn warm_up(&mut self) -> Result<()> {
+        let seed = self.wavefront().params.seed;
         self.render_pass(1)?;
-        self.reset_film();
+        self.restart(seed);
         Ok(())
     }
     /// Traces `spp` more samples of every pixel, in as few passes as possible.
@@ -340,12 +349,13 @@ impl PassSizer {
     }
 
     /// Renders passes on `tracer` until `seconds` have passed or the next pass would overrun
-    /// them (at least one pass), calling `after_pass` after each; returns the seconds spent.
+    /// them (at least one pass), calling `after_pass` after each (an error from it stops the
+    /// render and is returned); returns the seconds spent.
     pub fn render_for(
         &mut self,
         tracer: &mut dyn Integrator,
         seconds: f64,
-        mut after_pass: impl FnMut(&dyn Integrator, f64),
+        mut after_pass: impl FnMut(&dyn Integrator, f64) -> Result<()>,
     ) -> Result<f64> {
         let start = Instant::now();
         tracer.prepare()?;
@@ -361,7 +371,7 @@ impl PassSizer {
             tracer.render_pass(next)?;
             self.record(next, pass_start.elapsed().as_secs_f64());
             passes += 1;
-            after_pass(tracer, start.elapsed().as_secs_f64());
+            after_pass(tracer, start.elapsed().as_secs_f64())?;
         }
         Ok(start.elapsed().as_secs_f64())
     }
@@ -397,6 +407,115 @@ pub struct RenderOutput {
     pub target_pilot_spp: u32,
     /// `--method auto`: the method chosen and the pilot's figures (its time is in `rendering`).
     pub choice: Option<auto::MethodChoice>,
+}
+
+/// What every output records about its render (scene, settings, timing, device), as the
+/// command line's outputs and the Python package give it: (key, value) pairs in order.
+pub fn render_metadata(
+    ctx: &GpuContext,
+    scene_path: &Path,
+    gate_spec: &str,
+    settings: &RenderSettings,
+    output: &RenderOutput,
+) -> Metadata {
+    let film = &output.film;
+    let secs = output.elapsed.as_secs_f64();
+    let gate = &settings.gate;
+    let mut metadata: Metadata = vec![
+        ("scene".into(), scene_path.display().to_string()),
+        ("method".into(), settings.method.name().into()),
+        ("gate".into(), gate_spec.to_owned()),
+        ("gate_description".into(), gate.describe()),
+        ("spp".into(), film.spp.to_string()),
+        ("seed".into(), settings.seed.to_string()),
+        ("max_bounces".into(), settings.max_bounces.to_string()),
+        ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
+        ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
+        ("elapsed_seconds".into(), format!("{secs:.3}")),
+        ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
+        ("adapter".into(), ctx.adapter_description()),
+        ("truncated_traversals".into(), output.truncated_traversals.to_string()),
+        ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
+        ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
+    ];
+    if let Some((s, t)) = settings.debug_strategy {
+        metadata.push(("debug_strategy".into(), format!("{s},{t}")));
+    }
+    if let Some(choice) = &output.choice {
+        metadata.push(("chosen_method".into(), choice.chosen.name().into()));
+        metadata.push(("auto_reason".into(), choice.reason.clone()));
+        for c in &choice.candidates {
+            metadata.push((
+                format!("auto_pilot_{}", c.method.name()),
+                format!(
+                    "{} spp of {}x{} in {:.3} s, variance per sample {:.4e}, variance x seconds per sample (of the \
+                     image) {:.4e}",
+                    c.spp,
+                    choice.pilot_resolution.0,
+                    choice.pilot_resolution.1,
+                    c.seconds,
+                    c.variance_per_sample,
+                    c.cost()
+                ),
+            ));
+        }
+    }
+    if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
+        let g = settings.ellipsoid_guards;
+        metadata.push((
+            "connections_per_query".into(),
+            settings.connections_per_query.to_string(),
+        ));
+        metadata.push(("query_split".into(), settings.query.split.to_string()));
+        metadata.push((
+            "query_weights".into(),
+            if settings.query.reflection_weights {
+                "reflection"
+            } else {
+                "arcs"
+            }
+            .into(),
+        ));
+        metadata.push((
+            "ellipsoid_guards".into(),
+            format!("needle {:e}, length {:e}", g.needle, g.length),
+        ));
+        metadata.push((
+            "target_pilot_spp".into(),
+            output.target_pilot_spp.to_string(),
+        ));
+    }
+    metadata
+}
+
+/// Traces `budget` on `tracer`, from its current state: exactly that many more samples per
+/// pixel in as few passes as fit, or passes sized by a [`PassSizer`] to end within the time.
+/// Calls `after_pass` with the tracer and the passes so far after each pass; an error from it
+/// stops the render and is returned (the Python package stops on Ctrl-C this way).
+pub fn trace_budget(
+    tracer: &mut dyn Integrator,
+    budget: Budget,
+    mut after_pass: impl FnMut(&dyn Integrator, u64) -> Result<()>,
+) -> Result<()> {
+    let mut passes = 0;
+    match budget {
+        Budget::Samples(n) => {
+            let target = tracer.samples_done() + n;
+            while tracer.samples_done() < target {
+                let next = (target - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
+                tracer.render_pass(next)?;
+                passes += 1;
+                after_pass(tracer, passes)?;
+            }
+        }
+        Budget::Time(t) => {
+            PassSizer::default().render_for(tracer, t.as_secs_f64(), |tracer, _| {
+                passes += 1;
+                after_pass(tracer, passes)
+            })?;
+        }
+    }
+    Ok(())
 }
 
 /// Why no path of the scene can reach the gate, if none can (checked before any work).
@@ -652,36 +771,12 @@ pub fn render(
         Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
         samples => samples,
     };
-    let mut passes = 0;
     let rendering = Instant::now();
-    match budget {
-        Budget::Samples(n) => {
-            while tracer.samples_done() < n {
-                let next = (n - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
-                tracer.render_pass(next)?;
-                passes += 1;
-                let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
-                progress(Progress {
-                    passes,
-                    spp: tracer.samples_done(),
-                    elapsed,
-                    rendering,
-                });
-            }
-        }
-        Budget::Time(t) => {
-            PassSizer::default().render_for(tracer.as_mut(), t.as_secs_f64(), |tracer, _| {
-                passes += 1;
-                let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
-                progress(Progress {
-                    passes,
-                    spp: tracer.samples_done(),
-                    elapsed,
-                    rendering,
-                });
-            })?;
-        }
-    }
+    trace_budget(tracer.as_mut(), budget, |tracer, passes| {
+        let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
+        progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
+        Ok(())
+    })?;
     let rendering = pilot + rendering.elapsed();
     let film = tracer.film()?;
     let truncated_traversals = tracer.truncated_traversals()?;

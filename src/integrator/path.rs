@@ -283,6 +283,10 @@ impl Integrator for PathTracer<'_> {
         self.wf.reset_film(&[]);
     }
 
+    fn restart(&mut self, seed: u32) {
+        self.wf.restart(seed, &[]);
+    }
+
     fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &RenderSettings) -> Result<bool> {
         let moved = self.wf.set_gate(scene, settings)?;
         if moved {

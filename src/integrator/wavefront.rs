@@ -263,6 +263,21 @@ impl<'a> Wavefront<'a> {
         }
     }
 
+    /// Starts afresh from `seed` as a newly built render with that seed would: clears the film
+    /// (and the buffers `also` names), restarts the sample sequence at 0 and gives the target
+    /// lengths the seed render_params gives them, without extra visits (a pilot shapes them
+    /// again). The kernels and buffers stay.
+    pub fn restart(&mut self, seed: u32, also: &[&str]) {
+        self.next_sample = 0;
+        self.reset_film(also);
+        self.params.seed = seed;
+        self.params.target_length.seed = seed;
+        self.params.target_length.film_first_sample = 0;
+        self.params.target_length.extra = 0;
+        self.target_visits.clear();
+        self.ctx.queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
+    }
+
     /// Clears the film and the further buffers `also` (e.g. a splat film), and draws the next
     /// film's target-length seed.
     pub fn reset_film(&mut self, also: &[&str]) {

@@ -45,6 +45,15 @@ impl ThinLens {
 }
 
 impl CameraDesc {
+    /// `pinhole`, or the thin lens's aperture radius and focus distance (m), as outputs'
+    /// metadata records the camera.
+    pub fn describe(&self) -> String {
+        match self.lens {
+            None => "pinhole".into(),
+            Some(l) => format!("thin lens: aperture radius {} m, focus distance {} m", l.aperture_radius, l.focus_distance),
+        }
+    }
+
     /// The GPU camera for an image of `width` x `height` pixels (aspect from the resolution).
     pub fn to_gpu(&self, width: u32, height: u32) -> Camera {
         let (lens_radius, focus_distance) = match self.lens {

@@ -1,0 +1,284 @@
+"""gatetrace: a physically based GPU renderer for time-of-flight cameras, from Python.
+
+Time is optical path length in metres (c = 1): a gate W weighs every light path by its length,
+and a pixel measures the radiance (W m^-2 sr^-1) of the paths it sees, weighted by W. Gates are
+strings in the command line's syntax (``"box:3.14..3.19"``, ``"transient:1.9,0.01,100"``) or
+made by the constructors below (``box(3.14, 3.19)``, ``transient(1.9, 0.01, 100)``); lengths are
+metres of optical path, and ``ps``, ``ns`` and ``mm`` convert other units to them.
+
+    >>> import gatetrace
+    >>> image = gatetrace.render("assets/scenes/cornell_box.gltf", gate="box:3.14..3.19", spp=64, res=(64, 64))
+    >>> image.shape, image.dtype
+    ((64, 64, 3), dtype('float32'))
+
+A :class:`Renderer` keeps the device, the uploaded scene and the compiled kernels between renders:
+a sweep over gates of one kind and bin count builds its kernels once. Images are float32 numpy
+arrays ``[H, W, 3]`` (``[H, W, T, 3]`` for T transient bins), row 0 at the top: the layout of
+``gatetrace render --out x.npy``. Bad arguments raise ValueError, a missing scene file
+FileNotFoundError, device failures RuntimeError; Ctrl-C stops a render (KeyboardInterrupt).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Optional, Tuple, Union
+
+import numpy as np
+
+if not os.environ.get("XDG_RUNTIME_DIR"):
+    # Mesa's Vulkan driver probes for a Wayland display when the device opens and prints an
+    # error when this is unset; a headless render needs none (the command line does the same).
+    import tempfile
+
+    os.environ["XDG_RUNTIME_DIR"] = tempfile.gettempdir()
+
+from . import _gatetrace
+from ._gatetrace import Scene, describe_gate, device_name, kernels_built
+
+__all__ = [
+    "Scene",
+    "Renderer",
+    "Gate",
+    "render",
+    "none",
+    "box",
+    "gaussian",
+    "cw",
+    "table",
+    "transient",
+    "ps",
+    "ns",
+    "mm",
+    "SPEED_OF_LIGHT",
+    "describe_gate",
+    "device_name",
+    "kernels_built",
+    "__version__",
+]
+
+__version__ = _gatetrace.version()
+
+#: Speed of light (m/s): converts times of flight to optical path lengths.
+SPEED_OF_LIGHT = 299_792_458.0
+
+
+def ps(picoseconds: float) -> float:
+    """Optical path length (m) light travels in `picoseconds` ps."""
+    return picoseconds * 1e-12 * SPEED_OF_LIGHT
+
+
+def ns(nanoseconds: float) -> float:
+    """Optical path length (m) light travels in `nanoseconds` ns."""
+    return nanoseconds * 1e-9 * SPEED_OF_LIGHT
+
+
+def mm(millimetres: float) -> float:
+    """`millimetres` mm in metres."""
+    return millimetres * 1e-3
+
+
+@dataclass(frozen=True)
+class Gate:
+    """A gate in the command line's syntax (``spec``); ``str(gate)`` gives it back."""
+
+    spec: str
+
+    def __str__(self) -> str:
+        return self.spec
+
+    def describe(self) -> str:
+        """What the renderer understands the gate to be (ValueError when it is not one)."""
+        return describe_gate(self.spec)
+
+
+def _length(x: float) -> str:
+    return repr(float(x))
+
+
+def none() -> Gate:
+    """The steady state: W = 1 for every path."""
+    return Gate("none")
+
+
+def box(start: float, end: float) -> Gate:
+    """W = 1 for path lengths in [start, end) (m), else 0: an ideal gate."""
+    return Gate(f"box:{_length(start)}..{_length(end)}")
+
+
+def gaussian(mean: float, sigma: float) -> Gate:
+    """W = exp(-(l - mean)^2 / (2 sigma^2)) (lengths in m), peak 1: an imperfect gate."""
+    return Gate(f"gaussian:{_length(mean)},{_length(sigma)}")
+
+
+def cw(frequency_hz: float, phase_deg: float, code: Optional[str] = None) -> Gate:
+    """A CW-ToF gate: W = cos(2 pi f l / c + phase), signed, or with `code` (``"square"``,
+    ``"ham3"``, ``"ham4:1"``..``"ham4:4"``, ``"mseq[:CHIPS]"``, ``"depthsel[:CHIPS[:N]]"``, see the
+    README) one period of that code's correlation, repeated."""
+    spec = f"cw:{float(frequency_hz)!r},{float(phase_deg)!r}"
+    return Gate(spec if code is None else f"{spec},{code}")
+
+
+def table(path: Union[str, os.PathLike]) -> Gate:
+    """W from a CSV file of rows ``length,weight`` (lengths may carry units), linear in between,
+    0 outside."""
+    return Gate(f"table:{os.fspath(path)}")
+
+
+def transient(start: float, width: float, bins: int) -> Gate:
+    """A transient cube: `bins` bins of `width` m of path each from `start` m; each bin's image
+    integrates the radiance of the paths whose lengths fall in it."""
+    return Gate(f"transient:{_length(start)},{_length(width)},{int(bins)}")
+
+
+def _spec(gate: Union[str, Gate]) -> str:
+    if isinstance(gate, Gate):
+        return gate.spec
+    if isinstance(gate, str):
+        return gate
+    raise TypeError(f"gate must be a string in the command line's syntax or a gatetrace.Gate, not {type(gate).__name__}")
+
+
+def _typed(value: str):
+    """A metadata value as int or float where it is one, else the string."""
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
+
+
+class Renderer:
+    """Renders one scene with one method, image size and bounce count, again and again.
+
+    The device, the scene's upload and the compiled kernels are kept between renders: a render
+    whose gate has the kind and bin count of the last one only moves the gate (as the viewer does
+    when it scrubs tau), so gate sweeps compile kernels once. Every render starts afresh from its
+    seed, so it equals the command line's ``gatetrace render`` with the same arguments.
+
+    Args:
+        scene: a :class:`Scene`, or the path of a glTF 2.0 file (.gltf, .glb).
+        method: ``"path"`` (path tracing with next-event estimation), ``"direct"`` (bidirectional,
+            direct connections), ``"ellipsoidal"`` (bidirectional, ellipsoidal connections: needs a
+            gate) or ``"auto"`` (direct or ellipsoidal after a pilot of both; builds its kernels
+            for every render).
+        max_bounces: most scattering vertices of a path (0: lights seen directly).
+        res: image size (width, height) in pixels.
+        rr_depth: Russian roulette from this many scattering vertices on (None: never).
+        samples_per_pass: samples per pixel traced together (None: chosen from the image size).
+        connections_per_query: ``ellipsoidal``: points drawn from each ellipsoid query (1-8;
+            None: 4).
+        query_split, query_bottom_nodes, query_weights: ``ellipsoidal``'s ellipsoid queries, as
+            ``render --query-split``, ``--query-bottom-nodes`` and ``--query-weights``.
+    """
+
+    def __init__(
+        self,
+        scene: Union[Scene, str, os.PathLike],
+        *,
+        method: str = "path",
+        max_bounces: int = 8,
+        res: Tuple[int, int] = (256, 256),
+        rr_depth: Optional[int] = None,
+        samples_per_pass: Optional[int] = None,
+        connections_per_query: Optional[int] = None,
+        query_split: float = 1.0,
+        query_bottom_nodes: int = 31,
+        query_weights: str = "arcs",
+    ):
+        if not isinstance(scene, Scene):
+            scene = Scene.load(scene)
+        _check_count("max_bounces", max_bounces, 0)
+        if rr_depth is not None:
+            _check_count("rr_depth", rr_depth, 0)
+        if samples_per_pass is not None:
+            _check_count("samples_per_pass", samples_per_pass, 1)
+        if connections_per_query is not None:
+            _check_count("connections_per_query", connections_per_query, 1)
+        width, height = _resolution(res)
+        self.scene = scene
+        self._native = _gatetrace.Renderer(
+            scene,
+            method=method,
+            max_bounces=max_bounces,
+            res=(width, height),
+            rr_depth=rr_depth,
+            samples_per_pass=samples_per_pass,
+            connections_per_query=connections_per_query,
+            query_split=float(query_split),
+            query_bottom_nodes=query_bottom_nodes,
+            query_weights=query_weights,
+        )
+
+    def render(
+        self,
+        gate: Union[str, Gate] = "none",
+        *,
+        spp: Optional[int] = None,
+        seconds: Optional[float] = None,
+        seed: int = 0,
+    ) -> Tuple[np.ndarray, dict]:
+        """Renders `gate` for `spp` samples per pixel (64 when neither is given) or for `seconds`
+        of rendering, from `seed` (equal seeds and settings give identical images).
+
+        Returns (image, metadata): a float32 array [H, W, 3] or [H, W, T, 3] of bin-integrated
+        radiance (W m^-2 sr^-1) weighted by the gate, row 0 at the top; and the metadata the
+        command line writes beside its outputs (scene, method, gate, spp, seed, timing, adapter,
+        ...), numbers as numbers. The GIL is released while the device works.
+        """
+        if spp is not None:
+            _check_count("spp", spp, 1)
+        if seconds is not None and not (isinstance(seconds, (int, float)) and seconds > 0):
+            raise ValueError(f"seconds={seconds!r}: give a positive number of seconds")
+        _check_count("seed", seed, 0)
+        if seed >= 2**32:
+            raise ValueError(f"seed={seed}: give a number below 2^32")
+        image, pairs = self._native.render(_spec(gate), spp, None if seconds is None else float(seconds), seed)
+        metadata = {key: _typed(value) for key, value in pairs}
+        if "warning" in metadata:
+            import warnings
+
+            warnings.warn(str(metadata["warning"]), RuntimeWarning, stacklevel=2)
+        return image, metadata
+
+    def __repr__(self) -> str:
+        return repr(self._native)
+
+
+def render(
+    scene: Union[Scene, str, os.PathLike],
+    gate: Union[str, Gate] = "none",
+    *,
+    spp: Optional[int] = None,
+    seconds: Optional[float] = None,
+    seed: int = 0,
+    method: str = "path",
+    max_bounces: int = 8,
+    res: Tuple[int, int] = (256, 256),
+    metadata: bool = False,
+    **options,
+):
+    """Renders `scene` once: ``Renderer(scene, method=..., max_bounces=..., res=..., **options)
+    .render(gate, spp=..., seconds=..., seed=...)``. Returns the image, or (image, metadata)
+    with ``metadata=True``. For several renders of one scene, keep a :class:`Renderer`."""
+    renderer = Renderer(scene, method=method, max_bounces=max_bounces, res=res, **options)
+    image, meta = renderer.render(gate, spp=spp, seconds=seconds, seed=seed)
+    return (image, meta) if metadata else image
+
+
+def _check_count(name: str, value, least: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
+    if value < least:
+        raise ValueError(f"{name}={value}: give at least {least}")
+
+
+def _resolution(res) -> Tuple[int, int]:
+    try:
+        width, height = res
+    except (TypeError, ValueError):
+        raise ValueError(f"res={res!r}: give (width, height) in pixels") from None
+    _check_count("res width", width, 1)
+    _check_count("res height", height, 1)
+    return int(width), int(height)

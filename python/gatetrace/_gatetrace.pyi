@@ -1,0 +1,76 @@
+"""Type stubs of the extension module behind `gatetrace` (python/src/lib.rs). Lengths are metres
+of optical path, radiance W m^-2 sr^-1."""
+
+import os
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+class Scene:
+    """A loaded glTF 2.0 scene, baked to world space with its BVH built."""
+
+    @staticmethod
+    def load(
+        path: Union[str, os.PathLike],
+        *,
+        aperture_radius: Optional[float] = None,
+        focus_distance: Optional[float] = None,
+    ) -> "Scene":
+        """Loads a .gltf or .glb file; `aperture_radius` and `focus_distance` (m) make the camera a
+        thin lens. FileNotFoundError when the file does not exist, ValueError when it is unusable."""
+    @property
+    def path(self) -> "os.PathLike[str]":
+        """The file the scene came from (a pathlib.Path)."""
+    @property
+    def triangles(self) -> int:
+        """Number of triangles."""
+    @property
+    def camera(self) -> Dict[str, Any]:
+        """position, forward, up, right ([x, y, z], m and unit vectors), yfov (rad),
+        aperture_radius and focus_distance (m, None for a pinhole)."""
+    @property
+    def lights(self) -> List[Dict[str, Any]]:
+        """One dict per light: `type` point, spot, directional or area, and its parameters."""
+    @property
+    def nodes(self) -> List[str]:
+        """Names of the named glTF nodes."""
+    @property
+    def bounds(self) -> Tuple[List[float], List[float]]:
+        """Axis-aligned bounds (m): (min xyz, max xyz)."""
+    def path_length_bounds(self, max_bounces: int) -> Tuple[float, float]:
+        """Shortest and longest optical path length (m) of paths with at most `max_bounces`
+        scattering vertices (bounds)."""
+
+class Renderer:
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        method: str = "path",
+        max_bounces: int = 8,
+        res: Tuple[int, int] = (256, 256),
+        rr_depth: Optional[int] = None,
+        samples_per_pass: Optional[int] = None,
+        connections_per_query: Optional[int] = None,
+        query_split: float = 1.0,
+        query_bottom_nodes: int = 31,
+        query_weights: str = "arcs",
+    ) -> None: ...
+    def render(
+        self, gate: str, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0
+    ) -> Tuple[npt.NDArray[np.float32], List[Tuple[str, str]]]:
+        """(image [H, W, 3] or [H, W, T, 3], metadata as (key, value) strings)."""
+    @property
+    def settings(self) -> List[Tuple[str, str]]: ...
+
+def describe_gate(spec: str) -> str:
+    """What the renderer understands gate `spec` to be; ValueError when it is not a gate."""
+
+def kernels_built() -> int:
+    """Compute pipelines (kernels) built in this process so far."""
+
+def device_name() -> str:
+    """Adapter name, backend and type of the device renders run on."""
+
+def version() -> str: ...

@@ -1,0 +1,476 @@
+//! `gatetrace._gatetrace`: the extension module behind the `gatetrace` Python package
+//! (python/gatetrace/__init__.py wraps it). It translates arguments, films and errors; the
+//! renderer is the `gatetrace` crate, exactly as the command line runs it.
+//!
+//! One device serves the whole process (opened on first use). A `Renderer` keeps the scene
+//! uploaded and its kernels built: a render with a gate of the same kind and bins as the last
+//! one only moves the gate (`Integrator::set_gate`) and restarts the sample sequence from the
+//! seed (`Integrator::restart`), so its image equals a fresh render's bit for bit. Renders
+//! release the GIL between passes and check for signals after each, so Ctrl-C stops them.
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use gatetrace::film::{Film, Gate};
+use gatetrace::gpu::GpuContext;
+use gatetrace::integrator::{
+    Budget, Integrator, Method, QuerySettings, RenderOutput, RenderSettings, create_integrator, render_metadata,
+    trace_budget, unreachable_gate,
+};
+use gatetrace::scene::{PreparedScene, ThinLens, load_gltf};
+
+/// The process's device, opened on first use and shared by every renderer.
+fn device() -> PyResult<&'static GpuContext> {
+    static DEVICE: OnceLock<GpuContext> = OnceLock::new();
+    static OPENING: Mutex<()> = Mutex::new(());
+    if let Some(ctx) = DEVICE.get() {
+        return Ok(ctx);
+    }
+    let _opening = OPENING.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(ctx) = DEVICE.get() {
+        return Ok(ctx);
+    }
+    let ctx = GpuContext::new().map_err(|e| PyRuntimeError::new_err(format!("{e:#}")))?;
+    Ok(DEVICE.get_or_init(|| ctx))
+}
+
+/// A renderer error as a Python exception: ValueError for what the caller gave (settings,
+/// gates, scenes), RuntimeError for the device.
+fn value_error(e: anyhow::Error) -> PyErr {
+    PyValueError::new_err(format!("{e:#}"))
+}
+
+fn runtime_error(e: anyhow::Error) -> PyErr {
+    PyRuntimeError::new_err(format!("{e:#}"))
+}
+
+/// A loaded glTF scene (`gatetrace.Scene.load`), baked to world space with its BVH built.
+#[pyclass(module = "gatetrace._gatetrace", frozen)]
+struct Scene {
+    prepared: Arc<PreparedScene>,
+    path: PathBuf,
+}
+
+#[pymethods]
+impl Scene {
+    /// Loads a glTF 2.0 scene (.gltf or .glb). `aperture_radius` and `focus_distance` (m) make
+    /// the camera a thin lens, overriding the camera node's `extras` (aperture 0: a pinhole).
+    /// FileNotFoundError when the file does not exist; ValueError when it cannot be used.
+    #[staticmethod]
+    #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None))]
+    fn load(py: Python<'_>, path: PathBuf, aperture_radius: Option<f32>, focus_distance: Option<f32>) -> PyResult<Self> {
+        if !path.exists() {
+            return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
+        }
+        let load = || -> anyhow::Result<PreparedScene> {
+            let mut scene = load_gltf(&path)?;
+            if aperture_radius.is_some() || focus_distance.is_some() {
+                let old = scene.camera.lens;
+                let radius = aperture_radius.or(old.map(|l| l.aperture_radius)).unwrap_or(0.0);
+                let focus = focus_distance.or(old.map(|l| l.focus_distance));
+                scene.camera.lens = match (radius, focus) {
+                    (r, _) if r == 0.0 => None,
+                    (r, Some(f)) => Some(ThinLens::new(r, f)?),
+                    (_, None) => anyhow::bail!(
+                        "{}: aperture_radius needs a focus distance (focus_distance=..., metres): the camera has none",
+                        scene.source
+                    ),
+                };
+            }
+            PreparedScene::new(scene)
+        };
+        let prepared = py.detach(load).map_err(value_error)?;
+        Ok(Self { prepared: Arc::new(prepared), path })
+    }
+
+    /// The file the scene came from.
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.path.clone()
+    }
+
+    /// Number of triangles (zero-area ones dropped at load are not counted).
+    #[getter]
+    fn triangles(&self) -> usize {
+        self.prepared.scene.triangles.len()
+    }
+
+    /// The camera: position, forward, up and right (unit vectors, world space, metres), yfov
+    /// (rad), and the thin lens's aperture_radius and focus_distance (m; None for a pinhole).
+    #[getter]
+    fn camera<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let c = &self.prepared.scene.camera;
+        let d = PyDict::new(py);
+        d.set_item("position", c.position.to_array())?;
+        d.set_item("forward", c.forward.to_array())?;
+        d.set_item("up", c.up.to_array())?;
+        d.set_item("right", c.right.to_array())?;
+        d.set_item("yfov", c.yfov)?;
+        d.set_item("aperture_radius", c.lens.map(|l| l.aperture_radius))?;
+        d.set_item("focus_distance", c.lens.map(|l| l.focus_distance))?;
+        Ok(d)
+    }
+
+    /// The lights, one dict each: `point` and `spot` (position m, intensity W/sr per channel;
+    /// a spot's direction and inner/outer half-angles in rad), `directional` (direction of
+    /// travel, irradiance W/m^2 per channel) and `area` (one per emissive material: its
+    /// radiance W m^-2 sr^-1 per channel, triangles, double_sided).
+    #[getter]
+    fn lights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let scene = &self.prepared.scene;
+        let list = PyList::empty(py);
+        for l in &scene.point_lights {
+            let d = PyDict::new(py);
+            d.set_item("type", if l.spot.is_some() { "spot" } else { "point" })?;
+            d.set_item("position", l.position.to_array())?;
+            d.set_item("intensity", l.intensity.to_array())?;
+            if let Some(s) = l.spot {
+                d.set_item("direction", s.direction.to_array())?;
+                d.set_item("inner_cone_angle", s.inner)?;
+                d.set_item("outer_cone_angle", s.outer)?;
+            }
+            list.append(d)?;
+        }
+        for l in &scene.directional_lights {
+            let d = PyDict::new(py);
+            d.set_item("type", "directional")?;
+            d.set_item("direction", l.direction.to_array())?;
+            d.set_item("irradiance", l.irradiance.to_array())?;
+            list.append(d)?;
+        }
+        for (i, m) in scene.materials.iter().enumerate() {
+            if !m.is_emissive() {
+                continue;
+            }
+            let triangles = scene.triangles.iter().filter(|t| t.material as usize == i).count();
+            if triangles == 0 {
+                continue;
+            }
+            let d = PyDict::new(py);
+            d.set_item("type", "area")?;
+            d.set_item("material", &m.name)?;
+            d.set_item("radiance", m.emission.to_array())?;
+            d.set_item("triangles", triangles)?;
+            d.set_item("double_sided", m.double_sided)?;
+            list.append(d)?;
+        }
+        Ok(list)
+    }
+
+    /// Names of the scene's named nodes, in the order they were visited.
+    #[getter]
+    fn nodes(&self) -> Vec<String> {
+        self.prepared.scene.nodes.iter().map(|n| n.name.clone()).collect()
+    }
+
+    /// Axis-aligned bounds of the scene (m): (min xyz, max xyz).
+    #[getter]
+    fn bounds(&self) -> ([f32; 3], [f32; 3]) {
+        let (lo, hi) = self.prepared.scene.bounds();
+        (lo.to_array(), hi.to_array())
+    }
+
+    /// Shortest and longest optical path length (m) a path with at most `max_bounces`
+    /// scattering vertices can have in this scene (bounds, not exact).
+    fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
+        self.prepared.scene.path_length_bounds(max_bounces)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Scene('{}', {} triangles)", self.path.display(), self.prepared.scene.triangles.len())
+    }
+}
+
+/// What a renderer keeps between renders: the integrator for the last gate (None before the
+/// first render, and for `auto`, which builds its chosen method's integrator per render).
+struct State {
+    integrator: Option<Box<dyn Integrator>>,
+    /// The integrator has traced its warm-up pass (kernels compiled at first dispatch).
+    warm: bool,
+}
+
+/// A renderer bound to one scene and one set of settings: keeps the device, the scene upload
+/// and the compiled kernels across renders (`gatetrace.Renderer`).
+#[pyclass(module = "gatetrace._gatetrace", frozen)]
+struct Renderer {
+    scene: Arc<PreparedScene>,
+    path: PathBuf,
+    /// The settings every render shares (gate and seed are each render's).
+    base: RenderSettings,
+    state: Mutex<State>,
+}
+
+/// A method name as the command line spells it.
+fn parse_method(name: &str) -> PyResult<Method> {
+    Ok(match name {
+        "path" => Method::Path,
+        "direct" => Method::Direct,
+        "ellipsoidal" => Method::Ellipsoidal,
+        "auto" => Method::Auto,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "method `{other}`: choose path, direct, ellipsoidal or auto"
+            )));
+        }
+    })
+}
+
+#[pymethods]
+impl Renderer {
+    /// A renderer of `scene` with the command line's defaults (see gatetrace.Renderer).
+    #[new]
+    #[pyo3(signature = (scene, *, method="path", max_bounces=8, res=(256, 256), rr_depth=None, samples_per_pass=None,
+        connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="arcs"))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        scene: PyRef<'_, Scene>,
+        method: &str,
+        max_bounces: u32,
+        res: (u32, u32),
+        rr_depth: Option<u32>,
+        samples_per_pass: Option<u32>,
+        connections_per_query: Option<u32>,
+        query_split: f32,
+        query_bottom_nodes: u32,
+        query_weights: &str,
+    ) -> PyResult<Self> {
+        let method = parse_method(method)?;
+        let (width, height) = res;
+        if width == 0 || height == 0 {
+            return Err(PyValueError::new_err(format!("res {width}x{height}: both sides must be at least 1 pixel")));
+        }
+        if samples_per_pass == Some(0) {
+            return Err(PyValueError::new_err("samples_per_pass must be at least 1"));
+        }
+        let reflection_weights = match query_weights {
+            "arcs" => false,
+            "reflection" => true,
+            other => return Err(PyValueError::new_err(format!("query_weights `{other}`: choose arcs or reflection"))),
+        };
+        let settings = RenderSettings {
+            width,
+            height,
+            method,
+            max_bounces,
+            rr_depth,
+            samples_per_pass,
+            connections_per_query: connections_per_query
+                .unwrap_or(gatetrace::integrator::bidirectional::default_connections_per_query(method)),
+            query: QuerySettings { split: query_split, bottom_nodes: query_bottom_nodes, reflection_weights, ..Default::default() },
+            ..Default::default()
+        };
+        gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
+        Ok(Self {
+            scene: scene.prepared.clone(),
+            path: scene.path.clone(),
+            base: settings,
+            state: Mutex::new(State { integrator: None, warm: false }),
+        })
+    }
+
+    /// Renders `gate` (the command line's syntax) for `spp` samples per pixel or `seconds` of
+    /// rendering from `seed`; returns (film data as float32 numpy array [H, W, 3] or
+    /// [H, W, T, 3], the metadata as (key, value) pairs).
+    #[pyo3(signature = (gate, spp=None, seconds=None, seed=0))]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        gate: &str,
+        spp: Option<u64>,
+        seconds: Option<f64>,
+        seed: u32,
+    ) -> PyResult<(Bound<'py, PyAny>, Vec<(String, String)>)> {
+        let gate_value = Gate::parse(gate).map_err(|e| value_error(e.context(format!("gate `{gate}`"))))?;
+        let budget = match (spp, seconds) {
+            (Some(_), Some(_)) => return Err(PyValueError::new_err("give spp or seconds, not both")),
+            (Some(0), None) => return Err(PyValueError::new_err("spp must be at least 1")),
+            (Some(n), None) => Budget::Samples(n),
+            (None, Some(t)) => match Duration::try_from_secs_f64(t) {
+                Ok(d) if t > 0.0 => Budget::Time(d),
+                _ => return Err(PyValueError::new_err(format!("seconds={t}: give a positive number of seconds"))),
+            },
+            (None, None) => Budget::Samples(64),
+        };
+        // Never wait for the lock: a render releases the GIL and takes it back between passes, so
+        // a thread waiting here with the GIL would deadlock with it.
+        let mut state = match self.state.try_lock() {
+            Ok(state) => state,
+            Err(std::sync::TryLockError::Poisoned(e)) => e.into_inner(),
+            Err(std::sync::TryLockError::WouldBlock) => {
+                return Err(PyRuntimeError::new_err(
+                    "this Renderer is rendering in another thread: give each thread its own Renderer",
+                ));
+            }
+        };
+        let settings = RenderSettings { gate: gate_value, seed, ..self.base.clone() };
+        gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
+        let scene = self.scene.clone();
+        let start = Instant::now();
+        let output = if let Some(reason) = unreachable_gate(&scene, &settings) {
+            let warning = format!("{reason}: the image is black; no samples were traced");
+            let film = Film::zeroed(settings.width, settings.height, settings.gate.bins());
+            let output = RenderOutput {
+                film,
+                elapsed: start.elapsed(),
+                rendering: Duration::ZERO,
+                truncated_traversals: 0,
+                stats: None,
+                target_pilot_spp: 0,
+                choice: None,
+            };
+            let mut metadata = self.metadata(&settings, gate, &output)?;
+            metadata.push(("warning".into(), warning));
+            return Ok((film_array(py, &output.film)?, metadata));
+        } else if settings.method == Method::Auto {
+            // auto builds the chosen method's integrator after its pilot, every render (and stops
+            // for Ctrl-C only when it is done).
+            let ctx = device()?;
+            py.detach(|| gatetrace::integrator::render(ctx, &scene, &settings, budget, |_| {})).map_err(value_error)?
+        } else {
+            let ctx = device()?;
+            let state = &mut *state;
+            let reuse = match state.integrator.as_mut() {
+                Some(tracer) => py.detach(|| tracer.set_gate(&scene, &settings)).map_err(runtime_error)?,
+                None => false,
+            };
+            if !reuse {
+                state.integrator = None;
+                let tracer = py.detach(|| create_integrator(ctx, &scene, &settings)).map_err(value_error)?;
+                state.integrator = Some(tracer);
+                state.warm = false;
+            }
+            let tracer = state.integrator.as_mut().expect("built above");
+            let mut interrupted: Option<PyErr> = None;
+            let traced = py.detach(|| -> anyhow::Result<Duration> {
+                if matches!(budget, Budget::Time(_)) && !state_warm(&mut state.warm) {
+                    tracer.warm_up()?;
+                }
+                tracer.restart(seed);
+                let rendering = Instant::now();
+                trace_budget(tracer.as_mut(), budget, |_, _| {
+                    Python::attach(|py| py.check_signals()).map_err(|e| {
+                        interrupted = Some(e);
+                        anyhow::anyhow!("interrupted")
+                    })
+                })?;
+                Ok(rendering.elapsed())
+            });
+            let rendering = match traced {
+                Ok(r) => r,
+                Err(e) => {
+                    // The film holds a partial render: the next render restarts it anyway.
+                    return Err(interrupted.take().unwrap_or_else(|| runtime_error(e)));
+                }
+            };
+            RenderOutput {
+                film: tracer.film().map_err(runtime_error)?,
+                elapsed: start.elapsed(),
+                rendering,
+                truncated_traversals: tracer.truncated_traversals().map_err(runtime_error)?,
+                stats: None,
+                target_pilot_spp: tracer.target_pilot_spp(),
+                choice: None,
+            }
+        };
+        let mut metadata = self.metadata(&settings, gate, &output)?;
+        if output.truncated_traversals > 0 {
+            metadata.push((
+                "warning".into(),
+                format!(
+                    "{} ray traversals were cut short by the device (lavapipe ends a shader's loops after 65535 \
+                     iterations); the image may miss geometry",
+                    output.truncated_traversals
+                ),
+            ));
+        }
+        Ok((film_array(py, &output.film)?, metadata))
+    }
+
+    /// The settings every render shares, as the command line names them.
+    #[getter]
+    fn settings(&self) -> Vec<(String, String)> {
+        let s = &self.base;
+        vec![
+            ("method".into(), s.method.name().into()),
+            ("max_bounces".into(), s.max_bounces.to_string()),
+            ("resolution".into(), format!("{}x{}", s.width, s.height)),
+            ("connections_per_query".into(), s.connections_per_query.to_string()),
+        ]
+    }
+
+    fn __repr__(&self) -> String {
+        let s = &self.base;
+        format!(
+            "Renderer('{}', method={}, res=({}, {}), max_bounces={})",
+            self.path.display(),
+            s.method.name(),
+            s.width,
+            s.height,
+            s.max_bounces
+        )
+    }
+}
+
+impl Renderer {
+    /// The metadata the command line writes beside its outputs, and the camera.
+    fn metadata(&self, settings: &RenderSettings, gate: &str, output: &RenderOutput) -> PyResult<Vec<(String, String)>> {
+        let mut metadata = render_metadata(device()?, &self.path, gate, settings, output);
+        metadata.push(("camera".into(), self.scene.scene.camera.describe()));
+        Ok(metadata)
+    }
+}
+
+/// Marks the integrator warm, returning whether it was already.
+fn state_warm(warm: &mut bool) -> bool {
+    std::mem::replace(warm, true)
+}
+
+/// A film as a float32 numpy array: [H, W, 3], or [H, W, T, 3] for more than one bin; row 0 is
+/// the top of the image (the command line's .npy layout).
+fn film_array<'py>(py: Python<'py>, film: &Film) -> PyResult<Bound<'py, PyAny>> {
+    let (h, w, t) = (film.height as usize, film.width as usize, film.bins as usize);
+    let shape = if t == 1 { vec![h, w, 3] } else { vec![h, w, t, 3] };
+    let flat = PyArray1::from_slice(py, &film.data);
+    Ok(flat.reshape(shape)?.into_any())
+}
+
+/// Describes a gate given in the command line's syntax (ValueError when it is not one).
+#[pyfunction]
+fn describe_gate(spec: &str) -> PyResult<String> {
+    Gate::parse(spec).map(|g| g.describe()).map_err(|e| value_error(e.context(format!("gate `{spec}`"))))
+}
+
+/// Compute pipelines (kernels) built in this process so far.
+#[pyfunction]
+fn kernels_built() -> u64 {
+    gatetrace::gpu::kernels::kernels_built()
+}
+
+/// The device renders run on: adapter name, backend and type (opens it if needed).
+#[pyfunction]
+fn device_name() -> PyResult<String> {
+    Ok(device()?.adapter_description())
+}
+
+/// The renderer's version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _gatetrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Scene>()?;
+    m.add_class::<Renderer>()?;
+    m.add_function(wrap_pyfunction!(describe_gate, m)?)?;
+    m.add_function(wrap_pyfunction!(kernels_built, m)?)?;
+    m.add_function(wrap_pyfunction!(device_name, m)?)?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,190 @@
+"""The Python package against the command line and its own promises: equal images for equal
+arguments (bit for bit with `path`), one kernel build for a gate sweep on one Renderer, the
+documented array layout, Python exceptions for bad input, the GIL released and Ctrl-C honoured
+while rendering. GPU tests: they fail (never skip) without a Vulkan device."""
+
+import json
+import os
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gatetrace
+
+ROOT = Path(__file__).resolve().parents[2]
+BOX = ROOT / "assets/scenes/cornell_box.gltf"
+
+
+def cli_binary() -> Path:
+    """The command line `cargo test` built (GATETRACE_BIN, as tools/test.sh sets it)."""
+    if "GATETRACE_BIN" in os.environ:
+        path = Path(os.environ["GATETRACE_BIN"])
+    else:
+        built = [ROOT / "target" / p / "gatetrace" for p in ("release", "debug")]
+        built = [p for p in built if p.exists()]
+        assert built, "no gatetrace binary in target/: run cargo build or set GATETRACE_BIN"
+        path = max(built, key=lambda p: p.stat().st_mtime)
+    assert path.exists(), f"{path}: no such binary (set GATETRACE_BIN to the command line to compare with)"
+    return path
+
+
+def cli_render(tmp_path: Path, *args: str) -> tuple:
+    out = tmp_path / "cli.npy"
+    subprocess.run([str(cli_binary()), "render", *args, "--out", str(out)], check=True, capture_output=True)
+    return np.load(out), json.loads(out.with_suffix(".json").read_text())
+
+
+def test_one_call_render_equals_the_command_line_bit_for_bit(tmp_path):
+    image = gatetrace.render(str(BOX), gate="box:3.14..3.19", spp=64, res=(64, 64), seed=1)
+    assert image.shape == (64, 64, 3) and image.dtype == np.float32
+    cli, _ = cli_render(tmp_path, str(BOX), "--gate", "box:3.14..3.19", "--spp", "64", "--res", "64x64", "--seed", "1")
+    assert image.mean() > 0
+    assert np.array_equal(image, cli), f"largest difference {np.abs(image - cli).max()}"
+
+
+def test_transient_cube_equals_the_command_line_and_has_the_documented_layout(tmp_path):
+    renderer = gatetrace.Renderer(gatetrace.Scene.load(BOX), res=(32, 24), max_bounces=4)
+    gate = gatetrace.transient(1.9, 0.1, 6)
+    image, meta = renderer.render(gate, spp=16, seed=7)
+    assert image.shape == (24, 32, 6, 3) and image.dtype == np.float32
+    assert image.flags["C_CONTIGUOUS"]
+    cli, cli_meta = cli_render(tmp_path, str(BOX), "--gate", str(gate), "--spp", "16", "--res", "32x24",
+                               "--max-bounces", "4", "--seed", "7")
+    assert np.array_equal(image, cli)
+    for key in ("method", "gate", "spp", "seed", "max_bounces", "resolution"):
+        assert str(meta[key]) == str(cli_meta[key]), key
+    assert meta["spp"] == 16 and meta["seed"] == 7 and meta["method"] == "path"
+
+
+def test_row_zero_is_the_top_of_the_image():
+    # The Cornell box's light is in the ceiling: the brightest row lies in the upper half.
+    image = gatetrace.render(BOX, spp=16, res=(32, 32), max_bounces=0)
+    rows = image.sum(axis=(1, 2))
+    assert rows.max() > 0 and int(np.argmax(rows)) < 16
+
+
+def test_a_gate_sweep_on_one_renderer_builds_kernels_once_and_equals_fresh_renders():
+    scene = gatetrace.Scene.load(BOX)
+    renderer = gatetrace.Renderer(scene, res=(32, 32), max_bounces=4)
+    starts = [3.0 + 0.05 * i for i in range(10)]
+    images = []
+    for i, start in enumerate(starts):
+        images.append(renderer.render(gatetrace.box(start, start + 0.05), spp=8, seed=3)[0])
+        if i == 0:
+            built = gatetrace.kernels_built()
+    assert gatetrace.kernels_built() == built, "moving the gate rebuilt kernels"
+    assert sum(float(im.sum()) for im in images) > 0
+    # The sweep's renders equal fresh renderers' (the integrator restarts from the seed).
+    for i in (0, 6):
+        fresh = gatetrace.Renderer(scene, res=(32, 32), max_bounces=4).render(
+            gatetrace.box(starts[i], starts[i] + 0.05), spp=8, seed=3)[0]
+        assert np.array_equal(images[i], fresh), f"gate {i}"
+    # A gate of another kind needs other kernels, built on the same renderer.
+    steady, _ = renderer.render("none", spp=2)
+    assert steady.shape == (32, 32, 3) and steady.mean() > 0
+
+
+def test_bidirectional_methods_agree_with_path_on_the_image_mean():
+    gate = gatetrace.box(3.14, 3.24)
+    means = {}
+    for method in ("path", "direct", "ellipsoidal"):
+        image, meta = gatetrace.render(BOX, gate=gate, spp=64, res=(16, 16), max_bounces=3, method=method, seed=5,
+                                       metadata=True)
+        assert meta["method"] == method
+        means[method] = float(image.mean())
+    for method in ("direct", "ellipsoidal"):
+        # 64 spp of 256 pixels: the image means agree to a few per cent.
+        assert abs(means[method] / means["path"] - 1) < 0.1, means
+
+
+@pytest.mark.parametrize(
+    "call, error, words",
+    [
+        (lambda: gatetrace.Scene.load(ROOT / "no/such/scene.gltf"), FileNotFoundError, "no such file"),
+        (lambda: gatetrace.Scene.load(ROOT / "README.md"), ValueError, "README.md"),
+        (lambda: gatetrace.Renderer(BOX, method="bidirectional"), ValueError, "method"),
+        (lambda: gatetrace.Renderer(BOX, res=(0, 64)), ValueError, "res"),
+        (lambda: gatetrace.Renderer(BOX, res=64), ValueError, "res"),
+        (lambda: gatetrace.Renderer(BOX, max_bounces=-1), ValueError, "max_bounces"),
+        (lambda: gatetrace.Renderer(BOX, query_weights="angles"), ValueError, "query_weights"),
+        (lambda: gatetrace.render(BOX, gate="box:3.2..3.1", spp=1, res=(8, 8)), ValueError, "gate"),
+        (lambda: gatetrace.render(BOX, gate="boxcar:1..2", spp=1, res=(8, 8)), ValueError, "boxcar"),
+        (lambda: gatetrace.render(BOX, gate=3.14, spp=1, res=(8, 8)), TypeError, "gate"),
+        (lambda: gatetrace.render(BOX, spp=0, res=(8, 8)), ValueError, "spp"),
+        (lambda: gatetrace.render(BOX, spp=1, seconds=1.0, res=(8, 8)), ValueError, "not both"),
+        (lambda: gatetrace.render(BOX, seconds=-1.0, res=(8, 8)), ValueError, "seconds"),
+        (lambda: gatetrace.render(BOX, spp=1, seed=-1, res=(8, 8)), ValueError, "seed"),
+        (lambda: gatetrace.render(BOX, spp=1, res=(8, 8), method="ellipsoidal"), ValueError, "gate"),
+        (lambda: gatetrace.render(BOX, gate="table:/no/such.csv", spp=1, res=(8, 8)), ValueError, "such.csv"),
+    ],
+)
+def test_bad_arguments_raise_python_exceptions(call, error, words):
+    with pytest.raises(error) as caught:
+        call()
+    assert words in str(caught.value), str(caught.value)
+
+
+def test_units_and_gate_constructors_speak_the_command_line():
+    assert gatetrace.ps(1000) == pytest.approx(0.299792458)
+    assert gatetrace.ns(1) == pytest.approx(0.299792458)
+    assert gatetrace.mm(5) == pytest.approx(0.005)
+    assert str(gatetrace.box(3.14, 3.19)) == "box:3.14..3.19"
+    assert str(gatetrace.transient(1.9, 0.01, 100)) == "transient:1.9,0.01,100"
+    assert str(gatetrace.cw(20e6, 90, "ham3")) == "cw:20000000.0,90.0,ham3"
+    for gate in (gatetrace.box(3.14, 3.19), gatetrace.gaussian(3.0, 0.01), gatetrace.cw(20e6, 90),
+                 gatetrace.transient(1.9, gatetrace.ps(10), 8), gatetrace.none()):
+        assert gate.describe()
+
+
+def test_scene_shows_its_camera_lights_and_nodes():
+    scene = gatetrace.Scene.load(BOX)
+    assert scene.triangles > 0
+    assert scene.camera["position"] == pytest.approx([0.0, 0.0, 2.0])
+    assert scene.camera["aperture_radius"] is None
+    assert [l["type"] for l in scene.lights] == ["area"]
+    assert "camera" in scene.nodes
+    lens = gatetrace.Scene.load(BOX, aperture_radius=0.01, focus_distance=2.0)
+    assert lens.camera["aperture_radius"] == pytest.approx(0.01)
+
+
+def test_the_gil_is_released_while_rendering():
+    renderer = gatetrace.Renderer(BOX, res=(64, 64))
+    renderer.render("none", spp=1)  # builds the kernels
+    ticks = 0
+    done = threading.Event()
+
+    def count():
+        nonlocal ticks
+        while not done.is_set():
+            ticks += 1
+            time.sleep(0.001)
+
+    thread = threading.Thread(target=count)
+    thread.start()
+    start = time.perf_counter()
+    renderer.render("none", seconds=1.0)
+    elapsed = time.perf_counter() - start
+    done.set()
+    thread.join()
+    # A thread that needs the GIL every millisecond ran throughout the render.
+    assert ticks > 100 * elapsed, f"{ticks} ticks in {elapsed:.2f} s"
+
+
+def test_ctrl_c_stops_a_long_render_and_leaves_the_renderer_usable():
+    import _thread
+
+    renderer = gatetrace.Renderer(BOX, res=(64, 64))
+    renderer.render("none", spp=1)
+    timer = threading.Timer(1.0, _thread.interrupt_main)
+    timer.start()
+    start = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        renderer.render("none", seconds=60.0)
+    assert time.perf_counter() - start < 20.0
+    timer.join()
+    image, meta = renderer.render("none", spp=2, seed=1)
+    assert meta["spp"] == 2 and image.mean() > 0
