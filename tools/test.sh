@@ -2,7 +2,8 @@
 # Installs what is missing (tools/setup.sh) and runs the whole test suite: `cargo test` (GPU
 # tests run on the Vulkan device, lavapipe when there is no GPU; extra arguments go to it, e.g.
 # --release), then the Python package's tests: the package is built and installed with
-# `pip install .` into a virtual environment in target/python-env, and pytest runs
+# `pip install .` into a virtual environment in target/python-env (under CARGO_TARGET_DIR when
+# set), and pytest runs
 # python/tests against it and against the command line built by `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,11 +18,12 @@ maturin_profile=dev
 for arg in "$@"; do
     if [ "$arg" = "--release" ]; then profile=release; maturin_profile=release; fi
 done
-env_dir=target/python-env
+target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
+env_dir="$target_dir/python-env"
 if [ ! -x "$env_dir/bin/python" ]; then
     python3 -m venv "$env_dir"
 fi
 # The extension module is built in the profile cargo test just used, so it reuses its build
 # of the renderer.
 MATURIN_PEP517_ARGS="--profile $maturin_profile" "$env_dir/bin/python" -m pip install --quiet --disable-pip-version-check ".[test]"
-GATETRACE_BIN="$PWD/target/$profile/gatetrace" "$env_dir/bin/python" -m pytest -q python/tests
+GATETRACE_BIN="$target_dir/$profile/gatetrace" "$env_dir/bin/python" -m pytest -q python/tests

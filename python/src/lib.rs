@@ -314,16 +314,7 @@ impl Renderer {
         let start = Instant::now();
         let output = if let Some(reason) = unreachable_gate(&scene, &settings) {
             let warning = format!("{reason}: the image is black; no samples were traced");
-            let film = Film::zeroed(settings.width, settings.height, settings.gate.bins());
-            let output = RenderOutput {
-                film,
-                elapsed: start.elapsed(),
-                rendering: Duration::ZERO,
-                truncated_traversals: 0,
-                stats: None,
-                target_pilot_spp: 0,
-                choice: None,
-            };
+            let output = RenderOutput::black(&settings, start.elapsed());
             let mut metadata = self.metadata(&settings, gate, &output)?;
             metadata.push(("warning".into(), warning));
             return Ok((film_array(py, &output.film)?, metadata));

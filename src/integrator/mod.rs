@@ -409,6 +409,22 @@ pub struct RenderOutput {
     pub choice: Option<auto::MethodChoice>,
 }
 
+impl RenderOutput {
+    /// The black image of a render that traced nothing (no path can reach its gate), after
+    /// `elapsed` of setup.
+    pub fn black(settings: &RenderSettings, elapsed: Duration) -> Self {
+        RenderOutput {
+            film: Film::zeroed(settings.width, settings.height, settings.gate.bins()),
+            elapsed,
+            rendering: Duration::ZERO,
+            truncated_traversals: 0,
+            stats: None,
+            target_pilot_spp: 0,
+            choice: None,
+        }
+    }
+}
+
 /// What every output records about its render (scene, settings, timing, device), as the
 /// command line's outputs and the Python package give it: (key, value) pairs in order.
 pub fn render_metadata(
@@ -738,17 +754,7 @@ pub fn render(
     let start = Instant::now();
     if let Some(reason) = unreachable_gate(scene, settings) {
         eprintln!("warning: {reason}: the image is black; no samples were traced");
-        let g = &settings.gate;
-        let film = Film::zeroed(settings.width, settings.height, g.bins());
-        return Ok(RenderOutput {
-            film,
-            elapsed: start.elapsed(),
-            rendering: Duration::ZERO,
-            truncated_traversals: 0,
-            stats: None,
-            target_pilot_spp: 0,
-            choice: None,
-        });
+        return Ok(RenderOutput::black(settings, start.elapsed()));
     }
     // auto: a pilot of both methods (counted against a time budget) picks the one to render with.
     let choice = if settings.method == Method::Auto {
