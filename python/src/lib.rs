@@ -337,6 +337,9 @@ impl Renderer {
                 state.warm = false;
             }
             let tracer = state.integrator.as_mut().expect("built above");
+            // The device counts cut traversals over the integrator's life: this render's are the
+            // difference.
+            let truncated_before = tracer.truncated_traversals().map_err(runtime_error)?;
             let mut interrupted: Option<PyErr> = None;
             let traced = py.detach(|| -> anyhow::Result<Duration> {
                 if matches!(budget, Budget::Time(_)) && !state_warm(&mut state.warm) {
@@ -363,7 +366,7 @@ impl Renderer {
                 film: tracer.film().map_err(runtime_error)?,
                 elapsed: start.elapsed(),
                 rendering,
-                truncated_traversals: tracer.truncated_traversals().map_err(runtime_error)?,
+                truncated_traversals: tracer.truncated_traversals().map_err(runtime_error)? - truncated_before,
                 stats: None,
                 target_pilot_spp: tracer.target_pilot_spp(),
                 choice: None,
