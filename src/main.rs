@@ -598,25 +598,10 @@ fn with_lens_options(
     mut scene: gatetrace::scene::Scene,
     args: &RenderArgs,
 ) -> Result<gatetrace::scene::Scene> {
-    if args.aperture_radius.is_none() && args.focus_distance.is_none() {
-        return Ok(scene);
-    }
-    let old = scene.camera.lens;
-    let radius = args
-        .aperture_radius
-        .or(old.map(|l| l.aperture_radius))
-        .unwrap_or(0.0);
-    let focus = args.focus_distance.or(old.map(|l| l.focus_distance));
-    scene.camera.lens = match (radius, focus) {
-        (r, _) if r == 0.0 => None,
-        (r, Some(f)) => Some(
-            gatetrace::scene::ThinLens::new(r, f).context("--aperture-radius/--focus-distance")?,
-        ),
-        (_, None) => bail!(
-            "--aperture-radius needs a focus distance: give --focus-distance METRES (the camera of {} has none)",
-            scene.source
-        ),
-    };
+    scene
+        .camera
+        .override_lens(args.aperture_radius, args.focus_distance, "--focus-distance METRES")
+        .with_context(|| format!("{}: --aperture-radius/--focus-distance", scene.source))?;
     Ok(scene)
 }
 

@@ -133,14 +133,7 @@ fn pilot_renders_a_smaller_image_and_the_render_is_the_chosen_methods() {
 fn steady_state_takes_direct_without_a_pilot_and_directional_lights_get_one() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let output = render(
-        &ctx,
-        &scene,
-        &auto_settings("none"),
-        Budget::Samples(4),
-        |_| {},
-    )
-    .unwrap();
+    let output = render(&ctx, &scene, &auto_settings("none"), Budget::Samples(4), |_| {}).unwrap();
     let choice = output.choice.unwrap();
     assert_eq!(choice.chosen, Method::Direct);
     assert!(
@@ -152,14 +145,7 @@ fn steady_state_takes_direct_without_a_pilot_and_directional_lights_get_one() {
     let path = common::repo_path("assets/scenes/cornell_box_directional.gltf");
     let scene =
         gatetrace::scene::PreparedScene::new(gatetrace::scene::load_gltf(&path).unwrap()).unwrap();
-    let output = render(
-        &ctx,
-        &scene,
-        &auto_settings("box:3.6..3.7"),
-        Budget::Samples(4),
-        |_| {},
-    )
-    .unwrap();
+    let output = render(&ctx, &scene, &auto_settings("box:3.6..3.7"), Budget::Samples(4), |_| {}).unwrap();
     // Ellipsoidal connections serve directional lights too: both methods are measured.
     let choice = output.choice.unwrap();
     assert_eq!(choice.candidates.len(), 2, "{choice:?}");

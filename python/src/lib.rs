@@ -23,7 +23,7 @@ use gatetrace::integrator::{
     Budget, Integrator, Method, QuerySettings, RenderOutput, RenderSettings, create_integrator, render_metadata,
     trace_budget, unreachable_gate,
 };
-use gatetrace::scene::{PreparedScene, ThinLens, load_gltf};
+use gatetrace::scene::{PreparedScene, load_gltf};
 
 /// The process's device, opened on first use and shared by every renderer.
 fn device() -> PyResult<&'static GpuContext> {
@@ -70,19 +70,10 @@ impl Scene {
         }
         let load = || -> anyhow::Result<PreparedScene> {
             let mut scene = load_gltf(&path)?;
-            if aperture_radius.is_some() || focus_distance.is_some() {
-                let old = scene.camera.lens;
-                let radius = aperture_radius.or(old.map(|l| l.aperture_radius)).unwrap_or(0.0);
-                let focus = focus_distance.or(old.map(|l| l.focus_distance));
-                scene.camera.lens = match (radius, focus) {
-                    (r, _) if r == 0.0 => None,
-                    (r, Some(f)) => Some(ThinLens::new(r, f)?),
-                    (_, None) => anyhow::bail!(
-                        "{}: aperture_radius needs a focus distance (focus_distance=..., metres): the camera has none",
-                        scene.source
-                    ),
-                };
-            }
+            scene
+                .camera
+                .override_lens(aperture_radius, focus_distance, "focus_distance=METRES")
+                .map_err(|e| e.context(format!("{}: aperture_radius/focus_distance", scene.source)))?;
             PreparedScene::new(scene)
         };
         let prepared = py.detach(load).map_err(value_error)?;
@@ -342,7 +333,7 @@ impl Renderer {
             let truncated_before = tracer.truncated_traversals().map_err(runtime_error)?;
             let mut interrupted: Option<PyErr> = None;
             let traced = py.detach(|| -> anyhow::Result<Duration> {
-                if matches!(budget, Budget::Time(_)) && !state_warm(&mut state.warm) {
+                if matches!(budget, Budget::Time(_)) && !std::mem::replace(&mut state.warm, true) {
                     tracer.warm_up()?;
                 }
                 tracer.restart(seed);
@@ -418,11 +409,6 @@ impl Renderer {
         metadata.push(("camera".into(), self.scene.scene.camera.describe()));
         Ok(metadata)
     }
-}
-
-/// Marks the integrator warm, returning whether it was already.
-fn state_warm(warm: &mut bool) -> bool {
-    std::mem::replace(warm, true)
 }
 
 /// A film as a float32 numpy array: [H, W, 3], or [H, W, T, 3] for more than one bin; row 0 is

@@ -106,6 +106,8 @@ def test_bidirectional_methods_agree_with_path_on_the_image_mean():
     [
         (lambda: gatetrace.Scene.load(ROOT / "no/such/scene.gltf"), FileNotFoundError, "no such file"),
         (lambda: gatetrace.Scene.load(ROOT / "README.md"), ValueError, "README.md"),
+        (lambda: gatetrace.Scene.load(BOX, aperture_radius=0.01), ValueError, "focus_distance="),
+        (lambda: gatetrace.Scene.load(BOX, aperture_radius=0.01, focus_distance=-1.0), ValueError, "-1 m"),
         (lambda: gatetrace.Renderer(BOX, method="bidirectional"), ValueError, "method"),
         (lambda: gatetrace.Renderer(BOX, res=(0, 64)), ValueError, "res"),
         (lambda: gatetrace.Renderer(BOX, res=64), ValueError, "res"),

@@ -45,6 +45,30 @@ impl ThinLens {
 }
 
 impl CameraDesc {
+    /// Overrides the lens from the scene file: `aperture_radius` (m; 0 makes a pinhole) and
+    /// `focus_distance` (m) replace the file's where given. A radius without any focus distance
+    /// is an error whose hint names `focus_option`, the caller's way of giving one (the command
+    /// line's `--focus-distance METRES`, the Python package's `focus_distance=...`).
+    pub fn override_lens(
+        &mut self,
+        aperture_radius: Option<f32>,
+        focus_distance: Option<f32>,
+        focus_option: &str,
+    ) -> anyhow::Result<()> {
+        if aperture_radius.is_none() && focus_distance.is_none() {
+            return Ok(());
+        }
+        let old = self.lens;
+        let radius = aperture_radius.or(old.map(|l| l.aperture_radius)).unwrap_or(0.0);
+        let focus = focus_distance.or(old.map(|l| l.focus_distance));
+        self.lens = match (radius, focus) {
+            (r, _) if r == 0.0 => None,
+            (r, Some(f)) => Some(ThinLens::new(r, f)?),
+            (_, None) => anyhow::bail!("a thin lens needs a focus distance: give {focus_option} (the camera has none)"),
+        };
+        Ok(())
+    }
+
     /// `pinhole`, or the thin lens's aperture radius and focus distance (m), as outputs'
     /// metadata records the camera.
     pub fn describe(&self) -> String {
