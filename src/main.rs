@@ -88,28 +88,28 @@ struct RenderArgs {
     #[arg(long, default_value = "none", value_name = "SPEC")]
     gate: String,
     /// Samples per pixel (default 64 unless --time is given).
-    #[arg(long, conflicts_with = "time")]
+    #[arg(long, conflicts_with = "time", allow_hyphen_values = true)]
     spp: Option<u64>,
     /// Render for this many seconds instead of --spp (rendering only: scene loading, BVH build
     /// and kernel builds come first). Passes are sized from the measured rate so the render
     /// ends before the budget, overrunning it by at most one sample per pixel's time.
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true)]
     time: Option<f64>,
     /// Image size in pixels, WIDTHxHEIGHT.
-    #[arg(long, default_value = "256x256", value_parser = parse_resolution)]
+    #[arg(long, default_value = "256x256", value_parser = parse_resolution, allow_hyphen_values = true)]
     res: (u32, u32),
     /// Maximum number of scattering vertices of a path (0: only lights seen directly).
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(0..=1_000_000), allow_hyphen_values = true)]
     max_bounces: u32,
     /// Start Russian roulette after this many scattering vertices (off when not given).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     rr_depth: Option<u32>,
     /// Random seed; equal seeds and settings give identical images.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     seed: u32,
     /// Samples per pixel of one pass, traced together on the GPU when they fit (chosen from the
     /// image size by default). --time renders whole passes.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     samples_per_pass: Option<u32>,
     /// Print, per (s, t) strategy of a bidirectional method, the connections evaluated, those
     /// skipped (direct: the gate weighs their length zero; ellipsoidal: the spheroid met no
@@ -129,7 +129,7 @@ struct RenderArgs {
     /// equal time, from 2.5 mm to 50 cm gates and from 12 to 327,692 triangles. For --nlos
     /// captures 1: 0.41x the error of 4 at equal time on a 327,680-triangle hidden object (4 ps
     /// bins), though 2.4x on the example scene's letter.
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "K", allow_hyphen_values = true)]
     connections_per_query: Option<u32>,
     /// `ellipsoidal`: BVH nodes whose box diagonal is at most R times the spheroid's semi-major
     /// axis are entered by a stochastic descent (one child at a time, in proportion to an
@@ -172,7 +172,7 @@ struct RenderArgs {
     /// error on a 327,680-triangle hidden object, a sixth on the example scene's letter). Needs
     /// at most pixels x (bins + 1) x 4 bytes of device memory in one binding; where that does
     /// not fit, the render goes without (the metadata's target_pilot_spp says 0).
-    #[arg(long, value_name = "SPP")]
+    #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     target_pilot: Option<u32>,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
@@ -189,7 +189,7 @@ struct RenderArgs {
     /// Render a sequence of N frames (see --gate-step); --out then names each frame with
     /// {frame} or {frame:04}. Frame i renders with seed S + i x 0x9E3779B9 (mod 2^32), so frame
     /// 0 is the single image of seed S.
-    #[arg(long, default_value_t = 1, value_name = "N")]
+    #[arg(long, default_value_t = 1, value_name = "N", allow_hyphen_values = true)]
     frames: u32,
     /// Move the gate by D per frame: metres of optical path, or with a mm/ps/ns suffix
     /// (negative: earlier). A CW gate's phase moves by -360 f D / c degrees.
@@ -251,7 +251,7 @@ struct RenderArgs {
     #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
     laser_grid: Option<(u32, u32)>,
     /// --nlos: the laser beam's power (W).
-    #[arg(long, default_value_t = 1.0, value_name = "WATTS")]
+    #[arg(long, default_value_t = 1.0, value_name = "WATTS", allow_hyphen_values = true)]
     laser_power: f32,
     /// --nlos: count the laser origin -> spot and sensed point -> sensor origin segments in path
     /// lengths (mitransient's account_first_and_last_bounces; off by default, as there).

@@ -354,11 +354,13 @@ pub fn film_elements(settings: &RenderSettings) -> Result<u64> {
     let most = MAX_CHUNKS * (1u64 << 31) / 8;
     ensure!(
         elements <= most,
-        "the film of {}x{} pixels x {} bins needs {:.1} GiB; reduce the resolution or the bins",
+        "--res {}x{} with {} bins: the film needs {:.1} GiB of device memory, more than the {} GiB it can be \
+         split over; reduce the resolution or the bins",
         settings.width,
         settings.height,
         settings.gate.bins(),
-        elements as f64 * 8.0 / (1u64 << 30) as f64
+        elements as f64 * 8.0 / (1u64 << 30) as f64,
+        most * 8 >> 30
     );
     Ok(elements)
 }

@@ -26,6 +26,7 @@ pub fn sample_animations(
         for channel in animation.channels() {
             animated = true;
             let what = format!("{name}: {anim_name}, channel {}", channel.index());
+            check_channel(doc, animation.index(), &channel).map_err(|e| anyhow!("{what}: {e}"))?;
             let node = channel.target().node();
             let reader = channel.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
             let times: Vec<f32> = reader.read_inputs().ok_or_else(|| anyhow!("{what}: cannot read the key times"))?.collect();
@@ -70,6 +71,50 @@ pub fn sample_animations(
     }
     ensure!(animated, "{name}: --anim-time given, but the file has no animation");
     Ok(trs.into_iter().map(|(node, (t, r, s))| (node, Mat4::from_scale_rotation_translation(s, r, t))).collect())
+}
+
+/// Checks what the glTF reader would otherwise unwrap or reinterpret: the channel's target path
+/// and interpolation are known names, its key times are floats (SCALAR) and its values have
+/// the types glTF 2.0 requires of its path.
+fn check_channel(doc: &gltf::Document, animation: usize, channel: &gltf::animation::Channel) -> Result<()> {
+    use gltf::accessor::{DataType as D, Dimensions};
+    use gltf::json::validation::Checked;
+    let json = &doc.as_json().animations[animation];
+    let channel_json = &json.channels[channel.index()];
+    let Checked::Valid(property) = channel_json.target.path else {
+        bail!("the target path is not translation, rotation, scale or weights");
+    };
+    let sampler = json.samplers.get(channel_json.sampler.value()).ok_or_else(|| anyhow!("its sampler does not exist"))?;
+    if !matches!(sampler.interpolation, Checked::Valid(_)) {
+        bail!("the interpolation is not LINEAR, STEP or CUBICSPLINE");
+    }
+    let root = doc.as_json();
+    ensure!(channel_json.target.node.value() < root.nodes.len(), "its target node {} does not exist", channel_json.target.node.value());
+    for (role, accessor) in [("key times", sampler.input), ("key values", sampler.output)] {
+        ensure!(accessor.value() < root.accessors.len(), "the accessor {} of its {role} does not exist", accessor.value());
+    }
+    let (input, output) = (channel.sampler().input(), channel.sampler().output());
+    ensure!(
+        input.dimensions() == Dimensions::Scalar && input.data_type() == D::F32,
+        "key times (accessor {}) must be SCALAR of float",
+        input.index()
+    );
+    let ok = match property {
+        Property::Translation | Property::Scale => output.dimensions() == Dimensions::Vec3 && output.data_type() == D::F32,
+        Property::Rotation => {
+            output.dimensions() == Dimensions::Vec4
+                && (output.data_type() == D::F32
+                    || (output.normalized() && matches!(output.data_type(), D::I8 | D::U8 | D::I16 | D::U16)))
+        }
+        Property::MorphTargetWeights => true,
+    };
+    ensure!(
+        ok,
+        "key values (accessor {}) have the wrong type for {property:?}: glTF 2.0 requires VEC3 of float for \
+         translation and scale, VEC4 of float or normalised integers for rotation",
+        output.index()
+    );
+    Ok(())
 }
 
 /// The value of one channel at time t: keys `times`, values `values` (three per key for

@@ -31,7 +31,7 @@ pub fn load_gltf_for_capture(path: &Path) -> Result<Scene> {
 fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
+    let gltf = parse_gltf(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = gltf::import_buffers(&gltf.document, Some(base), gltf.blob.clone())
         .map_err(|e| anyhow!("{name}: cannot load a buffer: {e}"))?;
@@ -42,6 +42,29 @@ fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
         None => Default::default(),
     };
     Loader { name: &name, buffers: &buffers, images: &images, pose, capture }.load(&gltf.document)
+}
+
+/// Parses and validates a glTF or GLB file's bytes, as `gltf::Gltf::from_slice` does, but first
+/// checks what that validation indexes without checking (gltf-json 1.4.1 panics on a
+/// primitive whose POSITION names no accessor).
+fn parse_gltf(bytes: &[u8]) -> Result<gltf::Gltf, gltf::Error> {
+    use gltf::json::validation::{Error, Validate};
+    let gltf = gltf::Gltf::from_slice_without_validation(bytes)?;
+    let root = gltf.document.as_json();
+    let mut errors = Vec::new();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let position = primitive.attributes.get(&gltf::json::validation::Checked::Valid(gltf::Semantic::Positions));
+            if position.is_some_and(|a| a.value() >= root.accessors.len()) {
+                let path = gltf::json::Path::new().field("meshes").index(m).field("primitives").index(p);
+                errors.push((path.field("attributes").key("POSITION"), Error::IndexOutOfBounds));
+            }
+        }
+    }
+    if errors.is_empty() {
+        root.validate(root, gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
+    }
+    if errors.is_empty() { Ok(gltf) } else { Err(gltf::Error::Validation(errors)) }
 }
 
 struct Loader<'a> {
@@ -118,15 +141,27 @@ impl Loader<'_> {
                  capture, --nlos, needs none)"
             ),
         };
+        if c.triangles.is_empty() && c.dropped_degenerate > 0 {
+            bail!("{name}: all {} triangles of the scene have zero area", c.dropped_degenerate);
+        }
+        if c.triangles.is_empty() {
+            bail!("{name}: the scene has no triangles");
+        }
         let emissive = c.triangles.iter().any(|t| materials[t.material as usize].is_emissive());
-        if !emissive && c.point_lights.is_empty() && c.directional_lights.is_empty() && !self.capture {
+        let punctual = c.point_lights.len() + c.directional_lights.len();
+        if !emissive && punctual == 0 && !self.capture {
             bail!(
                 "{name}: no light: add an emissive material (emissiveFactor, KHR_materials_emissive_strength) \
                  or a KHR_lights_punctual light (an NLOS capture, --nlos, needs none)"
             );
         }
-        if c.triangles.is_empty() {
-            bail!("{name}: the scene has no triangles");
+        let powered = c.point_lights.iter().any(|l| l.intensity.max_element() > 0.0)
+            || c.directional_lights.iter().any(|l| l.irradiance.max_element() > 0.0);
+        if !emissive && !powered && !self.capture {
+            bail!(
+                "{name}: the scene's {punctual} KHR_lights_punctual lights emit no power (intensity 0) and no material \
+                 is emissive: the image would be black"
+            );
         }
         if c.triangles.len() > crate::gpu::layout::MAX_TRIANGLES as usize {
             bail!("{name}: {} triangles exceed the supported {}", c.triangles.len(), crate::gpu::layout::MAX_TRIANGLES);
@@ -281,6 +316,7 @@ impl Loader<'_> {
             if prim.mode() != gltf::mesh::Mode::Triangles {
                 bail!("{name}: {what}: primitive mode {:?} is not supported (triangles only)", prim.mode());
             }
+            check_accessors(&prim).map_err(|e| anyhow!("{name}: {what}: {e}"))?;
             let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
             let positions: Vec<Vec3> = reader
                 .read_positions()
@@ -289,6 +325,13 @@ impl Loader<'_> {
                 .collect();
             if let Some(bad) = positions.iter().position(|p| !p.is_finite()) {
                 bail!("{name}: {what}: vertex {bad} is not finite");
+            }
+            if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| p.abs().max_element() > MAX_COORDINATE) {
+                bail!(
+                    "{name}: {what}: vertex {i} has a coordinate of {:e} m, beyond the +-{MAX_COORDINATE:e} m gatetrace \
+                     accepts (f32 coordinates are 64 m apart there: keep the scene near the origin)",
+                    p.abs().max_element()
+                );
             }
             let normals: Option<Vec<Vec3>> = reader
                 .read_normals()
@@ -419,6 +462,66 @@ impl Loader<'_> {
             roughness,
         })
     }
+}
+
+/// Largest magnitude (m) of a vertex coordinate: at 1e9 m neighbouring f32 values are 64 m apart,
+/// and much further out squared lengths overflow f32.
+pub const MAX_COORDINATE: f32 = 1e9;
+
+/// Checks that a primitive's accessors have the types glTF 2.0 requires of them (the reader
+/// would reinterpret others): POSITION and NORMAL float VEC3, TEXCOORD_n VEC2 of floats or
+/// normalised unsigned bytes or shorts, indices SCALAR unsigned bytes, shorts or ints.
+fn check_accessors(prim: &gltf::Primitive) -> Result<()> {
+    use gltf::accessor::{DataType as D, Dimensions};
+    use gltf::Semantic;
+    let describe = |a: &gltf::Accessor| {
+        let dimensions = match a.dimensions() {
+            Dimensions::Scalar => "SCALAR",
+            Dimensions::Vec2 => "VEC2",
+            Dimensions::Vec3 => "VEC3",
+            Dimensions::Vec4 => "VEC4",
+            Dimensions::Mat2 => "MAT2",
+            Dimensions::Mat3 => "MAT3",
+            Dimensions::Mat4 => "MAT4",
+        };
+        let component = match a.data_type() {
+            D::I8 => "byte",
+            D::U8 => "unsigned byte",
+            D::I16 => "short",
+            D::U16 => "unsigned short",
+            D::U32 => "unsigned int",
+            D::F32 => "float",
+        };
+        format!("accessor {} ({dimensions} of {component})", a.index())
+    };
+    for (semantic, a) in prim.attributes() {
+        let (ok, needs) = match &semantic {
+            Semantic::Positions | Semantic::Normals => {
+                (a.dimensions() == Dimensions::Vec3 && a.data_type() == D::F32, "VEC3 of float")
+            }
+            Semantic::TexCoords(_) => (
+                a.dimensions() == Dimensions::Vec2
+                    && (a.data_type() == D::F32 || (a.normalized() && matches!(a.data_type(), D::U8 | D::U16))),
+                "VEC2 of float or normalised unsigned byte or short",
+            ),
+            _ => (true, ""),
+        };
+        if !ok {
+            let label = match &semantic {
+                Semantic::Positions => "POSITION".to_owned(),
+                Semantic::Normals => "NORMAL".to_owned(),
+                Semantic::TexCoords(n) => format!("TEXCOORD_{n}"),
+                other => format!("{other:?}"),
+            };
+            bail!("{label} is {}, but glTF 2.0 requires {needs}", describe(&a));
+        }
+    }
+    if let Some(a) = prim.indices()
+        && !(a.dimensions() == Dimensions::Scalar && matches!(a.data_type(), D::U8 | D::U16 | D::U32))
+    {
+        bail!("indices are {}, but glTF 2.0 requires SCALAR of unsigned byte, short or int", describe(&a));
+    }
+    Ok(())
 }
 
 /// Decodes an 8- or 16-bit sRGB-encoded (or float, linear) image to linear RGB.

@@ -1,0 +1,507 @@
+//! Hostile input: every case must exit non-zero with an error that names the file or option and
+//! the problem, must not panic, and must write no output file. Property tests feed mutated glTF
+//! documents and gate specifications to the loaders and check that they never panic.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::gltf_builder::{Camera, Material, Mesh, PointLight, Scene, quad_z, write_json};
+use serde_json::{Value, json};
+
+/// The Cornell box's glTF document (one embedded buffer).
+fn cornell_box_json() -> Value {
+    serde_json::from_str(&std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.gltf")).unwrap()).unwrap()
+}
+
+/// A quad lit by an emissive quad behind the camera, with the given first-quad positions.
+fn lit_scene(positions: Vec<[f32; 3]>) -> Scene {
+    let n = positions.len() as u32;
+    Scene {
+        meshes: vec![
+            Mesh { positions, normals: None, uvs: None, indices: (0..n).collect(), material: Some(0) },
+            quad_z(1.0, 1.0, false, 1),
+        ],
+        materials: vec![Material::diffuse([0.5; 3]), Material::emitter(2.0)],
+        camera: Some(Camera { position: [0.0, 0.0, 0.5], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 0.5 }),
+        point_lights: vec![],
+    }
+}
+
+/// Writes a lit scene whose second vertex is `vertex`, with finite POSITION bounds (as a broken
+/// exporter might write them), so that only the vertex data is wrong.
+fn write_with_bounds(dir: &Path, name: &str, vertex: [f32; 3]) {
+    let mut doc = lit_scene(vec![[-1.0, -1.0, -1.0], vertex, [0.0, 1.0, -1.0]]).to_json();
+    doc["accessors"][0]["min"] = json!([-1.0, -1.0, -1.0]);
+    doc["accessors"][0]["max"] = json!([1.0, 1.0, -1.0]);
+    write_json(dir, name, &doc);
+}
+
+/// A GLB container holding `doc` as its JSON chunk (buffers keep their data URIs).
+fn glb(doc: &Value) -> Vec<u8> {
+    let mut json = serde_json::to_vec(doc).unwrap();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let total = 12 + 8 + json.len();
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out
+}
+
+/// One hostile input: the command's arguments (`{dir}` is the case's directory, `{out}` the
+/// output it must not write) and what the error must say.
+struct Case {
+    name: &'static str,
+    args: Vec<String>,
+    needles: Vec<String>,
+}
+
+/// Builds a case whose files are written by `setup` into its directory.
+fn case(name: &'static str, setup: impl FnOnce(&Path) + 'static, args: Vec<String>, needles: &[&str]) -> (Case, Box<dyn FnOnce(&Path)>) {
+    let c = Case { name, args, needles: needles.iter().map(|s| s.to_string()).collect() };
+    let setup: Box<dyn FnOnce(&Path)> = Box::new(setup);
+    (c, setup)
+}
+
+fn none(_: &Path) {}
+
+/// Writes the Cornell box changed by `edit` as `name`.
+fn box_with(name: &'static str, edit: impl FnOnce(&mut Value) + 'static) -> impl FnOnce(&Path) {
+    move |dir: &Path| {
+        let mut doc = cornell_box_json();
+        edit(&mut doc);
+        write_json(dir, name, &doc);
+    }
+}
+
+fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
+    // `render SCENE` of a tiny image with `extra` options, writing {out}.
+    let render = |scene: &str, extra: &[&str]| -> Vec<String> {
+        let tiny = ["--res", "8x8", "--spp", "1", "--max-bounces", "2"];
+        let tail = ["--out", "{out}"];
+        std::iter::once("render").chain([scene]).chain(tiny).chain(extra.iter().copied()).chain(tail).map(String::from).collect()
+    };
+    // `render` of the default scene with `extra` options, writing {out}.
+    let default_scene = |extra: &[&str]| -> Vec<String> {
+        std::iter::once("render").chain(extra.iter().copied()).chain(["--out", "{out}"]).map(String::from).collect()
+    };
+    let plain = |args: &[&str]| -> Vec<String> { args.iter().map(|s| s.to_string()).collect() };
+    vec![
+        // --- files that are not glTF ---
+        case("empty file", |d| std::fs::write(d.join("empty.gltf"), b"").unwrap(), render("{dir}/empty.gltf", &[]),
+             &["empty.gltf", "not a valid glTF"]),
+        case("malformed JSON", |d| std::fs::write(d.join("bad.gltf"), b"{\"asset\": {\"version\": \"2.0\"},").unwrap(),
+             render("{dir}/bad.gltf", &[]), &["bad.gltf", "not a valid glTF"]),
+        case("truncated glTF", |d| {
+            let text = std::fs::read(common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
+            std::fs::write(d.join("half.gltf"), &text[..text.len() / 2]).unwrap();
+        }, render("{dir}/half.gltf", &[]), &["half.gltf", "not a valid glTF"]),
+        case("truncated GLB", |d| {
+            let bytes = glb(&cornell_box_json());
+            std::fs::write(d.join("half.glb"), &bytes[..bytes.len() / 2]).unwrap();
+        }, render("{dir}/half.glb", &[]), &["half.glb", "not a valid glTF"]),
+        case("missing scene file", none, render("{dir}/nowhere.gltf", &[]), &["nowhere.gltf", "cannot read"]),
+        // --- buffers and images ---
+        case("missing buffer", box_with("missing_buffer.gltf", |d| d["buffers"][0]["uri"] = json!("gone.bin")),
+             render("{dir}/missing_buffer.gltf", &[]), &["missing_buffer.gltf", "cannot load a buffer"]),
+        case("short buffer", box_with("short_buffer.gltf", |d| {
+            let n = d["buffers"][0]["byteLength"].as_u64().unwrap();
+            d["buffers"][0]["byteLength"] = json!(n + 64);
+        }), render("{dir}/short_buffer.gltf", &[]), &["short_buffer.gltf", "buffer"]),
+        case("missing image", box_with("missing_image.gltf", |d| {
+            d["images"] = json!([{"uri": "gone.png"}]);
+            d["textures"] = json!([{"source": 0}]);
+            d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
+        }), render("{dir}/missing_image.gltf", &[]), &["missing_image.gltf", "cannot load an image"]),
+        case("corrupt image", |d| {
+            std::fs::write(d.join("noise.png"), b"\x89PNG\r\n\x1a\n this is not a PNG").unwrap();
+            box_with("corrupt_image.gltf", |d| {
+                d["images"] = json!([{"uri": "noise.png"}]);
+                d["textures"] = json!([{"source": 0}]);
+                d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
+            })(d)
+        }, render("{dir}/corrupt_image.gltf", &[]), &["corrupt_image.gltf", "image"]),
+        // --- accessors ---
+        case("POSITION accessor of type SCALAR", box_with("scalar_positions.gltf", |d| {
+            // min and max stay VEC3-sized, so only the type is wrong.
+            d["accessors"][0]["type"] = json!("SCALAR");
+        }), render("{dir}/scalar_positions.gltf", &[]), &["scalar_positions.gltf", "POSITION", "VEC3"]),
+        case("POSITION accessor of unsigned bytes", box_with("byte_positions.gltf", |d| d["accessors"][0]["componentType"] = json!(5121)),
+             render("{dir}/byte_positions.gltf", &[]), &["byte_positions.gltf", "POSITION", "float"]),
+        case("index accessor of type VEC2", box_with("vec2_indices.gltf", |d| d["accessors"][2]["type"] = json!("VEC2")),
+             render("{dir}/vec2_indices.gltf", &[]), &["vec2_indices.gltf", "indices", "SCALAR"]),
+        case("accessor past its buffer", box_with("long_accessor.gltf", |d| d["accessors"][0]["count"] = json!(4000)),
+             render("{dir}/long_accessor.gltf", &[]), &["long_accessor.gltf"]),
+        case("index out of range", |d| {
+            let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
+            s.meshes[0].indices = vec![0, 1, 7];
+            s.write(d, "bad_index.gltf");
+        }, render("{dir}/bad_index.gltf", &[]), &["bad_index.gltf", "index 7 is out of range"]),
+        // --- coordinates ---
+        case("NaN vertex", |d| write_with_bounds(d, "nan.gltf", [f32::NAN, -1.0, -1.0]),
+             render("{dir}/nan.gltf", &[]), &["nan.gltf", "vertex 1 is not finite"]),
+        case("infinite vertex", |d| write_with_bounds(d, "inf.gltf", [1.0, f32::INFINITY, -1.0]),
+             render("{dir}/inf.gltf", &[]), &["inf.gltf", "vertex 1 is not finite"]),
+        case("non-finite vertex without bounds", |d| {
+            lit_scene(vec![[-1.0, -1.0, -1.0], [f32::INFINITY, -1.0, -1.0], [0.0, 1.0, -1.0]]).write(d, "inf_no_bounds.gltf");
+        }, render("{dir}/inf_no_bounds.gltf", &[]), &["inf_no_bounds.gltf", "POSITION", "min"]),
+        case("vertex at 1e30 m", |d| { lit_scene(vec![[-1.0, -1.0, -1.0], [1e30, -1.0, -1.0], [0.0, 1.0, -1.0]]).write(d, "far_vertex.gltf"); },
+             render("{dir}/far_vertex.gltf", &[]), &["far_vertex.gltf", "1e30", "m"]),
+        case("node translated by 1e30 m", box_with("far_node.gltf", |d| d["nodes"][0]["translation"] = json!([1e30, 0.0, 0.0])),
+             render("{dir}/far_node.gltf", &[]), &["far_node.gltf", "node `floor`", "1e30"]),
+        case("only degenerate triangles", |d| {
+            let mut s = lit_scene(vec![[0.0, 0.0, -1.0]; 6]);
+            s.meshes[1] = Mesh { positions: vec![[1.0, 1.0, 1.0]; 3], normals: None, uvs: None, indices: vec![0, 1, 2], material: Some(1) };
+            s.write(d, "degenerate.gltf");
+        }, render("{dir}/degenerate.gltf", &[]), &["degenerate.gltf", "zero area"]),
+        // --- camera and lights ---
+        case("no camera", |d| { let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]); s.camera = None; s.write(d, "no_camera.gltf"); },
+             render("{dir}/no_camera.gltf", &[]), &["no_camera.gltf", "no camera"]),
+        case("no light", box_with("no_light.gltf", |d| {
+            for m in d["materials"].as_array_mut().unwrap() {
+                m.as_object_mut().unwrap().remove("emissiveFactor");
+            }
+        }), render("{dir}/no_light.gltf", &[]), &["no_light.gltf", "no light"]),
+        case("zero-power light", |d| {
+            let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
+            s.materials[1] = Material::diffuse([0.5; 3]);
+            s.point_lights = vec![PointLight { position: [0.0, 0.0, 0.0], intensity: 0.0 }];
+            s.write(d, "dark_light.gltf");
+        }, render("{dir}/dark_light.gltf", &[]), &["dark_light.gltf", "no power"]),
+        // --- animations ---
+        case("animation keys out of order", |d| {
+            let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box_moving_block.gltf")).unwrap()).unwrap();
+            let input = doc["animations"][0]["samplers"][0]["input"].as_u64().unwrap() as usize;
+            doc["accessors"][input]["count"] = json!(1);
+            doc["animations"][0]["samplers"][0]["output"] = json!(input);
+            write_json(d, "bad_animation.gltf", &doc);
+        }, render("{dir}/bad_animation.gltf", &["--anim-time", "0.5"]), &["bad_animation.gltf", "animation"]),
+        case("--anim-time without animation", none, default_scene(&["--res", "8x8", "--spp", "1", "--anim-time", "0.5"]),
+             &["--anim-time", "no animation"]),
+        // --- gates ---
+        case("box gate ending before it starts", none, default_scene(&["--gate", "box:3.2..3.1"]), &["--gate box:3.2..3.1", "must exceed"]),
+        case("gaussian gate with sigma 0", none, default_scene(&["--gate", "gaussian:3,0"]), &["--gate gaussian:3,0", "sigma"]),
+        case("cw gate at a negative frequency", none, default_scene(&["--gate", "cw:-20e6,0"]), &["--gate cw:-20e6,0", "frequency"]),
+        case("cw gate with an unknown code", none, default_scene(&["--gate", "cw:20e6,0,zigzag"]), &["--gate cw:20e6,0,zigzag", "unknown cw code"]),
+        case("transient gate of 0 bins", none, default_scene(&["--gate", "transient:3,0.01,0"]), &["--gate transient:3,0.01,0", "bins"]),
+        case("transient gate of negative width", none, default_scene(&["--gate", "transient:3,-0.01,8"]), &["--gate transient:3,-0.01,8", "width"]),
+        case("unknown gate kind", none, default_scene(&["--gate", "wobble:1"]), &["--gate wobble:1", "unknown gate kind"]),
+        case("gate length that is no number", none, default_scene(&["--gate", "box:1x..2"]), &["--gate box:1x..2", "not a length"]),
+        case("malformed gate table", |d| std::fs::write(d.join("gate.csv"), "3.0,1.0\n3.1,heavy\n").unwrap(),
+             default_scene(&["--gate", "table:{dir}/gate.csv"]), &["gate.csv:2", "length,weight"]),
+        case("gate table with decreasing lengths", |d| std::fs::write(d.join("gate.csv"), "3.1,1.0\n3.0,0.5\n").unwrap(),
+             default_scene(&["--gate", "table:{dir}/gate.csv"]), &["gate.csv", "increase"]),
+        case("missing gate table", none, default_scene(&["--gate", "table:{dir}/none.csv"]), &["none.csv"]),
+        // --- sizes and counts ---
+        case("zero resolution", none, default_scene(&["--res", "0x4"]), &["--res", "resolution"]),
+        case("negative resolution", none, default_scene(&["--res", "-4x4"]), &["--res"]),
+        case("absurd resolution", none, default_scene(&["--res", "100000x100000"]), &["--res", "16384"]),
+        case("zero spp", none, default_scene(&["--spp", "0"]), &["--spp", "at least 1"]),
+        case("negative spp", none, default_scene(&["--spp", "-3"]), &["--spp"]),
+        case("absurd spp", none, default_scene(&["--spp", "100000000000000000000"]), &["--spp"]),
+        case("negative time", none, default_scene(&["--time", "-1"]), &["--time", "positive"]),
+        case("negative bounces", none, default_scene(&["--max-bounces", "-1"]), &["--max-bounces"]),
+        case("absurd bounces", none, default_scene(&["--max-bounces", "5000000"]), &["--max-bounces"]),
+        case("too many bidirectional bounces", none, default_scene(&["--method", "direct", "--max-bounces", "30"]),
+             &["at most 24 bounces"]),
+        case("transient cube that cannot fit", none, default_scene(&["--res", "16384x16384", "--gate", "transient:3,0.001,4096"]),
+             &["--res 16384x16384", "4096 bins", "GiB"]),
+        // --- methods and options ---
+        case("unknown method", none, default_scene(&["--method", "magic"]), &["--method", "magic"]),
+        case("--spp with --time", none, default_scene(&["--spp", "4", "--time", "2"]), &["--spp", "--time"]),
+        case("ellipsoidal without a gate", none, default_scene(&["--method", "ellipsoidal"]),
+             &["ellipsoidal", "draws target path lengths from the gate"]),
+        case("--debug-strategy without direct", none, default_scene(&["--debug-strategy", "1,2"]), &["--debug-strategy", "needs --method direct"]),
+        case("--target-pilot with path", none, default_scene(&["--target-pilot", "16"]), &["--target-pilot", "ellipsoidal"]),
+        case("a lens without focus", none, default_scene(&["--aperture-radius", "0.1"]), &["give --focus-distance"]),
+        case("a negative focus distance", none, default_scene(&["--aperture-radius", "0.1", "--focus-distance", "-2"]),
+             &["--aperture-radius/--focus-distance", "focus distance -2 m is not a positive length"]),
+        case("a NaN aperture", none, default_scene(&["--aperture-radius", "nan", "--focus-distance", "2"]), &["--aperture-radius/--focus-distance", "aperture radius NaN m"]),
+        case("a strategy that does not exist", none, default_scene(&["--method", "direct", "--debug-strategy", "0,1"]),
+             &["--debug-strategy", "not a strategy"]),
+        case("a strategy of one number", none, default_scene(&["--method", "direct", "--debug-strategy", "1"]),
+             &["--debug-strategy", "S,T"]),
+        // --- outputs ---
+        case("unknown output format", none, plain(&["render", "--res", "8x8", "--out", "{dir}/image.png"]), &["image.png", ".exr or .npy"]),
+        case("output under a regular file", |d| std::fs::write(d.join("file"), b"").unwrap(),
+             plain(&["render", "--res", "8x8", "--out", "{dir}/file/x.npy"]), &["file", "cannot create the directory"]),
+        case("output that is a directory", |d| std::fs::create_dir(d.join("x.npy")).unwrap(),
+             plain(&["render", "--res", "8x8", "--out", "{dir}/x.npy"]), &["x.npy", "cannot write the output file"]),
+        // Unwritable even for root (CI runs as root, for whom permission bits do not count).
+        case("output on a read-only file system", none, plain(&["render", "--res", "8x8", "--out", "/proc/gatetrace.npy"]),
+             &["/proc/gatetrace.npy", "cannot write the output file"]),
+    ]
+}
+
+/// The files under `dir`, recursively, as paths relative to it.
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            out.extend(files_under(&path));
+        } else {
+            out.push(path);
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn every_bad_input_gets_a_clear_error_and_no_output() {
+    let root = common::scratch_dir("bad_input");
+    let all = cases();
+    assert!(all.len() >= 25, "the suite must keep at least 25 cases");
+    let mut failures = Vec::new();
+    for (i, (c, setup)) in all.into_iter().enumerate() {
+        let dir = root.join(format!("case_{i:02}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        setup(&dir);
+        let before = files_under(&dir);
+        let d = dir.to_str().unwrap();
+        let out = format!("{d}/out.npy");
+        let args: Vec<String> = c.args.iter().map(|a| a.replace("{dir}", d).replace("{out}", &out)).collect();
+        let o = Command::new(env!("CARGO_BIN_EXE_gatetrace")).args(&args).output().expect("the binary runs");
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        let needles: Vec<String> = c.needles.iter().map(|n| n.replace("{dir}", d)).collect();
+        let mut problems = Vec::new();
+        if o.status.success() {
+            problems.push("exited with status 0".to_owned());
+        }
+        if err.contains("panicked") || o.status.code().is_none() {
+            problems.push("panicked or was killed".to_owned());
+        }
+        for n in &needles {
+            if !err.contains(n.as_str()) {
+                problems.push(format!("error does not mention `{n}`"));
+            }
+        }
+        let written: Vec<_> = files_under(&dir).into_iter().filter(|f| !before.contains(f)).collect();
+        if !written.is_empty() {
+            problems.push(format!("wrote {written:?}"));
+        }
+        if !problems.is_empty() {
+            failures.push(format!("{} ({}): {}\n    stderr: {}", c.name, args.join(" "), problems.join("; "), err.trim()));
+        }
+    }
+    assert!(failures.is_empty(), "{} cases failed:\n{}", failures.len(), failures.join("\n"));
+}
+
+mod properties {
+    use super::*;
+    use gatetrace::film::Gate;
+    use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
+    use proptest::prelude::*;
+
+    /// Values a mutation may put anywhere in a document: numbers at and beyond every limit,
+    /// strings, and the other JSON types.
+    fn hostile_value() -> impl Strategy<Value = Value> {
+        prop_oneof![
+            Just(json!(0)),
+            Just(json!(-1)),
+            Just(json!(1)),
+            Just(json!(3)),
+            Just(json!(4_294_967_295u64)),
+            Just(json!(18_446_744_073_709_551_615u64)),
+            Just(json!(-9_223_372_036_854_775_807i64)),
+            Just(json!(1e30)),
+            Just(json!(-1e30)),
+            Just(json!(1e-40)),
+            Just(json!(f64::MAX)),
+            Just(json!(0.5)),
+            Just(json!("")),
+            Just(json!("VEC3")),
+            Just(json!("SCALAR")),
+            Just(json!("data:application/octet-stream;base64,AAAA")),
+            Just(json!("../../../../etc/passwd")),
+            Just(json!(null)),
+            Just(json!(true)),
+            Just(json!([])),
+            Just(json!({})),
+            Just(json!([1e30, 1e30, 1e30])),
+            Just(json!([0, 0, 0, 0])),
+            any::<i32>().prop_map(|v| json!(v)),
+            any::<f32>().prop_filter("JSON numbers are finite", |v| v.is_finite()).prop_map(|v| json!(v)),
+        ]
+    }
+
+    /// One edit of a document: the `pick`-th value in a depth-first walk is replaced by
+    /// `value`, removed from its object or array, or (for an array) duplicated.
+    #[derive(Clone, Debug)]
+    struct Edit {
+        pick: usize,
+        action: u8,
+        value: Value,
+    }
+
+    fn edit() -> impl Strategy<Value = Edit> {
+        (any::<usize>(), 0u8..4, hostile_value()).prop_map(|(pick, action, value)| Edit { pick, action, value })
+    }
+
+    /// Counts the values of `doc` (depth first, the root included).
+    fn count(doc: &Value) -> usize {
+        1 + match doc {
+            Value::Array(a) => a.iter().map(count).sum(),
+            Value::Object(o) => o.values().map(count).sum(),
+            _ => 0,
+        }
+    }
+
+    /// Applies `e` to the value numbered `*left` (counting down, depth first); true once done.
+    fn apply(doc: &mut Value, left: &mut usize, e: &Edit) -> bool {
+        // Children are edited through their parent, so a value can be removed.
+        let children: Vec<(Option<String>, usize)> = match doc {
+            Value::Array(a) => (0..a.len()).map(|i| (None, i)).collect(),
+            Value::Object(o) => o.keys().cloned().map(|k| (Some(k), 0)).collect(),
+            _ => return false,
+        };
+        for (key, index) in children {
+            if *left == 0 {
+                break;
+            }
+            *left -= 1;
+            if *left == 0 {
+                match (doc, key, e.action) {
+                    (Value::Object(o), Some(k), 0) => {
+                        o.remove(&k);
+                    }
+                    (Value::Array(a), None, 0) => {
+                        a.remove(index);
+                    }
+                    (Value::Array(a), None, 1) => {
+                        let copy = a[index].clone();
+                        a.push(copy);
+                    }
+                    (Value::Object(o), Some(k), _) => {
+                        o.insert(k, e.value.clone());
+                    }
+                    (Value::Array(a), None, _) => a[index] = e.value.clone(),
+                    _ => unreachable!(),
+                }
+                return true;
+            }
+            let child = match (&mut *doc, key) {
+                (Value::Object(o), Some(k)) => o.get_mut(&k).unwrap(),
+                (Value::Array(a), None) => &mut a[index],
+                _ => unreachable!(),
+            };
+            if apply(child, left, e) {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Loads `path` every way the renderer does and prepares what loads (BVH build included):
+    /// errors are fine, panics are not.
+    fn load_every_way(path: &Path) {
+        if let Ok(scene) = load_gltf(path) {
+            let _ = PreparedScene::new(scene);
+        }
+        if let Ok(scene) = load_gltf_at(path, Some(0.5)) {
+            let _ = PreparedScene::new(scene);
+        }
+        if let Ok(scene) = load_gltf_for_capture(path) {
+            let _ = PreparedScene::new(scene);
+        }
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = common::repo_path("target/test-scratch").join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// The documents mutated: the Cornell box, an animated scene and the NLOS example.
+    fn base_document() -> impl Strategy<Value = Value> {
+        ["cornell_box.gltf", "cornell_box_moving_block.gltf", "nlos_letter.gltf", "cornell_box_spot.gltf"]
+            .map(|name| {
+                let text = std::fs::read_to_string(common::repo_path(&format!("assets/scenes/{name}"))).unwrap();
+                serde_json::from_str::<Value>(&text).unwrap()
+            })
+            .into_iter()
+            .map(Just)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(None::<BoxedStrategy<Value>>, |acc, s| Some(match acc {
+                None => s.boxed(),
+                Some(a) => prop_oneof![a, s].boxed(),
+            }))
+            .unwrap()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 1000, failure_persistence: None, ..ProptestConfig::default() })]
+
+        /// Edited documents (1 to 4 edits anywhere in the JSON) load or fail with an error.
+        #[test]
+        fn mutated_gltf_documents_never_panic(doc in base_document(), edits in prop::collection::vec(edit(), 1..5)) {
+            let mut doc = doc;
+            for e in &edits {
+                let mut left = e.pick % count(&doc);
+                if left > 0 {
+                    apply(&mut doc, &mut left, e);
+                }
+            }
+            let dir = scratch("properties_gltf");
+            let path = dir.join(format!("mutated_{:?}.gltf", std::thread::current().id()).replace(['(', ')'], ""));
+            std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+            load_every_way(&path);
+        }
+
+        /// Files with bytes overwritten or cut (text glTF and GLB) load or fail with an error.
+        #[test]
+        fn corrupted_gltf_bytes_never_panic(as_glb in any::<bool>(), flips in prop::collection::vec((any::<usize>(), any::<u8>()), 0..8),
+                                            cut in any::<usize>()) {
+            let doc = cornell_box_json();
+            let mut bytes = if as_glb { glb(&doc) } else { serde_json::to_vec(&doc).unwrap() };
+            for (at, byte) in flips {
+                let n = bytes.len();
+                bytes[at % n] = byte;
+            }
+            bytes.truncate(bytes.len() - cut % (bytes.len() / 4 + 1));
+            let dir = scratch("properties_bytes");
+            let path = dir.join(if as_glb { "corrupt.glb" } else { "corrupt.gltf" });
+            std::fs::write(&path, &bytes).unwrap();
+            load_every_way(&path);
+        }
+
+        /// Gate specifications built from every kind and hostile numbers parse or fail with an
+        /// error, and what parses can be described, binned and uploaded.
+        #[test]
+        fn gate_specifications_never_panic(
+            kind in prop::sample::select(vec!["none", "box", "gaussian", "cw", "transient", "table", "", "BOX", "wobble"]),
+            numbers in prop::collection::vec(prop::sample::select(vec![
+                "0", "-0", "1", "3.1", "-2", "1e308", "1e-320", "nan", "inf", "-inf", "4294967296", "18446744073709551616",
+                "3ps", "1.5ns", "2mm", "1e9ns", "", " ", "x", "20e6", "90", "sine", "square", "ham4:9", "mseq:1",
+                "depthsel:3:9", "mseq:1000000",
+            ]), 0..5),
+            separators in prop::collection::vec(prop::sample::select(vec![",", "..", ":", ";"]), 5),
+        ) {
+            let mut spec = format!("{kind}:");
+            for (i, n) in numbers.iter().enumerate() {
+                if i > 0 {
+                    spec.push_str(separators[i]);
+                }
+                spec.push_str(n);
+            }
+            for s in [spec.clone(), spec.trim_end_matches(':').to_owned()] {
+                if let Ok(gate) = Gate::parse(&s) {
+                    let _ = (gate.describe(), gate.bins(), gate.to_gpu(), gate.table(), gate.max_length(), gate.min_length());
+                    for i in 0..gate.bins().min(4) {
+                        let _ = gate.bin_range(i);
+                    }
+                    let _ = gate.shifted(0.25);
+                }
+            }
+        }
+    }
+}
