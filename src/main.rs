@@ -1,7 +1,10 @@
 //! The `gatetrace` command line.
 
+mod interrupt;
+
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
@@ -11,7 +14,10 @@ use gatetrace::frames::{
     FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range,
 };
 use gatetrace::gpu::GpuContext;
-use gatetrace::integrator::{Budget, LightStrategy, Method, RenderSettings, film_elements, render, render_metadata};
+use gatetrace::integrator::checkpoint::{checkpoint_path, fingerprint, read_checkpoint, write_checkpoint};
+use gatetrace::integrator::{
+    Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
+};
 use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
 
 /// The scene rendered when none is given.
@@ -213,6 +219,24 @@ struct RenderArgs {
     /// interrupted sequence resumes where it stopped).
     #[arg(long)]
     force: bool,
+    /// Save the render's state to OUT.checkpoint (beside the output) after the first pass that
+    /// ends this many seconds after the last save, and once more when the render is done
+    /// (0: after every pass). `--resume` continues from it. Without this option a checkpoint is
+    /// written only when the render is interrupted (SIGINT or SIGTERM: the pass in flight
+    /// finishes, the image of the samples traced so far is written with them in its metadata,
+    /// and gatetrace exits with status 128 + the signal's number; a second signal aborts at
+    /// once); a finished render then removes an old checkpoint.
+    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true)]
+    checkpoint_every: Option<f64>,
+    /// Continue the render saved in OUT.checkpoint to the requested samples per pixel (--spp,
+    /// counting those already taken, so a larger --spp extends a finished render saved with
+    /// --checkpoint-every) or total rendering time (--time). Every other option must be as
+    /// when the checkpoint was made (the scene file too); the result is the image the render
+    /// would have given without the interruption (bit for bit for `path`, within float rounding
+    /// for `direct` and `ellipsoidal`, whose light-tracing splats use float atomics). For a
+    /// sequence, frames with a checkpoint are continued and finished frames skipped.
+    #[arg(long)]
+    resume: bool,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
     /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr, or
     /// SCENE_NAME_{frame:04}.exr for a sequence, or SCENE_NAME_nlos.npy for --nlos.
@@ -515,7 +539,7 @@ fn main() {
     }
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(args) => run_render(args),
+        Command::Render(args) => interrupt::install().context("cannot watch for SIGINT and SIGTERM").and_then(|_| run_render(args)),
         Command::View(args) => run_view(args),
         Command::EqualTime(args) => run_equal_time(args),
         Command::StressEllipsoid(args) => run_stress(args),
@@ -532,6 +556,10 @@ fn main() {
         }
     };
     if let Err(e) = result {
+        if let Some(interrupted) = e.downcast_ref::<interrupt::Interrupted>() {
+            eprintln!("{e}");
+            std::process::exit(128 + interrupted.signal);
+        }
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
@@ -704,7 +732,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
         "--target-pilot applies to --method ellipsoidal only"
     );
+    if let Some(every) = args.checkpoint_every {
+        ensure!(every.is_finite() && every >= 0.0, "--checkpoint-every {every}: give seconds, 0 or more");
+    }
     if let Some(scan) = args.nlos {
+        ensure!(
+            args.checkpoint_every.is_none() && !args.resume,
+            "--checkpoint-every and --resume do not apply to NLOS captures (--nlos) yet: an interrupted capture writes \
+             the samples traced so far (single and confocal scans) but keeps no checkpoint"
+        );
         ensure!(
             args.method != Method::Auto,
             "--method auto does not apply to NLOS captures (--nlos): choose path, direct or ellipsoidal"
@@ -774,8 +810,20 @@ fn run_render(args: RenderArgs) -> Result<()> {
         bar.set_style(style.unwrap().progress_chars("=> "));
         bar
     });
+    if args.resume && !sequence {
+        let checkpoint = checkpoint_path(&frames[0].1);
+        ensure!(
+            checkpoint.exists(),
+            "--resume: there is no checkpoint {} (renders write one when interrupted, or with --checkpoint-every)",
+            checkpoint.display()
+        );
+    }
     for (frame, path, settings) in &frames {
-        if sequence && path.exists() && !args.force {
+        if let Some(signal) = interrupt::received() {
+            return Err(interrupt::Interrupted { signal }.into());
+        }
+        let incomplete = checkpoint_path(path).exists();
+        if sequence && path.exists() && !args.force && !incomplete {
             say(
                 &bars,
                 format!(
@@ -784,6 +832,17 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 ),
             )?;
         } else {
+            let resume = args.resume && incomplete;
+            if sequence && incomplete && !args.resume {
+                say(
+                    &bars,
+                    format!(
+                        "frame {frame}: {} was interrupted (a checkpoint lies beside it): rendered again from the \
+                         start (--resume continues it)",
+                        path.display()
+                    ),
+                )?;
+            }
             let animated;
             let scene = match &static_scene {
                 Some(scene) => scene,
@@ -797,6 +856,19 @@ fn run_render(args: RenderArgs) -> Result<()> {
             };
             let label = sequence.then(|| format!("frame {frame}/{}", plan.count - 1));
             let frame_info = (sequence || plan.anim_time.is_some()).then_some((*frame, &plan));
+            let anim_time = plan.anim_time(*frame);
+            let checkpoints = Checkpoints {
+                every: args.checkpoint_every.map(Duration::from_secs_f64),
+                resume,
+                fingerprint: fingerprint(
+                    &scene_path,
+                    settings,
+                    &[
+                        ("camera", scene.scene.camera.describe()),
+                        ("anim_time_s", anim_time.map_or("none".into(), |t| t.to_string())),
+                    ],
+                )?,
+            };
             render_one(
                 &ctx,
                 scene,
@@ -807,6 +879,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 path,
                 label,
                 frame_info,
+                &checkpoints,
                 &bars,
             )?;
         }
@@ -938,14 +1011,28 @@ fn run_nlos(
         } else {
             String::new()
         };
-        let output = render(&ctx, &scene, &settings, budget, |p| {
+        let output = render_resumable(&ctx, &scene, &settings, budget, None, false, |_, p| {
             match budget {
                 Budget::Samples(_) => bar.set_position(p.spp),
                 Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
             }
             bar.set_message(format!("{label}{} spp", p.spp));
+            Ok(if interrupt::received().is_some() { ControlFlow::Break(()) } else { ControlFlow::Continue(()) })
         })?;
         bar.finish_and_clear();
+        if let Some(signal) = interrupt::received() {
+            if aims.len() > 1 {
+                eprintln!(
+                    "{}: stopped at laser spot {} of {}: an exhaustive capture is written only whole, so {} was not \
+                     written",
+                    interrupt::name(signal),
+                    k + 1,
+                    aims.len(),
+                    out.display()
+                );
+                return Err(interrupt::Interrupted { signal }.into());
+            }
+        }
         data.extend_from_slice(&output.film.data);
         last = Some((settings, output));
     }
@@ -959,6 +1046,10 @@ fn run_nlos(
          count_first_and_last)"
             .into(),
     ));
+    let signal = interrupt::received().filter(|_| output.stopped_early);
+    if let Some(signal) = signal {
+        metadata.push(("interrupted_by".into(), interrupt::name(signal).into()));
+    }
     let extras = nlos::capture_record(&scene, &capture, scan, &sensed, w, &spots, laser_w);
     let film = &output.film;
     let bin_ranges: Vec<(f64, f64)> = (0..settings.gate.bins())
@@ -1008,10 +1099,23 @@ fn run_nlos(
         ),
     )?;
     print_stats(&settings, &output);
+    if let Some(signal) = signal {
+        return Err(interrupt::Interrupted { signal }.into());
+    }
     if let Some(report) = ctx.profile_report()? {
         print!("{report}");
     }
     Ok(())
+}
+
+/// How a render keeps checkpoints (see --checkpoint-every and --resume).
+struct Checkpoints {
+    /// Save the state after the first pass this long after the last save.
+    every: Option<Duration>,
+    /// Continue from the checkpoint beside the output.
+    resume: bool,
+    /// What identifies the render (see `checkpoint::fingerprint`).
+    fingerprint: std::collections::BTreeMap<String, String>,
 }
 
 /// Renders one image (or frame) and writes it with its metadata.
@@ -1026,14 +1130,33 @@ fn render_one(
     out: &Path,
     label: Option<String>,
     frame: Option<(u32, &FramePlan)>,
+    checkpoints: &Checkpoints,
     bars: &indicatif::MultiProgress,
 ) -> Result<()> {
+    let checkpoint = checkpoint_path(out);
+    let resumed = if checkpoints.resume {
+        let state = read_checkpoint(&checkpoint, &checkpoints.fingerprint)?;
+        if let Budget::Samples(n) = budget {
+            ensure!(
+                n >= state.samples_in_film,
+                "--resume: {} holds {} spp already; ask --spp {} or more",
+                checkpoint.display(),
+                state.samples_in_film,
+                state.samples_in_film
+            );
+        }
+        Some(state)
+    } else {
+        None
+    };
     let bar = bars.add(progress_bar(budget));
     let prefix = label
         .as_deref()
         .map(|l| format!("{l}: "))
         .unwrap_or_default();
-    let output = render(ctx, scene, settings, budget, |p| {
+    let mut last_save = Instant::now();
+    let keep_state = checkpoints.every.is_some();
+    let output = render_resumable(ctx, scene, settings, budget, resumed.as_ref(), keep_state, |tracer, p| {
         match budget {
             Budget::Samples(_) => bar.set_position(p.spp),
             Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
@@ -1046,6 +1169,14 @@ fn render_one(
             p.spp,
             rate / 1e6
         ));
+        let stop = interrupt::received().is_some();
+        if stop || checkpoints.every.is_some_and(|every| last_save.elapsed() >= every) {
+            let mut state = tracer.save_state()?;
+            state.rendering_seconds = p.rendering.as_secs_f64();
+            write_checkpoint(&checkpoint, &checkpoints.fingerprint, &state)?;
+            last_save = Instant::now();
+        }
+        Ok(if stop { ControlFlow::Break(()) } else { ControlFlow::Continue(()) })
     })?;
     bar.finish_and_clear();
 
@@ -1065,13 +1196,48 @@ fn render_one(
             metadata.push(("anim_time_s".into(), t.to_string()));
         }
     }
+    if let Some(state) = &resumed {
+        metadata.push(("resumed_from_spp".into(), state.samples_in_film.to_string()));
+    }
+    let signal = interrupt::received().filter(|_| output.stopped_early);
+    if let Some(signal) = signal {
+        metadata.push(("interrupted_by".into(), interrupt::name(signal).into()));
+        metadata.push((
+            "requested".into(),
+            match budget {
+                Budget::Samples(n) => format!("{n} spp"),
+                Budget::Time(t) => format!("{} s", t.as_secs_f64()),
+            },
+        ));
+    }
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
     write_film(out, film, &metadata, &bin_ranges)?;
+    if let Some(signal) = signal {
+        say(
+            bars,
+            format!(
+                "{}: wrote {} with the {} spp traced so far, and {}; run the same command with --resume to continue",
+                interrupt::name(signal),
+                out.display(),
+                film.spp,
+                checkpoint.display()
+            ),
+        )?;
+        return Err(interrupt::Interrupted { signal }.into());
+    }
+    if let Some(state) = &output.state {
+        // The finished render's state, saved after its image: --resume with a larger --spp
+        // extends it.
+        write_checkpoint(&checkpoint, &checkpoints.fingerprint, state)?;
+    } else if checkpoint.exists() {
+        std::fs::remove_file(&checkpoint)
+            .with_context(|| format!("{}: cannot remove the finished render's checkpoint", checkpoint.display()))?;
+    }
     let mean = film.mean_rgb();
     say(
         bars,
         format!(
-            "{}{}: {}x{} {} gate {} | {} spp in {:.2} s ({:.2} s rendering, {:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+            "{}{}: {}x{} {} gate {} | {} spp{} in {:.2} s ({:.2} s rendering, {:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
             label.map(|l| format!("{l} ")).unwrap_or_default(),
             scene_path
                 .file_name()
@@ -1089,6 +1255,7 @@ fn render_one(
                 gate_spec.to_owned()
             },
             film.spp,
+            resumed.as_ref().map(|r| format!(" (resumed from {})", r.samples_in_film)).unwrap_or_default(),
             secs,
             output.rendering.as_secs_f64(),
             (film.spp * (settings.width * settings.height) as u64) as f64

@@ -326,7 +326,7 @@ impl<'a> Viewer<'a> {
         if tracer.samples_done() == 0 {
             self.sizer = PassSizer::default();
         }
-        self.sizer.render_for(tracer.as_mut(), budget.as_secs_f64(), |_, _| Ok(()))?;
+        self.sizer.render_for(tracer.as_mut(), budget.as_secs_f64(), |_, _| Ok(std::ops::ControlFlow::Continue(())))?;
         let done = tracer.samples_done() - before;
         let rate = done as f64 * pixels / start.elapsed().as_secs_f64().max(1e-9);
         let t = &mut self.timing;

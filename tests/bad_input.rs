@@ -72,6 +72,19 @@ fn case(name: &'static str, setup: impl FnOnce(&Path) + 'static, args: Vec<Strin
 
 fn none(_: &Path) {}
 
+/// Renders the Cornell box (8x8, 4 spp, 2 bounces, `extra` options) to `dir/out.npy` with a
+/// checkpoint beside it.
+fn checkpointed(dir: &Path, extra: &[&str]) {
+    let out = dir.join("out.npy");
+    let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+        .args(["render", "--res", "8x8", "--spp", "4", "--max-bounces", "2", "--checkpoint-every", "0", "--out"])
+        .arg(&out)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(o.status.success() && dir.join("out.npy.checkpoint").exists(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 /// Writes the Cornell box changed by `edit` as `name`.
 fn box_with(name: &'static str, edit: impl FnOnce(&mut Value) + 'static) -> impl FnOnce(&Path) {
     move |dir: &Path| {
@@ -228,6 +241,19 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
              &["--debug-strategy", "not a strategy"]),
         case("a strategy of one number", none, default_scene(&["--method", "direct", "--debug-strategy", "1"]),
              &["--debug-strategy", "S,T"]),
+        // --- checkpoints ---
+        case("--resume without a checkpoint", none, default_scene(&["--res", "8x8", "--resume"]), &["--resume", "out.npy.checkpoint"]),
+        case("--resume with another seed", |d| checkpointed(d, &["--seed", "1"]),
+             default_scene(&["--res", "8x8", "--spp", "8", "--max-bounces", "2", "--seed", "2", "--resume"]),
+             &["out.npy.checkpoint", "another render", "seed: 1"]),
+        case("--resume to fewer samples than taken", |d| checkpointed(d, &[]),
+             default_scene(&["--res", "8x8", "--spp", "2", "--max-bounces", "2", "--resume"]), &["out.npy.checkpoint", "4 spp already"]),
+        case("--resume from a corrupt checkpoint", |d| std::fs::write(d.join("out.npy.checkpoint"), b"GATETRACE-CHECKPOINT\n{").unwrap(),
+             default_scene(&["--res", "8x8", "--resume"]), &["out.npy.checkpoint", "header"]),
+        case("negative --checkpoint-every", none, default_scene(&["--checkpoint-every", "-1"]), &["--checkpoint-every", "seconds"]),
+        case("--resume of an NLOS capture", none,
+             render(&common::repo_path("assets/scenes/nlos_letter.gltf").display().to_string(), &["--nlos", "confocal", "--resume"]),
+             &["--resume", "NLOS"]),
         // --- outputs ---
         case("unknown output format", none, plain(&["render", "--res", "8x8", "--out", "{dir}/image.png"]), &["image.png", ".exr or .npy"]),
         case("output under a regular file", |d| std::fs::write(d.join("file"), b"").unwrap(),

@@ -338,8 +338,9 @@ impl Renderer {
                 }
                 tracer.restart(seed);
                 let rendering = Instant::now();
-                trace_budget(tracer.as_mut(), budget, |_, _| {
-                    Python::attach(|py| py.check_signals()).map_err(|e| {
+                // Ctrl-C raises KeyboardInterrupt: the error stops the render (never a Break).
+                let _ = trace_budget(tracer.as_mut(), budget, |_, _| {
+                    Python::attach(|py| py.check_signals()).map(|_| std::ops::ControlFlow::Continue(())).map_err(|e| {
                         interrupted = Some(e);
                         anyhow::anyhow!("interrupted")
                     })
@@ -361,6 +362,8 @@ impl Renderer {
                 stats: None,
                 target_pilot_spp: tracer.target_pilot_spp(),
                 choice: None,
+                stopped_early: false,
+                state: None,
             }
         };
         let mut metadata = self.metadata(&settings, gate, &output)?;

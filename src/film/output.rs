@@ -89,8 +89,22 @@ pub fn write_sidecar(npy: &Path, metadata: &Metadata, extras: &serde_json::Map<S
     let mut map: serde_json::Map<String, serde_json::Value> =
         metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
     map.extend(extras.clone());
-    std::fs::write(&sidecar, serde_json::to_string_pretty(&map)? + "\n")
+    let text = serde_json::to_string_pretty(&map)? + "\n";
+    replace_atomically(&sidecar, |tmp| std::fs::write(tmp, &text).map_err(Into::into))
         .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
+}
+
+/// Writes `path` through `write` into a temporary file beside it that is then renamed over it,
+/// so that a reader (or a process killed while writing) never sees a partly written file.
+pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = PathBuf::from(tmp);
+    let result = write(&tmp).and_then(|_| std::fs::rename(&tmp, path).map_err(Into::into));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }
 
 /// `x.npy` -> `x.json`.
@@ -129,10 +143,8 @@ fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, 
             )
         })
         .collect();
-    Image::from_layers(attributes, layers)
-        .write()
-        .non_parallel()
-        .to_file(path)
+    let image = Image::from_layers(attributes, layers);
+    replace_atomically(path, |tmp| image.write().non_parallel().to_file(tmp).map_err(Into::into))
         .with_context(|| format!("{}: cannot write the EXR file", path.display()))
 }
 
@@ -163,7 +175,8 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     for v in data {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    std::fs::write(path, bytes).with_context(|| format!("{}: cannot write", path.display()))
+    replace_atomically(path, |tmp| std::fs::write(tmp, &bytes).map_err(Into::into))
+        .with_context(|| format!("{}: cannot write", path.display()))
 }
 
 /// Reads a little-endian float32 (or float64, converted) C-order `.npy` file: (shape, data).

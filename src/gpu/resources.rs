@@ -191,6 +191,15 @@ impl Resources {
         Ok(out)
     }
 
+    /// Writes `data` over split array `name` (as many elements as it was created with).
+    pub fn write_chunked<T: bytemuck::Pod>(&self, ctx: &GpuContext, name: &'static str, layout: ChunkLayout, data: &[T]) {
+        for c in 0..layout.chunks {
+            let r = layout.range(c, data.len() as u64);
+            let bytes = bytemuck::cast_slice(&data[r.start as usize..r.end as usize]);
+            ctx.queue.write_buffer(&self.buffers[chunk_names(name)[c as usize]], 0, bytes);
+        }
+    }
+
     /// Zeroes every chunk of split array `name`.
     pub fn clear_chunked(&self, encoder: &mut wgpu::CommandEncoder, name: &'static str) {
         for chunk_name in chunk_names(name) {

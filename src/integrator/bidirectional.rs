@@ -621,6 +621,29 @@ impl Integrator for BidirectionalTracer<'_> {
         self.passes_since_fold = 0;
     }
 
+    fn save_state(&self) -> Result<super::checkpoint::RenderState> {
+        let mut state = self.wf.save_state(self.method)?;
+        let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), self.splat_sums.len())?;
+        state.push("splat_film", &splats);
+        state.push("splat_sums", &self.splat_sums);
+        let flags = [self.passes_since_fold, self.target_pilot_pending as u32, self.target_pilot_ran as u32];
+        state.push("bidirectional", &flags);
+        Ok(state)
+    }
+
+    fn load_state(&mut self, state: &super::checkpoint::RenderState) -> Result<()> {
+        let splats: Vec<f32> = state.values("splat_film", self.splat_sums.len())?;
+        let sums: Vec<f64> = state.values("splat_sums", self.splat_sums.len())?;
+        let flags: Vec<u32> = state.values("bidirectional", 3)?;
+        self.wf.load_state(self.method, state)?;
+        self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
+        self.splat_sums = sums;
+        self.passes_since_fold = flags[0];
+        self.target_pilot_pending = flags[1] != 0;
+        self.target_pilot_ran = flags[2] != 0;
+        Ok(())
+    }
+
     fn restart(&mut self, seed: u32) {
         self.wf.restart(seed, &["splat_film"]);
         self.splat_sums.iter_mut().for_each(|s| *s = 0.0);

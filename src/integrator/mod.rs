@@ -5,10 +5,12 @@
 
 pub mod auto;
 pub mod bidirectional;
+pub mod checkpoint;
 pub mod mis;
 pub mod path;
 pub mod wavefront;
 
+use std::ops::ControlFlow;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -283,6 +285,13 @@ pub trait Integrator: Send {
         self.restart(seed);
         Ok(())
     }
+    /// Everything the render has accumulated so far (see [`checkpoint`]), to continue it in
+    /// another process. `rendering_seconds` is left 0 for the caller to fill in.
+    fn save_state(&self) -> Result<checkpoint::RenderState>;
+    /// Continues the render whose state [`Self::save_state`] took: this integrator must have
+    /// been built with the same scene and settings (it refuses states of another image size,
+    /// method or kind). The next pass then traces the samples that render would have traced.
+    fn load_state(&mut self, state: &checkpoint::RenderState) -> Result<()>;
     /// Traces `spp` more samples of every pixel, in as few passes as possible.
     fn render_samples(&mut self, spp: u64) -> Result<()> {
         let mut left = spp;
@@ -351,11 +360,12 @@ impl PassSizer {
     /// Renders passes on `tracer` until `seconds` have passed or the next pass would overrun
     /// them (at least one pass), calling `after_pass` after each (an error from it stops the
     /// render and is returned); returns the seconds spent.
+    /// `after_pass` may stop the render early (`ControlFlow::Break`).
     pub fn render_for(
         &mut self,
         tracer: &mut dyn Integrator,
         seconds: f64,
-        mut after_pass: impl FnMut(&dyn Integrator, f64) -> Result<()>,
+        mut after_pass: impl FnMut(&dyn Integrator, f64) -> Result<ControlFlow<()>>,
     ) -> Result<f64> {
         let start = Instant::now();
         tracer.prepare()?;
@@ -371,7 +381,9 @@ impl PassSizer {
             tracer.render_pass(next)?;
             self.record(next, pass_start.elapsed().as_secs_f64());
             passes += 1;
-            after_pass(tracer, start.elapsed().as_secs_f64())?;
+            if after_pass(tracer, start.elapsed().as_secs_f64())?.is_break() {
+                break;
+            }
         }
         Ok(start.elapsed().as_secs_f64())
     }
@@ -407,6 +419,10 @@ pub struct RenderOutput {
     pub target_pilot_spp: u32,
     /// `--method auto`: the method chosen and the pilot's figures (its time is in `rendering`).
     pub choice: Option<auto::MethodChoice>,
+    /// The render stopped before its budget was spent (see [`render_resumable`]).
+    pub stopped_early: bool,
+    /// The render's state after its last pass, when asked for (see [`render_resumable`]).
+    pub state: Option<checkpoint::RenderState>,
 }
 
 impl RenderOutput {
@@ -421,6 +437,8 @@ impl RenderOutput {
             stats: None,
             target_pilot_spp: 0,
             choice: None,
+            stopped_early: false,
+            state: None,
         }
     }
 }
@@ -511,27 +529,29 @@ pub fn render_metadata(
 pub fn trace_budget(
     tracer: &mut dyn Integrator,
     budget: Budget,
-    mut after_pass: impl FnMut(&dyn Integrator, u64) -> Result<()>,
-) -> Result<()> {
+    mut after_pass: impl FnMut(&dyn Integrator, u64) -> Result<ControlFlow<()>>,
+) -> Result<ControlFlow<()>> {
     let mut passes = 0;
+    let mut flow = ControlFlow::Continue(());
     match budget {
         Budget::Samples(n) => {
             let target = tracer.samples_done() + n;
-            while tracer.samples_done() < target {
+            while tracer.samples_done() < target && flow.is_continue() {
                 let next = (target - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
                 tracer.render_pass(next)?;
                 passes += 1;
-                after_pass(tracer, passes)?;
+                flow = after_pass(tracer, passes)?;
             }
         }
         Budget::Time(t) => {
             PassSizer::default().render_for(tracer, t.as_secs_f64(), |tracer, _| {
                 passes += 1;
-                after_pass(tracer, passes)
+                flow = after_pass(tracer, passes)?;
+                Ok(flow)
             })?;
         }
     }
-    Ok(())
+    Ok(flow)
 }
 
 /// Why no path of the scene can reach the gate, if none can (checked before any work).
@@ -742,13 +762,35 @@ fn padded_table<T: bytemuck::Pod + Default>(table: &[T], len: usize) -> Vec<T> {
     padded
 }
 
-/// Renders `scene` with `settings` until `budget` is spent, calling `progress` after each wave.
+/// Renders `scene` with `settings` until `budget` is spent, calling `progress` after each pass.
 pub fn render(
     ctx: &GpuContext,
     scene: &PreparedScene,
     settings: &RenderSettings,
     budget: Budget,
     mut progress: impl FnMut(Progress),
+) -> Result<RenderOutput> {
+    render_resumable(ctx, scene, settings, budget, None, false, |_, p| {
+        progress(p);
+        Ok(ControlFlow::Continue(()))
+    })
+}
+
+/// [`render`], continuing the render `resume` saved (see [`checkpoint`]) when given, and asking
+/// `after_pass` after every pass whether to go on: it gets the integrator (to save its state)
+/// and the progress, and may stop the render early (`ControlFlow::Break`; the output then has
+/// the samples traced so far and `stopped_early` set). With `resume`, `budget` counts the whole
+/// render: samples per pixel in all, or seconds of rendering in all; `auto` renders with the
+/// method the saved render chose, without a new pilot. With `keep_state`, the output holds the
+/// state after the last pass (`RenderOutput::state`), to be saved as a checkpoint.
+pub fn render_resumable(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    budget: Budget,
+    resume: Option<&checkpoint::RenderState>,
+    keep_state: bool,
+    mut after_pass: impl FnMut(&dyn Integrator, Progress) -> Result<ControlFlow<()>>,
 ) -> Result<RenderOutput> {
     film_elements(settings)?;
     let start = Instant::now();
@@ -757,14 +799,15 @@ pub fn render(
         return Ok(RenderOutput::black(settings, start.elapsed()));
     }
     // auto: a pilot of both methods (counted against a time budget) picks the one to render with.
-    let choice = if settings.method == Method::Auto {
+    let choice = if settings.method == Method::Auto && resume.is_none() {
         Some(auto::choose(ctx, scene, settings, budget)?)
     } else {
         None
     };
-    let render_settings = match &choice {
-        Some(c) => auto::candidate_settings(settings, c.chosen),
-        None => settings.clone(),
+    let render_settings = match (&choice, resume) {
+        (Some(c), _) => auto::candidate_settings(settings, c.chosen),
+        (None, Some(state)) if settings.method == Method::Auto => auto::candidate_settings(settings, state.method),
+        _ => settings.clone(),
     };
     let mut tracer = create_integrator(ctx, scene, &render_settings)?;
     if let Budget::Time(_) = budget {
@@ -772,16 +815,22 @@ pub fn render(
         // sample, discarded, keeps that out of the budget and out of the rate passes are sized by.
         tracer.warm_up()?;
     }
-    let pilot = Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds));
+    let before = match resume {
+        Some(state) => {
+            tracer.load_state(state)?;
+            Duration::try_from_secs_f64(state.rendering_seconds).unwrap_or_default()
+        }
+        None => Duration::ZERO,
+    };
+    let pilot = before + Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds));
     let budget = match budget {
         Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
-        samples => samples,
+        Budget::Samples(n) => Budget::Samples(n.saturating_sub(tracer.samples_done())),
     };
     let rendering = Instant::now();
-    trace_budget(tracer.as_mut(), budget, |tracer, passes| {
+    let flow = trace_budget(tracer.as_mut(), budget, |tracer, passes| {
         let (elapsed, rendering) = (start.elapsed(), pilot + rendering.elapsed());
-        progress(Progress { passes, spp: tracer.samples_done(), elapsed, rendering });
-        Ok(())
+        after_pass(tracer, Progress { passes, spp: tracer.samples_done(), elapsed, rendering })
     })?;
     let rendering = pilot + rendering.elapsed();
     let film = tracer.film()?;
@@ -798,6 +847,10 @@ pub fn render(
         None
     };
     let target_pilot_spp = tracer.target_pilot_spp();
+    let state = match keep_state {
+        true => Some(checkpoint::RenderState { rendering_seconds: rendering.as_secs_f64(), ..tracer.save_state()? }),
+        false => None,
+    };
     Ok(RenderOutput {
         film,
         elapsed: start.elapsed(),
@@ -806,6 +859,8 @@ pub fn render(
         stats,
         target_pilot_spp,
         choice,
+        stopped_early: flow.is_break(),
+        state,
     })
 }
 

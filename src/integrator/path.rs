@@ -283,7 +283,15 @@ impl Integrator for PathTracer<'_> {
         self.wf.reset_film(&[]);
     }
 
-    fn restart(&mut self, seed: u32) {
+fn save_state(&self) -> Result<super::checkpoint::RenderState> {
+        self.wf.save_state(super::Method::Path)
+    }
+
+    fn load_state(&mut self, state: &super::checkpoint::RenderState) -> Result<()> {
+        self.wf.load_state(super::Method::Path, state)
+    }
+
+        fn restart(&mut self, seed: u32) {
         self.wf.restart(seed, &[]);
     }
 

@@ -3,6 +3,7 @@
 
 use anyhow::{Result, ensure};
 
+use super::checkpoint::RenderState;
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
 use crate::bvh::TRAVERSAL_BUDGET;
 use crate::film::Film;
@@ -261,6 +262,62 @@ impl<'a> Wavefront<'a> {
                 film.data[base..base + 3].iter_mut().for_each(|v| *v *= f);
             }
         }
+    }
+
+    /// The state every method keeps between passes (see `checkpoint`): the sample counters,
+    /// the params uniform (seeds, target-length sampling), the target lengths' extra visits and
+    /// the film's sums. `method` names the integrator.
+    pub fn save_state(&self, method: super::Method) -> Result<RenderState> {
+        let elements = self.film_element_count();
+        let film: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, elements)?;
+        let mut state = RenderState {
+            method,
+            samples_in_film: self.samples_in_film,
+            next_sample: self.next_sample,
+            rendering_seconds: 0.0,
+            blobs: Vec::new(),
+        };
+        state.push("params", std::slice::from_ref(&self.params));
+        state.push("target_visits", &self.target_visits);
+        state.push("film", &film);
+        Ok(state)
+    }
+
+    /// Puts a state [`Self::save_state`] took into this render (built with the same settings),
+    /// so that its next pass continues where that render stopped.
+    pub fn load_state(&mut self, method: super::Method, state: &RenderState) -> Result<()> {
+        ensure!(
+            state.method == method,
+            "the checkpoint was rendered with --method {}, this render uses {}",
+            state.method.name(),
+            method.name()
+        );
+        let params: RenderParams = state.values("params", 1)?[0];
+        let (a, b) = (&params, &self.params);
+        ensure!(
+            (a.width, a.height, a.gate.bins, a.max_bounces) == (b.width, b.height, b.gate.bins, b.max_bounces),
+            "the checkpoint's image ({}x{}, {} bins, {} bounces) is not this render's ({}x{}, {} bins, {} bounces)",
+            a.width, a.height, a.gate.bins, a.max_bounces, b.width, b.height, b.gate.bins, b.max_bounces
+        );
+        let film: Vec<[f32; 2]> = state.values("film", self.film_element_count() as usize)?;
+        let visits: Vec<u32> = state.values("target_visits", state.blob("target_visits")?.len() / 4)?;
+        if !visits.is_empty() {
+            let buffer = self.resources.get("target_visits").ok_or_else(|| anyhow::anyhow!("this render keeps no target visits"))?;
+            ensure!((visits.len() * 4) as u64 <= buffer.size(), "the checkpoint's target visits do not fit this render's");
+            self.ctx.queue.write_buffer(buffer, 0, bytemuck::cast_slice(&visits));
+        }
+        self.resources.write_chunked(self.ctx, "film", self.film_layout, &film);
+        self.params = params;
+        self.ctx.queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
+        self.target_visits = visits;
+        self.samples_in_film = state.samples_in_film;
+        self.next_sample = state.next_sample;
+        Ok(())
+    }
+
+    /// Elements (pixel, bin, channel) of the film.
+    fn film_element_count(&self) -> u64 {
+        self.params.width as u64 * self.params.height as u64 * self.params.gate.bins as u64 * 3
     }
 
     /// Starts afresh from `seed` as a newly built render with that seed would: clears the film

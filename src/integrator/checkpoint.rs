@@ -1,0 +1,215 @@
+//! Resumable renders. A [`RenderState`] is everything a render has accumulated between passes
+//! (the film's sums, the sample counters, the random-sequence and target-length state, and a
+//! method's host-side sums); `Integrator::save_state` takes it and `Integrator::load_state`
+//! puts it into a freshly built integrator of the same settings, whose next passes then
+//! continue exactly where the saved render stopped. A checkpoint file holds one state with a
+//! fingerprint of the render (scene file, settings, version), so that a resume refuses a
+//! state made by another render.
+//!
+//! File layout: the line `GATETRACE-CHECKPOINT`, one line of JSON (format, fingerprint,
+//! counters, the names and byte lengths of the blobs), then the blobs back to back.
+
+use std::collections::BTreeMap;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result, anyhow, bail, ensure};
+use serde_json::{Value, json};
+
+use super::{Method, RenderSettings};
+
+/// The first line of a checkpoint file.
+const MAGIC: &[u8] = b"GATETRACE-CHECKPOINT\n";
+/// Version of the layout of the header and blobs.
+const FORMAT: u64 = 1;
+
+/// What a render has accumulated, in a form that survives the process.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderState {
+    /// The method whose integrator made the state (for `auto`, the method it chose).
+    pub method: Method,
+    /// Samples per pixel in the film.
+    pub samples_in_film: u64,
+    /// Index of the next sample to trace.
+    pub next_sample: u64,
+    /// Seconds of rendering so far (a time budget counts them).
+    pub rendering_seconds: f64,
+    /// Named byte blobs: device buffers and host-side values, as each integrator names them.
+    pub blobs: Vec<(String, Vec<u8>)>,
+}
+
+impl RenderState {
+    /// The blob called `name` (an error naming it when the state lacks it).
+    pub fn blob(&self, name: &str) -> Result<&[u8]> {
+        self.blobs
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, b)| b.as_slice())
+            .ok_or_else(|| anyhow!("the checkpoint has no `{name}`: it was made by another kind of render"))
+    }
+
+    /// The blob called `name` as `count` values of T.
+    pub fn values<T: bytemuck::Pod>(&self, name: &str, count: usize) -> Result<Vec<T>> {
+        let bytes = self.blob(name)?;
+        ensure!(
+            bytes.len() == count * size_of::<T>(),
+            "the checkpoint's `{name}` holds {} bytes, this render's {}: it was made by another render",
+            bytes.len(),
+            count * size_of::<T>()
+        );
+        Ok(bytemuck::pod_collect_to_vec(bytes))
+    }
+
+    /// Adds blob `name` holding `values`.
+    pub fn push<T: bytemuck::Pod>(&mut self, name: &str, values: &[T]) {
+        self.blobs.push((name.to_owned(), bytemuck::cast_slice(values).to_vec()));
+    }
+}
+
+/// Where the checkpoint of the render written to `out` lives: beside it, `OUT.checkpoint`.
+pub fn checkpoint_path(out: &Path) -> PathBuf {
+    let mut name = out.as_os_str().to_owned();
+    name.push(".checkpoint");
+    PathBuf::from(name)
+}
+
+/// What identifies a render: the scene file (its path and a hash of its bytes), every setting
+/// (`RenderSettings`, the seed included; not the budget), gatetrace's version, and `extra`
+/// (e.g. an animation time or a camera override). Equal fingerprints continue each other.
+pub fn fingerprint(scene: &Path, settings: &RenderSettings, extra: &[(&str, String)]) -> Result<BTreeMap<String, String>> {
+    let bytes = std::fs::read(scene).with_context(|| format!("{}: cannot read the scene file", scene.display()))?;
+    let mut f = BTreeMap::new();
+    f.insert("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into());
+    f.insert("scene".into(), scene.display().to_string());
+    f.insert("scene_fnv1a64".into(), format!("{:016x}", fnv1a64(&bytes)));
+    f.insert("settings".into(), format!("{settings:?}"));
+    for (k, v) in extra {
+        f.insert((*k).into(), v.clone());
+    }
+    Ok(f)
+}
+
+/// FNV-1a, 64 bits: a fast hash that tells a changed scene file from the one a checkpoint
+/// was made from (not a cryptographic hash).
+fn fnv1a64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
+/// Writes `state` with its `fingerprint` to `path` (atomically: an interrupted write never
+/// leaves a torn checkpoint).
+pub fn write_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>, state: &RenderState) -> Result<()> {
+    let header = json!({
+        "format": FORMAT,
+        "fingerprint": fingerprint,
+        "method": state.method.name(),
+        "samples_in_film": state.samples_in_film,
+        "next_sample": state.next_sample,
+        "rendering_seconds": state.rendering_seconds,
+        "blobs": state.blobs.iter().map(|(n, b)| json!({"name": n, "bytes": b.len()})).collect::<Vec<_>>(),
+    });
+    let write = |tmp: &Path| -> Result<()> {
+        let mut file = std::io::BufWriter::new(std::fs::File::create(tmp)?);
+        file.write_all(MAGIC)?;
+        file.write_all(serde_json::to_string(&header)?.as_bytes())?;
+        file.write_all(b"\n")?;
+        for (_, blob) in &state.blobs {
+            file.write_all(blob)?;
+        }
+        file.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        Ok(())
+    };
+    crate::film::output::replace_atomically(path, write).with_context(|| format!("{}: cannot write the checkpoint", path.display()))
+}
+
+/// Reads the checkpoint at `path` and checks that it was made by the render `fingerprint`
+/// describes; the error names the file and the first difference.
+pub fn read_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>) -> Result<RenderState> {
+    let name = path.display();
+    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the checkpoint"))?;
+    let body = bytes.strip_prefix(MAGIC).ok_or_else(|| anyhow!("{name}: not a gatetrace checkpoint"))?;
+    let end = body.iter().position(|&b| b == b'\n').ok_or_else(|| anyhow!("{name}: the checkpoint's header is cut off"))?;
+    let header: Value =
+        serde_json::from_slice(&body[..end]).map_err(|e| anyhow!("{name}: the checkpoint's header is not valid: {e}"))?;
+    let bad = |what: &str| anyhow!("{name}: the checkpoint's header lacks a valid `{what}`");
+    let format = header["format"].as_u64().ok_or_else(|| bad("format"))?;
+    ensure!(format == FORMAT, "{name}: checkpoint format {format}, this gatetrace reads format {FORMAT}");
+    let saved: BTreeMap<String, String> =
+        serde_json::from_value(header["fingerprint"].clone()).map_err(|_| bad("fingerprint"))?;
+    for (key, now) in fingerprint {
+        let then = saved.get(key).map(String::as_str).unwrap_or("(none)");
+        if then != now {
+            bail!("{name}: the checkpoint was made by another render ({key}: {})", first_difference(then, now));
+        }
+    }
+    let method = match header["method"].as_str().ok_or_else(|| bad("method"))? {
+        "path" => Method::Path,
+        "direct" => Method::Direct,
+        "ellipsoidal" => Method::Ellipsoidal,
+        other => bail!("{name}: the checkpoint names an unknown method `{other}`"),
+    };
+    let mut data = &body[end + 1..];
+    let mut blobs = Vec::new();
+    for b in header["blobs"].as_array().ok_or_else(|| bad("blobs"))? {
+        let blob_name = b["name"].as_str().ok_or_else(|| bad("blobs"))?;
+        let len = b["bytes"].as_u64().ok_or_else(|| bad("blobs"))? as usize;
+        ensure!(len <= data.len(), "{name}: the checkpoint is cut off in `{blob_name}`");
+        blobs.push((blob_name.to_owned(), data[..len].to_vec()));
+        data = &data[len..];
+    }
+    ensure!(data.is_empty(), "{name}: {} bytes follow the checkpoint's last blob", data.len());
+    Ok(RenderState {
+        method,
+        samples_in_film: header["samples_in_film"].as_u64().ok_or_else(|| bad("samples_in_film"))?,
+        next_sample: header["next_sample"].as_u64().ok_or_else(|| bad("next_sample"))?,
+        rendering_seconds: header["rendering_seconds"].as_f64().ok_or_else(|| bad("rendering_seconds"))?,
+        blobs,
+    })
+}
+
+/// "`A` then, `B` now" for the first comma-separated field where two fingerprint values
+/// differ (the whole values when they have no commas).
+fn first_difference(then: &str, now: &str) -> String {
+    let (a, b): (Vec<&str>, Vec<&str>) = (then.split(", ").collect(), now.split(", ").collect());
+    let i = a.iter().zip(&b).position(|(x, y)| x != y).unwrap_or(a.len().min(b.len()));
+    let pick = |v: &[&str]| v.get(i).copied().unwrap_or("(nothing)").to_owned();
+    format!("`{}` then, `{}` now", pick(&a), pick(&b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn checkpoints_round_trip_and_refuse_other_renders() {
+        let dir = std::env::temp_dir().join(format!("gatetrace_checkpoint_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("x.npy.checkpoint");
+        let mut state = RenderState {
+            method: Method::Direct,
+            samples_in_film: 12,
+            next_sample: 20,
+            rendering_seconds: 1.5,
+            blobs: Vec::new(),
+        };
+        state.push("film", &[1.0f32, 2.0, 3.0]);
+        state.push("empty", &[] as &[u32]);
+        state.push("sums", &[0.25f64]);
+        let f: BTreeMap<String, String> = [("settings".to_string(), "a, b, c".to_string())].into();
+        write_checkpoint(&path, &f, &state).unwrap();
+        assert_eq!(read_checkpoint(&path, &f).unwrap(), state);
+        assert_eq!(state.values::<f32>("film", 3).unwrap(), vec![1.0, 2.0, 3.0]);
+        assert!(state.values::<f32>("film", 4).is_err());
+
+        let other: BTreeMap<String, String> = [("settings".to_string(), "a, x, c".to_string())].into();
+        let e = format!("{:#}", read_checkpoint(&path, &other).unwrap_err());
+        assert!(e.contains("x.npy.checkpoint") && e.contains("another render (settings: `b` then, `x` now)"), "{e}");
+
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 3]).unwrap();
+        let e = format!("{:#}", read_checkpoint(&path, &f).unwrap_err());
+        assert!(e.contains("cut off in `sums`"), "{e}");
+        std::fs::write(&path, b"hello").unwrap();
+        assert!(format!("{:#}", read_checkpoint(&path, &f).unwrap_err()).contains("not a gatetrace checkpoint"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

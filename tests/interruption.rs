@@ -1,0 +1,214 @@
+//! Interrupted and resumed renders: a saved state continues the render it came from, SIGINT and
+//! SIGTERM leave the image of the samples taken (and a checkpoint), and `--resume` finishes it
+//! as the uninterrupted render would have.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use gatetrace::film::{Film, Gate};
+use gatetrace::integrator::{Method, RenderSettings, create_integrator};
+use gatetrace::scene::{PreparedScene, load_gltf_for_capture};
+
+/// Renders `first` samples per pixel, saves the state, loads it into a new integrator and
+/// renders `second` more; returns that film and the film of one integrator rendering both.
+fn continued_and_uninterrupted(ctx: &gatetrace::gpu::GpuContext, scene: &PreparedScene, settings: &RenderSettings,
+                               first: u64, second: u64) -> (Film, Film) {
+    let mut whole = create_integrator(ctx, scene, settings).unwrap();
+    whole.render_samples(first).unwrap();
+    let state = whole.save_state().unwrap();
+    whole.render_samples(second).unwrap();
+    let mut resumed = create_integrator(ctx, scene, settings).unwrap();
+    resumed.load_state(&state).unwrap();
+    resumed.render_samples(second).unwrap();
+    (resumed.film().unwrap(), whole.film().unwrap())
+}
+
+#[test]
+fn a_saved_state_continues_the_render() {
+    let ctx = common::gpu();
+    let cornell = common::cornell_box();
+    let base = RenderSettings { width: 16, height: 16, max_bounces: 4, samples_per_pass: Some(4), ..Default::default() };
+    let gated = Gate::Box { start: 3.14, end: 3.19 };
+    let transient = Gate::Transient { start: 3.0, width: 0.1, bins: 8 };
+    // path is deterministic: bit for bit. The bidirectional methods' light-tracing splats are
+    // float atomics, so their sums may differ in the last bits only.
+    for (method, gate, exact) in [
+        (Method::Path, Gate::None, true),
+        (Method::Path, transient.clone(), true),
+        (Method::Direct, gated.clone(), false),
+        (Method::Ellipsoidal, gated.clone(), false),
+        (Method::Ellipsoidal, transient.clone(), false),
+    ] {
+        let settings = RenderSettings { method, gate: gate.clone(), ..base.clone() };
+        let (resumed, whole) = continued_and_uninterrupted(&ctx, &cornell, &settings, 12, 8);
+        assert_eq!(resumed.spp, 20);
+        check(&format!("{} {}", method.name(), gate.describe()), &resumed, &whole, exact);
+    }
+    // An NLOS capture whose pilot render shapes the target lengths' visits per sensed point.
+    let letter = PreparedScene::new(load_gltf_for_capture(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap()).unwrap();
+    let settings = RenderSettings {
+        target_pilot_spp: 8,
+        samples_per_pass: Some(4),
+        ..common::example_capture(8, 8, Gate::Transient { start: 1.6, width: 0.02, bins: 40 }, gatetrace::nlos::LaserAim::Confocal,
+                                  Method::Ellipsoidal)
+    };
+    let (resumed, whole) = continued_and_uninterrupted(&ctx, &letter, &settings, 8, 8);
+    check("NLOS confocal ellipsoidal with a target pilot", &resumed, &whole, false);
+}
+
+/// Asserts that `resumed` equals `whole`: bit for bit when `exact`, else within float rounding
+/// (1e-5 of the largest value), and that the films are not black.
+fn check(label: &str, resumed: &Film, whole: &Film, exact: bool) {
+    assert_eq!((resumed.spp, resumed.bins), (whole.spp, whole.bins), "{label}");
+    let largest = whole.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(largest > 0.0, "{label}: the film is black");
+    if exact {
+        assert!(resumed.data == whole.data, "{label}: the resumed film differs from the uninterrupted one");
+    } else {
+        let worst = resumed.data.iter().zip(&whole.data).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst <= 1e-5 * largest, "{label}: differs by {worst} (largest value {largest})");
+    }
+}
+
+fn gatetrace() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+}
+
+/// Waits until `path` exists (the render has saved a checkpoint), at most 120 s.
+fn wait_for(path: &Path, child: &mut Child) {
+    let start = Instant::now();
+    while !path.exists() {
+        assert!(child.try_wait().unwrap().is_none(), "the render ended before its first checkpoint");
+        assert!(start.elapsed() < Duration::from_secs(120), "no checkpoint after 120 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn signal(child: &Child, name: &str) {
+    let status = Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status().unwrap();
+    assert!(status.success(), "kill -{name} failed");
+}
+
+fn metadata(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// A render of many samples stopped by `signal_name` once it has saved a checkpoint: the exit
+/// status is 128 + the signal, the image holds the samples taken (its metadata says how many
+/// and why it stopped), and `--resume` to a few samples more gives the image of an
+/// uninterrupted render of as many samples (bit for bit for `path`).
+fn interrupt_and_resume(method: &str, signal_name: &str, status: i32, dir: &Path) {
+    let args = |out: &str| -> Vec<String> {
+        ["render", "--method", method, "--res", "16x16", "--max-bounces", "3", "--gate", "box:3.14..3.19", "--samples-per-pass",
+         "4", "--out", out].map(String::from).to_vec()
+    };
+    let out = dir.join("stopped.npy");
+    let mut child = gatetrace()
+        .args(args(out.to_str().unwrap()))
+        .args(["--spp", "100000000", "--checkpoint-every", "0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for(&dir.join("stopped.npy.checkpoint"), &mut child);
+    signal(&child, signal_name);
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(status), "{method}, {signal_name}: {err}");
+    let meta = metadata(&dir.join("stopped.json"));
+    assert_eq!(meta["interrupted_by"], format!("SIG{signal_name}"), "{meta}");
+    assert_eq!(meta["requested"], "100000000 spp", "{meta}");
+    let taken: u64 = meta["spp"].as_str().unwrap().parse().unwrap();
+    assert!(taken >= 4 && taken % 4 == 0, "{taken} spp: whole passes of 4");
+    assert!(said.contains(&format!("with the {taken} spp traced so far")), "{said}");
+
+    let total = (taken + 8).to_string();
+    let resumed = gatetrace().args(args(out.to_str().unwrap())).args(["--spp", &total, "--resume"]).output().unwrap();
+    assert!(resumed.status.success(), "{}", String::from_utf8_lossy(&resumed.stderr));
+    assert!(!dir.join("stopped.npy.checkpoint").exists(), "a finished render removes its checkpoint");
+    let meta = metadata(&dir.join("stopped.json"));
+    assert_eq!(meta["spp"], total.as_str());
+    assert_eq!(meta["resumed_from_spp"], taken.to_string().as_str());
+    assert!(meta.get("interrupted_by").is_none(), "{meta}");
+
+    let fresh = dir.join("fresh.npy");
+    let o = gatetrace().args(args(fresh.to_str().unwrap())).args(["--spp", &total]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (shape, a) = gatetrace::film::output::read_npy_f32(&out).unwrap();
+    let (_, b) = gatetrace::film::output::read_npy_f32(&fresh).unwrap();
+    let film = |data: Vec<f32>| Film { width: shape[1] as u32, height: shape[0] as u32, bins: 1, spp: taken + 8, data };
+    check(&format!("{method} resumed after {signal_name}"), &film(a), &film(b), method == "path");
+}
+
+#[test]
+fn sigint_and_sigterm_keep_the_samples_taken_and_resume_finishes_the_render() {
+    let dir = common::scratch_dir("interruption_path");
+    interrupt_and_resume("path", "INT", 130, &dir);
+    let dir = common::scratch_dir("interruption_direct");
+    interrupt_and_resume("direct", "TERM", 143, &dir);
+}
+
+/// A closed white box (2 m wide, double-sided walls of albedo 0.95) around the camera, lit by
+/// a small emitter: no path escapes, so every path runs to --max-bounces.
+fn closed_box(dir: &Path) -> std::path::PathBuf {
+    use common::gltf_builder::{Camera, Material, Mesh, Scene};
+    let face = |corner: [f32; 3], u: [f32; 3], v: [f32; 3], material| {
+        let p = |a: f32, b: f32| [0, 1, 2].map(|i| corner[i] + a * u[i] + b * v[i]);
+        Mesh { positions: vec![p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)], normals: None, uvs: None,
+               indices: vec![0, 1, 2, 0, 2, 3], material: Some(material) }
+    };
+    let mut meshes = vec![];
+    for axis in 0..3 {
+        for side in [-1.0f32, 1.0] {
+            let mut corner = [-1.0f32; 3];
+            corner[axis] = side;
+            let (mut u, mut v) = ([0.0f32; 3], [0.0f32; 3]);
+            u[(axis + 1) % 3] = 2.0;
+            v[(axis + 2) % 3] = 2.0;
+            meshes.push(face(corner, u, v, 0));
+        }
+    }
+    meshes.push(face([-0.1, 0.9, -0.1], [0.2, 0.0, 0.0], [0.0, 0.0, 0.2], 1));
+    let mut white = Material::diffuse([0.95; 3]);
+    white.double_sided = true;
+    let mut light = Material::emitter(5.0);
+    light.double_sided = true;
+    let scene = Scene {
+        meshes,
+        materials: vec![white, light],
+        camera: Some(Camera { position: [0.0; 3], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 1.0 }),
+        point_lights: vec![],
+    };
+    scene.write(dir, "closed_box.gltf")
+}
+
+#[test]
+fn a_second_signal_aborts_at_once() {
+    let dir = common::scratch_dir("interruption_abort");
+    let out = dir.join("x.npy");
+    // One pass of 128 x 128 x 240 paths of 100 bounces each takes many seconds: both signals
+    // arrive during the first pass.
+    let scene = closed_box(&dir);
+    let mut child = gatetrace()
+        .args(["render", scene.to_str().unwrap(), "--res", "128x128", "--spp", "240", "--samples-per-pass", "240",
+               "--max-bounces", "100", "--out", out.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(1));
+    signal(&child, "INT");
+    std::thread::sleep(Duration::from_millis(200));
+    let second = Instant::now();
+    signal(&child, "INT");
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("SIGINT: aborted"), "{err}");
+    assert!(second.elapsed() < Duration::from_secs(5), "exited {:?} after the second signal", second.elapsed());
+    assert!(!out.exists() && !dir.join("x.npy.checkpoint").exists(), "an aborted render writes nothing");
+}
