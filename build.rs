@@ -53,19 +53,13 @@ fn main() {
 
 /// Kernels also built with a WESL feature flag on, for adapters with the device feature it
 /// needs: (kernel, feature). Every kernel is built with all flags off as well.
-const FEATURE_VARIANTS: [(&str, &str); 4] = [
-    ("splat_light_paths", "float_atomics"),
-    ("connect_ellipsoidal", "float_atomics"),
-    ("connect_spherical", "float_atomics"),
-    ("resolve_display", "splats"),
-];
+const FEATURE_VARIANTS: [(&str, &str); 1] = [("resolve_display", "splats")];
 
 /// The naga capabilities a WESL feature flag needs (validation of its variants).
 fn capabilities_of(feature: Option<&str>) -> naga::valid::Capabilities {
     let baseline = naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32;
     match feature {
         None => baseline,
-        Some("float_atomics") => baseline | naga::valid::Capabilities::SHADER_FLOAT32_ATOMIC,
         Some("splats") => baseline,
         Some(other) => panic!("unknown WESL feature `{other}`"),
     }

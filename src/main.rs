@@ -14,7 +14,10 @@ use gatetrace::frames::{
     FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range,
 };
 use gatetrace::gpu::GpuContext;
-use gatetrace::integrator::checkpoint::{checkpoint_path, fingerprint, read_checkpoint, write_checkpoint};
+use gatetrace::integrator::checkpoint::{
+    check_fingerprint, checkpoint_path, fingerprint, merge_states, read_checkpoint, read_state_file, write_checkpoint,
+    write_state_file,
+};
 use gatetrace::integrator::{
     Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
 };
@@ -54,6 +57,20 @@ enum Command {
     /// Compare the kernels' f32 ellipsoid code with the f64 oracle on many random and
     /// adversarial configurations and print the error distributions per family.
     StressEllipsoid(StressArgs),
+    /// Combine the shards of a render (`render --shard I/N`, one file each) into the image the
+    /// unsplit render gives, bit for bit; refuses parts of different renders, missing or
+    /// repeated shards.
+    Merge(MergeArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The shard files, one per shard index 0 .. N-1 (any order).
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// Output file: .exr or .npy (with a .json sidecar), as `render` writes them.
+    #[arg(long, short)]
+    out: PathBuf,
 }
 
 #[derive(Args)]
@@ -232,11 +249,19 @@ struct RenderArgs {
     /// counting those already taken, so a larger --spp extends a finished render saved with
     /// --checkpoint-every) or total rendering time (--time). Every other option must be as
     /// when the checkpoint was made (the scene file too); the result is the image the render
-    /// would have given without the interruption (bit for bit for `path`, within float rounding
-    /// for `direct` and `ellipsoidal`, whose light-tracing splats use float atomics). For a
-    /// sequence, frames with a checkpoint are continued and finished frames skipped.
+    /// would have given without the interruption, bit for bit (--spp; a --time budget stops
+    /// where time runs out). For a sequence, frames with a checkpoint are continued and
+    /// finished frames skipped.
     #[arg(long)]
     resume: bool,
+    /// Render only shard I of N (I from 0) of the image: samples floor(I S / N) to
+    /// floor((I + 1) S / N) of each pixel's S = --spp, written to --out (default
+    /// SCENE_NAME.shard_I_of_N) as the sums `gatetrace merge` adds into the image of the unsplit
+    /// render, bit for bit, with every method. Run the N shards anywhere (a job array), with
+    /// identical other options. Needs --spp; not for sequences, NLOS captures or --method auto
+    /// (whose choice depends on timings).
+    #[arg(long, value_name = "I/N", value_parser = parse_shard)]
+    shard: Option<(u32, u32)>,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
     /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr, or
     /// SCENE_NAME_{frame:04}.exr for a sequence, or SCENE_NAME_nlos.npy for --nlos.
@@ -515,6 +540,16 @@ fn parse_pair(s: &str, what: &str) -> Result<(u32, u32), String> {
     ))
 }
 
+fn parse_shard(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{s}` is not I/N (the shard index from 0 and the count, e.g. 0/4)");
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (i, n): (u32, u32) = (i.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+    if n == 0 || i >= n {
+        return Err(format!("shard {i}/{n}: give I/N with 0 <= I < N"));
+    }
+    Ok((i, n))
+}
+
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let bad = || format!("`{s}` is not WIDTHxHEIGHT (e.g. 256x256)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
@@ -543,6 +578,7 @@ fn main() {
         Command::View(args) => run_view(args),
         Command::EqualTime(args) => run_equal_time(args),
         Command::StressEllipsoid(args) => run_stress(args),
+        Command::Merge(args) => run_merge(args),
         Command::Bench(args) => {
             let settings = gatetrace::bench::BenchSettings {
                 seconds: args.seconds,
@@ -669,7 +705,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
         .unwrap_or("render")
         .to_owned();
     let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from(if sequence {
+        PathBuf::from(if let Some((i, n)) = args.shard {
+            format!("{stem}.shard_{i}_of_{n}")
+        } else if sequence {
             format!("{stem}_{{frame:04}}.exr")
         } else {
             format!("{stem}.exr")
@@ -693,7 +731,6 @@ fn run_render(args: RenderArgs) -> Result<()> {
         light_strategy: LightStrategy::Mis,
         stats: args.stats,
         debug_strategy: args.debug_strategy,
-        portable_atomics: false,
         binding_limit: None,
         connections_per_query: args.connections_per_query.unwrap_or(
             if args.nlos.is_some() && args.method == Method::Ellipsoidal {
@@ -715,7 +752,6 @@ fn run_render(args: RenderArgs) -> Result<()> {
             needle: args.needle_guard,
             length: args.length_guard,
         },
-        keep_splats_on_device: false,
         nlos: None,
         target_pilot_spp: args.target_pilot.unwrap_or(
             if args.nlos.is_some()
@@ -734,6 +770,25 @@ fn run_render(args: RenderArgs) -> Result<()> {
     );
     if let Some(every) = args.checkpoint_every {
         ensure!(every.is_finite() && every >= 0.0, "--checkpoint-every {every}: give seconds, 0 or more");
+    }
+    if args.shard.is_some() {
+        ensure!(
+            matches!(budget, Budget::Samples(_)),
+            "--shard needs --spp: a shard renders a slice of a known number of samples per pixel"
+        );
+        ensure!(
+            args.method != Method::Auto,
+            "--shard: --method auto chooses from timings, so shards could choose differently; choose path, direct or \
+             ellipsoidal"
+        );
+        ensure!(
+            args.nlos.is_none() && !sequence && args.anim_time.is_none(),
+            "--shard splits one image: it does not apply to --nlos, --frames, --frame-range or --anim-time"
+        );
+        ensure!(
+            !args.resume && args.checkpoint_every.is_none(),
+            "--shard keeps no checkpoint (--resume, --checkpoint-every): rerun an interrupted shard whole"
+        );
     }
     if let Some(scan) = args.nlos {
         ensure!(
@@ -763,7 +818,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
         } else {
             out.clone()
         };
-        OutputFormat::of(&path)?;
+        if args.shard.is_none() {
+            OutputFormat::of(&path)?;
+        }
         let settings = RenderSettings {
             gate: plan.gate(&gate, frame)?,
             seed: frame_seed(args.seed, frame),
@@ -800,8 +857,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if args.profile {
         ctx.enable_profiling()?;
     }
-    // A sequence shows a bar over its frames above each frame's bar over passes.
     let bars = indicatif::MultiProgress::new();
+    if let (Some(shard), Some(scene), Budget::Samples(total)) = (args.shard, &static_scene, budget) {
+        let (_, path, settings) = &frames[0];
+        return render_shard(&ctx, scene, &scene_path, &args, shard, settings, total, path, &bars);
+    }
+    // A sequence shows a bar over its frames above each frame's bar over passes.
     let frames_bar = sequence.then(|| {
         let bar = bars.add(indicatif::ProgressBar::new(frames.len() as u64));
         let style = indicatif::ProgressStyle::with_template(
@@ -1011,7 +1072,7 @@ fn run_nlos(
         } else {
             String::new()
         };
-        let output = render_resumable(&ctx, &scene, &settings, budget, None, false, |_, p| {
+        let output = render_resumable(&ctx, &scene, &settings, budget, Default::default(), |_, p| {
             match budget {
                 Budget::Samples(_) => bar.set_position(p.spp),
                 Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
@@ -1108,6 +1169,120 @@ fn run_nlos(
     Ok(())
 }
 
+/// Renders shard `index` of `count` of the image: samples floor(index total / count) to
+/// floor((index + 1) total / count) of each pixel, written to `out` as a state file with the
+/// image's metadata for `gatetrace merge`.
+#[allow(clippy::too_many_arguments)]
+fn render_shard(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    scene_path: &Path,
+    args: &RenderArgs,
+    (index, count): (u32, u32),
+    settings: &RenderSettings,
+    total: u64,
+    out: &Path,
+    bars: &indicatif::MultiProgress,
+) -> Result<()> {
+    let (first, end) = (total * index as u64 / count as u64, total * (index as u64 + 1) / count as u64);
+    let fingerprint = fingerprint(
+        scene_path,
+        settings,
+        &[("camera", scene.scene.camera.describe()), ("shards", count.to_string()), ("spp", total.to_string())],
+    )?;
+    let bar = bars.add(progress_bar(Budget::Samples(end - first)));
+    let start = gatetrace::integrator::RenderStart { resume: None, skip_samples: first, keep_state: true };
+    let output = render_resumable(ctx, scene, settings, Budget::Samples(end - first), start, |_, p| {
+        bar.set_position(p.spp);
+        bar.set_message(format!("shard {index}/{count}: {} spp", p.spp));
+        Ok(if interrupt::received().is_some() { ControlFlow::Break(()) } else { ControlFlow::Continue(()) })
+    })?;
+    bar.finish_and_clear();
+    if let Some(signal) = interrupt::received().filter(|_| output.stopped_early) {
+        eprintln!("{}: shard {index}/{count} stopped; {} was not written (rerun the shard)", interrupt::name(signal), out.display());
+        return Err(interrupt::Interrupted { signal }.into());
+    }
+    let state = output.state.as_ref().expect("the render keeps its state");
+    let mut metadata = render_metadata(ctx, scene_path, &args.gate, settings, &output);
+    metadata.push(("camera".into(), scene.scene.camera.describe()));
+    let gate = &settings.gate;
+    let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
+    let mut extra = serde_json::Map::new();
+    extra.insert("part".into(), index.into());
+    extra.insert("metadata".into(), serde_json::json!(metadata));
+    extra.insert("bin_ranges".into(), serde_json::json!(bin_ranges));
+    write_state_file(out, &fingerprint, state, extra)?;
+    say(
+        bars,
+        format!(
+            "shard {index}/{count}: samples {first}..{end} of {total} per pixel, {:.2} s rendering on {} -> {} (gatetrace \
+             merge combines the {count} shards)",
+            output.rendering.as_secs_f64(),
+            ctx.adapter_info.name,
+            out.display()
+        ),
+    )?;
+    print_stats(settings, &output);
+    Ok(())
+}
+
+/// `gatetrace merge`: adds the shards' sums and writes the unsplit render's image.
+fn run_merge(args: MergeArgs) -> Result<()> {
+    OutputFormat::of(&args.out)?;
+    check_writable(&args.out)?;
+    let mut parts = Vec::new();
+    for path in &args.parts {
+        parts.push((path, read_state_file(path)?));
+    }
+    let (first_path, (first_fingerprint, _, first_header)) = &parts[0];
+    let not_a_shard = |path: &Path| anyhow::anyhow!("{}: not a shard (gatetrace render --shard I/N writes them)", path.display());
+    let count: u32 = first_fingerprint.get("shards").and_then(|n| n.parse().ok()).ok_or_else(|| not_a_shard(first_path))?;
+    let mut by_index: Vec<Option<usize>> = vec![None; count as usize];
+    for (k, (path, (fingerprint, _, header))) in parts.iter().enumerate() {
+        let problem = format!("not a shard of the render {} belongs to", first_path.display());
+        check_fingerprint(path, &problem, fingerprint, first_fingerprint)?;
+        let index = header["part"].as_u64().filter(|&i| i < count as u64).ok_or_else(|| not_a_shard(path))? as usize;
+        if let Some(other) = by_index[index] {
+            bail!("{} and {} are both shard {index}/{count}", parts[other].0.display(), path.display());
+        }
+        by_index[index] = Some(k);
+    }
+    let missing: Vec<String> = by_index.iter().enumerate().filter(|(_, k)| k.is_none()).map(|(i, _)| i.to_string()).collect();
+    ensure!(missing.is_empty(), "shards {} of {count} are missing", missing.join(", "));
+    let order: Vec<usize> = by_index.into_iter().flatten().collect();
+    let states: Vec<_> = order.iter().map(|&k| parts[k].1.1.clone()).collect();
+    let names: Vec<String> = order.iter().map(|&k| parts[k].0.display().to_string()).collect();
+    let merged = merge_states(&states, &names)?;
+    let film = gatetrace::integrator::wavefront::film_of_state(&merged)?;
+    let mut metadata: Vec<(String, String)> =
+        serde_json::from_value(first_header["metadata"].clone()).map_err(|_| not_a_shard(first_path))?;
+    let bin_ranges: Vec<(f64, f64)> =
+        serde_json::from_value(first_header["bin_ranges"].clone()).map_err(|_| not_a_shard(first_path))?;
+    for (key, value) in metadata.iter_mut() {
+        match key.as_str() {
+            "spp" => *value = merged.samples_in_film.to_string(),
+            "rendering_seconds" => *value = format!("{:.3}", merged.rendering_seconds),
+            "elapsed_seconds" => *value = "(sum over shards: see rendering_seconds)".into(),
+            _ => {}
+        }
+    }
+    metadata.push(("shards".into(), count.to_string()));
+    write_film(&args.out, &film, &metadata, &bin_ranges)?;
+    let mean = film.mean_rgb();
+    println!(
+        "merged {count} shards: {}x{}, {} spp, {:.2} s rendering in all | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
+        film.width,
+        film.height,
+        film.spp,
+        merged.rendering_seconds,
+        mean[0],
+        mean[1],
+        mean[2],
+        args.out.display()
+    );
+    Ok(())
+}
+
 /// How a render keeps checkpoints (see --checkpoint-every and --resume).
 struct Checkpoints {
     /// Save the state after the first pass this long after the last save.
@@ -1156,7 +1331,8 @@ fn render_one(
         .unwrap_or_default();
     let mut last_save = Instant::now();
     let keep_state = checkpoints.every.is_some();
-    let output = render_resumable(ctx, scene, settings, budget, resumed.as_ref(), keep_state, |tracer, p| {
+    let start = gatetrace::integrator::RenderStart { resume: resumed.as_ref(), skip_samples: 0, keep_state };
+    let output = render_resumable(ctx, scene, settings, budget, start, |tracer, p| {
         match budget {
             Budget::Samples(_) => bar.set_position(p.spp),
             Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),

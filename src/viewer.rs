@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, Result, anyhow, bail};
 use eframe::egui;
 
-use crate::film::Gate;
+use crate::film::{Gate, fixed};
 use crate::film::output::{Metadata, write_film};
 use crate::gpu::layout::{DISPLAY_LINEAR, DISPLAY_LOG, DisplayParams};
 use crate::gpu::{GpuContext, Kernel, Resources};
@@ -239,7 +239,6 @@ impl<'a> Viewer<'a> {
             max_bounces: o.max_bounces,
             seed: o.seed,
             connections_per_query: crate::integrator::bidirectional::default_connections_per_query(method),
-            keep_splats_on_device: true,
             ..Default::default()
         }
     }
@@ -373,15 +372,16 @@ impl<'a> Viewer<'a> {
         let ctx = self.ctx;
         let film = p.tracer.resources().get("film").unwrap();
         let w = self.options.width;
-        let first = ((p.pixel.1 * w + p.pixel.0) * p.bins * 3) as u64 * 8;
-        let bytes = p.bins as u64 * 3 * 8;
+        let element = crate::integrator::FILM_ELEMENT_BYTES;
+        let first = ((p.pixel.1 * w + p.pixel.0) * p.bins * 3) as u64 * element;
+        let bytes = p.bins as u64 * 3 * element;
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(film, first, &p.staging, 0, bytes);
         ctx.queue.submit([encoder.finish()]);
         let slice = p.staging.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
         ctx.wait_idle()?;
-        let sums: Vec<[f32; 2]> = {
+        let sums: Vec<[u32; 4]> = {
             let view = slice.get_mapped_range().map_err(|e| anyhow!("cannot read the time profile back: {e:?}"))?;
             bytemuck::cast_slice(&view).to_vec()
         };
@@ -391,7 +391,7 @@ impl<'a> Viewer<'a> {
         p.values = sums
             .chunks(3)
             .map(|c| {
-                let rgb: Vec<f64> = c.iter().map(|s| (s[0] as f64 + s[1] as f64) / spp).collect();
+                let rgb: Vec<f64> = c.iter().map(|&s| fixed::to_f64(fixed::from_words(s)) / spp).collect();
                 (0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]) / width
             })
             .collect();
@@ -429,7 +429,7 @@ impl<'a> Viewer<'a> {
         let tracer = create_integrator(self.ctx, self.scene, &settings)?;
         let staging = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("profile_staging"),
-            size: bins as u64 * 3 * 8,
+            size: bins as u64 * 3 * crate::integrator::FILM_ELEMENT_BYTES,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });

@@ -188,7 +188,7 @@ fn smooth_gates_weigh_each_path_by_its_length() {
 #[test]
 fn transient_bins_sum_to_the_steady_image_of_the_same_run() {
     // Same seed, same paths: bins covering every path length add up to the steady image. The
-    // film's double-float sums are exact to far below f32 precision, so the difference is the
+    // film's fixed-point sums are exact, so the difference is the
     // rounding of each bin to f32 and the f32 sum over 80 bins: under 82 f32 epsilons.
     let ctx = common::gpu();
     let scene = common::cornell_box();
@@ -337,7 +337,7 @@ fn pixels_partly_on_the_light_read_radiance_times_coverage() {
 fn long_renders_do_not_drift() {
     // 2^22 samples of a pixel that sees an emitter of radiance 0.1 everywhere: every term is
     // the same f32, so the mean must be 0.1 to f32 precision. A plain f32 sum of these terms
-    // is off by percents; the film's double-float sums are exact to about 2^-48.
+    // is off by percents; the film's fixed-point sums are exact.
     let scene = emitter_wall(0.1, true, 0.5, "long_render");
     let ctx = common::gpu();
     let settings = RenderSettings { width: 1, height: 2, max_bounces: 0, ..Default::default() };

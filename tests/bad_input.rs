@@ -85,6 +85,20 @@ fn checkpointed(dir: &Path, extra: &[&str]) {
     assert!(o.status.success() && dir.join("out.npy.checkpoint").exists(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
+/// Renders shards `indices` of 4 of the Cornell box (8x8, 8 spp, `extra` options) to
+/// `dir/I.shard`.
+fn shards(dir: &Path, indices: &[u32], extra: &[&str]) {
+    for i in indices {
+        let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+            .args(["render", "--res", "8x8", "--spp", "8", "--max-bounces", "2", "--shard", &format!("{i}/4"), "--out"])
+            .arg(dir.join(format!("{i}.shard")))
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
 /// Writes the Cornell box changed by `edit` as `name`.
 fn box_with(name: &'static str, edit: impl FnOnce(&mut Value) + 'static) -> impl FnOnce(&Path) {
     move |dir: &Path| {
@@ -254,6 +268,22 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
         case("--resume of an NLOS capture", none,
              render(&common::repo_path("assets/scenes/nlos_letter.gltf").display().to_string(), &["--nlos", "confocal", "--resume"]),
              &["--resume", "NLOS"]),
+        // --- shards ---
+        case("--shard with --time", none, default_scene(&["--shard", "0/2", "--time", "1"]), &["--shard", "--spp"]),
+        case("--shard of auto", none, default_scene(&["--shard", "0/2", "--method", "auto", "--gate", "box:3.14..3.19"]),
+             &["--shard", "auto"]),
+        case("--shard past its count", none, default_scene(&["--shard", "4/4"]), &["--shard", "0 <= I < N"]),
+        case("--shard that is no fraction", none, default_scene(&["--shard", "half"]), &["--shard", "I/N"]),
+        case("merge with a shard missing", |d| shards(d, &[0, 1, 3], &[]), plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/3.shard", "--out", "{out}"]),
+             &["shards 2 of 4 are missing"]),
+        case("merge with a shard twice", |d| shards(d, &[0, 1, 2, 3], &[]),
+             plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/1.shard", "{dir}/2.shard", "{dir}/3.shard", "--out", "{out}"]),
+             &["1.shard", "both shard 1/4"]),
+        case("merge of shards of two renders", |d| { shards(d, &[0, 1, 2], &[]); shards(d, &[3], &["--seed", "5"]); },
+             plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/2.shard", "{dir}/3.shard", "--out", "{out}"]),
+             &["3.shard", "not a shard of the render", "seed: 0"]),
+        case("merge of a checkpoint", |d| checkpointed(d, &[]), plain(&["merge", "{dir}/out.npy.checkpoint", "--out", "{dir}/m.npy"]),
+             &["out.npy.checkpoint", "not a shard"]),
         // --- outputs ---
         case("unknown output format", none, plain(&["render", "--res", "8x8", "--out", "{dir}/image.png"]), &["image.png", ".exr or .npy"]),
         case("output under a regular file", |d| std::fs::write(d.join("file"), b"").unwrap(),

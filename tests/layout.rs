@@ -36,7 +36,7 @@ fn wgsl_structs_match_rust_structs() {
         PathVertex { position, path_length, normal, material, shading_normal, triangle, throughput, flags, pdf_fwd,
                      pdf_rev, uv }
         Splat { radiance, path_length, pixel, reserved0, reserved1, reserved2 }
-        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals, ellipsoid_queries, unfinished_shadow_rays }
+        QueueCounters { rays, next_rays, shadow_rays, truncated_traversals, ellipsoid_queries, unfinished_shadow_rays, invalid_contributions }
         WallPoint { position, length_offset, origin, triangle, power, b1, b2, reserved0, reserved1, reserved2 }
         DisplayParams { inverse_spp, exposure, curve, bin, decades, stride, reserved1, reserved2 }
     };

@@ -349,20 +349,25 @@ fn wgsl_gates_match_cpu_twin() {
 }
 
 #[test]
-fn wgsl_compensated_sums_match_cpu_twin() {
-    use gatetrace::film::compensated_add;
+fn wgsl_fixed_point_sums_match_cpu_twin() {
+    use gatetrace::film::fixed::{fixed_from_f32, to_words};
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let tracer = tracer_for(&ctx, &scene, Gate::None);
-    let input: Vec<[f32; 4]> =
-        (0..64u32).map(|i| [f32::from_bits(1000 + 997 * i), 0.1 + i as f32 * 0.37, 1e4 * i as f32, 0.0]).collect();
+    let seed = gatetrace::integrator::Integrator::wavefront(&tracer).params.seed;
+    // Values across the whole range, both signs, denormals, and ones rounded at random.
+    let mut values: Vec<f32> = (0..600).map(|i| f32::from_bits(0x0000_1000u32.wrapping_add(0x0071_c6a3u32.wrapping_mul(i)))).collect();
+    values.extend([0.0, -0.0, 1.0, -1.0, 1e-25, -3e-20, 5.4e-20, 2.7e-20, 1e18, -9.0e18, f32::MIN_POSITIVE]);
+    let input: Vec<[f32; 4]> = values
+        .iter()
+        .enumerate()
+        .map(|(i, &a)| [a, f32::from_bits(i as u32 * 7919), -values[(i * 31) % values.len()] * 0.37, f32::from_bits(i as u32)])
+        .collect();
     let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 11.0)], &input, input.len());
     for (x, g) in input.iter().zip(out) {
-        let mut acc = [x[2], x[3]];
-        for _ in 0..x[0].to_bits() {
-            acc = compensated_add(acc, x[1]);
-        }
-        assert_eq!([g[0], g[1]], acc, "{} additions of {} to {}", x[0].to_bits(), x[1], x[2]);
+        let (a, b) = (fixed_from_f32(x[0], x[1].to_bits(), seed), fixed_from_f32(x[2], x[3].to_bits(), seed));
+        let expected = to_words(a.unwrap_or(0).wrapping_add(b.unwrap_or(0)));
+        assert_eq!(g.map(f32::to_bits), expected, "{:e} + {:e}", x[0], x[2]);
     }
 }
 

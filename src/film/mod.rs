@@ -1,6 +1,7 @@
 //! The film: per-pixel, per-bin radiance estimates, and their output as EXR or NPY with the
 //! render's metadata.
 
+pub mod fixed;
 pub mod gate;
 pub mod output;
 pub mod target;
@@ -22,18 +23,6 @@ pub struct Film {
     pub spp: u64,
     /// Values, [H, W, T, 3] row-major.
     pub data: Vec<f32>,
-}
-
-/// Double-float accumulation (hi, lo) + value, |lo| <= ulp(hi) / 2: the CPU twin of the
-/// kernels' film accumulation (`compensated_add` in `shaders/lib/chunked.wesl`). hi + lo is the
-/// total, to about 48 significant bits.
-pub fn compensated_add(acc: [f32; 2], value: f32) -> [f32; 2] {
-    let s = acc[0] + value;
-    let v = s - acc[0];
-    let error = (acc[0] - (s - v)) + (value - v);
-    let t = error + acc[1];
-    let hi = s + t;
-    [hi, t - (hi - s)]
 }
 
 impl Film {
@@ -75,26 +64,5 @@ impl Film {
     /// True when every value is finite.
     pub fn all_finite(&self) -> bool {
         self.data.iter().all(|v| v.is_finite())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn compensated_sums_do_not_drift() {
-        // 2^22 additions of 0.1: a plain f32 sum is off by percents, the compensated one by
-        // about one f32 ulp of the total.
-        let n = 1 << 22;
-        let (mut plain, mut acc) = (0.0f32, [0.0f32; 2]);
-        for _ in 0..n {
-            plain += 0.1;
-            acc = compensated_add(acc, 0.1);
-        }
-        let exact = n as f64 * 0.1f32 as f64;
-        assert!(((plain as f64 - exact) / exact).abs() > 1e-3, "the plain sum should drift");
-        let total = acc[0] as f64 + acc[1] as f64;
-        assert!(((total - exact) / exact).abs() < 2.0 * f32::EPSILON as f64, "{total} vs {exact}");
     }
 }

@@ -26,6 +26,8 @@ pub struct GpuContext {
     /// GPU time per stage, when enabled (`enable_profiling`); kernels built afterwards record
     /// their dispatches into it.
     pub profiler: Option<super::profiler::SharedProfiler>,
+    /// Why the device was lost, once it has been (the driver's reason and message).
+    lost: std::sync::Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl GpuContext {
@@ -42,11 +44,9 @@ impl GpuContext {
         let adapter = choose_adapter(adapters)?;
         let adapter_info = adapter.get_info();
         let limits = adapter.limits();
-        // Optional features the kernels have variants for, and timestamps for --profile.
-        let features = adapter.features()
-            & (wgpu::Features::SHADER_FLOAT32_ATOMIC
-                | wgpu::Features::TIMESTAMP_QUERY
-                | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
+        // Timestamps for --profile, where the device has them.
+        let features =
+            adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("gatetrace"),
             required_features: features,
@@ -56,7 +56,33 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .with_context(|| format!("cannot open a device on adapter `{}`", adapter_info.name))?;
-        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None })
+        let lost = std::sync::Arc::new(std::sync::Mutex::new(None));
+        let record = lost.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            *record.lock().unwrap_or_else(|e| e.into_inner()) = Some(format!("{reason:?}: {message}"));
+        });
+        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None, lost })
+    }
+
+    /// Why the device was lost (a driver reset, a hung kernel, an unplugged GPU), if it was.
+    pub fn lost_reason(&self) -> Option<String> {
+        self.lost.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Runs `create`, which makes buffer `name` of `size` bytes, and turns the device running out
+    /// of memory for it into an error naming the buffer, its size and the adapter.
+    pub fn allocate<T>(&self, name: &str, size: u64, create: impl FnOnce() -> T) -> Result<T> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let value = create();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            bail!(
+                "out of device memory: buffer `{name}` of {:.1} MiB does not fit on `{}` ({e}); reduce the resolution, \
+                 the bins or the samples per pass",
+                size as f64 / 1048576.0,
+                self.adapter_info.name
+            );
+        }
+        Ok(value)
     }
 
     /// "name (backend, device type)", as recorded with every output.
@@ -71,12 +97,6 @@ impl GpuContext {
         self.adapter_info.device_type == wgpu::DeviceType::Cpu
     }
 
-    /// True when kernels may add floats atomically in storage buffers (SHADER_FLOAT32_ATOMIC;
-    /// lavapipe has it).
-    pub fn has_float_atomics(&self) -> bool {
-        self.features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC)
-    }
-
     /// Largest storage-buffer binding the device allows (bytes).
     pub fn max_binding_size(&self) -> u64 {
         self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size)
@@ -85,7 +105,14 @@ impl GpuContext {
     /// Blocks until all submitted work has finished (and adds the finished dispatches' times to
     /// the profiler, when there is one).
     pub fn wait_idle(&self) -> Result<()> {
-        self.device.poll(wgpu::PollType::wait_indefinitely()).context("GPU device lost while waiting")?;
+        if let Err(e) = self.device.poll(wgpu::PollType::wait_indefinitely()) {
+            let reason = self.lost_reason().unwrap_or_else(|| e.to_string());
+            bail!(
+                "the GPU device `{}` was lost while rendering ({reason}); the render cannot go on (a render with \
+                 --checkpoint-every resumes from its last checkpoint with --resume)",
+                self.adapter_info.name
+            );
+        }
         if let Some(profiler) = &self.profiler {
             profiler.lock().unwrap().collect(&self.device, &self.queue)?;
         }

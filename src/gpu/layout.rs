@@ -435,6 +435,9 @@ pub struct QueueCounters {
     pub ellipsoid_queries: u32,
     /// Shadow rays the last trace_shadow_rays pass left unfinished.
     pub unfinished_shadow_rays: u32,
+    /// Contributions the film could not hold (NaN, infinite, or 2^63 or more); never reset
+    /// during a render.
+    pub invalid_contributions: u32,
 }
 
 /// One vertex of a bidirectional subpath (see `PathVertex` in layout.wesl).

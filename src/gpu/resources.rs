@@ -40,11 +40,13 @@ impl Resources {
         let mut bytes = bytemuck::cast_slice::<T, u8>(data).to_vec();
         check_size(ctx, name, bytes.len() as u64)?;
         bytes.resize(bytes.len().max(16).max(size_of::<T>()), 0);
-        let buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(name),
-            contents: &bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-        });
+        let buffer = ctx.allocate(name, bytes.len() as u64, || {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(name),
+                contents: &bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            })
+        })?;
         self.insert(name, buffer);
         Ok(())
     }
@@ -58,12 +60,14 @@ impl Resources {
         extra: wgpu::BufferUsages,
     ) -> Result<()> {
         check_size(ctx, name, size)?;
-        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(name),
-            size: size.max(16),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC | extra,
-            mapped_at_creation: false,
-        });
+        let buffer = ctx.allocate(name, size, || {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(name),
+                size: size.max(16),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC | extra,
+                mapped_at_creation: false,
+            })
+        })?;
         self.insert(name, buffer);
         Ok(())
     }

@@ -30,9 +30,8 @@
 //! [setup_dispatch(shadow_resume)        while shadow rays stopped at the traversal budget
 //!  trace_shadow_rays(resume)]           (read back after each pass)
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
-//! splat_light_paths                     t = 1 contributions -> splat_film (float atomics
-//!                                       where the device has them, else compare-exchange),
-//!                                       folded into f64 host sums every few passes
+//! splat_light_paths                     t = 1 contributions -> splat_film (exact fixed
+//!                                       point, integer atomics: the same bits in any order)
 //! ```
 //!
 //! Slot `slot` keeps its camera subpath in queue entry `slot` and its light subpath in entry
@@ -44,7 +43,6 @@ use anyhow::{Result, ensure};
 use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
 use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
 use super::{Integrator, Method, RenderSettings, Wavefront};
-use crate::film::Film;
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
@@ -218,13 +216,6 @@ pub struct BidirectionalTracer<'a> {
     query_work: [u64; QUERY_COUNTERS],
     /// Which connections join the subpaths.
     method: Method,
-    /// Light-tracing sums moved off the device's f32 splat film (see `fold_splats`).
-    splat_sums: Vec<f64>,
-    /// Passes since the splat film was last folded into `splat_sums`.
-    passes_since_fold: u32,
-    /// Fold after this many passes: few enough that no f32 splat sum takes more than about 2^16
-    /// additions (on average over pixels), so long renders do not drift.
-    fold_interval: u32,
     /// The BVH has more than TRAVERSAL_BUDGET nodes (traversals can stop and resume):
     /// intersect_closest finds the subpaths' hits and connections queue their shadow rays.
     resumable: bool,
@@ -308,7 +299,7 @@ impl<'a> BidirectionalTracer<'a> {
         if target_pilot_spp > 0 {
             r.storage_zeroed(ctx, "target_visits", visits_bytes, wgpu::BufferUsages::empty())?;
         }
-        let splat_film_bytes = super::film_elements(settings)? * 4;
+        let splat_film_bytes = super::film_elements(settings)? * super::FILM_ELEMENT_BYTES;
         ensure!(
             splat_film_bytes <= limit,
             "--method {} keeps its light-tracing image in one binding of at most {limit} bytes; {}x{} pixels x {} \
@@ -376,13 +367,8 @@ impl<'a> BidirectionalTracer<'a> {
             c.push(("QUEUE", queue));
             c
         };
-        // Kernels that add to splat_film: with the device's float atomics where it has them.
-        let float_atomics = ctx.has_float_atomics() && !settings.portable_atomics;
-        let splatting = |name: &str| {
-            if float_atomics { Kernel::with_feature(ctx, name, "float_atomics", &constants) } else { Kernel::new(ctx, name, None, &constants) }
-        };
-        // With shadow rays traced on the spot, the ellipsoidal kernels splat straight into splat_film.
-        let connect_kernel = |name: &str| if inline_shadow_rays { splatting(name) } else { Kernel::new(ctx, name, None, &constants) };
+        let splatting = |name: &str| Kernel::new(ctx, name, None, &constants);
+        let connect_kernel = splatting;
         let stages = Stages {
             generate_subpaths: Kernel::new(ctx, "generate_subpaths", None, &constants),
             setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
@@ -417,10 +403,6 @@ impl<'a> BidirectionalTracer<'a> {
             strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
         });
         let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
-        let additions_per_pass = samples_per_pass as u64 * splats_per_slot;
-        let fold_interval =
-            if settings.keep_splats_on_device { u32::MAX } else { (65536 / additions_per_pass).clamp(1, 4096) as u32 };
-        let splat_sums = vec![0.0; super::film_elements(settings)? as usize];
         Ok(Self {
             wf,
             stages,
@@ -428,9 +410,6 @@ impl<'a> BidirectionalTracer<'a> {
             stats,
             query_work: [0; QUERY_COUNTERS],
             method: settings.method,
-            splat_sums,
-            passes_since_fold: 0,
-            fold_interval,
             resumable,
             inline_shadow_rays,
             target_pilot_spp,
@@ -459,6 +438,12 @@ impl<'a> BidirectionalTracer<'a> {
         Ok(())
     }
 
+    /// Elements (pixel, bin, channel) of the film and the splat film.
+    fn film_elements(&self) -> usize {
+        let p = &self.wf.params;
+        (p.width * p.height * p.gate.bins * 3) as usize
+    }
+
     /// Whether the render has a target pilot and the current gate's visit tables (strata + 1
     /// counts per pixel) fit the buffer built for them.
     fn target_pilot_fits(&self) -> bool {
@@ -484,20 +469,6 @@ impl<'a> BidirectionalTracer<'a> {
     /// than the needle guard, and sampled points off the target length.
     pub fn guarded(&self) -> (u64, u64) {
         (self.query_work[3], self.query_work[4])
-    }
-
-    /// Adds the device's f32 splat film to the host's f64 sums and clears it.
-    fn fold_splats(&mut self) -> Result<()> {
-        let buffer = self.wf.resources.get("splat_film").unwrap();
-        let splats: Vec<f32> = read_buffer(self.wf.ctx, buffer, self.splat_sums.len())?;
-        for (sum, &x) in self.splat_sums.iter_mut().zip(&splats) {
-            *sum += x as f64;
-        }
-        let mut encoder = self.wf.ctx.device.create_command_encoder(&Default::default());
-        encoder.clear_buffer(buffer, 0, None);
-        self.wf.ctx.queue.submit([encoder.finish()]);
-        self.passes_since_fold = 0;
-        Ok(())
     }
 
     fn render_wave(&mut self, wave: WaveParams) -> Result<()> {
@@ -573,26 +544,7 @@ impl Integrator for BidirectionalTracer<'_> {
             self.render_wave(wave)?;
         }
         self.wf.pass_done(samples);
-        self.passes_since_fold += 1;
-        if self.passes_since_fold >= self.fold_interval {
-            self.fold_splats()?;
-        }
         Ok(())
-    }
-
-    /// Camera-side sums (double-float) plus the light-tracing splats (host f64 sums and the
-    /// device's f32 sums since the last fold), over the samples per pixel.
-    fn film(&self) -> Result<Film> {
-        let mut film = self.wf.film()?;
-        if self.method == Method::Ellipsoidal {
-            self.wf.divide_by_stratum_counts(&mut film);
-        }
-        let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), film.data.len())?;
-        let spp = self.wf.samples_in_film.max(1) as f64;
-        for ((v, &splat), sum) in film.data.iter_mut().zip(&splats).zip(&self.splat_sums) {
-            *v = (*v as f64 + (sum + splat as f64) / spp) as f32;
-        }
-        Ok(film)
     }
 
     fn target_pilot_spp(&self) -> u32 {
@@ -617,37 +569,34 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn reset_film(&mut self) {
         self.wf.reset_film(&["splat_film"]);
-        self.splat_sums.iter_mut().for_each(|s| *s = 0.0);
-        self.passes_since_fold = 0;
     }
 
     fn save_state(&self) -> Result<super::checkpoint::RenderState> {
         let mut state = self.wf.save_state(self.method)?;
-        let splats: Vec<f32> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), self.splat_sums.len())?;
+        let splats: Vec<[u32; 4]> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), self.film_elements())?;
         state.push("splat_film", &splats);
-        state.push("splat_sums", &self.splat_sums);
-        let flags = [self.passes_since_fold, self.target_pilot_pending as u32, self.target_pilot_ran as u32];
-        state.push("bidirectional", &flags);
+        state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_ran as u32]);
         Ok(state)
     }
 
     fn load_state(&mut self, state: &super::checkpoint::RenderState) -> Result<()> {
-        let splats: Vec<f32> = state.values("splat_film", self.splat_sums.len())?;
-        let sums: Vec<f64> = state.values("splat_sums", self.splat_sums.len())?;
-        let flags: Vec<u32> = state.values("bidirectional", 3)?;
+        let splats: Vec<[u32; 4]> = state.values("splat_film", self.film_elements())?;
+        let flags: Vec<u32> = state.values("target_pilot", 2)?;
         self.wf.load_state(self.method, state)?;
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
-        self.splat_sums = sums;
-        self.passes_since_fold = flags[0];
-        self.target_pilot_pending = flags[1] != 0;
-        self.target_pilot_ran = flags[2] != 0;
+        self.target_pilot_pending = flags[0] != 0;
+        self.target_pilot_ran = flags[1] != 0;
+        Ok(())
+    }
+
+    fn skip_samples(&mut self, samples: u64) -> Result<()> {
+        self.prepare()?;
+        self.wf.next_sample += samples;
         Ok(())
     }
 
     fn restart(&mut self, seed: u32) {
         self.wf.restart(seed, &["splat_film"]);
-        self.splat_sums.iter_mut().for_each(|s| *s = 0.0);
-        self.passes_since_fold = 0;
         // As a new tracer: the pilot (where the gate's tables fit) shapes the extra visits again.
         self.target_pilot_pending = self.target_pilot_fits();
         self.target_pilot_ran = false;

@@ -98,7 +98,17 @@ fn fnv1a64(bytes: &[u8]) -> u64 {
 /// Writes `state` with its `fingerprint` to `path` (atomically: an interrupted write never
 /// leaves a torn checkpoint).
 pub fn write_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>, state: &RenderState) -> Result<()> {
-    let header = json!({
+    write_state_file(path, fingerprint, state, serde_json::Map::new())
+}
+
+/// [`write_checkpoint`] with `extra` entries in the header (a shard's index and metadata).
+pub fn write_state_file(
+    path: &Path,
+    fingerprint: &BTreeMap<String, String>,
+    state: &RenderState,
+    extra: serde_json::Map<String, Value>,
+) -> Result<()> {
+    let mut header = json!({
         "format": FORMAT,
         "fingerprint": fingerprint,
         "method": state.method.name(),
@@ -107,6 +117,7 @@ pub fn write_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>, sta
         "rendering_seconds": state.rendering_seconds,
         "blobs": state.blobs.iter().map(|(n, b)| json!({"name": n, "bytes": b.len()})).collect::<Vec<_>>(),
     });
+    header.as_object_mut().expect("an object").extend(extra);
     let write = |tmp: &Path| -> Result<()> {
         let mut file = std::io::BufWriter::new(std::fs::File::create(tmp)?);
         file.write_all(MAGIC)?;
@@ -124,6 +135,27 @@ pub fn write_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>, sta
 /// Reads the checkpoint at `path` and checks that it was made by the render `fingerprint`
 /// describes; the error names the file and the first difference.
 pub fn read_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>) -> Result<RenderState> {
+    let (saved, state, _) = read_state_file(path)?;
+    check_fingerprint(path, "the checkpoint was made by another render", &saved, fingerprint)?;
+    Ok(state)
+}
+
+/// An error "`path`: `problem` (key: `A` then, `B` now)" for the first entry where the
+/// fingerprint `saved` differs from `now` (entries of either).
+pub fn check_fingerprint(path: &Path, problem: &str, saved: &BTreeMap<String, String>, now: &BTreeMap<String, String>) -> Result<()> {
+    for key in now.keys().chain(saved.keys()) {
+        let then = saved.get(key).map(String::as_str).unwrap_or("(none)");
+        let value = now.get(key).map(String::as_str).unwrap_or("(none)");
+        if then != value {
+            bail!("{}: {problem} ({key}: {})", path.display(), first_difference(then, value));
+        }
+    }
+    Ok(())
+}
+
+/// Reads a state file (a checkpoint or a shard): its fingerprint, its state and its whole
+/// header (for the entries `write_state_file` added).
+pub fn read_state_file(path: &Path) -> Result<(BTreeMap<String, String>, RenderState, Value)> {
     let name = path.display();
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the checkpoint"))?;
     let body = bytes.strip_prefix(MAGIC).ok_or_else(|| anyhow!("{name}: not a gatetrace checkpoint"))?;
@@ -135,12 +167,6 @@ pub fn read_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>) -> R
     ensure!(format == FORMAT, "{name}: checkpoint format {format}, this gatetrace reads format {FORMAT}");
     let saved: BTreeMap<String, String> =
         serde_json::from_value(header["fingerprint"].clone()).map_err(|_| bad("fingerprint"))?;
-    for (key, now) in fingerprint {
-        let then = saved.get(key).map(String::as_str).unwrap_or("(none)");
-        if then != now {
-            bail!("{name}: the checkpoint was made by another render ({key}: {})", first_difference(then, now));
-        }
-    }
     let method = match header["method"].as_str().ok_or_else(|| bad("method"))? {
         "path" => Method::Path,
         "direct" => Method::Direct,
@@ -157,13 +183,43 @@ pub fn read_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>) -> R
         data = &data[len..];
     }
     ensure!(data.is_empty(), "{name}: {} bytes follow the checkpoint's last blob", data.len());
-    Ok(RenderState {
+    let state = RenderState {
         method,
         samples_in_film: header["samples_in_film"].as_u64().ok_or_else(|| bad("samples_in_film"))?,
         next_sample: header["next_sample"].as_u64().ok_or_else(|| bad("next_sample"))?,
         rendering_seconds: header["rendering_seconds"].as_f64().ok_or_else(|| bad("rendering_seconds"))?,
         blobs,
-    })
+    };
+    Ok((saved, state, header))
+}
+
+/// The state of the render whose disjoint slices of samples `parts` hold (shards): the sums of
+/// their films (`film` and `splat_film`, exact fixed point, so the result is the unsplit
+/// render's bit for bit) and their samples. Everything else (method, parameters, target
+/// visits, pilot) must be equal in every part; `names` name the parts in errors.
+pub fn merge_states(parts: &[RenderState], names: &[String]) -> Result<RenderState> {
+    let first = parts.first().ok_or_else(|| anyhow!("no parts to merge"))?;
+    let summed = ["film", "splat_film"];
+    let mut merged = first.clone();
+    for (part, name) in parts.iter().zip(names).skip(1) {
+        ensure!(part.method == first.method, "{name}: rendered with {}, {} with {}", part.method.name(), names[0], first.method.name());
+        let layout = |s: &RenderState| s.blobs.iter().map(|(n, b)| (n.clone(), b.len())).collect::<Vec<_>>();
+        ensure!(layout(part) == layout(first), "{name}: its sums do not have the shape of {}'s", names[0]);
+        for ((blob_name, sum), (_, add)) in merged.blobs.iter_mut().zip(&part.blobs) {
+            if summed.contains(&blob_name.as_str()) {
+                for (a, b) in sum.chunks_exact_mut(16).zip(add.chunks_exact(16)) {
+                    let total = i128::from_le_bytes(a.try_into().unwrap()).wrapping_add(i128::from_le_bytes(b.try_into().unwrap()));
+                    a.copy_from_slice(&total.to_le_bytes());
+                }
+            } else {
+                ensure!(sum == add, "{name}: its `{blob_name}` differs from {}'s: the parts are not slices of one render", names[0]);
+            }
+        }
+        merged.samples_in_film += part.samples_in_film;
+        merged.next_sample = merged.next_sample.max(part.next_sample);
+        merged.rendering_seconds += part.rendering_seconds;
+    }
+    Ok(merged)
 }
 
 /// "`A` then, `B` now" for the first comma-separated field where two fingerprint values

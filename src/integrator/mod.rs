@@ -27,7 +27,7 @@ use crate::gpu::layout::{
 use crate::gpu::resources::ChunkLayout;
 use crate::scene::PreparedScene;
 pub use bidirectional::{BidirectionalTracer, StrategyStats};
-pub use path::{PathTracer, film_elements};
+pub use path::{FILM_ELEMENT_BYTES, PathTracer, film_elements};
 pub use wavefront::Wavefront;
 
 /// Sampling strategy (`--method`).
@@ -93,9 +93,6 @@ pub struct RenderSettings {
     pub stats: bool,
     /// Only this (s, t) strategy contributes, MIS-weighted (`--debug-strategy`; `direct`).
     pub debug_strategy: Option<(u32, u32)>,
-    /// Splat light tracing with the portable compare-exchange loop even where the device has
-    /// float atomics (tests compare the two).
-    pub portable_atomics: bool,
     /// Largest storage binding to use (bytes); None: the device's limit. Smaller values force
     /// the split-array layout (used by tests to check it against the unsplit one).
     pub binding_limit: Option<u64>,
@@ -109,9 +106,6 @@ pub struct RenderSettings {
     pub query: QuerySettings,
     /// Where `ellipsoidal` leaves out connections f32 cannot place (numerical studies).
     pub ellipsoid_guards: EllipsoidGuards,
-    /// Bidirectional methods: keep the light-tracing sums on the device (f32) instead of
-    /// folding them into host f64 sums every few passes; the viewer resolves them there.
-    pub keep_splats_on_device: bool,
     /// An NLOS capture (`--nlos`): pixels are sensed points of a relay wall lit by a laser spot,
     /// and the image's width x height is the grid of sensed points (see [`crate::nlos`]).
     pub nlos: Option<crate::nlos::NlosCapture>,
@@ -202,12 +196,10 @@ impl Default for RenderSettings {
             light_strategy: LightStrategy::Mis,
             stats: false,
             debug_strategy: None,
-            portable_atomics: false,
             binding_limit: None,
             connections_per_query: 1,
             query: QuerySettings::default(),
             ellipsoid_guards: EllipsoidGuards::default(),
-            keep_splats_on_device: false,
             nlos: None,
             target_pilot_spp: 0,
         }
@@ -235,9 +227,19 @@ pub trait Integrator: Send {
     /// (the viewer scrubbing tau). Returns false, changing nothing, when a new integrator is
     /// needed instead.
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool>;
-    /// The film's current estimate (sums divided by the samples per pixel).
+    /// The film's current estimate (sums divided by the samples per pixel): the film of its
+    /// state (see [`wavefront::film_of_state`]), so that a render, a resumed one and merged
+    /// shards turn equal sums into equal images.
+    /// An error when a contribution was NaN, infinite or beyond the film's range (a bug or a
+    /// scene far outside physical values), which the sums could not hold.
     fn film(&self) -> Result<Film> {
-        self.wavefront().film()
+        let invalid = self.wavefront().counters()?.invalid_contributions;
+        anyhow::ensure!(
+            invalid == 0,
+            "{invalid} contributions were NaN, infinite or of 2^63 (9.2e18) or more, which the film cannot hold: \
+             the image would be wrong"
+        );
+        wavefront::film_of_state(&self.save_state()?)
     }
     /// The named buffers the kernels bind (scene, wavefront state, film).
     fn resources(&self) -> &Resources {
@@ -292,6 +294,10 @@ pub trait Integrator: Send {
     /// been built with the same scene and settings (it refuses states of another image size,
     /// method or kind). The next pass then traces the samples that render would have traced.
     fn load_state(&mut self, state: &checkpoint::RenderState) -> Result<()>;
+    /// Moves the sample sequence `samples` samples per pixel on without tracing them, after the
+    /// work a render does before its first pass ([`Self::prepare`]): a shard of a render
+    /// traces its own slice of the samples, and the sums of all slices are the render's.
+    fn skip_samples(&mut self, samples: u64) -> Result<()>;
     /// Traces `spp` more samples of every pixel, in as few passes as possible.
     fn render_samples(&mut self, spp: u64) -> Result<()> {
         let mut left = spp;
@@ -721,7 +727,8 @@ pub fn upload_scene(
     // Extra target-length visits come from a pilot render (BidirectionalTracer), if any.
     r.storage_init(ctx, "target_visits", &[0u32])?;
     let film_len = film_elements(settings)?;
-    let film = r.storage_chunked_zeroed(ctx, "film", film_len, 8, limit)?;
+    check_film_memory(ctx, settings, film_len)?;
+    let film = r.storage_chunked_zeroed(ctx, "film", film_len, FILM_ELEMENT_BYTES, limit)?;
     let flag = |b: bool| b as u32 as f64;
     let constants = vec![
         ("GATE_KIND", gate.kind() as u32 as f64),
@@ -753,6 +760,35 @@ pub fn upload_scene(
     Ok((r, constants, film))
 }
 
+/// Refuses, before anything is allocated, a film (and light-tracing film) larger than the
+/// memory a CPU device can give it (MemAvailable of /proc/meminfo). A GPU's free memory cannot
+/// be asked for portably: there, running out is reported when the buffer is created
+/// (`GpuContext::allocate`).
+fn check_film_memory(ctx: &GpuContext, settings: &RenderSettings, elements: u64) -> Result<()> {
+    let films = if settings.method == Method::Path { 1 } else { 2 };
+    let bytes = elements * FILM_ELEMENT_BYTES * films;
+    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        let line = m.lines().find(|l| l.starts_with("MemAvailable:"))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib * 1024)
+    });
+    if let (true, Some(available)) = (ctx.is_cpu(), available) {
+        let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+        anyhow::ensure!(
+            bytes <= available,
+            "--res {}x{} with {} bins: the film{} needs {:.1} GiB of memory, more than the {:.1} GiB available to the CPU \
+             device `{}`; reduce the resolution or the bins",
+            settings.width,
+            settings.height,
+            settings.gate.bins(),
+            if films > 1 { "s of a bidirectional method" } else { "" },
+            gib(bytes),
+            gib(available),
+            ctx.adapter_info.name
+        );
+    }
+    Ok(())
+}
+
 /// The first `len` elements of `table`, zero-padded to `len`: the contents of a uniform buffer
 /// holding a fixed-length WGSL array (unused when the table is longer, see the overrides that
 /// select them).
@@ -770,26 +806,35 @@ pub fn render(
     budget: Budget,
     mut progress: impl FnMut(Progress),
 ) -> Result<RenderOutput> {
-    render_resumable(ctx, scene, settings, budget, None, false, |_, p| {
+    render_resumable(ctx, scene, settings, budget, RenderStart::default(), |_, p| {
         progress(p);
         Ok(ControlFlow::Continue(()))
     })
 }
 
-/// [`render`], continuing the render `resume` saved (see [`checkpoint`]) when given, and asking
-/// `after_pass` after every pass whether to go on: it gets the integrator (to save its state)
-/// and the progress, and may stop the render early (`ControlFlow::Break`; the output then has
-/// the samples traced so far and `stopped_early` set). With `resume`, `budget` counts the whole
-/// render: samples per pixel in all, or seconds of rendering in all; `auto` renders with the
-/// method the saved render chose, without a new pilot. With `keep_state`, the output holds the
-/// state after the last pass (`RenderOutput::state`), to be saved as a checkpoint.
+/// Where a render starts and what it keeps (see [`render_resumable`]).
+#[derive(Clone, Copy, Default)]
+pub struct RenderStart<'a> {
+    /// Continue this saved render (see [`checkpoint`]); the budget then counts the whole
+    /// render: samples per pixel in all, or seconds of rendering in all. `auto` renders with
+    /// the method the saved render chose, without a new pilot.
+    pub resume: Option<&'a checkpoint::RenderState>,
+    /// Skip this many samples per pixel of the sequence first (a shard renders its slice).
+    pub skip_samples: u64,
+    /// Keep the state after the last pass in the output (`RenderOutput::state`).
+    pub keep_state: bool,
+}
+
+/// [`render`] from `start`, asking `after_pass` after every pass whether to go on: it gets the
+/// integrator (to save its state) and the progress, and may stop the render early
+/// (`ControlFlow::Break`; the output then has the samples traced so far and `stopped_early`
+/// set).
 pub fn render_resumable(
     ctx: &GpuContext,
     scene: &PreparedScene,
     settings: &RenderSettings,
     budget: Budget,
-    resume: Option<&checkpoint::RenderState>,
-    keep_state: bool,
+    start_at: RenderStart,
     mut after_pass: impl FnMut(&dyn Integrator, Progress) -> Result<ControlFlow<()>>,
 ) -> Result<RenderOutput> {
     film_elements(settings)?;
@@ -799,6 +844,7 @@ pub fn render_resumable(
         return Ok(RenderOutput::black(settings, start.elapsed()));
     }
     // auto: a pilot of both methods (counted against a time budget) picks the one to render with.
+    let resume = start_at.resume;
     let choice = if settings.method == Method::Auto && resume.is_none() {
         Some(auto::choose(ctx, scene, settings, budget)?)
     } else {
@@ -822,6 +868,11 @@ pub fn render_resumable(
         }
         None => Duration::ZERO,
     };
+    if start_at.skip_samples > 0 || start_at.keep_state {
+        // (With a kept state, the pilot runs even when no sample is traced: every shard's state
+        // then records the same pilot.)
+        tracer.skip_samples(start_at.skip_samples)?;
+    }
     let pilot = before + Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds));
     let budget = match budget {
         Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
@@ -847,7 +898,7 @@ pub fn render_resumable(
         None
     };
     let target_pilot_spp = tracer.target_pilot_spp();
-    let state = match keep_state {
+    let state = match start_at.keep_state {
         true => Some(checkpoint::RenderState { rendering_seconds: rendering.as_secs_f64(), ..tracer.save_state()? }),
         false => None,
     };

@@ -291,6 +291,11 @@ fn save_state(&self) -> Result<super::checkpoint::RenderState> {
         self.wf.load_state(super::Method::Path, state)
     }
 
+    fn skip_samples(&mut self, samples: u64) -> Result<()> {
+        self.wf.next_sample += samples;
+        Ok(())
+    }
+
         fn restart(&mut self, seed: u32) {
         self.wf.restart(seed, &[]);
     }
@@ -355,11 +360,15 @@ pub(super) fn waves_of_pass(params: &RenderParams, slots_per_wave: u64, next_sam
     Ok(waves)
 }
 
+/// Bytes of one film element (pixel, bin, channel): a 128-bit fixed-point sum
+/// (`crate::film::fixed`).
+pub const FILM_ELEMENT_BYTES: u64 = 16;
+
 /// Elements (pixel, bin, channel) of the film of `settings`, checked against what the device can
-/// hold at all: up to four bindings of 8-byte compensated sums.
+/// hold at all: up to four bindings of 2 GiB.
 pub fn film_elements(settings: &RenderSettings) -> Result<u64> {
     let elements = settings.width as u64 * settings.height as u64 * settings.gate.bins() as u64 * 3;
-    let most = MAX_CHUNKS * (1u64 << 31) / 8;
+    let most = MAX_CHUNKS * (1u64 << 31) / FILM_ELEMENT_BYTES;
     ensure!(
         elements <= most,
         "--res {}x{} with {} bins: the film needs {:.1} GiB of device memory, more than the {} GiB it can be \
@@ -367,8 +376,8 @@ pub fn film_elements(settings: &RenderSettings) -> Result<u64> {
         settings.width,
         settings.height,
         settings.gate.bins(),
-        elements as f64 * 8.0 / (1u64 << 30) as f64,
-        most * 8 >> 30
+        (elements * FILM_ELEMENT_BYTES) as f64 / (1u64 << 30) as f64,
+        most * FILM_ELEMENT_BYTES >> 30
     );
     Ok(elements)
 }

@@ -6,7 +6,7 @@ use anyhow::{Result, ensure};
 use super::checkpoint::RenderState;
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
 use crate::bvh::TRAVERSAL_BUDGET;
-use crate::film::Film;
+use crate::film::{Film, fixed};
 use crate::film::target::{next_target_seed, stratum_factors};
 use crate::gpu::layout::{QueueCounters, RenderParams, TargetParams, WaveParams};
 use crate::gpu::resources::{ChunkLayout, read_buffer};
@@ -225,51 +225,12 @@ impl<'a> Wavefront<'a> {
         Ok(read_buffer::<QueueCounters>(self.ctx, self.resources.get("counters").unwrap(), 1)?[0])
     }
 
-    /// The per-pixel film (compensated sums divided by the samples per pixel).
-    pub fn film(&self) -> Result<Film> {
-        let mut film = Film::zeroed(self.params.width, self.params.height, self.params.gate.bins);
-        let sums: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, film.data.len() as u64)?;
-        let n = self.samples_in_film.max(1) as f64;
-        film.data = sums.iter().map(|s| ((s[0] as f64 + s[1] as f64) / n) as f32).collect();
-        film.spp = self.samples_in_film;
-        Ok(film)
-    }
-
-    /// Turns each bin of a film of stratified target lengths (ellipsoidal connections on a
-    /// transient gate, `TargetParams::strata` > 0) from the sum over the pixel's samples divided
-    /// by their number into the mean over the samples whose target fell in it, once every bin
-    /// has had one (see `film::target::stratum_factors`; before that, with extra visits, the
-    /// plain mean with each bin's base-visit weight). Both are unbiased; the second is
-    /// free of the error of a bin's sample count. Only for the film of camera-subpath
-    /// contributions, whose lengths are their slot's target; light-tracing splats land in
-    /// other pixels and keep the plain mean.
-    pub fn divide_by_stratum_counts(&self, film: &mut Film) {
-        let t = &self.params.target_length;
-        let n = t.strata as usize;
-        if n == 0 {
-            return;
-        }
-        let mut factors = vec![0.0f32; n];
-        let bins = film.bins as usize;
-        for pixel in 0..(film.width * film.height) as usize {
-            let row = if t.extra > 0 { &self.target_visits[pixel * (n + 1)..(pixel + 1) * (n + 1)] } else { &[][..] };
-            // None when there is nothing to change (no extra visits and fewer samples than bins).
-            if stratum_factors(t, row, pixel as u32, self.samples_in_film, &mut factors).is_none() {
-                continue;
-            }
-            for (j, f) in factors.iter().enumerate() {
-                let base = (pixel * bins + t.first_bin as usize + j) * 3;
-                film.data[base..base + 3].iter_mut().for_each(|v| *v *= f);
-            }
-        }
-    }
-
     /// The state every method keeps between passes (see `checkpoint`): the sample counters,
     /// the params uniform (seeds, target-length sampling), the target lengths' extra visits and
-    /// the film's sums. `method` names the integrator.
+    /// the film's sums (`film`, four words per element). `method` names the integrator.
     pub fn save_state(&self, method: super::Method) -> Result<RenderState> {
         let elements = self.film_element_count();
-        let film: Vec<[f32; 2]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, elements)?;
+        let film: Vec<[u32; 4]> = self.resources.read_chunked(self.ctx, "film", self.film_layout, elements)?;
         let mut state = RenderState {
             method,
             samples_in_film: self.samples_in_film,
@@ -299,7 +260,7 @@ impl<'a> Wavefront<'a> {
             "the checkpoint's image ({}x{}, {} bins, {} bounces) is not this render's ({}x{}, {} bins, {} bounces)",
             a.width, a.height, a.gate.bins, a.max_bounces, b.width, b.height, b.gate.bins, b.max_bounces
         );
-        let film: Vec<[f32; 2]> = state.values("film", self.film_element_count() as usize)?;
+        let film: Vec<[u32; 4]> = state.values("film", self.film_element_count() as usize)?;
         let visits: Vec<u32> = state.values("target_visits", state.blob("target_visits")?.len() / 4)?;
         if !visits.is_empty() {
             let buffer = self.resources.get("target_visits").ok_or_else(|| anyhow::anyhow!("this render keeps no target visits"))?;
@@ -349,5 +310,61 @@ impl<'a> Wavefront<'a> {
         self.ctx.queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;
+    }
+}
+
+/// The film a render's state holds: each element's sum over the samples per pixel, the
+/// camera-side sums (`film`) of stratified target lengths divided per bin by the samples whose
+/// target fell in it (see [`divide_by_stratum_counts`]), plus the light-tracing sums
+/// (`splat_film`, where the method keeps them). A render's `film()` is this function of its
+/// state, so equal sums (an uninterrupted render, a resumed one, merged shards) give equal
+/// images, bit for bit.
+pub fn film_of_state(state: &RenderState) -> Result<Film> {
+    let params: RenderParams = state.values("params", 1)?[0];
+    let mut film = Film::zeroed(params.width, params.height, params.gate.bins);
+    let n = film.data.len();
+    let spp = state.samples_in_film.max(1) as f64;
+    let sums: Vec<[u32; 4]> = state.values("film", n)?;
+    film.data = sums.iter().map(|&w| (fixed::to_f64(fixed::from_words(w)) / spp) as f32).collect();
+    film.spp = state.samples_in_film;
+    if state.method == super::Method::Ellipsoidal {
+        let visits: Vec<u32> = state.values("target_visits", state.blob("target_visits")?.len() / 4)?;
+        divide_by_stratum_counts(&params, &visits, state.samples_in_film, &mut film);
+    }
+    if state.blobs.iter().any(|(name, _)| name == "splat_film") {
+        let splats: Vec<[u32; 4]> = state.values("splat_film", n)?;
+        for (v, &w) in film.data.iter_mut().zip(&splats) {
+            *v = (*v as f64 + fixed::to_f64(fixed::from_words(w)) / spp) as f32;
+        }
+    }
+    Ok(film)
+}
+
+/// Turns each bin of a film of stratified target lengths (ellipsoidal connections on a
+/// transient gate, `TargetParams::strata` > 0) from the sum over the pixel's samples divided
+/// by their number into the mean over the samples whose target fell in it, once every bin
+/// has had one (see `film::target::stratum_factors`; before that, with extra visits, the
+/// plain mean with each bin's base-visit weight). Both are unbiased; the second is
+/// free of the error of a bin's sample count. Only for the film of camera-subpath
+/// contributions, whose lengths are their slot's target; light-tracing splats land in
+/// other pixels and keep the plain mean. `visits`: the extra visits (empty without a pilot).
+pub fn divide_by_stratum_counts(params: &RenderParams, visits: &[u32], samples: u64, film: &mut Film) {
+    let t = &params.target_length;
+    let n = t.strata as usize;
+    if n == 0 {
+        return;
+    }
+    let mut factors = vec![0.0f32; n];
+    let bins = film.bins as usize;
+    for pixel in 0..(film.width * film.height) as usize {
+        let row = if t.extra > 0 { &visits[pixel * (n + 1)..(pixel + 1) * (n + 1)] } else { &[][..] };
+        // None when there is nothing to change (no extra visits and fewer samples than bins).
+        if stratum_factors(t, row, pixel as u32, samples, &mut factors).is_none() {
+            continue;
+        }
+        for (j, f) in factors.iter().enumerate() {
+            let base = (pixel * bins + t.first_bin as usize + j) * 3;
+            film.data[base..base + 3].iter_mut().for_each(|v| *v *= f);
+        }
     }
 }
