@@ -5,7 +5,8 @@
 #   - a C toolchain (build-essential: cargo needs a linker) and curl;
 #   - a Rust toolchain (1.95 or newer), with rustup, when cargo is missing;
 #   - for the viewer's test (tools/test.sh): xvfb-run and the X11 libraries a window needs;
-#   - for the Python package's tests (tools/test.sh): python3 with venv and pip.
+#   - for the Python package's tests (tools/test.sh): python3 with venv and pip;
+#   - for the job-scheduler test (tools/slurm_test.sh): Slurm (slurm-wlm) and munge.
 # tools/render.sh and tools/test.sh source this file, so cargo is on PATH for them afterwards.
 # Running it directly does the same installs. Safe to repeat: it does nothing when all is there.
 
@@ -73,6 +74,13 @@ gatetrace_setup_python() {
     python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || missing+=(python3-venv python3-pip)
     if [ ${#missing[@]} -gt 0 ]; then
         gatetrace_apt_install "${missing[@]}" || return 1
+    fi
+}
+
+# The job-scheduler test (tools/slurm_test.sh): Slurm's daemons and commands, and munge.
+gatetrace_setup_slurm() {
+    if ! command -v slurmctld >/dev/null 2>&1 || ! command -v munged >/dev/null 2>&1; then
+        gatetrace_apt_install slurm-wlm munge || return 1
     fi
 }
 

@@ -4,13 +4,15 @@
 # --release), then the Python package's tests: the package is built and installed with
 # `pip install .` into a virtual environment in target/python-env (under CARGO_TARGET_DIR when
 # set), and pytest runs
-# python/tests against it and against the command line built by `cargo test`.
+# python/tests against it and against the command line built by `cargo test`; last, a 4-task
+# Slurm job array of shards and its merge on a single-node cluster (tools/slurm_test.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . tools/setup.sh
 gatetrace_setup
 gatetrace_setup_display
 gatetrace_setup_python
+gatetrace_setup_slurm
 cargo test "$@"
 
 profile=debug
@@ -27,3 +29,4 @@ fi
 # of the renderer.
 MATURIN_PEP517_ARGS="--profile $maturin_profile" "$env_dir/bin/python" -m pip install --quiet --disable-pip-version-check ".[test]"
 GATETRACE_BIN="$target_dir/$profile/gatetrace" "$env_dir/bin/python" -m pytest -q python/tests
+tools/slurm_test.sh "$target_dir/$profile/gatetrace"
