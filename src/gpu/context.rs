@@ -28,6 +28,9 @@ pub struct GpuContext {
     pub profiler: Option<super::profiler::SharedProfiler>,
     /// Why the device was lost, once it has been (the driver's reason and message).
     lost: std::sync::Arc<std::sync::Mutex<Option<String>>>,
+    /// The first error the device reported outside an error scope (running out of memory for
+    /// a staging buffer, say); `wait_idle` returns it instead of the process panicking.
+    uncaptured: std::sync::Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl GpuContext {
@@ -61,7 +64,18 @@ impl GpuContext {
         device.set_device_lost_callback(move |reason, message| {
             *record.lock().unwrap_or_else(|e| e.into_inner()) = Some(format!("{reason:?}: {message}"));
         });
-        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None, lost })
+        let uncaptured = std::sync::Arc::new(std::sync::Mutex::new(None));
+        let record = uncaptured.clone();
+        device.on_uncaptured_error(std::sync::Arc::new(move |e: wgpu::Error| {
+            let message = match &e {
+                wgpu::Error::OutOfMemory { .. } => {
+                    "the device ran out of memory; reduce the resolution, the bins or the samples per pass".to_owned()
+                }
+                other => format!("device error: {other}"),
+            };
+            record.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(message);
+        }));
+        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None, lost, uncaptured })
     }
 
     /// Why the device was lost (a driver reset, a hung kernel, an unplugged GPU), if it was.
@@ -105,7 +119,11 @@ impl GpuContext {
     /// Blocks until all submitted work has finished (and adds the finished dispatches' times to
     /// the profiler, when there is one).
     pub fn wait_idle(&self) -> Result<()> {
-        if let Err(e) = self.device.poll(wgpu::PollType::wait_indefinitely()) {
+        let polled = self.device.poll(wgpu::PollType::wait_indefinitely());
+        if let Some(error) = self.uncaptured.lock().unwrap_or_else(|e| e.into_inner()).clone() {
+            bail!("GPU `{}`: {error}", self.adapter_info.name);
+        }
+        if let Err(e) = polled {
             let reason = self.lost_reason().unwrap_or_else(|| e.to_string());
             bail!(
                 "the GPU device `{}` was lost while rendering ({reason}); the render cannot go on (a render with \

@@ -760,30 +760,34 @@ pub fn upload_scene(
     Ok((r, constants, film))
 }
 
-/// Refuses, before anything is allocated, a film (and light-tracing film) larger than the
-/// memory a CPU device can give it (MemAvailable of /proc/meminfo). A GPU's free memory cannot
-/// be asked for portably: there, running out is reported when the buffer is created
-/// (`GpuContext::allocate`).
+/// Refuses, before anything is allocated, a render whose films do not fit the memory available
+/// (MemAvailable of /proc/meminfo): the host holds about three copies of each film when the
+/// image is read back (staging buffer, sums, saved state) plus the f32 image, and a CPU device
+/// (lavapipe) keeps the films themselves in the same memory. A GPU's free memory cannot be
+/// asked for portably: there, running out is reported when a buffer is created
+/// (`GpuContext::allocate`) or at the next wait (`GpuContext::wait_idle`).
 fn check_film_memory(ctx: &GpuContext, settings: &RenderSettings, elements: u64) -> Result<()> {
     let films = if settings.method == Method::Path { 1 } else { 2 };
-    let bytes = elements * FILM_ELEMENT_BYTES * films;
+    let device = elements * FILM_ELEMENT_BYTES * films;
+    let host = elements * (3 * FILM_ELEMENT_BYTES * films + 8);
+    let needed = host + if ctx.is_cpu() { device } else { 0 };
     let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
         let line = m.lines().find(|l| l.starts_with("MemAvailable:"))?;
         line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib * 1024)
     });
-    if let (true, Some(available)) = (ctx.is_cpu(), available) {
+    if let Some(available) = available {
         let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
         anyhow::ensure!(
-            bytes <= available,
-            "--res {}x{} with {} bins: the film{} needs {:.1} GiB of memory, more than the {:.1} GiB available to the CPU \
-             device `{}`; reduce the resolution or the bins",
+            needed <= available,
+            "--res {}x{} with {} bins: the film{} and {} copies need about {:.1} GiB of memory, more than the {:.1} GiB \
+             available; reduce the resolution or the bins",
             settings.width,
             settings.height,
             settings.gate.bins(),
             if films > 1 { "s of a bidirectional method" } else { "" },
-            gib(bytes),
-            gib(available),
-            ctx.adapter_info.name
+            if films > 1 { "their" } else { "its" },
+            gib(needed),
+            gib(available)
         );
     }
     Ok(())
