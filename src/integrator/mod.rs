@@ -230,6 +230,7 @@ pub trait Integrator: Send {
     /// The film's current estimate (sums divided by the samples per pixel): the film of its
     /// state (see [`wavefront::film_of_state`]), so that a render, a resumed one and merged
     /// shards turn equal sums into equal images.
+    ///
     /// An error when a contribution was NaN, infinite or beyond the film's range (a bug or a
     /// scene far outside physical values), which the sums could not hold.
     fn film(&self) -> Result<Film> {

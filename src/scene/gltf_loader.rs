@@ -46,10 +46,11 @@ fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
 
 /// Parses and validates a glTF or GLB file's bytes, as `gltf::Gltf::from_slice` does, but first
 /// checks what that validation indexes without checking (gltf-json 1.4.1 panics on a
-/// primitive whose POSITION names no accessor).
-fn parse_gltf(bytes: &[u8]) -> Result<gltf::Gltf, gltf::Error> {
+/// primitive whose POSITION names no accessor), and afterwards the byte ranges the crate's
+/// readers compute unchecked (`check_buffer_ranges`).
+fn parse_gltf(bytes: &[u8]) -> Result<gltf::Gltf, String> {
     use gltf::json::validation::{Error, Validate};
-    let gltf = gltf::Gltf::from_slice_without_validation(bytes)?;
+    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
     let root = gltf.document.as_json();
     let mut errors = Vec::new();
     for (m, mesh) in root.meshes.iter().enumerate() {
@@ -64,7 +65,77 @@ fn parse_gltf(bytes: &[u8]) -> Result<gltf::Gltf, gltf::Error> {
     if errors.is_empty() {
         root.validate(root, gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
     }
-    if errors.is_empty() { Ok(gltf) } else { Err(gltf::Error::Validation(errors)) }
+    if !errors.is_empty() {
+        return Err(gltf::Error::Validation(errors).to_string());
+    }
+    check_buffer_ranges(&gltf.document)?;
+    Ok(gltf)
+}
+
+/// Checks, with arithmetic that cannot overflow, that every buffer view lies in its buffer and
+/// every accessor (and each part of a sparse one) in its view, with a count of at least 1 and
+/// a stride of at least an element: the gltf crate computes these ranges unchecked (an
+/// overflow panics in a debug build and slices wrongly in a release build).
+fn check_buffer_ranges(doc: &gltf::Document) -> Result<(), String> {
+    use gltf::json::accessor::ComponentType;
+    use gltf::json::validation::Checked;
+    for view in doc.views() {
+        let buffer = view.buffer();
+        let end = (view.offset() as u64).checked_add(view.length() as u64);
+        if end.is_none_or(|end| end > buffer.length() as u64) {
+            return Err(format!(
+                "bufferViews[{}]: {} bytes from byte {} lie outside buffer {} ({} bytes)",
+                view.index(),
+                view.length(),
+                view.offset(),
+                buffer.index(),
+                buffer.length()
+            ));
+        }
+    }
+    // `count` elements of `size` bytes, `stride` apart from byte `offset`, must lie in `view`.
+    let fits = |what: &str, view: gltf::buffer::View, offset: usize, stride: usize, count: usize, size: usize| {
+        let end = (count as u64 - 1)
+            .checked_mul(stride as u64)
+            .and_then(|e| e.checked_add(offset as u64))
+            .and_then(|e| e.checked_add(size as u64));
+        match end {
+            Some(end) if stride >= size && end <= view.length() as u64 => Ok(()),
+            _ => Err(format!(
+                "{what}: {count} elements of {size} bytes, {stride} bytes apart from byte {offset}, do not fit buffer view \
+                 {} ({} bytes)",
+                view.index(),
+                view.length()
+            )),
+        }
+    };
+    for a in doc.accessors() {
+        let what = format!("accessors[{}]", a.index());
+        if a.count() == 0 {
+            return Err(format!("{what}: count 0 (glTF requires at least 1)"));
+        }
+        let size = a.size();
+        if let Some(view) = a.view() {
+            let stride = view.stride().unwrap_or(size);
+            fits(&what, view, a.offset(), stride, a.count(), size)?;
+        }
+        if let Some(sparse) = doc.as_json().accessors[a.index()].sparse.as_ref() {
+            let integer = matches!(sparse.indices.component_type,
+                Checked::Valid(t) if matches!(t.0, ComponentType::U8 | ComponentType::U16 | ComponentType::U32));
+            if !integer {
+                return Err(format!("{what}: sparse indices must be unsigned bytes, shorts or ints"));
+            }
+            let sparse = a.sparse().expect("checked above");
+            if sparse.count() == 0 || sparse.count() > a.count() {
+                return Err(format!("{what}: {} sparse values for {} elements", sparse.count(), a.count()));
+            }
+            let (indices, values) = (sparse.indices(), sparse.values());
+            let index_size = indices.index_type().size();
+            fits(&format!("{what}.sparse.indices"), indices.view(), indices.offset(), index_size, sparse.count(), index_size)?;
+            fits(&format!("{what}.sparse.values"), values.view(), values.offset(), size, sparse.count(), size)?;
+        }
+    }
+    Ok(())
 }
 
 struct Loader<'a> {
