@@ -162,8 +162,16 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
         }), render("{dir}/scalar_positions.gltf", &[]), &["scalar_positions.gltf", "POSITION", "VEC3"]),
         case("POSITION accessor of unsigned bytes", box_with("byte_positions.gltf", |d| d["accessors"][0]["componentType"] = json!(5121)),
              render("{dir}/byte_positions.gltf", &[]), &["byte_positions.gltf", "POSITION", "float"]),
-        case("index accessor of type VEC2", box_with("vec2_indices.gltf", |d| d["accessors"][2]["type"] = json!("VEC2")),
+        case("index accessor of type VEC2", box_with("vec2_indices.gltf", |d| {
+            // Half the count, so that the bytes still fit the view and only the type is wrong.
+            d["accessors"][2]["type"] = json!("VEC2");
+            d["accessors"][2]["count"] = json!(3);
+        }),
              render("{dir}/vec2_indices.gltf", &[]), &["vec2_indices.gltf", "indices", "SCALAR"]),
+        case("accessor of no elements", box_with("empty_accessor.gltf", |d| d["accessors"][0]["count"] = json!(0)),
+             render("{dir}/empty_accessor.gltf", &[]), &["empty_accessor.gltf", "accessors[0]", "count 0"]),
+        case("buffer view past its buffer", box_with("long_view.gltf", |d| d["bufferViews"][1]["byteLength"] = json!(18_446_744_073_709_551_615u64)),
+             render("{dir}/long_view.gltf", &[]), &["long_view.gltf", "bufferViews[1]", "outside buffer 0"]),
         case("accessor past its buffer", box_with("long_accessor.gltf", |d| d["accessors"][0]["count"] = json!(4000)),
              render("{dir}/long_accessor.gltf", &[]), &["long_accessor.gltf"]),
         case("index out of range", |d| {
