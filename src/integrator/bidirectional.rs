@@ -438,12 +438,6 @@ impl<'a> BidirectionalTracer<'a> {
         Ok(())
     }
 
-    /// Elements (pixel, bin, channel) of the film and the splat film.
-    fn film_elements(&self) -> usize {
-        let p = &self.wf.params;
-        (p.width * p.height * p.gate.bins * 3) as usize
-    }
-
     /// Whether the render has a target pilot and the current gate's visit tables (strata + 1
     /// counts per pixel) fit the buffer built for them.
     fn target_pilot_fits(&self) -> bool {
@@ -573,14 +567,14 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn save_state(&self) -> Result<super::checkpoint::RenderState> {
         let mut state = self.wf.save_state(self.method)?;
-        let splats: Vec<[u32; 4]> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), self.film_elements())?;
+        let splats: Vec<[u32; 4]> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), self.wf.film_element_count() as usize)?;
         state.push("splat_film", &splats);
         state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_ran as u32]);
         Ok(state)
     }
 
     fn load_state(&mut self, state: &super::checkpoint::RenderState) -> Result<()> {
-        let splats: Vec<[u32; 4]> = state.values("splat_film", self.film_elements())?;
+        let splats: Vec<[u32; 4]> = state.values("splat_film", self.wf.film_element_count() as usize)?;
         let flags: Vec<u32> = state.values("target_pilot", 2)?;
         self.wf.load_state(self.method, state)?;
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));

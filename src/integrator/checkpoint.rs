@@ -60,6 +60,13 @@ impl RenderState {
         Ok(bytemuck::pod_collect_to_vec(bytes))
     }
 
+    /// The blob called `name` as values of T, however many it holds.
+    pub fn all_values<T: bytemuck::Pod>(&self, name: &str) -> Result<Vec<T>> {
+        let bytes = self.blob(name)?;
+        ensure!(bytes.len() % size_of::<T>() == 0, "the checkpoint's `{name}` is cut off");
+        Ok(bytemuck::pod_collect_to_vec(bytes))
+    }
+
     /// Adds blob `name` holding `values`.
     pub fn push<T: bytemuck::Pod>(&mut self, name: &str, values: &[T]) {
         self.blobs.push((name.to_owned(), bytemuck::cast_slice(values).to_vec()));

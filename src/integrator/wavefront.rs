@@ -261,7 +261,7 @@ impl<'a> Wavefront<'a> {
             a.width, a.height, a.gate.bins, a.max_bounces, b.width, b.height, b.gate.bins, b.max_bounces
         );
         let film: Vec<[u32; 4]> = state.values("film", self.film_element_count() as usize)?;
-        let visits: Vec<u32> = state.values("target_visits", state.blob("target_visits")?.len() / 4)?;
+        let visits: Vec<u32> = state.all_values("target_visits")?;
         if !visits.is_empty() {
             let buffer = self.resources.get("target_visits").ok_or_else(|| anyhow::anyhow!("this render keeps no target visits"))?;
             ensure!((visits.len() * 4) as u64 <= buffer.size(), "the checkpoint's target visits do not fit this render's");
@@ -277,7 +277,7 @@ impl<'a> Wavefront<'a> {
     }
 
     /// Elements (pixel, bin, channel) of the film.
-    fn film_element_count(&self) -> u64 {
+    pub fn film_element_count(&self) -> u64 {
         self.params.width as u64 * self.params.height as u64 * self.params.gate.bins as u64 * 3
     }
 
@@ -328,7 +328,7 @@ pub fn film_of_state(state: &RenderState) -> Result<Film> {
     film.data = sums.iter().map(|&w| (fixed::to_f64(fixed::from_words(w)) / spp) as f32).collect();
     film.spp = state.samples_in_film;
     if state.method == super::Method::Ellipsoidal {
-        let visits: Vec<u32> = state.values("target_visits", state.blob("target_visits")?.len() / 4)?;
+        let visits: Vec<u32> = state.all_values("target_visits")?;
         divide_by_stratum_counts(&params, &visits, state.samples_in_film, &mut film);
     }
     if state.blobs.iter().any(|(name, _)| name == "splat_film") {
