@@ -197,6 +197,15 @@ struct RenderArgs {
     /// not fit, the render goes without (the metadata's target_pilot_spp says 0).
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     target_pilot: Option<u32>,
+    /// --nlos captures with `ellipsoidal` on a transient gate: `on` (default) builds the band
+    /// index before the first pass (per sensed point and bin, the BVH clusters whose triangles
+    /// the bin's three-bounce path lengths can reach, with modelled masses; device memory:
+    /// 8 bytes per entry, in one binding) and draws each spot-to-sensed-point connection from
+    /// it, querying one cluster instead of descending the whole BVH; `off` descends. Unbiased
+    /// either way. The metadata's band_index gives its size and build time, or why a capture
+    /// went without.
+    #[arg(long, value_name = "on|off", default_value = "on")]
+    band_index: OnOff,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
     #[arg(long, default_value_t = 1e-6, value_name = "REL")]
@@ -385,6 +394,13 @@ enum QueryWeights {
     Arcs,
     /// By their arcs' angle times a bound on the contribution per radian.
     Reflection,
+}
+
+/// A switch (render --band-index).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum OnOff {
+    On,
+    Off,
 }
 
 #[derive(Args)]
@@ -719,7 +735,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         "--out {pattern}: a sequence of frames needs {{frame}} or {{frame:04}} in the output name, e.g. \
          frames/f_{{frame:04}}.npy"
     );
-    let settings = RenderSettings {
+    let mut settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
         method: args.method,
@@ -763,11 +779,16 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 0
             },
         ),
+        band_index: false,
     };
     ensure!(
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
         "--target-pilot applies to --method ellipsoidal only"
     );
+    settings.band_index = args.band_index == OnOff::On
+        && args.nlos.is_some()
+        && settings.method == Method::Ellipsoidal
+        && matches!(gate, Gate::Transient { .. });
     if let Some(every) = args.checkpoint_every {
         ensure!(every.is_finite() && every >= 0.0, "--checkpoint-every {every}: give seconds, 0 or more");
     }

@@ -361,6 +361,7 @@ impl Renderer {
                 truncated_traversals: tracer.truncated_traversals().map_err(runtime_error)? - truncated_before,
                 stats: None,
                 target_pilot_spp: tracer.target_pilot_spp(),
+                band_index: tracer.band_index_report(),
                 choice: None,
                 stopped_early: false,
                 state: None,

@@ -140,6 +140,7 @@ pub fn chunk_names(name: &'static str) -> [&'static str; 4] {
             ["bvh_node_surfaces", "bvh_node_surfaces_1", "bvh_node_surfaces_2", "bvh_node_surfaces_3"]
         }
         "film" => ["film", "film_1", "film_2", "film_3"],
+        "band_entries" => ["band_entries", "band_entries_1", "band_entries_2", "band_entries_3"],
         other => panic!("`{other}` is not a split array"),
     }
 }

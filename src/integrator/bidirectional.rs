@@ -231,6 +231,13 @@ pub struct BidirectionalTracer<'a> {
     target_pilot_pending: bool,
     /// The film's target lengths follow a pilot render's extra visits.
     target_pilot_ran: bool,
+    /// The band index of an NLOS capture, while it is still to be built (before the pilot and
+    /// the first pass).
+    band_index: Option<super::band_index::BandIndex>,
+    /// What became of the band index: built (its figures) or why not; None when not asked for.
+    band_index_result: Option<std::result::Result<super::band_index::BandIndexSummary, String>>,
+    /// Bytes one binding may hold.
+    binding_limit: u64,
 }
 
 impl<'a> BidirectionalTracer<'a> {
@@ -268,7 +275,7 @@ impl<'a> BidirectionalTracer<'a> {
             splats_per_slot * size_of::<Splat>() as u64,
             queued_rays_per_slot.max(1) * size_of::<ShadowRay>() as u64,
             2 * size_of::<PathState>() as u64,
-            queries_per_slot * 8,
+            queries_per_slot * 16,
         ];
         let fit = per_slot
             .iter()
@@ -329,6 +336,18 @@ impl<'a> BidirectionalTracer<'a> {
         // Three counters per strategy, then five for the ellipsoid queries' work and guards.
         r.storage_zeroed(ctx, "strategy_stats", 4 * (3 * strategy_count + QUERY_COUNTERS as u64), none)?;
         r.storage_zeroed(ctx, "targets", 8 * slots, none)?;
+        // The band index of an NLOS capture (built in `prepare`), or stand-ins for its buffers.
+        let mut band_index_result = None;
+        let mut band_index_planned = false;
+        if ellipsoidal && settings.band_index && settings.nlos.is_some() {
+            match super::band_index::unfit(&params, limit) {
+                None => band_index_planned = true,
+                Some(why) => band_index_result = Some(Err(why)),
+            }
+        }
+        if !band_index_planned {
+            super::band_index::placeholders(ctx, &mut r)?;
+        }
 
         constants.push(("CAMERA_VERTICES", camera_vertices as f64));
         constants.push(("LIGHT_VERTICES", light_vertices as f64));
@@ -356,6 +375,12 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("QUERY_ALLOWANCE", settings.query.allowance as f64));
             constants.push(("QUERY_REFLECTION_WEIGHTS", settings.query.reflection_weights as u32 as f64));
         }
+        constants.push(("BAND_ENTRIES_CHUNK_BITS", super::band_index::entries_chunk_bits(limit) as f64));
+        let band_index = match band_index_planned {
+            true => Some(super::band_index::BandIndex::new(ctx, &mut r, scene, &params, &constants, limit)?),
+            false => None,
+        };
+        constants.push(("BAND_INDEX", band_index_planned as u32 as f64));
         constants.push(("STATS", settings.stats as u32 as f64));
         constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));
         if let Some((s, t)) = settings.debug_strategy {
@@ -415,7 +440,24 @@ impl<'a> BidirectionalTracer<'a> {
             target_pilot_spp,
             target_pilot_pending: target_pilot_spp > 0,
             target_pilot_ran: false,
+            band_index,
+            band_index_result,
+            binding_limit: limit,
         })
+    }
+
+    /// Builds the band index (when one is still to be built) and binds queue_ellipsoid_queries
+    /// to it; where its entries do not fit a binding the capture goes on with BVH queries.
+    fn build_band_index(&mut self) -> Result<()> {
+        let Some(index) = self.band_index.take() else { return Ok(()) };
+        let wf = &mut self.wf;
+        let result = index.build(wf.ctx, &mut wf.resources, &mut wf.params, self.binding_limit)?;
+        if let (Ok(_), Some(kernels), Some(groups)) = (&result, &self.stages.ellipsoidal, &mut self.bindings.ellipsoidal) {
+            // queue_ellipsoid_queries reads the index.
+            groups[1] = kernels[1].bind(wf.ctx, &wf.resources);
+        }
+        self.band_index_result = Some(result);
+        Ok(())
     }
 
     /// Traces the pilot render (stratified bins, each once a cycle), shares out the extra
@@ -545,7 +587,22 @@ impl Integrator for BidirectionalTracer<'_> {
         if self.target_pilot_ran { self.target_pilot_spp } else { 0 }
     }
 
+    fn band_index_report(&self) -> Option<String> {
+        match self.band_index_result.as_ref()? {
+            Ok(b) => Some(format!(
+                "{} clusters, {} entries, built in {:.2} s ({} dispatches per pass){}",
+                b.clusters,
+                b.entries,
+                b.seconds,
+                b.batches,
+                if self.wf.params.target_length.band_index == 0 { "; off after a change of gate" } else { "" }
+            )),
+            Err(why) => Some(format!("off: {why}")),
+        }
+    }
+
     fn prepare(&mut self) -> Result<()> {
+        self.build_band_index()?;
         if self.target_pilot_pending {
             self.run_target_pilot()?;
         }
@@ -554,10 +611,12 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn warm_up(&mut self) -> Result<()> {
         let pilot = std::mem::take(&mut self.target_pilot_pending);
+        let band_index = self.band_index.take();
         let seed = self.wf.params.seed;
         self.render_pass(1)?;
         self.restart(seed);
         self.target_pilot_pending = pilot;
+        self.band_index = band_index;
         Ok(())
     }
 
@@ -577,6 +636,9 @@ impl Integrator for BidirectionalTracer<'_> {
         let splats: Vec<[u32; 4]> = state.values("splat_film", self.wf.film_element_count() as usize)?;
         let flags: Vec<u32> = state.values("target_pilot", 2)?;
         self.wf.load_state(self.method, state)?;
+        // The state's parameters say whether its render had a band index; this one uses its own.
+        self.wf.params.target_length.band_index = matches!(self.band_index_result, Some(Ok(_))) as u32;
+        self.wf.ctx.queue.write_buffer(self.wf.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.wf.params));
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
         self.target_pilot_pending = flags[0] != 0;
         self.target_pilot_ran = flags[1] != 0;

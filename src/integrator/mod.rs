@@ -4,6 +4,7 @@
 //! direct connections' MIS weights.
 
 pub mod auto;
+pub mod band_index;
 pub mod bidirectional;
 pub mod checkpoint;
 pub mod mis;
@@ -115,6 +116,11 @@ pub struct RenderSettings {
     /// the samples. `--target-pilot`; `render --nlos` gives `ellipsoidal`
     /// [`bidirectional::DEFAULT_NLOS_TARGET_PILOT`].
     pub target_pilot_spp: u32,
+    /// `ellipsoidal` NLOS captures on a transient gate: build the band index (see
+    /// [`band_index`]) before the first pass and draw each connection between a pixel's laser
+    /// spot and its sensed point from it, instead of descending the whole BVH. `render --nlos`
+    /// turns it on for `ellipsoidal` unless `--band-index off`.
+    pub band_index: bool,
 }
 
 /// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
@@ -202,6 +208,7 @@ impl Default for RenderSettings {
             ellipsoid_guards: EllipsoidGuards::default(),
             nlos: None,
             target_pilot_spp: 0,
+            band_index: false,
         }
     }
 }
@@ -271,6 +278,11 @@ pub trait Integrator: Send {
     /// `RenderSettings::target_pilot_spp`), 0 for none.
     fn target_pilot_spp(&self) -> u32 {
         0
+    }
+    /// What became of the band index of an NLOS capture (`RenderSettings::band_index`): its
+    /// size and build time, or why the capture went without; None when it was not asked for.
+    fn band_index_report(&self) -> Option<String> {
+        None
     }
     /// Work a render does once before its first pass (`BidirectionalTracer`: the pilot render
     /// of `RenderSettings::target_pilot_spp`); `render_pass` does it when it has not been done.
@@ -424,6 +436,8 @@ pub struct RenderOutput {
     /// Samples per pixel of the pilot render traced before the film's and discarded (see
     /// `RenderSettings::target_pilot_spp`).
     pub target_pilot_spp: u32,
+    /// What became of the band index (see [`Integrator::band_index_report`]).
+    pub band_index: Option<String>,
     /// `--method auto`: the method chosen and the pilot's figures (its time is in `rendering`).
     pub choice: Option<auto::MethodChoice>,
     /// The render stopped before its budget was spent (see [`render_resumable`]).
@@ -443,6 +457,7 @@ impl RenderOutput {
             truncated_traversals: 0,
             stats: None,
             target_pilot_spp: 0,
+            band_index: None,
             choice: None,
             stopped_early: false,
             state: None,
@@ -525,6 +540,9 @@ pub fn render_metadata(
             "target_pilot_spp".into(),
             output.target_pilot_spp.to_string(),
         ));
+        if let Some(report) = &output.band_index {
+            metadata.push(("band_index".into(), report.clone()));
+        }
     }
     metadata
 }
@@ -914,6 +932,7 @@ pub fn render_resumable(
         truncated_traversals,
         stats,
         target_pilot_spp,
+        band_index: tracer.band_index_report(),
         choice,
         stopped_early: flow.is_break(),
         state,

@@ -244,9 +244,37 @@ pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::Prepared
 /// 20 f^2 flat triangles, each vertex pushed along its radius by +-4 % bumps: the scene
 /// tools/make_sphere_scene.py writes, built in memory (f = 128: 327,680 sphere triangles).
 pub fn sphere_scene(frequency: u32) -> PreparedScene {
-    use glam::Vec3;
     let mut scene = load_gltf(&repo_path("assets/scenes/cornell_box.gltf")).unwrap();
     let white = scene.materials.iter().position(|m| m.name == "white").unwrap() as u32;
+    push_sphere(&mut scene, glam::Vec3::new(0.0, -0.5 + 0.05 + 0.25, -0.05), 0.25, frequency, white);
+    PreparedScene::new(scene).unwrap()
+}
+
+/// The NLOS example scene (assets/scenes/nlos_letter.gltf) with its hidden letter replaced by a
+/// displaced geodesic sphere of 20 f^2 triangles (radius 0.15 m, centred 0.6 m in front of the
+/// relay wall's centre, the letter's material), as tools/make_sphere_scene.py --nlos writes it
+/// but without the occluder: the relay wall and the sphere alone.
+pub fn nlos_sphere_scene(frequency: u32) -> PreparedScene {
+    let mut scene = load_gltf(&repo_path("assets/scenes/nlos_letter.gltf")).unwrap();
+    let occluder = scene.node("occluder").unwrap().triangles.clone();
+    assert_eq!(occluder.end, scene.triangles.len(), "the occluder's triangles are expected last");
+    scene.triangles.truncate(occluder.start);
+    scene.nodes.iter_mut().find(|n| n.name == "occluder").unwrap().triangles = occluder.start..occluder.start;
+    let letter = scene.node("hidden_letter").unwrap().triangles.clone();
+    let material = scene.triangles[letter.start].material;
+    scene.triangles.drain(letter.clone());
+    for node in &mut scene.nodes {
+        let shift = |i: usize| if i >= letter.end { i - letter.len() } else { i.min(letter.start) };
+        node.triangles = shift(node.triangles.start)..shift(node.triangles.end);
+    }
+    push_sphere(&mut scene, glam::Vec3::new(0.0, 0.0, 0.6), 0.15, frequency, material);
+    PreparedScene::new(scene).unwrap()
+}
+
+/// Appends a geodesic sphere (an icosahedron whose faces are cut into f x f flat triangles,
+/// each vertex pushed along its radius by +-4 % bumps) of `radius` m about `centre`.
+fn push_sphere(scene: &mut gatetrace::scene::Scene, centre: glam::Vec3, radius: f32, frequency: u32, material: u32) {
+    use glam::Vec3;
     let p = (1.0 + 5f32.sqrt()) / 2.0;
     let ico: Vec<Vec3> = [
         (-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0), (0.0, -1.0, p), (0.0, 1.0, p),
@@ -260,7 +288,6 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
         (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10),
         (8, 6, 7), (9, 8, 1),
     ];
-    let centre = Vec3::new(0.0, -0.5 + 0.05 + 0.25, -0.05);
     let waves = [
         (Vec3::new(0.36, 0.48, 0.80), 7.0, 0.3, 0.45),
         (Vec3::new(-0.60, 0.64, 0.48), 11.0, 1.7, 0.30),
@@ -270,7 +297,7 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
     let point = |d: Vec3| {
         let d = d.normalize();
         let bump: f32 = waves.iter().map(|&(w, k, phase, weight)| weight * (k * w.dot(d) + phase).sin()).sum();
-        centre + 0.25 * (1.0 + 0.04 * bump) * d
+        centre + radius * (1.0 + 0.04 * bump) * d
     };
     let f = frequency as f32;
     for &(a, b, c) in &faces {
@@ -283,7 +310,7 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
                         positions: p,
                         normals: None,
                         uvs: [glam::Vec2::ZERO; 3],
-                        material: white,
+                        material,
                     })
                 };
                 add([lattice(i, j), lattice(i + 1, j), lattice(i, j + 1)]);
@@ -293,7 +320,6 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
             }
         }
     }
-    PreparedScene::new(scene).unwrap()
 }
 
 /// An NLOS capture of assets/scenes/nlos_letter.gltf as the peer data was made: sensor and laser
@@ -302,6 +328,9 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
 pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim: gatetrace::nlos::LaserAim,
                        method: gatetrace::integrator::Method) -> RenderSettings {
     let origin = glam::Vec3::new(-1.2, 0.0, 0.6);
+    // The command line's defaults for captures (target pilot and band index below).
+    let band_index =
+        method == gatetrace::integrator::Method::Ellipsoidal && matches!(gate, gatetrace::film::Gate::Transient { .. });
     RenderSettings {
         width,
         height,
@@ -317,12 +346,12 @@ pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim
             count_first_and_last: false,
         }),
         query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },
-        // The command line's defaults for captures.
         target_pilot_spp: if method == gatetrace::integrator::Method::Ellipsoidal {
             gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
         } else {
             0
         },
+        band_index,
         ..Default::default()
     }
 }
