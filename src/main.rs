@@ -197,14 +197,16 @@ struct RenderArgs {
     /// not fit, the render goes without (the metadata's target_pilot_spp says 0).
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     target_pilot: Option<u32>,
-    /// --nlos captures with `ellipsoidal` on a transient gate: `on` (default) builds the band
-    /// index before the first pass (per sensed point and bin, the BVH clusters whose triangles
-    /// the bin's three-bounce path lengths can reach, with modelled masses; device memory:
-    /// 8 bytes per entry, in one binding) and draws each spot-to-sensed-point connection from
-    /// it, querying one cluster instead of descending the whole BVH; `off` descends. Unbiased
-    /// either way. The metadata's band_index gives its size and build time, or why a capture
-    /// went without.
-    #[arg(long, value_name = "on|off", default_value = "on")]
+    /// --nlos captures with `ellipsoidal` on a transient gate: `on` builds the band index before
+    /// the first pass (per sensed point and bin, the BVH clusters whose triangles the bin's
+    /// three-bounce path lengths can reach, with modelled masses; device memory: 8 bytes per
+    /// entry, up to four bindings) and draws each spot-to-sensed-point connection from it,
+    /// querying one cluster instead of descending the whole BVH; `off` (default) descends.
+    /// Unbiased either way; the build counts in a time budget. A capture goes without it where
+    /// it cannot be built completely (the metadata's band_index says why, or gives its size and
+    /// build time). Off by default: on the 327,680-triangle hidden sphere with the example's
+    /// occluder, at 1 ps bins and 10 s, it did not beat the descent (README, NLOS captures).
+    #[arg(long, value_name = "on|off", default_value = "off")]
     band_index: OnOff,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).

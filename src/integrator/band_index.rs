@@ -5,9 +5,8 @@
 //! laser spot and its sensed point then draw a cluster of their bin in proportion to the masses
 //! and query that subtree exhaustively, instead of a stochastic descent of the whole BVH whose
 //! estimate compounds a model error at every level (on a 327,680-triangle hidden sphere the
-//! error per sample fell from 2.3x to about 0.1x the single-bin floor; README, NLOS captures).
-//! Listing clusters per group of four 1 ps bins instead (a quarter of the entries and 20 % less
-//! build time) raised it to 0.39x there, so the index keeps the gate's bins.
+//! error per sample fell from 2.3x to 1.1-1.6x the single-bin floor, though the build takes half
+//! of a 10 s capture; README, NLOS captures).
 //!
 //! Built on the device in two passes over the clusters, batched so that no invocation's loops
 //! run past lavapipe's 65,535 iterations: `count_band_entries` counts each pixel's entries per
@@ -26,7 +25,9 @@ use crate::gpu::{GpuContext, Kernel, Resources};
 pub const CLUSTER_NODES: u32 = 31;
 
 /// Loop iterations one invocation of a build pass may spend on one batch of clusters (bounded
-/// from the clusters' sizes, well below lavapipe's 65,535).
+/// from the clusters' sizes, well below lavapipe's 65,535, after which it ends an invocation's
+/// loops). A cluster whose bound alone exceeds it (large triangles over fine bins) leaves the
+/// capture without an index.
 const BATCH_ITERATIONS: u64 = 48_000;
 
 /// Strata the fill pass sums per walk over a cluster's triangles (band_index.wesl BAND_WINDOW).
@@ -90,7 +91,7 @@ pub fn unfit(params: &RenderParams, limit: u64) -> Option<String> {
 pub fn placeholders(ctx: &GpuContext, r: &mut Resources) -> Result<()> {
     for name in BUFFERS {
         if name == "band_build" {
-            r.uniform_init(ctx, name, &[0u32; 4]);
+            r.uniform_init(ctx, name, &[0u32; 8]);
         } else {
             r.storage_zeroed(ctx, name, 16, wgpu::BufferUsages::empty())?;
         }
@@ -105,7 +106,7 @@ pub struct BandIndexSummary {
     pub clusters: usize,
     /// Entries over every pixel and bin.
     pub entries: u64,
-    /// Dispatches per pass.
+    /// Dispatches of the two passes.
     pub batches: usize,
     /// Wall-clock seconds the build took.
     pub seconds: f64,
@@ -115,9 +116,13 @@ pub struct BandIndexSummary {
 pub struct BandIndex {
     count: Kernel,
     fill: Kernel,
-    /// (first cluster, clusters) of each dispatch.
-    batches: Vec<(u32, u32)>,
+    /// (first cluster, clusters, first stratum, end of strata) of each dispatch of the count
+    /// and fill passes.
+    count_batches: Vec<[u32; 4]>,
+    fill_batches: Vec<[u32; 4]>,
     clusters: usize,
+    /// Why the capture goes without the index, found before building it.
+    refused: Option<String>,
     /// band_ranges holds every pixel's clusters' strata (else the fill pass recomputes them).
     ranges: bool,
 }
@@ -146,24 +151,68 @@ impl BandIndex {
             r.storage_zeroed(ctx, "band_ranges", range_bytes, wgpu::BufferUsages::empty())?;
         }
         let width = params.gate.p1 as f64;
-        let mut batches = Vec::new();
-        let (mut first, mut spent) = (0u32, 0u64);
+        let strata = params.target_length.strata;
+        let mut refused = (clusters.len() < 2)
+            .then(|| "the BVH is one cluster, which every query searches whole anyway".to_owned());
+        // Count batches: whole clusters. Fill batches: whole clusters, or one cluster over a range
+        // of strata where filling it whole would take one invocation past the budget.
+        let (mut count_batches, mut fill_batches) = (Vec::new(), Vec::new());
+        let (mut count_first, mut count_spent) = (0u32, 0u64);
+        let (mut fill_first, mut fill_spent) = (0u32, 0u64);
         for (c, cluster) in clusters.iter().enumerate() {
-            let iterations = cluster_iterations(&scene.bvh.nodes, &scene.triangles, cluster, width);
-            if spent + iterations > BATCH_ITERATIONS && (c as u32) > first {
-                batches.push((first, c as u32 - first));
-                (first, spent) = (c as u32, 0);
+            let c = c as u32;
+            let cost = cluster_cost(&scene.bvh.nodes, &scene.triangles, cluster, width);
+            if count_spent + cost.count > BATCH_ITERATIONS && c > count_first {
+                count_batches.push([count_first, c - count_first, 0, strata]);
+                (count_first, count_spent) = (c, 0);
             }
-            spent += iterations;
+            count_spent += cost.count;
+            if cost.count > BATCH_ITERATIONS || cost.per_window + cost.range > BATCH_ITERATIONS {
+                refused.get_or_insert_with(|| {
+                    format!(
+                        "cluster {c} ({} triangles) would take more loop iterations to index at these bins than one \
+                         invocation may run",
+                        cluster[3] - cluster[2]
+                    )
+                });
+            }
+            if cost.whole() <= BATCH_ITERATIONS {
+                if fill_spent + cost.whole() > BATCH_ITERATIONS && c > fill_first {
+                    fill_batches.push([fill_first, c - fill_first, 0, strata]);
+                    (fill_first, fill_spent) = (c, 0);
+                }
+                fill_spent += cost.whole();
+                continue;
+            }
+            // Too costly whole: the batch so far, then this cluster over ranges of strata, each of
+            // `per` windows (split dispatches align windows to multiples of WINDOW).
+            if c > fill_first {
+                fill_batches.push([fill_first, c - fill_first, 0, strata]);
+            }
+            let per = (BATCH_ITERATIONS.saturating_sub(cost.range) / cost.per_window.max(1)).max(1) as u32;
+            let step = per * WINDOW as u32;
+            let mut lo = 0;
+            while lo < strata {
+                fill_batches.push([c, 1, lo, (lo + step).min(strata)]);
+                lo += step;
+            }
+            (fill_first, fill_spent) = (c + 1, 0);
         }
-        batches.push((first, clusters.len() as u32 - first));
+        if count_first < clusters.len() as u32 {
+            count_batches.push([count_first, clusters.len() as u32 - count_first, 0, strata]);
+        }
+        if fill_first < clusters.len() as u32 {
+            fill_batches.push([fill_first, clusters.len() as u32 - fill_first, 0, strata]);
+        }
         let mut constants = constants.to_vec();
         constants.push(("BAND_INDEX", 1.0));
         Ok(Self {
             count: Kernel::new(ctx, "count_band_entries", None, &constants),
             fill: Kernel::new(ctx, "fill_band_entries", None, &constants),
-            batches,
+            count_batches,
+            fill_batches,
             clusters: clusters.len(),
+            refused,
             ranges,
         })
     }
@@ -179,6 +228,9 @@ impl BandIndex {
         params: &mut RenderParams,
         limit: u64,
     ) -> Result<std::result::Result<BandIndexSummary, String>> {
+        if let Some(why) = &self.refused {
+            return Ok(Err(why.clone()));
+        }
         let start = std::time::Instant::now();
         let pixels = params.width * params.height;
         let cells = pixels as usize * params.target_length.strata as usize;
@@ -189,13 +241,12 @@ impl BandIndex {
             ctx.queue.submit([encoder.finish()]);
         };
         // One submission per pass: every batch binds its own copy of band_build.
-        let run = |kernel: &Kernel, r: &Resources| {
-            let groups: Vec<wgpu::BindGroup> = self
-                .batches
+        let run = |kernel: &Kernel, batches: &[[u32; 4]], r: &Resources| {
+            let groups: Vec<wgpu::BindGroup> = batches
                 .iter()
-                .map(|&(first, count)| {
+                .map(|&[first, count, lo, hi]| {
                     let mut batch = r.clone();
-                    batch.uniform_init(ctx, "band_build", &[first, count, self.ranges as u32, 0]);
+                    batch.uniform_init(ctx, "band_build", &[[first, count, self.ranges as u32, 0], [lo, hi, 0, 0]]);
                     kernel.bind(ctx, &batch)
                 })
                 .collect();
@@ -209,7 +260,7 @@ impl BandIndex {
             ctx.queue.submit([encoder.finish()]);
         };
         clear(r);
-        run(&self.count, r);
+        run(&self.count, &self.count_batches, r);
         ctx.wait_idle()?;
         let counts: Vec<u32> = read_buffer(ctx, r.get("band_cursors").unwrap(), cells)?;
         let mut offsets = Vec::with_capacity(cells + 1);
@@ -236,14 +287,26 @@ impl BandIndex {
             let entries = total.saturating_sub(c as u64 * per_chunk).min(per_chunk);
             r.storage_zeroed(ctx, name, entries.max(2) * 8, wgpu::BufferUsages::empty())?;
         }
-        run(&self.fill, r);
+        run(&self.fill, &self.fill_batches, r);
         ctx.wait_idle()?;
+        // Every bin's cursor must have reached the next bin's offset: a device that cut an
+        // invocation's loops short would leave entries unwritten, and the index biased.
+        let cursors: Vec<u32> = read_buffer(ctx, r.get("band_cursors").unwrap(), cells)?;
+        if let Some(k) = (0..cells).find(|&k| cursors[k] != offsets[k + 1]) {
+            return Ok(Err(format!(
+                "the device cut its build short (pixel {}, bin {}: {} of {} entries written)",
+                k / params.target_length.strata as usize,
+                k % params.target_length.strata as usize,
+                cursors[k] - offsets[k],
+                offsets[k + 1] - offsets[k]
+            )));
+        }
         params.target_length.band_index = 1;
         ctx.queue.write_buffer(r.get("params").unwrap(), 0, bytemuck::bytes_of(params));
         Ok(Ok(BandIndexSummary {
             clusters: self.clusters,
             entries: total,
-            batches: self.batches.len(),
+            batches: self.count_batches.len() + self.fill_batches.len(),
             seconds: start.elapsed().as_secs_f64(),
         }))
     }
@@ -260,23 +323,45 @@ fn pieces(longest: f32) -> u64 {
     (longest * (1.0 + 1e-5) / PIECE).ceil().clamp(1.0, MAX_PIECES as f32) as u64
 }
 
-/// A bound on the loop iterations one invocation of the fill pass (the heavier) spends on
-/// cluster `cluster` with bins `width` metres wide: |grad L| <= 2, so the cluster's range of
-/// path lengths spans at most 2 x its box diagonal and a piece's at most 2 x its longest edge;
-/// the pass walks the triangles once for the range, then once per window of WINDOW bins (their
-/// k x k pieces, each piece's bins once in all), and writes each window.
-fn cluster_iterations(nodes: &[BvhNode], triangles: &[Triangle], cluster: &[u32; 4], width: f64) -> u64 {
+/// Bounds on the loop iterations one invocation spends on a cluster, with bins `width` metres
+/// wide (|grad L| <= 2, so a cluster's path lengths span at most 2 x its box diagonal and a
+/// piece's at most 2 x its longest edge).
+struct ClusterCost {
+    /// The count pass: the triangles' walk for the range, then the range's bins.
+    count: u64,
+    /// The fill pass's range (a walk of the triangles where band_ranges is not kept).
+    range: u64,
+    /// The fill pass per window of WINDOW strata: every triangle's pieces, their bins in the
+    /// window, the window's writes.
+    per_window: u64,
+    /// Windows the cluster's range may span.
+    windows: u64,
+}
+
+impl ClusterCost {
+    /// The fill pass over the whole cluster.
+    fn whole(&self) -> u64 {
+        self.range + self.windows * self.per_window
+    }
+}
+
+fn cluster_cost(nodes: &[BvhNode], triangles: &[Triangle], cluster: &[u32; 4], width: f64) -> ClusterCost {
     let root = &nodes[cluster[0] as usize];
     let bins = |length: f64| (2.0 * length / width).ceil().min(1e12) as u64 + 3;
     let span = bins((root.max - root.min).length() as f64);
-    let windows = span.div_ceil(WINDOW);
-    let walks: u64 = (cluster[2]..cluster[3])
+    let count = (cluster[3] - cluster[2]) as u64;
+    let per_window: u64 = (cluster[2]..cluster[3])
         .map(|t| {
             let tri = &triangles[t as usize];
             let longest = tri.e1.length().max(tri.e2.length()).max((tri.e2 - tri.e1).length());
             let k = pieces(longest);
-            1 + windows * (2 + k + 2 * k * k) + 2 * k * k * bins(longest as f64 / k as f64)
+            2 + k + 2 * k * k * (1 + bins(longest as f64 / k as f64).min(WINDOW))
         })
         .sum();
-    walks + windows * (2 * WINDOW + 2)
+    ClusterCost {
+        count: 2 * count + span + 2,
+        range: 2 * count + 2,
+        per_window: per_window + 2 * WINDOW + 2,
+        windows: span.div_ceil(WINDOW) + 1,
+    }
 }

@@ -590,7 +590,7 @@ impl Integrator for BidirectionalTracer<'_> {
     fn band_index_report(&self) -> Option<String> {
         match self.band_index_result.as_ref()? {
             Ok(b) => Some(format!(
-                "{} clusters, {} entries, built in {:.2} s ({} dispatches per pass){}",
+                "{} clusters, {} entries, built in {:.2} s ({} dispatches){}",
                 b.clusters,
                 b.entries,
                 b.seconds,

@@ -118,8 +118,8 @@ pub struct RenderSettings {
     pub target_pilot_spp: u32,
     /// `ellipsoidal` NLOS captures on a transient gate: build the band index (see
     /// [`band_index`]) before the first pass and draw each connection between a pixel's laser
-    /// spot and its sensed point from it, instead of descending the whole BVH. `render --nlos`
-    /// turns it on for `ellipsoidal` unless `--band-index off`.
+    /// spot and its sensed point from it, instead of descending the whole BVH
+    /// (`render --band-index on`; off by default).
     pub band_index: bool,
 }
 

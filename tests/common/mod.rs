@@ -252,14 +252,16 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
 
 /// The NLOS example scene (assets/scenes/nlos_letter.gltf) with its hidden letter replaced by a
 /// displaced geodesic sphere of 20 f^2 triangles (radius 0.15 m, centred 0.6 m in front of the
-/// relay wall's centre, the letter's material), as tools/make_sphere_scene.py --nlos writes it
-/// but without the occluder: the relay wall and the sphere alone.
-pub fn nlos_sphere_scene(frequency: u32) -> PreparedScene {
+/// relay wall's centre, the letter's material), as tools/make_sphere_scene.py --nlos writes it;
+/// without the occluder unless `occluder`: the relay wall and the sphere alone.
+pub fn nlos_sphere_scene(frequency: u32, occluder: bool) -> PreparedScene {
     let mut scene = load_gltf(&repo_path("assets/scenes/nlos_letter.gltf")).unwrap();
-    let occluder = scene.node("occluder").unwrap().triangles.clone();
-    assert_eq!(occluder.end, scene.triangles.len(), "the occluder's triangles are expected last");
-    scene.triangles.truncate(occluder.start);
-    scene.nodes.iter_mut().find(|n| n.name == "occluder").unwrap().triangles = occluder.start..occluder.start;
+    if !occluder {
+        let range = scene.node("occluder").unwrap().triangles.clone();
+        assert_eq!(range.end, scene.triangles.len(), "the occluder's triangles are expected last");
+        scene.triangles.truncate(range.start);
+        scene.nodes.iter_mut().find(|n| n.name == "occluder").unwrap().triangles = range.start..range.start;
+    }
     let letter = scene.node("hidden_letter").unwrap().triangles.clone();
     let material = scene.triangles[letter.start].material;
     scene.triangles.drain(letter.clone());
@@ -328,9 +330,6 @@ fn push_sphere(scene: &mut gatetrace::scene::Scene, centre: glam::Vec3, radius: 
 pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim: gatetrace::nlos::LaserAim,
                        method: gatetrace::integrator::Method) -> RenderSettings {
     let origin = glam::Vec3::new(-1.2, 0.0, 0.6);
-    // The command line's defaults for captures (target pilot and band index below).
-    let band_index =
-        method == gatetrace::integrator::Method::Ellipsoidal && matches!(gate, gatetrace::film::Gate::Transient { .. });
     RenderSettings {
         width,
         height,
@@ -346,12 +345,12 @@ pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim
             count_first_and_last: false,
         }),
         query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },
+        // The command line's defaults for captures.
         target_pilot_spp: if method == gatetrace::integrator::Method::Ellipsoidal {
             gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
         } else {
             0
         },
-        band_index,
         ..Default::default()
     }
 }
