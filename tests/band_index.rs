@@ -78,17 +78,7 @@ fn band_index_agrees_with_the_descent(scan: &str, aim: LaserAim) {
         Some((pixel * (bins / GROUP) + bin / GROUP) * 3 + c)
     };
     let result = common::compare_films(&indexed, &descended, groups, group);
-    let limit = common::stats::t_critical(common::stats::sidak(0.01, groups), (BATCHES - 1) as f64);
-    let worst = result.iter().enumerate().max_by(|p, q| p.1.2.abs().total_cmp(&q.1.2.abs())).unwrap();
-    println!("{scan}: worst of {groups} groups |z| {:.2} (limit {limit:.2})", worst.1.2.abs());
-    assert!(
-        worst.1.2.abs() < limit,
-        "{scan}: group {} differs: band index {} vs descent {} (|z| {:.2} >= {limit:.2})",
-        worst.0,
-        worst.1.0,
-        worst.1.1,
-        worst.1.2.abs()
-    );
+    common::assert_groups_agree(&format!("{scan}, band index vs descent"), "group", &result, (BATCHES - 1) as f64, 0.01);
     // Whole-capture energy.
     let energy = common::compare_films(&indexed, &descended, 1, |_| Some(0))[0];
     println!("{scan}: energy {:.6e} vs {:.6e} (z {:+.2})", energy.0, energy.1, energy.2);

@@ -191,12 +191,19 @@ pub fn assert_films_agree(label: &str, a: &[Film], b: &[Film], block: u32, alpha
         let (x, y) = (p as u32 % w, p as u32 / w);
         Some(((y / block) * bx + x / block) as usize * per_pixel + k)
     });
-    let limit = stats::t_critical(stats::sidak(alpha, blocks), (a.len().min(b.len()) - 1) as f64);
+    assert_groups_agree(label, "block", &result, (a.len().min(b.len()) - 1) as f64, alpha);
+}
+
+/// Asserts that every group of a comparison (`compare_films`: means and z) lies within the
+/// Sidak-corrected Student's t limit at family-wise rate `alpha`, with `dof` degrees of freedom
+/// (batches - 1). Prints the worst.
+pub fn assert_groups_agree(label: &str, what: &str, result: &[(f64, f64, f64)], dof: f64, alpha: f64) {
+    let limit = stats::t_critical(stats::sidak(alpha, result.len()), dof);
     let worst = result.iter().enumerate().max_by(|p, q| p.1.2.abs().total_cmp(&q.1.2.abs())).unwrap();
-    println!("{label}: worst of {blocks} blocks |z| {:.2} (limit {limit:.2})", worst.1.2.abs());
+    println!("{label}: worst of {} {what}s |z| {:.2} (limit {limit:.2})", result.len(), worst.1.2.abs());
     assert!(
         worst.1.2.abs() < limit,
-        "{label}: block {} differs: {} vs {} (|z| = {:.2} >= {limit:.2})",
+        "{label}: {what} {} differs: {} vs {} (|z| = {:.2} >= {limit:.2})",
         worst.0,
         worst.1.0,
         worst.1.1,
