@@ -1016,10 +1016,10 @@ fn run_nlos(
     );
     film_elements(&base)?;
     check_writable(&out)?;
-    let scene = PreparedScene::new(load_gltf_for_capture(scene_path)?)?;
+    let mut loaded = load_gltf_for_capture(scene_path)?;
     let origin = |given: Option<glam::Vec3>, node: &str, flag: &str| -> Result<glam::Vec3> {
         given
-            .or_else(|| nlos::origin_from_nodes(&scene.scene, node))
+            .or_else(|| nlos::origin_from_nodes(&loaded, node))
             .with_context(|| {
                 format!(
                     "{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)",
@@ -1027,10 +1027,24 @@ fn run_nlos(
                 )
             })
     };
+    let (sensor_origin, laser_origin) = (
+        origin(args.sensor_origin, "sensor_origin", "--sensor-origin")?,
+        origin(args.laser_origin, "laser_origin", "--laser-origin")?,
+    );
+    // Shell connections want the hidden scene's closed surfaces one-sided and its large
+    // triangles cut into pieces (nlos::prepare_for_shells).
+    let shells = match (base.band_index, &base.gate) {
+        (true, gatetrace::film::Gate::Transient { width, .. }) if loaded.node(&args.relay_wall).is_some() => Some(
+            nlos::prepare_for_shells(&mut loaded, &args.relay_wall, *width, &[sensor_origin, laser_origin])
+                .with_context(|| scene_path.display().to_string())?,
+        ),
+        _ => None,
+    };
+    let scene = PreparedScene::new(loaded)?;
     let capture = NlosCapture {
         relay_wall: args.relay_wall.clone(),
-        sensor_origin: origin(args.sensor_origin, "sensor_origin", "--sensor-origin")?,
-        laser_origin: origin(args.laser_origin, "laser_origin", "--laser-origin")?,
+        sensor_origin,
+        laser_origin,
         aim: if scan == Scan::Confocal {
             LaserAim::Confocal
         } else {
@@ -1130,6 +1144,15 @@ fn run_nlos(
          count_first_and_last)"
             .into(),
     ));
+    if let Some(r) = shells {
+        metadata.push((
+            "shell_preparation".into(),
+            format!(
+                "{} closed meshes made one-sided, {} triangles cut into pieces, {} triangles in all",
+                r.closed_meshes, r.refined, r.triangles
+            ),
+        ));
+    }
     let signal = interrupt::received().filter(|_| output.stopped_early);
     if let Some(signal) = signal {
         metadata.push(("interrupted_by".into(), interrupt::name(signal).into()));

@@ -50,11 +50,12 @@ sys.path.insert(0, HERE)
 C_MM_PER_PS = 0.299792458  # optical path per picosecond (mm)
 
 
-def gatetrace_render(args, method, seconds, seed, out, extra=()):
-    """`render --nlos ... --time`; returns (capture [H, W, T, 3], rendering seconds, spp).
+def gatetrace_render(args, method, seconds, seed, out, extra=(), factor=1):
+    """`render --nlos ... --time`; returns (capture [H, W, T, 3], rendering seconds, spp), with
+    bins `factor` times the base width (and a factor-th as many).
     `method` may go on with `:K` (ellipsoidal's connections per query), `:arcs` or
-    `:reflection` (its query weights) and `:pilotN` (its pilot render of N spp, `--target-pilot`),
-    e.g. `ellipsoidal:1:arcs:pilot0`."""
+    `:reflection` (its query weights), `:pilotN` (its pilot render of N spp, `--target-pilot`),
+    `:split=R` (`--query-split R`) and `:index` (`--band-index on`), e.g. `ellipsoidal:1:arcs:pilot0`."""
     origin = ",".join(map(str, args.origin))
     method, *options = method.split(":")
     extra = list(extra)
@@ -65,12 +66,16 @@ def gatetrace_render(args, method, seconds, seed, out, extra=()):
             extra += ["--connections-per-query", option]
         elif option.startswith("pilot") and option[5:].isdigit():
             extra += ["--target-pilot", option[5:]]
+        elif option.startswith("split="):
+            extra += ["--query-split", option[6:]]
+        elif option in ("index", "noindex"):
+            extra += ["--band-index", "on" if option == "index" else "off"]
         else:
-            sys.exit(f"method option {option!r}: neither a number of connections per query, arcs|reflection "
-                     "nor pilotN")
+            sys.exit(f"method option {option!r}: neither a number of connections per query, arcs|reflection, "
+                     "pilotN, split=R nor index|noindex")
     cmd = [EXE, "render", args.scene, "--nlos", args.scan, "--method", method,
            "--res", f"{args.res}x{args.res}", "--max-bounces", str(args.max_bounces),
-           "--gate", f"transient:{args.start},{args.base_width},{args.bins}",
+           "--gate", f"transient:{args.start},{args.base_width * factor},{args.bins // factor}",
            f"--sensor-origin={origin}", f"--laser-origin={origin}",
            "--time", str(seconds), "--seed", str(seed), "-o", out]
     if args.scan == "single":
@@ -158,6 +163,11 @@ def main():
     p.add_argument("--reference-method", default="ellipsoidal")
     p.add_argument("--reference-seconds", type=float, default=240.0,
                    help="seconds of rendering of the reference, in 8 batches (default 240)")
+    p.add_argument("--per-width", action="store_true",
+                   help="render gatetrace's captures at each width of --widths-ps (bins of that width) instead of "
+                        "summing the finest; the peer's sums are exact either way")
+    p.add_argument("--reference-args", default="",
+                   help="extra options for the reference's renders, e.g. '--band-index on'")
     p.add_argument("--reference-cache", metavar="NPZ",
                    help="reuse the reference stored in this file, or store it there (same capture settings)")
     p.add_argument("--gatetrace-args", default="",
@@ -188,7 +198,8 @@ def main():
         if ref_stack[0].shape != (args.res, args.res, args.bins, 3):
             sys.exit(f"{args.reference_cache}: a reference of shape {ref_stack[0].shape}, not this capture's")
     else:
-        refs = [gatetrace_render(args, args.reference_method, args.reference_seconds / batches, 9000 + k, out)
+        refs = [gatetrace_render(args, args.reference_method, args.reference_seconds / batches, 9000 + k, out,
+                                 args.reference_args.split())
                 for k in range(batches)]
         ref_stack = [r[0] * power for r in refs]
         ref_spp, ref_seconds = sum(r[2] for r in refs), sum(r[1] for r in refs)
@@ -199,16 +210,24 @@ def main():
     print(f"reference: {args.reference_method}, {ref_spp} spp in {ref_seconds:.0f} s")
 
     runs = []
+    # With --per-width, gatetrace renders every width with bins of that width (runs_at[f]); the
+    # peer's coarser bins are exactly sums of its finer ones.
+    runs_at = {}
     for method in args.methods.split(","):
-        results = [gatetrace_render(args, method, args.seconds, 100 + k, out, args.gatetrace_args.split())
-                   for k in range(args.repeats)]
-        runs.append((f"gatetrace {method}", [(img * power, secs, spp) for img, secs, spp in results]))
+        for f in (factors if args.per_width else [1]):
+            results = [gatetrace_render(args, method, args.seconds, 100 + k, out, args.gatetrace_args.split(), f)
+                       for k in range(args.repeats)]
+            runs_at.setdefault(f, []).append(
+                (f"gatetrace {method}", [(img * power, secs, spp) for img, secs, spp in results]))
+        if not args.per_width:
+            runs.append(runs_at[1][-1])
     probe = 512  # large enough that the rate is not that of per-render overheads
     peer.render(probe, 0)
     _, t = peer.render(probe, 1)
     spp = max(1, int(probe * args.seconds / t))
     label = f"mitransient (hidden geometry {args.peer_hidden_geometry})"
-    runs.append((label, [(*peer.render(spp, 200 + k), spp) for k in range(args.repeats)]))
+    peer_run = (label, [(*peer.render(spp, 200 + k), spp) for k in range(args.repeats)])
+    runs.append(peer_run)
 
     table = []
     for f in factors:
@@ -216,8 +235,10 @@ def main():
         reference = stack.mean(axis=0)
         noise = (stack.var(axis=0, ddof=1) / batches).mean()
         rows = []
-        for name, results in runs:
-            mse = np.mean([((coarsen(img, f) - reference) ** 2).mean() - noise for img, _, _ in results])
+        for name, results in (runs_at[f] + [peer_run] if args.per_width else runs):
+            # A render at this width already has its bins (per_width); the rest are summed.
+            rendered_at = f if args.per_width and name != peer_run[0] else 1
+            mse = np.mean([((coarsen(img, f // rendered_at) - reference) ** 2).mean() - noise for img, _, _ in results])
             rows.append({"renderer": name, "spp": float(np.mean([r[2] for r in results])),
                          "seconds": float(np.mean([r[1] for r in results])), "mse": float(mse)})
         peer_cost = rows[-1]["mse"] * rows[-1]["seconds"]

@@ -380,6 +380,36 @@ pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u3
     (extra, rows)
 }
 
+/// Extra visits per cycle per stratified bin that the masses of an NLOS capture's band index
+/// share out (`visit_tables_from_masses`): the masses are exact, so a cycle spends 1 of
+/// BAND_EXTRA_VISITS_PER_BIN + 1 visits on bins they show dark.
+pub const BAND_EXTRA_VISITS_PER_BIN: u32 = 15;
+
+/// Extra visits shaped by per-bin weights known before the render (an NLOS capture's band-index
+/// masses, `masses[pixel][stratum]`, `t.strata` per pixel): returns `t.extra`
+/// (BAND_EXTRA_VISITS_PER_BIN per bin, at most MAX_EXTRA_VISITS) and the `target_visits` rows, as
+/// [`visit_tables`] does, with each bin's share of its pixel's extra visits in proportion to its
+/// own weight (a pixel of no weight gets them evenly).
+pub fn visit_tables_from_masses(t: &TargetParams, masses: &[f32]) -> (u32, Vec<u32>) {
+    let n = t.strata as usize;
+    assert!(n > 0 && masses.len().is_multiple_of(n));
+    let extra = (BAND_EXTRA_VISITS_PER_BIN as u64 * n as u64).min(MAX_EXTRA_VISITS as u64) as u32;
+    let mut rows = Vec::with_capacity(masses.len() / n * (n + 1));
+    for pixel in masses.chunks(n) {
+        let weight = |m: f32| if m.is_finite() && m > 0.0 { m as f64 } else { 0.0 };
+        let total: f64 = pixel.iter().map(|&m| weight(m)).sum();
+        let even = !(total.is_finite() && total > 0.0);
+        let mut acc = 0.0f64;
+        rows.push(0);
+        for (j, &m) in pixel.iter().enumerate() {
+            acc += if even { 1.0 } else { weight(m) };
+            let whole = if even { n as f64 } else { total };
+            rows.push(if j + 1 == n { extra } else { ((extra as f64 * acc / whole).round() as u32).min(extra) });
+        }
+    }
+    (extra, rows)
+}
+
 /// The low-discrepancy uniform number of sample `sample` of a pixel whose random offset is
 /// `offset` (bits of a uniform u32): fract(offset + sample x (golden ratio - 1)) in 32-bit fixed
 /// point. Each sample's number is uniform (the offset is), and a pixel's samples spread evenly

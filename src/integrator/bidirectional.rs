@@ -236,6 +236,9 @@ pub struct BidirectionalTracer<'a> {
     band_index: Option<super::band_index::BandIndex>,
     /// What became of the band index: built (its figures) or why not; None when not asked for.
     band_index_result: Option<std::result::Result<super::band_index::BandIndexSummary, String>>,
+    /// The built band index's masses per pixel and stratum (empty without one): they share out
+    /// the target lengths' extra visits instead of a pilot render.
+    band_masses: Vec<f32>,
     /// Bytes one binding may hold.
     binding_limit: u64,
 }
@@ -301,9 +304,11 @@ impl<'a> BidirectionalTracer<'a> {
         let pixels = settings.width as u64 * settings.height as u64;
         let strata = params.target_length.strata as u64;
         let visits_bytes = pixels * (strata + 1) * 4;
-        let target_pilot_spp =
-            if ellipsoidal && strata > 0 && visits_bytes <= limit { settings.target_pilot_spp } else { 0 };
-        if target_pilot_spp > 0 {
+        let visits_fit = ellipsoidal && strata > 0 && visits_bytes <= limit;
+        let target_pilot_spp = if visits_fit { settings.target_pilot_spp } else { 0 };
+        // A band index's masses share out the extra visits too (see `prepare`).
+        let index_visits = visits_fit && settings.band_index && settings.nlos.is_some();
+        if target_pilot_spp > 0 || index_visits {
             r.storage_zeroed(ctx, "target_visits", visits_bytes, wgpu::BufferUsages::empty())?;
         }
         let splat_film_bytes = super::film_elements(settings)? * super::FILM_ELEMENT_BYTES;
@@ -442,6 +447,7 @@ impl<'a> BidirectionalTracer<'a> {
             target_pilot_ran: false,
             band_index,
             band_index_result,
+            band_masses: Vec::new(),
             binding_limit: limit,
         })
     }
@@ -456,8 +462,33 @@ impl<'a> BidirectionalTracer<'a> {
             // queue_ellipsoid_queries reads the index.
             groups[1] = kernels[1].bind(wf.ctx, &wf.resources);
         }
+        if result.is_ok() && wf.resources.get("target_visits").is_some_and(|b| b.size() > 4) {
+            let cells = (wf.params.width * wf.params.height) as usize * wf.params.target_length.strata as usize;
+            self.band_masses = read_buffer(wf.ctx, wf.resources.get("band_sums").unwrap(), cells)?;
+        }
         self.band_index_result = Some(result);
         Ok(())
+    }
+
+    /// Shares out the extra visits of each pixel's bins by the band index's masses
+    /// (`film::target::visit_tables_from_masses`) when the index is in use and no allocation is:
+    /// they are exact where a pilot render's transient is noisy, and cost no samples. Returns
+    /// whether it did.
+    fn apply_band_allocation(&mut self) -> bool {
+        let t = self.wf.params.target_length;
+        if self.band_masses.is_empty() || t.band_index == 0 || t.extra != 0
+            || self.band_masses.len() != (self.wf.params.width * self.wf.params.height) as usize * t.strata as usize
+        {
+            return false;
+        }
+        let (extra, rows) = crate::film::target::visit_tables_from_masses(&t, &self.band_masses);
+        self.wf.params.target_length.extra = extra;
+        self.wf.params.target_length.extra_stride = crate::film::target::golden_stride(extra);
+        let ctx = self.wf.ctx;
+        ctx.queue.write_buffer(self.wf.resources.get("target_visits").unwrap(), 0, bytemuck::cast_slice(&rows));
+        ctx.queue.write_buffer(self.wf.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.wf.params));
+        self.wf.target_visits = rows;
+        true
     }
 
     /// Traces the pilot render (stratified bins, each once a cycle), shares out the extra
@@ -603,6 +634,9 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn prepare(&mut self) -> Result<()> {
         self.build_band_index()?;
+        if self.apply_band_allocation() {
+            self.target_pilot_pending = false;
+        }
         if self.target_pilot_pending {
             self.run_target_pilot()?;
         }

@@ -262,6 +262,11 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
 /// relay wall's centre, the letter's material), as tools/make_sphere_scene.py --nlos writes it;
 /// without the occluder unless `occluder`: the relay wall and the sphere alone.
 pub fn nlos_sphere_scene(frequency: u32, occluder: bool) -> PreparedScene {
+    PreparedScene::new(nlos_sphere_scene_unprepared(frequency, occluder)).unwrap()
+}
+
+/// The scene of `nlos_sphere_scene` before its BVH is built.
+pub fn nlos_sphere_scene_unprepared(frequency: u32, occluder: bool) -> gatetrace::scene::Scene {
     let mut scene = load_gltf(&repo_path("assets/scenes/nlos_letter.gltf")).unwrap();
     if !occluder {
         let range = scene.node("occluder").unwrap().triangles.clone();
@@ -276,8 +281,15 @@ pub fn nlos_sphere_scene(frequency: u32, occluder: bool) -> PreparedScene {
         let shift = |i: usize| if i >= letter.end { i - letter.len() } else { i.min(letter.start) };
         node.triangles = shift(node.triangles.start)..shift(node.triangles.end);
     }
+    let first = scene.triangles.len();
     push_sphere(&mut scene, glam::Vec3::new(0.0, 0.0, 0.6), 0.15, frequency, material);
-    PreparedScene::new(scene).unwrap()
+    scene.nodes.push(gatetrace::scene::NamedNode {
+        name: "hidden_sphere".into(),
+        position: glam::Vec3::new(0.0, 0.0, 0.6),
+        triangles: first..scene.triangles.len(),
+        texcoords: None,
+    });
+    scene
 }
 
 /// Appends a geodesic sphere (an icosahedron whose faces are cut into f x f flat triangles,
