@@ -194,19 +194,27 @@ struct RenderArgs {
     /// every bin an equal share. Default 256 (at equal time, 4 ps bins, K = 1: a quarter of the
     /// error on a 327,680-triangle hidden object, a sixth on the example scene's letter). Needs
     /// at most pixels x (bins + 1) x 4 bytes of device memory in one binding; where that does
-    /// not fit, the render goes without (the metadata's target_pilot_spp says 0).
+    /// not fit, the render goes without (the metadata's target_pilot_spp says 0). With the band
+    /// index and --max-bounces 3 its masses share out the visits instead (15 more per bin) and
+    /// no pilot runs.
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     target_pilot: Option<u32>,
     /// --nlos captures with `ellipsoidal` on a transient gate: `on` builds the band index before
-    /// the first pass (per sensed point and bin, the BVH clusters whose triangles the bin's
-    /// three-bounce path lengths can reach, with modelled masses; device memory: 8 bytes per
-    /// entry, up to four bindings) and draws each spot-to-sensed-point connection from it,
-    /// querying one cluster instead of descending the whole BVH; `off` (default) descends.
+    /// the first pass (per sensed point and bin, the BVH clusters whose triangles reach into the
+    /// bin's shell of three-bounce path lengths, with their masses there; device memory: 8
+    /// bytes per entry, up to four bindings) and makes each spot-to-sensed-point connection a
+    /// shell connection: a point drawn from the index in the bin's shell, whose estimate covers
+    /// the whole bin; its masses also share out each pixel's visits to its bins (with
+    /// --max-bounces 3, instead of --target-pilot). The hidden scene is prepared for it: closed
+    /// double-sided meshes become one-sided, triangles larger than the bins resolve are cut
+    /// (the metadata's shell_preparation). `off` queries the BVH for every connection (a
+    /// stochastic descent). `auto` (default): on when the scene has more than 64 triangles
+    /// besides the relay wall (a smaller one is searched whole by every query, exactly).
     /// Unbiased either way; the build counts in a time budget. A capture goes without it where
     /// it cannot be built completely (the metadata's band_index says why, or gives its size and
-    /// build time). Off by default: on the 327,680-triangle hidden sphere with the example's
-    /// occluder, at 1 ps bins and 10 s, it did not beat the descent (README, NLOS captures).
-    #[arg(long, value_name = "on|off", default_value = "off")]
+    /// build time). On the 327,680-triangle hidden sphere at 4 ps bins and 10 s it has 1/2,400
+    /// of the descent's error (README, NLOS captures).
+    #[arg(long, value_name = "auto|on|off", default_value = "auto")]
     band_index: OnOff,
     /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
@@ -398,9 +406,10 @@ enum QueryWeights {
     Reflection,
 }
 
-/// A switch (render --band-index).
+/// A switch that may decide by itself (render --band-index).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum OnOff {
+    Auto,
     On,
     Off,
 }
@@ -787,7 +796,8 @@ fn run_render(args: RenderArgs) -> Result<()> {
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
         "--target-pilot applies to --method ellipsoidal only"
     );
-    settings.band_index = args.band_index == OnOff::On
+    // `auto` is decided once the scene is loaded (run_nlos).
+    settings.band_index = args.band_index != OnOff::Off
         && args.nlos.is_some()
         && settings.method == Method::Ellipsoidal
         && matches!(gate, Gate::Transient { .. });
@@ -1017,6 +1027,14 @@ fn run_nlos(
     film_elements(&base)?;
     check_writable(&out)?;
     let mut loaded = load_gltf_for_capture(scene_path)?;
+    let mut base = base;
+    let hidden_triangles = loaded.triangles.len() - loaded.node(&args.relay_wall).map_or(0, |n| n.triangles.len());
+    let band_index_declined = base.band_index
+        && args.band_index == OnOff::Auto
+        && hidden_triangles <= gatetrace::integrator::band_index::AUTO_MIN_TRIANGLES;
+    if band_index_declined {
+        base.band_index = false;
+    }
     let origin = |given: Option<glam::Vec3>, node: &str, flag: &str| -> Result<glam::Vec3> {
         given
             .or_else(|| nlos::origin_from_nodes(&loaded, node))
@@ -1135,6 +1153,14 @@ fn run_nlos(
         last = Some((settings, output));
     }
     let (settings, output) = last.expect("at least one laser spot");
+    if settings.method == Method::Ellipsoidal && settings.gate.bins() > 1 && (output.film.spp as u64) < settings.gate.bins() as u64 {
+        eprintln!(
+            "warning: {} samples per pixel over {} bins: the capture may have ended before visiting every bin once; bins \
+             it did not visit are estimated from the others (unbiased, but far noisier): give it more time",
+            output.film.spp,
+            settings.gate.bins()
+        );
+    }
     let mut metadata = render_metadata(&ctx, scene_path, &args.gate, &settings, &output);
     metadata.retain(|(k, _)| k != "units");
     metadata.push((
@@ -1144,6 +1170,12 @@ fn run_nlos(
          count_first_and_last)"
             .into(),
     ));
+    if band_index_declined {
+        metadata.push((
+            "band_index".into(),
+            format!("off (auto): the scene's {hidden_triangles} triangles besides the relay wall are searched whole by every query"),
+        ));
+    }
     if let Some(r) = shells {
         metadata.push((
             "shell_preparation".into(),

@@ -307,7 +307,12 @@ mod tests {
 
 /// Pieces per edge (k: a triangle becomes k^2) of the largest refinement `refine_for_shells`
 /// makes.
-pub const MAX_REFINE_PIECES: u32 = 64;
+pub const MAX_REFINE_PIECES: u32 = 256;
+/// The finest bins (m, 4 ps) `refine_for_shells` cuts for: finer bins would multiply the band
+/// index's entries (about in proportion to the pieces' number over their size) beyond the
+/// device's memory and its build time, while pieces cut for 4 ps overshoot a 1 ps bin by at most
+/// its width.
+pub const REFINE_FINEST_BIN: f64 = 0.0012;
 /// Most triangles `refine_for_shells` leaves a scene with (unless it had more).
 pub const MAX_REFINED_TRIANGLES: u64 = 1 << 23;
 
@@ -403,8 +408,9 @@ pub fn close_surfaces(scene: &mut Scene, relay_wall: &str, outside: &[Vec3]) -> 
 /// connections of the band index (band_index.wesl) at bins `bin_width` metres wide: over a
 /// piece the path length must stay close to linear and the contribution close to constant. A
 /// piece a distance d from the relay wall (where every focus lies) gets edges of at most
-/// min(sqrt(0.75 bin_width d), d / 40): its strip then overshoots the bin by at most a quarter
-/// bin (eps = K e^2 / 6 with K <= 2 / d) and its 1 / d^4 falls by at most a tenth across it.
+/// min(sqrt(0.75 w d), d / 20), w the bin width (at least REFINE_FINEST_BIN): its strip then
+/// overshoots a bin of w by at most a quarter (eps = K e^2 / 6 with K <= 2 / d) and its 1 / d^4
+/// falls by at most a fifth across it.
 /// Each triangle becomes k x k congruent pieces (k <= MAX_REFINE_PIECES; normals and texture
 /// coordinates interpolated), in place, so every node keeps its triangles contiguous. The relay
 /// wall's own triangles, on which no three-bounce connection reflects, are kept whole.
@@ -421,11 +427,9 @@ pub fn refine_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64) ->
     let pieces = |t: &crate::scene::SceneTriangle, scale: f64| -> u32 {
         let [a, b, c] = t.positions;
         let longest = a.distance(b).max(a.distance(c)).max(b.distance(c)) as f64;
-        let centroid = (a + b + c) / 3.0;
-        let reach = [a, b, c].iter().map(|p| p.distance(centroid)).fold(0.0f32, f32::max);
-        let gap = (centroid - centroid.clamp(lo, hi)).length();
-        let d = ((gap - reach) as f64).max(0.01);
-        let edge = scale * (0.75 * bin_width * d).sqrt().min(d / 40.0);
+        // The nearest vertex's distance from the wall's box (at least 1 cm) stands for d.
+        let d = [a, b, c].iter().map(|&p| (p - p.clamp(lo, hi)).length()).fold(f32::INFINITY, f32::min).max(0.01) as f64;
+        let edge = scale * (0.75 * bin_width.max(REFINE_FINEST_BIN) * d).sqrt().min(d / 20.0);
         (longest / edge).ceil().clamp(1.0, MAX_REFINE_PIECES as f64) as u32
     };
     let count = |scale: f64| -> Vec<u32> {

@@ -406,3 +406,30 @@ fn closed_surfaces_become_one_sided_and_nothing_else() {
     open.triangles[r.start].positions[0] += Vec3::splat(1e-3);
     assert_eq!(gatetrace::nlos::close_surfaces(&mut open, "relay_wall", &[origin]).unwrap(), 0);
 }
+
+/// Through the command line: `--band-index auto` (the default) declines the example letter (8
+/// triangles besides the relay wall, which every query searches whole) and says so in the
+/// metadata; `on` prepares its scene (its panels cut into pieces) and builds the index.
+#[test]
+fn the_command_line_decides_the_band_index_by_the_scene() {
+    let dir = common::scratch_dir("band_index_cli");
+    let letter = common::repo_path("assets/scenes/nlos_letter.gltf");
+    let render = |name: &str, extra: &[&str]| -> serde_json::Value {
+        let out = dir.join(format!("{name}.npy"));
+        let mut args = vec!["render", letter.to_str().unwrap(), "--nlos", "confocal", "--method", "ellipsoidal", "--res", "4x4", "--max-bounces", "3",
+                            "--gate", "transient:0.9,0.0048,80", "--spp", "96", "--seed", "3", "-o", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_gatetrace")).args(&args).output().unwrap();
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.json"))).unwrap()).unwrap()
+    };
+    let auto = render("auto", &[]);
+    let report = auto["band_index"].as_str().expect("auto says what it decided");
+    assert!(report.starts_with("off (auto)") && report.contains("8 triangles"), "{report}");
+    assert!(auto.get("shell_preparation").is_none());
+    let on = render("on", &["--band-index", "on"]);
+    let report = on["band_index"].as_str().unwrap();
+    assert!(report.contains("clusters") && !report.starts_with("off"), "{report}");
+    let prepared = on["shell_preparation"].as_str().unwrap();
+    assert!(prepared.contains("triangles cut into pieces") && !prepared.starts_with("0 closed meshes made one-sided, 0 "), "{prepared}");
+}

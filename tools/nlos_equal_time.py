@@ -73,7 +73,7 @@ def gatetrace_render(args, method, seconds, seed, out, extra=(), factor=1):
         else:
             sys.exit(f"method option {option!r}: neither a number of connections per query, arcs|reflection, "
                      "pilotN, split=R nor index|noindex")
-    cmd = [EXE, "render", args.scene, "--nlos", args.scan, "--method", method,
+    cmd = [args.exe, "render", args.scene, "--nlos", args.scan, "--method", method,
            "--res", f"{args.res}x{args.res}", "--max-bounces", str(args.max_bounces),
            "--gate", f"transient:{args.start},{args.base_width * factor},{args.bins // factor}",
            f"--sensor-origin={origin}", f"--laser-origin={origin}",
@@ -85,6 +85,10 @@ def gatetrace_render(args, method, seconds, seed, out, extra=(), factor=1):
     m = re.search(r"\| (\d+) spp, ([0-9.]+) s rendering", text)
     if not m:
         sys.exit(f"cannot read the render's summary line:\n{text}")
+    with open(os.path.splitext(out)[0] + ".json") as f:
+        index = json.load(f).get("band_index")
+    if index:
+        print(f"  {method} x{factor}, seed {seed}: band index {index}", file=sys.stderr)
     return np.load(out).astype(np.float64), float(m.group(2)), int(m.group(1))
 
 
@@ -163,6 +167,7 @@ def main():
     p.add_argument("--reference-method", default="ellipsoidal")
     p.add_argument("--reference-seconds", type=float, default=240.0,
                    help="seconds of rendering of the reference, in 8 batches (default 240)")
+    p.add_argument("--exe", default=EXE, help=f"the gatetrace binary (default {EXE})")
     p.add_argument("--per-width", action="store_true",
                    help="render gatetrace's captures at each width of --widths-ps (bins of that width) instead of "
                         "summing the finest; the peer's sums are exact either way")
@@ -176,8 +181,8 @@ def main():
     p.add_argument("--peer-hidden-geometry", choices=["on", "off"], default="on",
                    help="mitransient's nlos_hidden_geometry_sampling (default on)")
     args = p.parse_args()
-    if not os.path.exists(EXE):
-        sys.exit(f"{EXE} not found: run cargo build --release first")
+    if not os.path.exists(args.exe):
+        sys.exit(f"{args.exe} not found: run cargo build --release first")
     args.base_width = args.base_ps * C_MM_PER_PS * 1e-3
     factors = []
     for w in args.widths_ps.split(","):

@@ -24,6 +24,13 @@ use crate::scene::PreparedScene;
 use crate::gpu::resources::{MAX_CHUNKS, chunk_names, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
 
+/// `render --band-index auto` builds the index for scenes of more triangles than this besides
+/// the relay wall (about what one cluster holds): a smaller hidden scene is searched whole by
+/// every ellipsoid query, exactly, and on the example letter (8 triangles besides the wall) the
+/// queries had less error than shell connections at every bin width from 1 to 100 ps (1/100 at
+/// 1 ps; 10 s captures).
+pub const AUTO_MIN_TRIANGLES: usize = 64;
+
 /// Most nodes of a cluster's subtree (31: at most 16 leaves of up to 4 triangles).
 pub const CLUSTER_NODES: u32 = 31;
 
@@ -107,33 +114,36 @@ pub fn placeholders(ctx: &GpuContext, r: &mut Resources) -> Result<()> {
 pub struct BandIndexSummary {
     /// Clusters of the BVH.
     pub clusters: usize,
-    /// Entries over every pixel and bin.
+    /// Entries over every pixel and index bin.
     pub entries: u64,
+    /// Strata of the gate per index bin.
+    pub ratio: u32,
     /// Dispatches of the two passes.
     pub batches: usize,
     /// Wall-clock seconds the build took.
     pub seconds: f64,
 }
 
-/// The band index's build kernels and batches, bound to one capture.
+/// The band index's build kernels and clusters, bound to one capture.
 pub struct BandIndex {
     count: Kernel,
     fill: Kernel,
-    /// (first cluster, clusters, first stratum, end of strata) of each dispatch of the count
-    /// and fill passes.
-    count_batches: Vec<[u32; 4]>,
-    fill_batches: Vec<[u32; 4]>,
+    /// The clusters' loop bounds at one stratum per index bin, in cluster order.
+    costs: Vec<ClusterCost>,
     clusters: usize,
     /// Why the capture goes without the index, found before building it.
     refused: Option<String>,
-    /// band_ranges holds every pixel's clusters' strata (else the fill pass recomputes them).
+    /// band_ranges holds every pixel's clusters' index bins (else the fill pass recomputes them).
     ranges: bool,
 }
 
+/// (first cluster, clusters, first index bin, end of index bins) of each dispatch of a pass.
+type Batches = Vec<[u32; 4]>;
+
 impl BandIndex {
     /// Creates the index's buffers (the offsets and entries as stand-ins until `build`) and its
-    /// kernels, and batches the clusters of the scene's BVH for the bins of `params` (whose gate
-    /// must be stratified and fit bindings of `limit` bytes, see [`unfit`]).
+    /// kernels for the clusters of the scene's BVH and the bins of `params` (whose gate must be
+    /// stratified and fit bindings of `limit` bytes, see [`unfit`]).
     pub fn new(
         ctx: &GpuContext,
         r: &mut Resources,
@@ -154,76 +164,80 @@ impl BandIndex {
             r.storage_zeroed(ctx, "band_ranges", range_bytes, wgpu::BufferUsages::empty())?;
         }
         let width = params.gate.p1 as f64;
-        let strata = params.target_length.strata;
-        let mut refused = (clusters.len() < 2)
+        let refused = (clusters.len() < 2)
             .then(|| "the BVH is one cluster, which every query searches whole anyway".to_owned());
-        // Count batches: whole clusters. Fill batches: whole clusters, or one cluster over a range
-        // of strata where filling it whole would take one invocation past the budget.
-        let (mut count_batches, mut fill_batches) = (Vec::new(), Vec::new());
-        let (mut count_first, mut count_spent) = (0u32, 0u64);
-        let (mut fill_first, mut fill_spent) = (0u32, 0u64);
-        for (c, cluster) in clusters.iter().enumerate() {
-            let c = c as u32;
-            let cost = cluster_cost(&scene.bvh.nodes, &scene.triangles, cluster, width);
-            if count_spent + cost.count > BATCH_ITERATIONS && c > count_first {
-                count_batches.push([count_first, c - count_first, 0, strata]);
-                (count_first, count_spent) = (c, 0);
-            }
-            count_spent += cost.count;
-            if cost.count > BATCH_ITERATIONS || cost.per_window + cost.range > BATCH_ITERATIONS {
-                refused.get_or_insert_with(|| {
-                    format!(
-                        "cluster {c} ({} triangles) would take more loop iterations to index at these bins than one \
-                         invocation may run",
-                        cluster[3] - cluster[2]
-                    )
-                });
-            }
-            if cost.whole() <= BATCH_ITERATIONS {
-                if fill_spent + cost.whole() > BATCH_ITERATIONS && c > fill_first {
-                    fill_batches.push([fill_first, c - fill_first, 0, strata]);
-                    (fill_first, fill_spent) = (c, 0);
-                }
-                fill_spent += cost.whole();
-                continue;
-            }
-            // Too costly whole: the batch so far, then this cluster over ranges of strata, each of
-            // `per` windows (split dispatches align windows to multiples of WINDOW).
-            if c > fill_first {
-                fill_batches.push([fill_first, c - fill_first, 0, strata]);
-            }
-            let per = (BATCH_ITERATIONS.saturating_sub(cost.range) / cost.per_window.max(1)).max(1) as u32;
-            let step = per * WINDOW as u32;
-            let mut lo = 0;
-            while lo < strata {
-                fill_batches.push([c, 1, lo, (lo + step).min(strata)]);
-                lo += step;
-            }
-            (fill_first, fill_spent) = (c + 1, 0);
-        }
-        if count_first < clusters.len() as u32 {
-            count_batches.push([count_first, clusters.len() as u32 - count_first, 0, strata]);
-        }
-        if fill_first < clusters.len() as u32 {
-            fill_batches.push([fill_first, clusters.len() as u32 - fill_first, 0, strata]);
-        }
+        let costs = clusters.iter().map(|c| cluster_cost(&scene.bvh.nodes, &scene.triangles, c, width)).collect();
         let mut constants = constants.to_vec();
         constants.push(("BAND_INDEX", 1.0));
         Ok(Self {
             count: Kernel::new(ctx, "count_band_entries", None, &constants),
             fill: Kernel::new(ctx, "fill_band_entries", None, &constants),
-            count_batches,
-            fill_batches,
+            costs,
             clusters: clusters.len(),
             refused,
             ranges,
         })
     }
 
+    /// The count and fill passes' dispatches for index bins of `ratio` strata (of `strata`),
+    /// or why a cluster cannot be indexed at them: count batches hold whole clusters; fill
+    /// batches whole clusters, or one cluster over a range of bins where filling it whole would
+    /// take one invocation past the budget.
+    fn batches(&self, ratio: u32, strata: u32) -> std::result::Result<(Batches, Batches), String> {
+        let bins = strata.div_ceil(ratio);
+        let (mut count_batches, mut fill_batches) = (Vec::new(), Vec::new());
+        let (mut count_first, mut count_spent) = (0u32, 0u64);
+        let (mut fill_first, mut fill_spent) = (0u32, 0u64);
+        for (c, cost) in self.costs.iter().enumerate() {
+            let c = c as u32;
+            let cost = cost.at_ratio(ratio);
+            if count_spent + cost.count > BATCH_ITERATIONS && c > count_first {
+                count_batches.push([count_first, c - count_first, 0, bins]);
+                (count_first, count_spent) = (c, 0);
+            }
+            count_spent += cost.count;
+            if cost.count > BATCH_ITERATIONS || cost.range + 1 + cost.per_window + cost.triangle_bins > BATCH_ITERATIONS {
+                return Err(format!(
+                    "cluster {c} would take more loop iterations to index at these bins than one invocation may run"
+                ));
+            }
+            if cost.whole() <= BATCH_ITERATIONS {
+                if fill_spent + cost.whole() > BATCH_ITERATIONS && c > fill_first {
+                    fill_batches.push([fill_first, c - fill_first, 0, bins]);
+                    (fill_first, fill_spent) = (c, 0);
+                }
+                fill_spent += cost.whole();
+                continue;
+            }
+            // Too costly whole: the batch so far, then this cluster over ranges of bins, each of
+            // `per` windows (split dispatches align windows to multiples of WINDOW).
+            if c > fill_first {
+                fill_batches.push([fill_first, c - fill_first, 0, bins]);
+            }
+            let per = (BATCH_ITERATIONS.saturating_sub(cost.range + 1 + cost.triangle_bins) / cost.per_window).max(1) as u32;
+            let step = per * WINDOW as u32;
+            let mut lo = 0;
+            while lo < bins {
+                fill_batches.push([c, 1, lo, (lo + step).min(bins)]);
+                lo += step;
+            }
+            (fill_first, fill_spent) = (c + 1, 0);
+        }
+        let n = self.costs.len() as u32;
+        if count_first < n {
+            count_batches.push([count_first, n - count_first, 0, bins]);
+        }
+        if fill_first < n {
+            fill_batches.push([fill_first, n - fill_first, 0, bins]);
+        }
+        Ok((count_batches, fill_batches))
+    }
+
     /// Builds the index for the capture of `params` into `r`'s buffers: its figures when it was
-    /// built (then `params.target_length.band_index` is 1 and the caller must bind its kernels
-    /// to the new band_offsets and band_entries), or why the capture goes without it (the
-    /// entries do not fit MAX_CHUNKS bindings of `limit` bytes).
+    /// built (then `params.target_length.band_index` is its strata per index bin and the caller
+    /// must bind its kernels to the new band_offsets and band_entries), or why the capture goes
+    /// without it. Index bins are single strata unless their entries would not fit MAX_CHUNKS
+    /// bindings of `limit` bytes; then as many strata per bin as make them fit.
     pub fn build(
         &self,
         ctx: &GpuContext,
@@ -236,7 +250,7 @@ impl BandIndex {
         }
         let start = std::time::Instant::now();
         let pixels = params.width * params.height;
-        let cells = pixels as usize * params.target_length.strata as usize;
+        let strata = params.target_length.strata;
         let clear = |r: &Resources| {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             encoder.clear_buffer(r.get("band_cursors").unwrap(), 0, None);
@@ -244,12 +258,12 @@ impl BandIndex {
             ctx.queue.submit([encoder.finish()]);
         };
         // One submission per pass: every batch binds its own copy of band_build.
-        let run = |kernel: &Kernel, batches: &[[u32; 4]], r: &Resources| {
+        let run = |kernel: &Kernel, batches: &[[u32; 4]], ratio: u32, r: &Resources| {
             let groups: Vec<wgpu::BindGroup> = batches
                 .iter()
                 .map(|&[first, count, lo, hi]| {
                     let mut batch = r.clone();
-                    batch.uniform_init(ctx, "band_build", &[[first, count, self.ranges as u32, 0], [lo, hi, 0, 0]]);
+                    batch.uniform_init(ctx, "band_build", &[[first, count, self.ranges as u32, 0], [lo, hi, ratio, 0]]);
                     kernel.bind(ctx, &batch)
                 })
                 .collect();
@@ -262,24 +276,44 @@ impl BandIndex {
             }
             ctx.queue.submit([encoder.finish()]);
         };
-        clear(r);
-        run(&self.count, &self.count_batches, r);
-        ctx.wait_idle()?;
-        let counts: Vec<u32> = read_buffer(ctx, r.get("band_cursors").unwrap(), cells)?;
-        let mut offsets = Vec::with_capacity(cells + 1);
-        let mut total = 0u64;
-        for &n in &counts {
-            offsets.push(total as u32);
-            total += n as u64;
-        }
-        offsets.push(total as u32);
         let per_chunk = 1u64 << entries_chunk_bits(limit);
-        if total > MAX_CHUNKS * per_chunk {
-            return Ok(Err(format!(
-                "its {total} entries need more than {MAX_CHUNKS} bindings of {} bytes",
-                per_chunk * 8
-            )));
-        }
+        let capacity = MAX_CHUNKS * per_chunk;
+        // Single strata where they fit: a cluster drawn for a wider bin may not reach the
+        // stratum at hand, and its weight then varies with how much of the bin it covers (on the
+        // 327,680-triangle sphere, 4 strata of 4 ps a bin had 1000x the error of single ones).
+        let mut ratio = 1u32;
+        let mut dispatches = 0;
+        let (cells, offsets, total, fill_batches) = loop {
+            let (count_batches, fill_batches) = match self.batches(ratio, strata) {
+                Ok(b) => b,
+                Err(why) => return Ok(Err(why)),
+            };
+            clear(r);
+            run(&self.count, &count_batches, ratio, r);
+            dispatches += count_batches.len();
+            ctx.wait_idle()?;
+            let cells = pixels as usize * strata.div_ceil(ratio) as usize;
+            let counts: Vec<u32> = read_buffer(ctx, r.get("band_cursors").unwrap(), cells)?;
+            let mut offsets = Vec::with_capacity(cells + 1);
+            let mut total = 0u64;
+            for &n in &counts {
+                offsets.push(total as u32);
+                total += n as u64;
+            }
+            offsets.push(total as u32);
+            if total <= capacity {
+                break (cells, offsets, total, fill_batches);
+            }
+            // Entries fall about in proportion to the bins' width: more strata per bin.
+            let next = ((ratio as f64 * total as f64 / capacity as f64 * 1.25).ceil() as u32).max(ratio + 1);
+            if ratio >= strata || total > u32::MAX as u64 {
+                return Ok(Err(format!(
+                    "its {total} entries need more than {MAX_CHUNKS} bindings of {} bytes",
+                    per_chunk * 8
+                )));
+            }
+            ratio = next.min(strata);
+        };
         r.storage_init(ctx, "band_offsets", &offsets)?;
         // The fill pass writes each bin's entries from its offset on.
         ctx.queue.write_buffer(r.get("band_cursors").unwrap(), 0, bytemuck::cast_slice(&offsets[..cells]));
@@ -290,82 +324,111 @@ impl BandIndex {
             let entries = total.saturating_sub(c as u64 * per_chunk).min(per_chunk);
             r.storage_zeroed(ctx, name, entries.max(2) * 8, wgpu::BufferUsages::empty())?;
         }
-        run(&self.fill, &self.fill_batches, r);
+        run(&self.fill, &fill_batches, ratio, r);
+        dispatches += fill_batches.len();
         ctx.wait_idle()?;
         // Every bin's cursor must have reached the next bin's offset: a device that cut an
         // invocation's loops short would leave entries unwritten, and the index biased.
         let cursors: Vec<u32> = read_buffer(ctx, r.get("band_cursors").unwrap(), cells)?;
+        let bins = strata.div_ceil(ratio) as usize;
         if let Some(k) = (0..cells).find(|&k| cursors[k] != offsets[k + 1]) {
             return Ok(Err(format!(
-                "the device cut its build short (pixel {}, bin {}: {} of {} entries written)",
-                k / params.target_length.strata as usize,
-                k % params.target_length.strata as usize,
+                "the device cut its build short (pixel {}, index bin {}: {} of {} entries written)",
+                k / bins,
+                k % bins,
                 cursors[k] - offsets[k],
                 offsets[k + 1] - offsets[k]
             )));
         }
-        params.target_length.band_index = 1;
+        params.target_length.band_index = ratio;
         ctx.queue.write_buffer(r.get("params").unwrap(), 0, bytemuck::bytes_of(params));
         Ok(Ok(BandIndexSummary {
             clusters: self.clusters,
             entries: total,
-            batches: self.count_batches.len() + self.fill_batches.len(),
+            ratio,
+            batches: dispatches,
             seconds: start.elapsed().as_secs_f64(),
         }))
     }
 }
 
-/// Longest edge (m) of the pieces a triangle's mass is modelled in, and most pieces per edge
-/// (band_index.wesl BAND_PIECE, BAND_MAX_PIECES).
-const PIECE: f32 = 0.02;
-const MAX_PIECES: u32 = 8;
-
-/// Pieces per edge of a triangle of longest edge `longest` (band_index.wesl `band_pieces`),
-/// rounded up where f32 rounding could make the device's count one more.
-fn pieces(longest: f32) -> u64 {
-    (longest * (1.0 + 1e-5) / PIECE).ceil().clamp(1.0, MAX_PIECES as f32) as u64
+/// Per-stratum masses from an index's per-bin masses (`ratio` strata per bin, `strata` per
+/// pixel): each stratum gets its bin's mass shared evenly, which is all the index knows of it.
+pub fn strata_masses(bins: &[f32], ratio: u32, strata: u32) -> Vec<f32> {
+    let per_pixel = strata.div_ceil(ratio) as usize;
+    bins.chunks(per_pixel)
+        .flat_map(|pixel| {
+            (0..strata).map(move |j| {
+                let b = (j / ratio) as usize;
+                let width = (strata - b as u32 * ratio).min(ratio);
+                pixel[b] / width as f32
+            })
+        })
+        .collect()
 }
 
-/// Bounds on the loop iterations one invocation spends on a cluster, with bins `width` metres
-/// wide (|grad L| <= 2, so a cluster's path lengths span at most 2 x its box diagonal and a
-/// piece's at most 2 x its longest edge).
+/// Bounds on the loop iterations one invocation spends on a cluster, with index bins one
+/// stratum wide (|grad L| <= 2, so a cluster's path lengths span at most 2 x its box diagonal
+/// and a triangle's at most 2 x its longest edge); `at_ratio` scales them to wider bins.
+#[derive(Clone, Copy, Debug)]
 struct ClusterCost {
-    /// The count pass: the triangles' walk for the range, then the range's bins.
+    /// The cluster's triangles.
+    triangles: u64,
+    /// Strata its path lengths may span, and the sum over its triangles of the strata each may.
+    span: u64,
+    triangle_spans: u64,
+}
+
+/// A ClusterCost's bounds at index bins of a ratio: the passes' loop iterations (lavapipe
+/// counts every back edge of every loop, nested and in called functions alike).
+struct PassCost {
+    /// The count pass: the walk of the triangles for the range, then the range's bins.
     count: u64,
     /// The fill pass's range (a walk of the triangles where band_ranges is not kept).
     range: u64,
-    /// The fill pass per window of WINDOW strata: every triangle's pieces, their bins in the
-    /// window, the window's writes.
+    /// The fill pass per window of at most WINDOW bins: the window, its masses' setup and
+    /// writes, the walk of the triangles.
     per_window: u64,
+    /// The fill pass's triangles' bins over all windows: each triangle's bins once, plus one
+    /// more wherever a window boundary cuts them.
+    triangle_bins: u64,
     /// Windows the cluster's range may span.
     windows: u64,
 }
 
-impl ClusterCost {
+impl PassCost {
     /// The fill pass over the whole cluster.
     fn whole(&self) -> u64 {
-        self.range + self.windows * self.per_window
+        self.range + 1 + self.windows * self.per_window + self.triangle_bins
+    }
+}
+
+impl ClusterCost {
+    fn at_ratio(&self, ratio: u32) -> PassCost {
+        let bins = |strata: u64| strata.div_ceil(ratio as u64) + 1;
+        PassCost {
+            count: self.triangles + bins(self.span) + 2,
+            range: self.triangles + 1,
+            per_window: 1 + 2 * WINDOW.min(bins(self.span)) + self.triangles,
+            triangle_bins: 2 * (self.triangle_spans.div_ceil(ratio as u64) + 2 * self.triangles),
+            windows: bins(self.span).div_ceil(WINDOW) + 1,
+        }
     }
 }
 
 fn cluster_cost(nodes: &[BvhNode], triangles: &[Triangle], cluster: &[u32; 4], width: f64) -> ClusterCost {
     let root = &nodes[cluster[0] as usize];
-    let bins = |length: f64| (2.0 * length / width).ceil().min(1e12) as u64 + 3;
-    let span = bins((root.max - root.min).length() as f64);
-    let count = (cluster[3] - cluster[2]) as u64;
-    let per_window: u64 = (cluster[2]..cluster[3])
+    let strata = |length: f64| (2.0 * length / width).ceil().min(1e12) as u64 + 3;
+    let triangle_spans = (cluster[2]..cluster[3])
         .map(|t| {
             let tri = &triangles[t as usize];
-            let longest = tri.e1.length().max(tri.e2.length()).max((tri.e2 - tri.e1).length());
-            let k = pieces(longest);
-            2 + k + 2 * k * k * (1 + bins(longest as f64 / k as f64).min(WINDOW))
+            strata(tri.e1.length().max(tri.e2.length()).max((tri.e2 - tri.e1).length()) as f64)
         })
         .sum();
     ClusterCost {
-        count: 2 * count + span + 2,
-        range: 2 * count + 2,
-        per_window: per_window + 2 * WINDOW + 2,
-        windows: span.div_ceil(WINDOW) + 1,
+        triangles: (cluster[3] - cluster[2]) as u64,
+        span: strata((root.max - root.min).length() as f64),
+        triangle_spans,
     }
 }
 

@@ -462,21 +462,26 @@ impl<'a> BidirectionalTracer<'a> {
             // queue_ellipsoid_queries reads the index.
             groups[1] = kernels[1].bind(wf.ctx, &wf.resources);
         }
-        if result.is_ok() && wf.resources.get("target_visits").is_some_and(|b| b.size() > 4) {
-            let cells = (wf.params.width * wf.params.height) as usize * wf.params.target_length.strata as usize;
-            self.band_masses = read_buffer(wf.ctx, wf.resources.get("band_sums").unwrap(), cells)?;
+        if let Ok(summary) = &result
+            && wf.resources.get("target_visits").is_some_and(|b| b.size() > 4)
+        {
+            let strata = wf.params.target_length.strata;
+            let cells = (wf.params.width * wf.params.height) as usize * strata.div_ceil(summary.ratio) as usize;
+            let bins: Vec<f32> = read_buffer(wf.ctx, wf.resources.get("band_sums").unwrap(), cells)?;
+            self.band_masses = super::band_index::strata_masses(&bins, summary.ratio, strata);
         }
         self.band_index_result = Some(result);
         Ok(())
     }
 
     /// Shares out the extra visits of each pixel's bins by the band index's masses
-    /// (`film::target::visit_tables_from_masses`) when the index is in use and no allocation is:
-    /// they are exact where a pilot render's transient is noisy, and cost no samples. Returns
-    /// whether it did.
+    /// (`film::target::visit_tables_from_masses`) when the index is in use, no allocation is,
+    /// and the capture's paths are the three-bounce ones the masses describe (--max-bounces 3;
+    /// longer paths arrive later, where a pilot render sees them): the masses are exact where a
+    /// pilot's transient is noisy, and cost no samples. Returns whether it did.
     fn apply_band_allocation(&mut self) -> bool {
         let t = self.wf.params.target_length;
-        if self.band_masses.is_empty() || t.band_index == 0 || t.extra != 0
+        if self.band_masses.is_empty() || t.band_index == 0 || t.extra != 0 || self.wf.params.max_bounces != 3
             || self.band_masses.len() != (self.wf.params.width * self.wf.params.height) as usize * t.strata as usize
         {
             return false;
@@ -621,9 +626,10 @@ impl Integrator for BidirectionalTracer<'_> {
     fn band_index_report(&self) -> Option<String> {
         match self.band_index_result.as_ref()? {
             Ok(b) => Some(format!(
-                "{} clusters, {} entries, built in {:.2} s ({} dispatches){}",
+                "{} clusters, {} entries over bins of {} strata, built in {:.2} s ({} dispatches){}",
                 b.clusters,
                 b.entries,
+                b.ratio,
                 b.seconds,
                 b.batches,
                 if self.wf.params.target_length.band_index == 0 { "; off after a change of gate" } else { "" }
