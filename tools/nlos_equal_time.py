@@ -26,8 +26,13 @@ adding each sample to a single bin can have (bins drawn in proportion to the ref
 values): how far each is from that floor, and so how much any such estimator could gain on it
 per sample. Also a JSON line with everything.
 
+With --per-width, gatetrace renders each width with bins of that width instead (stratified
+target lengths and the band index see the bins they render; the peer's coarser bins are exact
+sums either way).
+
 Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,ellipsoidal:4,path]
-           [--reference-seconds S] [--widths-ps 1,2,4,10,20,50,100]
+           [--reference-seconds S] [--widths-ps 1,2,4,10,20,50,100] [--per-width] [--exe BINARY]
+           [--reference-args '--band-index on'] [--reference-cache NPZ]
 Requires: a built gatetrace (cargo build --release), numpy, mitsuba and mitransient.
 """
 

@@ -24,7 +24,16 @@ pids=()
 cleanup() {
     for p in "${pids[@]}"; do kill "$p" 2> /dev/null || true; done
     wait 2> /dev/null || true
-    rm -rf "$work"
+    # The daemons save their state as they stop (they are not this shell's children, so `wait`
+    # does not wait for them): give them up to 10 s, then remove the directory; a leftover
+    # temporary directory fails nothing.
+    for _ in $(seq 100); do
+        alive=0
+        for p in "${pids[@]}"; do kill -0 "$p" 2> /dev/null && alive=1; done
+        [ "$alive" = 0 ] && break
+        sleep 0.1
+    done
+    rm -rf "$work" 2> /dev/null || { sleep 1; rm -rf "$work" 2> /dev/null; } || true
 }
 trap cleanup EXIT
 
