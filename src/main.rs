@@ -189,14 +189,14 @@ struct RenderArgs {
     /// --nlos captures with `ellipsoidal` on a transient gate: samples per pixel of a pilot
     /// render, traced first and then discarded, whose transient decides how the render's target
     /// lengths visit each pixel's bins: every bin once a cycle, and 7 more visits per bin (at
-    /// most 65,535 a cycle) shared out in proportion to the light the pilot saw near it.
-    /// Unbiased whatever the pilot saw (each bin is divided by its own visits). 0: no pilot,
-    /// every bin an equal share. Default 256 (at equal time, 4 ps bins, K = 1: a quarter of the
-    /// error on a 327,680-triangle hidden object, a sixth on the example scene's letter). Needs
-    /// at most pixels x (bins + 1) x 4 bytes of device memory in one binding; where that does
-    /// not fit, the render goes without (the metadata's target_pilot_spp says 0). With the band
-    /// index and --max-bounces 3 its masses share out the visits instead (15 more per bin) and
-    /// no pilot runs.
+    /// most 65,535 a cycle), half shared out evenly and half in proportion to the light the
+    /// pilot saw near each bin. Unbiased whatever the pilot saw (each bin is divided by its own
+    /// visits). 0: no pilot, every bin an equal share. Default 256 (at equal time, 4 ps bins,
+    /// K = 1: a quarter of the error on a 327,680-triangle hidden object with --band-index off,
+    /// a seventh on the example scene's letter). Needs at most pixels x (bins + 1) x 4 bytes of
+    /// device memory in one binding; where that does not fit, the render goes without (the
+    /// metadata's target_pilot_spp says 0). With the band index and --max-bounces 3 its masses
+    /// share out the visits instead (15 more per bin) and no pilot runs.
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     target_pilot: Option<u32>,
     /// --nlos captures with `ellipsoidal` on a transient gate: `on` builds the band index before
@@ -1153,10 +1153,10 @@ fn run_nlos(
         last = Some((settings, output));
     }
     let (settings, output) = last.expect("at least one laser spot");
-    if settings.method == Method::Ellipsoidal && settings.gate.bins() > 1 && (output.film.spp as u64) < settings.gate.bins() as u64 {
+    if let Some(needed) = output.samples_to_visit_every_bin.filter(|&n| (output.film.spp as u64) < n) {
         eprintln!(
-            "warning: {} samples per pixel over {} bins: the capture may have ended before visiting every bin once; bins \
-             it did not visit are estimated from the others (unbiased, but far noisier): give it more time",
+            "warning: {} samples per pixel over {} bins: the capture ended before visiting every bin once ({needed} samples \
+             per pixel do); bins it did not visit are estimated from the others (unbiased, but noisier): give it more time",
             output.film.spp,
             settings.gate.bins()
         );

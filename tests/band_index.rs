@@ -75,10 +75,11 @@ fn capture(aim: LaserAim, band_index: bool, occluder: bool, seed: u32, batches: 
 
 fn band_index_agrees_with_exhaustive_queries(scan: &str, aim: LaserAim, occluder: bool) {
     const BATCHES: usize = 16;
-    // At least one sample per bin (300): each batch's first 300 samples visit every bin once.
-    // With fewer, which bins a batch visits decides its group sums, whose few distinct values a
-    // t test over 16 batches cannot model (the shell connection's estimates of a visited bin
-    // vary by much less than that lottery).
+    // More samples than bins (300), though fewer than a cycle of visits (a base visit and 7
+    // extra ones per bin): which bins a batch visits then decides its group sums (the shell
+    // connection's estimates of a visited bin vary by much less than that lottery), and a t test
+    // over 16 batches models them only because the visits spread evenly over the bins
+    // (golden_stride; with a stride whose first points came in pairs it failed at |z| = 6.8).
     const SPP: u32 = 320;
     const GROUP: usize = 10;
     const QUERY_SPP: u32 = SPP;

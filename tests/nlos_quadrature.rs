@@ -326,8 +326,8 @@ fn confocal_scan_with_ellipsoidal_connections_at_fine_bins_matches_quadrature() 
     compare_with_quadrature("confocal", LaserAim::Confocal, Method::Ellipsoidal, 4096, 1);
 }
 
-/// Fewer samples per film than bins: every sample is a base visit of its cycle, weighted as the
-/// pilot's extra visits divide the cycle, and the film must undo that (stratum_factors). With
+/// Fewer samples per film than bins: the film ends within its first cycle, before some bins'
+/// base visits, and divides each bin by its expected visits (stratum_factors). With
 /// half a visit per bin and batch, single bins are far from normal; groups of 25 (100 ps) are
 /// compared.
 #[test]

@@ -165,6 +165,35 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
     }
 }
 
+/// Every prefix of a stride's sequence spreads evenly: the largest gap between the first m
+/// positions of (i g) mod n is at most 3 n / m (the worst of these n is 2.41; the integer
+/// nearest 0.618 n gave 6.3 for n = 2100, m = 280, its first points in pairs), so a capture that
+/// stops within a cycle has visited its bins evenly.
+#[test]
+fn stride_prefixes_spread_evenly() {
+    use gatetrace::film::target::golden_stride;
+    let sizes: Vec<u32> = (3..600).chain([1000, 2100, 4000, 4500, 15_000, 28_000, 60_000, 65_535]).collect();
+    for n in sizes {
+        let g = golden_stride(n);
+        let mut points: Vec<u32> = (0..n).map(|i| (i as u64 * g as u64 % n as u64) as u32).collect();
+        let sequence = points.clone();
+        points.sort_unstable();
+        assert!(points.iter().copied().eq(0..n), "stride {g} of {n} is not a permutation");
+        for k in [2, 3, 5, 8, 16, 32, 100] {
+            let m = (n / k).max(2) as usize;
+            let mut prefix = sequence[..m].to_vec();
+            prefix.sort_unstable();
+            let wrap = prefix[0] + n - prefix[m - 1];
+            let largest = prefix.windows(2).map(|w| w[1] - w[0]).fold(wrap, u32::max);
+            assert!(
+                largest as f64 * m as f64 <= 3.0 * n as f64,
+                "stride {g} of {n}: the first {m} points leave a gap of {largest} (mean {:.1})",
+                n as f64 / m as f64
+            );
+        }
+    }
+}
+
 #[test]
 fn extra_visits_follow_the_pixels_rows() {
     use gatetrace::film::gate::gate_bin;
@@ -224,7 +253,7 @@ fn extra_visits_follow_the_pixels_rows() {
 
 #[test]
 fn stratum_factors_divide_each_bin_by_its_samples() {
-    use gatetrace::film::target::{golden_stride, stratum_factors, target_visit};
+    use gatetrace::film::target::{golden_stride, samples_to_visit_every_bin, stratum_factors, target_visit};
     let scene = common::cornell_box();
     let settings = RenderSettings { max_bounces: 5, gate: transient_gates()[0].clone(), seed: 3, ..Default::default() };
     let plain = gatetrace::gpu::layout::TargetParams { seed: 3, film_first_sample: 77, ..target_sampler(&scene, &settings).unwrap().params };
@@ -236,41 +265,115 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
     let mut factors = vec![0.0f32; n as usize];
     for t in [plain, shaped] {
         let cycle = (n + t.extra) as u64;
+        let every = samples_to_visit_every_bin(&t);
         let n = n as u64;
-        for (pixel, samples) in [(0u32, n - 1), (7, n), (9, 3 * cycle + 5), (123, 10 * cycle + cycle - 1), (45, n + 3), (46, cycle)] {
+        let cases = [(0u32, n - 1), (7, n), (9, 3 * cycle + 5), (123, 10 * cycle + cycle - 1), (45, n + 3), (46, cycle), (47, every - 1), (48, every)];
+        for (pixel, samples) in cases {
             let row = if t.extra > 0 { &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)] } else { &[][..] };
             let done = stratum_factors(&t, row, pixel, samples, &mut factors);
             if samples < n && t.extra == 0 {
                 assert!(done.is_none(), "{samples} samples < {n} strata, no extra visits: nothing to change");
                 continue;
             }
-            if samples < n {
-                // Base visits only, each to a bin uniform over the strata: each bin's base-visit
-                // weight n per_cycle / cycle.
-                assert!(done.is_some());
-                for (j, &f) in factors.iter().enumerate() {
-                    let expected = (n * (1 + row[j + 1] - row[j]) as u64) as f64 / cycle as f64;
-                    assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f} with {samples} samples");
+            assert!(done.is_some());
+            let counts_of = |t: &gatetrace::gpu::layout::TargetParams| {
+                let mut counts = vec![0u64; n as usize];
+                for s in 0..samples {
+                    counts[target_visit(t, row, pixel, t.film_first_sample + s as u32).stratum as usize] += 1;
+                }
+                counts
+            };
+            let per_cycle = |j: usize| if t.extra > 0 { 1 + row[j + 1] - row[j] } else { 1 } as f64;
+            if samples < every {
+                // Some bins may not have been visited yet, and their factors divide by their
+                // expected count; the others' by their actual count. Either way the bin's
+                // estimate is unbiased when count_j factor_j has mean samples per_cycle_j /
+                // cycle over the random offsets: checked over 400 seeds (new randomisations).
+                assert!(t.extra > 0);
+                let seeds = 400u32;
+                let (mut sum, mut sum2) = (vec![0.0f64; n as usize], vec![0.0f64; n as usize]);
+                for seed in 0..seeds {
+                    let ts = gatetrace::gpu::layout::TargetParams { seed: 1000 + seed, ..t };
+                    assert!(stratum_factors(&ts, row, pixel, samples, &mut factors).is_some());
+                    for (j, c) in counts_of(&ts).into_iter().enumerate() {
+                        let ratio = c as f64 * factors[j] as f64 * cycle as f64 / (samples as f64 * per_cycle(j));
+                        sum[j] += ratio;
+                        sum2[j] += ratio * ratio;
+                    }
+                }
+                for j in 0..n as usize {
+                    let mean = sum[j] / seeds as f64;
+                    let sd = ((sum2[j] / seeds as f64 - mean * mean).max(0.0) / (seeds - 1) as f64).sqrt();
+                    assert!(
+                        (mean - 1.0).abs() <= 5.0 * sd + 1e-5,
+                        "{samples} samples, stratum {j}: count x factor over its mean {mean} +- {sd}"
+                    );
                 }
                 continue;
             }
-            assert!(done.is_some(), "{samples} samples from the film's first visit every bin");
-            let mut counts = vec![0u64; n as usize];
-            for s in 0..samples {
-                counts[target_visit(&t, row, pixel, t.film_first_sample + s as u32).stratum as usize] += 1;
-            }
+            let counts = counts_of(&t);
+            assert!(counts.iter().all(|&c| c > 0), "{samples} samples from the film's first visit every bin");
             for (j, (&f, &c)) in factors.iter().zip(&counts).enumerate() {
-                let per_cycle = if t.extra > 0 { 1 + row[j + 1] - row[j] } else { 1 } as f64;
-                let expected = samples as f64 * per_cycle / (cycle as f64 * c as f64);
+                let expected = samples as f64 * per_cycle(j) / (cycle as f64 * c as f64);
                 assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f}, {c} samples of {samples}");
             }
         }
     }
 }
 
+/// A cycle with extra visits interleaves them with its base visits (one base visit, then
+/// extra / strata extra ones, the remainder last), so every prefix of a cycle already spends
+/// most of its samples where the allocation puts them; every bin has had its base visit after
+/// `samples_to_visit_every_bin` samples and not before.
+#[test]
+fn a_cycle_interleaves_base_and_extra_visits() {
+    use gatetrace::film::target::{base_visits_before, cycle_slot, golden_stride, samples_to_visit_every_bin, target_visit};
+    let mut rng = gatetrace::rng::Rng::new(4, 5, 6);
+    for (n, extra) in [(1u32, 5u32), (7, 3), (7, 7), (40, 15 * 40), (40, 15 * 40 + 13), (300, 65_535), (1000, 999)] {
+        let t = gatetrace::gpu::layout::TargetParams {
+            strata: n,
+            stride: golden_stride(n),
+            extra,
+            extra_stride: golden_stride(extra),
+            seed: 9,
+            film_first_sample: 5,
+            ..Default::default()
+        };
+        let run = extra / n + 1;
+        let (mut base, mut extras) = (vec![false; n as usize], vec![false; extra as usize]);
+        let mut bases_so_far = 0u64;
+        for q in 0..n + extra {
+            assert_eq!(base_visits_before(&t, q as u64), bases_so_far, "({n}, {extra}) position {q}");
+            let (is_base, i) = cycle_slot(&t, q);
+            let seen = if is_base { &mut base[i as usize] } else { &mut extras[i as usize] };
+            assert!(!*seen, "({n}, {extra}): position {q} repeats {}", if is_base { "a base visit" } else { "an extra visit" });
+            *seen = true;
+            // In order, and one base visit in each run of `run` positions up to the last.
+            if is_base {
+                assert_eq!((i as u64, q % run), (bases_so_far, 0), "({n}, {extra}) position {q}");
+                bases_so_far += 1;
+            }
+        }
+        assert!(base.iter().all(|&b| b) && extras.iter().all(|&e| e), "({n}, {extra}): a visit missing");
+        // Every bin visited after samples_to_visit_every_bin samples from the film's first.
+        let rows = random_rows(n, extra, 3, &mut rng);
+        let every = samples_to_visit_every_bin(&t);
+        // The last base visit of the first cycle is its sample every - 1.
+        assert_eq!((base_visits_before(&t, every - 1), base_visits_before(&t, every)), (n as u64 - 1, n as u64), "({n}, {extra})");
+        for pixel in 0..3u32 {
+            let row = &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize];
+            let mut seen = vec![0u32; n as usize];
+            for s in 0..every as u32 {
+                seen[target_visit(&t, row, pixel, t.film_first_sample + s).stratum as usize] += 1;
+            }
+            assert!(seen.iter().all(|&c| c > 0), "({n}, {extra}) pixel {pixel}: a bin unvisited after {every} samples");
+        }
+    }
+}
+
 #[test]
 fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
-    use gatetrace::film::target::{EXTRA_VISITS_PER_BIN, PILOT_CELLS, PILOT_SPREAD, visit_tables};
+    use gatetrace::film::target::{EXTRA_VISITS_PER_BIN, PILOT_CELLS, PILOT_SPREAD, PILOT_UNIFORM_SHARE, visit_tables};
     let (strata, bins) = (512u32, 530usize);
     let t = gatetrace::gpu::layout::TargetParams { strata, first_bin: 10, ..Default::default() };
     // Pixel 0: light in bins 110 .. 130 only (strata 100 .. 120); pixel 1: black; pixel 2: NaN.
@@ -287,14 +390,15 @@ fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
         assert!(row.windows(2).all(|w| w[0] <= w[1]), "rows are cumulative");
     }
     // Strata 100 .. 120 lie in cells 25 .. 30 of 128 (4 bins each); spread by PILOT_SPREAD
-    // cells, the shaped visits fall in cells 23 .. 32, strata 92 .. 128, evenly.
+    // cells, the shaped visits fall in cells 23 .. 32, strata 92 .. 128, evenly; the uniform
+    // share goes to every stratum.
     assert_eq!((PILOT_CELLS, PILOT_SPREAD), (128, 2));
     let row = &rows[..strata as usize + 1];
-    assert_eq!(row[92], 0);
-    assert_eq!(row[128], extra);
-    let share = extra as f64 / 36.0;
-    for j in 92..128 {
-        assert!(((row[j + 1] - row[j]) as f64 - share).abs() <= 1.0, "stratum {j}: {} extra visits", row[j + 1] - row[j]);
+    let even = PILOT_UNIFORM_SHARE * extra as f64 / strata as f64;
+    let shaped = (1.0 - PILOT_UNIFORM_SHARE) * extra as f64 / 36.0;
+    for j in 0..strata as usize {
+        let expected = even + if (92..128).contains(&j) { shaped } else { 0.0 };
+        assert!(((row[j + 1] - row[j]) as f64 - expected).abs() <= 1.0, "stratum {j}: {} extra visits, not {expected:.1}", row[j + 1] - row[j]);
     }
     // A pixel the pilot saw nothing in (or nothing finite) gets its extra visits evenly.
     for row in rows.chunks(strata as usize + 1).skip(1) {

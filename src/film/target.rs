@@ -20,7 +20,7 @@
 //! transients rendered by ellipsoidal connections.
 //!
 //! A pilot render can share out extra visits (`visit_tables`): a pixel's samples then run in
-//! cycles of strata + extra, each bin visited once and then as many more times as the pixel's
+//! cycles of strata + extra, each bin visited once and as many more times as the pixel's
 //! row of `target_visits` gives it (`target_visit`), with 1 / p scaled to match. A pixel whose
 //! light arrives in a few hundred of 4000 bins then spends most samples there, while every bin
 //! keeps a visit a cycle, and `stratum_factors` still divides each bin by its own visits.
@@ -210,8 +210,13 @@ pub fn next_target_seed(seed: u32) -> u32 {
     pcg4d([seed, TAU_STREAM, 0, 1])[0]
 }
 
-/// The stride of the bin sequence over `n` strata: the integer nearest n (golden ratio - 1) that
-/// is coprime to n, so n consecutive samples meet every bin once and fewer spread evenly.
+/// The stride g of a sequence (o + i g) mod n over `n` positions (the bins' base visits, the
+/// extra visits' positions): coprime to n, so n consecutive steps meet every position once, and
+/// with the smallest partial quotients in the continued fraction of g / n, so that every prefix
+/// of the sequence spreads evenly too (the largest gap of its first m points stays within a
+/// small factor of n / m), taking the one nearest n (golden ratio - 1) among equals. The
+/// integer nearest n (golden ratio - 1) alone can be poor: for n = 2100 it is 1297, whose
+/// quotient 30 puts the first 280 points in pairs 2 apart with gaps of 47 between them.
 pub fn golden_stride(n: u32) -> u32 {
     if n <= 2 {
         return 1;
@@ -222,8 +227,29 @@ pub fn golden_stride(n: u32) -> u32 {
         }
         a
     };
+    // The largest partial quotient of g / n (g coprime to n, 0 < g < n).
+    let largest_quotient = |g: u32| {
+        let (mut a, mut b, mut largest) = (n, g, 0);
+        while b != 0 {
+            largest = largest.max(a / b);
+            (a, b) = (b, a % b);
+        }
+        largest
+    };
     let g = (n as f64 * 0.618_033_988_749_894_8).round() as u32;
-    (0..n).flat_map(|d| [g + d, g.wrapping_sub(d)]).find(|&c| c > 0 && c < n && gcd(c, n) == 1).unwrap_or(1)
+    // Candidates in order of distance from g; a quotient of 3 or less is as good as it gets
+    // for most n, so the search stops at the first such one (or after 4096 candidates).
+    let mut best: Option<(u32, u32)> = None;
+    for c in (0..n.min(2048)).flat_map(|d| [g + d, g.wrapping_sub(d)]).filter(|&c| c > 0 && c < n && gcd(c, n) == 1) {
+        let q = largest_quotient(c);
+        if best.is_none_or(|(b, _)| q < b) {
+            best = Some((q, c));
+        }
+        if q <= 3 {
+            break;
+        }
+    }
+    best.map_or(1, |(_, c)| c)
 }
 
 /// The stratum (0 .. strata, a bin after `first_bin`) of base visit `visit` of pixel `pixel`:
@@ -246,11 +272,36 @@ pub struct TargetVisit {
     pub per_cycle: u32,
 }
 
+/// What position `q` (0 .. strata + extra) of a cycle with extra visits holds: `(true, b)` for
+/// the cycle's base visit b (0 .. strata), `(false, i)` for its extra visit i (0 .. extra). With
+/// r = extra / strata (integer division), the first strata (r + 1) positions are runs of one base
+/// visit and r extra ones, the rest extra visits: a capture that stops within its first cycle
+/// (4000 bins and 60,000 extra visits a cycle) has still spent r / (r + 1) of its samples where
+/// the allocation puts them, not all of them on one visit per bin (twin of the kernels'
+/// `cycle_slot`).
+pub fn cycle_slot(t: &TargetParams, q: u32) -> (bool, u32) {
+    let run = t.extra / t.strata + 1;
+    if q >= t.strata * run {
+        (false, q - t.strata)
+    } else if q.is_multiple_of(run) {
+        (true, q / run)
+    } else {
+        (false, q - q / run - 1)
+    }
+}
+
+/// Base visits among the first `q` positions of a cycle with extra visits (see `cycle_slot`).
+pub fn base_visits_before(t: &TargetParams, q: u64) -> u64 {
+    let (n, run) = (t.strata as u64, (t.extra / t.strata + 1) as u64);
+    q.div_ceil(run).min(n)
+}
+
 /// The visit of sample `sample` (the kernels' index, from `t.film_first_sample`) of pixel
 /// `pixel`, whose row of `target_visits` is `row` (`strata + 1` cumulative extra visits; empty
-/// when `t.extra` = 0). A pixel's samples run in cycles of strata + extra: the first strata of a
-/// cycle visit each bin once (`stratum`), the other extra visit bin j row[j + 1] - row[j] times
-/// in a golden-ratio order from a random start (twin of the kernels' `target_visit`).
+/// when `t.extra` = 0). A pixel's samples run in cycles of strata + extra: strata of a cycle's
+/// positions (`cycle_slot`) visit each bin once (`stratum`), the other extra visit bin j
+/// row[j + 1] - row[j] times in a golden-ratio order from a random start (twin of the kernels'
+/// `target_visit`).
 pub fn target_visit(t: &TargetParams, row: &[u32], pixel: u32, sample: u32) -> TargetVisit {
     let n = t.strata;
     let s = sample.wrapping_sub(t.film_first_sample);
@@ -259,20 +310,25 @@ pub fn target_visit(t: &TargetParams, row: &[u32], pixel: u32, sample: u32) -> T
     if t.extra == 0 {
         return TargetVisit { stratum: stratum(t, t.seed, pixel, s), visit: round, per_cycle: 1 };
     }
-    let (j, k) = if q < n {
-        (stratum(t, t.seed, pixel, round * n + q), 0)
+    let (base, index) = cycle_slot(t, q);
+    let (j, k) = if base {
+        (stratum(t, t.seed, pixel, round * n + index), 0)
     } else {
-        let k = extra_position(t, pixel, q - n);
+        let k = extra_position(t, pixel, index);
         (extra_stratum(row, k), k)
     };
     let per_cycle = 1 + row[j as usize + 1] - row[j as usize];
-    let visit = round * per_cycle + if q >= n { 1 + k - row[j as usize] } else { 0 };
+    let visit = round * per_cycle + if base { 0 } else { 1 + k - row[j as usize] };
     TargetVisit { stratum: j, visit, per_cycle }
 }
 
 /// Position (0 .. t.extra) of extra visit `i` of a cycle of pixel `pixel`.
 fn extra_position(t: &TargetParams, pixel: u32, i: u32) -> u32 {
-    let start = pcg4d([pixel, t.seed, TAU_STREAM, 1])[0] % t.extra;
+    extra_position_from(t, pcg4d([pixel, t.seed, TAU_STREAM, 1])[0] % t.extra, i)
+}
+
+/// Position (0 .. t.extra) of extra visit `i` of a cycle whose extra visits start at `start`.
+fn extra_position_from(t: &TargetParams, start: u32, i: u32) -> u32 {
     (start + i * t.extra_stride % t.extra) % t.extra
 }
 
@@ -281,42 +337,99 @@ fn extra_stratum(row: &[u32], k: u32) -> u32 {
     (row.partition_point(|&c| c <= k) - 1).min(row.len() - 2) as u32
 }
 
-/// Film factors of a stratified render: the film's `samples` samples per pixel gave pixel
-/// `pixel`'s stratum j `count_j` samples, where the film's division by `samples` and the
-/// weight 1 / p = cycle x width / per_cycle_j assumed samples x per_cycle_j / cycle; factor_j =
-/// samples per_cycle_j / (cycle count_j) turns bin first_bin + j into the mean over its own
-/// samples. Every bin has a sample once samples >= strata (a film's first strata samples
-/// visit each bin once). Before that, every sample is a cycle's base visit, to a bin uniform
-/// over the strata, so factor_j = strata per_cycle_j / cycle makes the plain mean unbiased;
-/// without extra visits that factor is 1 and this returns None (nothing to change). `row`: the
-/// pixel's row of `target_visits` (empty without extra visits). Writes the factors into
-/// `factors` (strata values).
-pub fn stratum_factors(t: &TargetParams, row: &[u32], pixel: u32, samples: u64, factors: &mut [f32]) -> Option<()> {
-    let n = t.strata as u64;
-    let cycle = n + t.extra as u64;
-    if n == 0 || (samples < n && t.extra == 0) {
-        return None;
-    }
-    let per_cycle = |j: usize| if t.extra == 0 { 1 } else { 1 + row[j + 1] - row[j] } as u64;
-    if samples < n {
-        for (j, f) in factors.iter_mut().enumerate() {
-            *f = (n as f64 * per_cycle(j) as f64 / cycle as f64) as f32;
+/// Film factors of a stratified render after `samples` samples per pixel (prepared once per
+/// film, then [`StratumFactors::pixel`] per pixel). The film's division by `samples` and the
+/// weight 1 / p = cycle x width / per_cycle_j assumed samples x per_cycle_j / cycle samples in
+/// stratum j; a factor samples per_cycle_j / (cycle c_j) turns the bin into its samples' sum
+/// over c_j:
+/// - c_j = count_j, the samples the bin had, when the bin is sure to have had one whatever the
+///   random offsets: after the film's first cycle's base visits (`base_visits_before`) every
+///   bin is, and before that a bin of e_j extra visits a cycle is once e_j is at least the
+///   largest gap between the extra positions drawn so far (the golden-ratio positions of the
+///   first X extra visits of a cycle leave gaps that do not depend on the random start). The
+///   bin's estimate is then the mean over its own samples, free of the error of its count.
+/// - c_j = B / strata + X e_j / extra, the expected count over the random offsets of the bins'
+///   sequence and of the extra visits' order (B base and X extra visits so far), for the other
+///   bins, which may not have had a sample yet; the estimate stays unbiased, if noisier.
+///
+/// Without extra visits, the film's first `strata` samples meet each bin once and before that
+/// the factor is 1 (`pixel` returns None: nothing to change).
+pub struct StratumFactors {
+    t: TargetParams,
+    samples: u64,
+    /// Base and extra visits of the film's first cycle so far, when it has not ended.
+    partial: Option<(u64, u64)>,
+    /// The largest gap between the extra positions of the first cycle so far: a bin of at
+    /// least this many extra visits a cycle has had one (u32::MAX: none is sure to).
+    sure_from: u32,
+}
+
+impl StratumFactors {
+    /// Factors of a film of `samples` samples per pixel with target parameters `t`.
+    pub fn new(t: &TargetParams, samples: u64) -> Self {
+        let (n, extra) = (t.strata as u64, t.extra as u64);
+        let mut partial = None;
+        let mut sure_from = u32::MAX;
+        if n > 0 && extra > 0 && samples < n + extra {
+            let base = base_visits_before(t, samples);
+            if base < n {
+                let x = samples - base;
+                partial = Some((base, x));
+                if x > 0 {
+                    let mut points: Vec<u32> = (0..x as u32).map(|i| extra_position_from(t, 0, i)).collect();
+                    points.sort_unstable();
+                    let wrap = points[0] + t.extra - points[points.len() - 1];
+                    sure_from = points.windows(2).map(|w| w[1] - w[0]).fold(wrap, u32::max);
+                }
+            }
         }
-        return Some(());
+        StratumFactors { t: *t, samples, partial, sure_from }
     }
-    let rounds = samples / cycle;
-    let mut counts: Vec<u64> = (0..n as usize).map(|j| rounds * per_cycle(j)).collect();
-    // Any cycle-long run of samples meets stratum j per_cycle_j times; the rest are counted.
-    for s in rounds * cycle..samples {
-        counts[target_visit(t, row, pixel, t.film_first_sample.wrapping_add(s as u32)).stratum as usize] += 1;
+
+    /// Writes the factors of pixel `pixel`, whose row of `target_visits` is `row` (empty without
+    /// extra visits), into `factors` (strata values); None when there is nothing to change.
+    pub fn pixel(&self, row: &[u32], pixel: u32, factors: &mut [f32]) -> Option<()> {
+        let t = &self.t;
+        let n = t.strata as u64;
+        let samples = self.samples;
+        let cycle = n + t.extra as u64;
+        if n == 0 || (samples < n && t.extra == 0) {
+            return None;
+        }
+        let extra_of = |j: usize| if t.extra == 0 { 0 } else { row[j + 1] - row[j] };
+        let factor = |j: usize, count: f64| (samples as f64 * (1 + extra_of(j)) as f64 / (cycle as f64 * count)) as f32;
+        let rounds = samples / cycle;
+        let mut counts: Vec<u64> = (0..n as usize).map(|j| rounds * (1 + extra_of(j)) as u64).collect();
+        // Any cycle-long run of samples meets stratum j per_cycle_j times; the rest are counted.
+        if self.partial.is_none() || (0..n as usize).any(|j| extra_of(j) >= self.sure_from) {
+            for s in rounds * cycle..samples {
+                counts[target_visit(t, row, pixel, t.film_first_sample.wrapping_add(s as u32)).stratum as usize] += 1;
+            }
+        }
+        for (j, f) in factors.iter_mut().enumerate() {
+            *f = match self.partial {
+                Some((base, x)) if extra_of(j) < self.sure_from => {
+                    factor(j, base as f64 / n as f64 + x as f64 * extra_of(j) as f64 / t.extra as f64)
+                }
+                _ if counts[j] == 0 => return None,
+                _ => factor(j, counts[j] as f64),
+            };
+        }
+        Some(())
     }
-    if counts.contains(&0) {
-        return None;
-    }
-    for (j, (f, c)) in factors.iter_mut().zip(counts).enumerate() {
-        *f = (samples as f64 * per_cycle(j) as f64 / (cycle as f64 * c as f64)) as f32;
-    }
-    Some(())
+}
+
+/// The factors of [`StratumFactors`] for one pixel (`StratumFactors::new(t, samples).pixel(row,
+/// pixel, factors)`; prepare them once per film where there are many pixels).
+pub fn stratum_factors(t: &TargetParams, row: &[u32], pixel: u32, samples: u64, factors: &mut [f32]) -> Option<()> {
+    StratumFactors::new(t, samples).pixel(row, pixel, factors)
+}
+
+/// Samples per pixel after which every bin of a stratified render has had a sample: the base
+/// visits of the first cycle (`cycle_slot`), `strata` without extra visits.
+pub fn samples_to_visit_every_bin(t: &TargetParams) -> u64 {
+    let n = t.strata as u64;
+    if t.extra == 0 || n == 0 { n } else { (n - 1) * (t.extra / t.strata + 1) as u64 + 1 }
 }
 
 /// Most visits per cycle beyond one per bin (`TargetParams::extra`), so that a pixel's extra
@@ -333,15 +446,24 @@ pub const PILOT_CELLS: u32 = 128;
 /// A cell's pilot mass is the largest within this many cells of it (the pilot leaves gaps
 /// inside a transient's support).
 pub const PILOT_SPREAD: usize = 2;
+/// Share of the extra visits `visit_tables` spreads evenly over the bins whatever the pilot
+/// saw, so that the bins of an arrival the pilot missed get more than one visit a cycle. It was
+/// needed while the bins' stride let a 256-sample pilot visit them in pairs with gaps of 36 bins
+/// (the example letter at 4 ps: the pilot alone 18x the error of no pilot, with this share 3x);
+/// with evenly spreading strides (`golden_stride`), shares of 0 and 0.5 gave 1,251-2,242x and
+/// 1,314-2,567x mitransient's accuracy at 1 to 100 ps (10 s, one run each), and it stays as
+/// insurance for pilots too short to see every arrival.
+pub const PILOT_UNIFORM_SHARE: f64 = 0.5;
 
 /// Extra visits shaped by a pilot estimate of a stratified render (`t.strata` > 0): returns
 /// `t.extra` (EXTRA_VISITS_PER_BIN per bin, at most MAX_EXTRA_VISITS) and the `target_visits`
-/// rows, pixel after pixel, `strata + 1` cumulative counts each. A pixel's extra visits go to
-/// its bins in proportion to the pilot's mass near them (|values| summed over the channels
-/// and over PILOT_CELLS cells of bins, then the largest within PILOT_SPREAD cells), each cell's
-/// share spread evenly over its bins, their running sum rounded; a pixel the pilot saw
-/// nothing in gets them evenly. Any allocation is unbiased (every bin keeps a visit a cycle and
-/// the film divides each bin by its visits); this one puts samples where the light is.
+/// rows, pixel after pixel, `strata + 1` cumulative counts each. Of a pixel's extra visits,
+/// PILOT_UNIFORM_SHARE go to its bins evenly and the rest in proportion to the pilot's mass
+/// near them (|values| summed over the channels and over PILOT_CELLS cells of bins, then the
+/// largest within PILOT_SPREAD cells), each cell's share spread evenly over its bins, their
+/// running sum rounded; a pixel the pilot saw nothing in gets them all evenly. Any allocation
+/// is unbiased (every bin keeps a visit a cycle and the film divides each bin by its visits);
+/// this one puts samples where the light is.
 ///
 /// `film`: the pilot's [pixel][bin][3] values (`bins` per pixel).
 pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u32>) {
@@ -372,9 +494,8 @@ pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u3
         let mut acc = 0.0f64;
         rows.push(0);
         for j in 0..n {
-            acc += if even { 1.0 } else { share(j) };
-            let whole = if even { n as f64 } else { total };
-            rows.push(if j + 1 == n { extra } else { ((extra as f64 * acc / whole).round() as u32).min(extra) });
+            acc += if even { 1.0 / n as f64 } else { (1.0 - PILOT_UNIFORM_SHARE) * share(j) / total + PILOT_UNIFORM_SHARE / n as f64 };
+            rows.push(if j + 1 == n { extra } else { ((extra as f64 * acc).round() as u32).min(extra) });
         }
     }
     (extra, rows)

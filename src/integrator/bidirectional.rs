@@ -623,6 +623,11 @@ impl Integrator for BidirectionalTracer<'_> {
         if self.target_pilot_ran { self.target_pilot_spp } else { 0 }
     }
 
+    fn samples_to_visit_every_bin(&self) -> Option<u64> {
+        let t = &self.wf.params.target_length;
+        (t.strata > 0).then(|| crate::film::target::samples_to_visit_every_bin(t))
+    }
+
     fn band_index_report(&self) -> Option<String> {
         match self.band_index_result.as_ref()? {
             Ok(b) => Some(format!(

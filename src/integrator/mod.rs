@@ -284,6 +284,11 @@ pub trait Integrator: Send {
     fn band_index_report(&self) -> Option<String> {
         None
     }
+    /// Samples per pixel after which every bin of a transient gate's stratified target lengths
+    /// has had one (`film::target::samples_to_visit_every_bin`); None for other methods and gates.
+    fn samples_to_visit_every_bin(&self) -> Option<u64> {
+        None
+    }
     /// Work a render does once before its first pass (`BidirectionalTracer`: the pilot render
     /// of `RenderSettings::target_pilot_spp`); `render_pass` does it when it has not been done.
     /// A time budget counts it, but the pass sizer's rate of samples does not.
@@ -438,6 +443,9 @@ pub struct RenderOutput {
     pub target_pilot_spp: u32,
     /// What became of the band index (see [`Integrator::band_index_report`]).
     pub band_index: Option<String>,
+    /// Samples per pixel a stratified render needs before every bin has had one (see
+    /// [`Integrator::samples_to_visit_every_bin`]); fewer leave bins estimated from the others.
+    pub samples_to_visit_every_bin: Option<u64>,
     /// `--method auto`: the method chosen and the pilot's figures (its time is in `rendering`).
     pub choice: Option<auto::MethodChoice>,
     /// The render stopped before its budget was spent (see [`render_resumable`]).
@@ -458,6 +466,7 @@ impl RenderOutput {
             stats: None,
             target_pilot_spp: 0,
             band_index: None,
+            samples_to_visit_every_bin: None,
             choice: None,
             stopped_early: false,
             state: None,
@@ -933,6 +942,7 @@ pub fn render_resumable(
         stats,
         target_pilot_spp,
         band_index: tracer.band_index_report(),
+        samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
         choice,
         stopped_early: flow.is_break(),
         state,

@@ -7,7 +7,7 @@ use super::checkpoint::RenderState;
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
 use crate::bvh::TRAVERSAL_BUDGET;
 use crate::film::{Film, fixed};
-use crate::film::target::{next_target_seed, stratum_factors};
+use crate::film::target::{StratumFactors, next_target_seed};
 use crate::gpu::layout::{QueueCounters, RenderParams, TargetParams, WaveParams};
 use crate::gpu::resources::{ChunkLayout, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
@@ -342,10 +342,10 @@ pub fn film_of_state(state: &RenderState) -> Result<Film> {
 
 /// Turns each bin of a film of stratified target lengths (ellipsoidal connections on a
 /// transient gate, `TargetParams::strata` > 0) from the sum over the pixel's samples divided
-/// by their number into the mean over the samples whose target fell in it, once every bin
-/// has had one (see `film::target::stratum_factors`; before that, with extra visits, the
-/// plain mean with each bin's base-visit weight). Both are unbiased; the second is
-/// free of the error of a bin's sample count. Only for the film of camera-subpath
+/// by their number into the mean over the samples whose target fell in it, wherever the bin is
+/// sure to have had one (see `film::target::StratumFactors`; elsewhere, with extra visits, the
+/// sum over the bin's expected count). Both are unbiased; the first is free of the error of a
+/// bin's sample count. Only for the film of camera-subpath
 /// contributions, whose lengths are their slot's target; light-tracing splats land in
 /// other pixels and keep the plain mean. `visits`: the extra visits (empty without a pilot).
 pub fn divide_by_stratum_counts(params: &RenderParams, visits: &[u32], samples: u64, film: &mut Film) {
@@ -356,10 +356,11 @@ pub fn divide_by_stratum_counts(params: &RenderParams, visits: &[u32], samples: 
     }
     let mut factors = vec![0.0f32; n];
     let bins = film.bins as usize;
+    let stratum_factors = StratumFactors::new(t, samples);
     for pixel in 0..(film.width * film.height) as usize {
         let row = if t.extra > 0 { &visits[pixel * (n + 1)..(pixel + 1) * (n + 1)] } else { &[][..] };
         // None when there is nothing to change (no extra visits and fewer samples than bins).
-        if stratum_factors(t, row, pixel as u32, samples, &mut factors).is_none() {
+        if stratum_factors.pixel(row, pixel as u32, &mut factors).is_none() {
             continue;
         }
         for (j, f) in factors.iter().enumerate() {
