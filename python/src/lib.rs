@@ -362,21 +362,30 @@ impl Renderer {
                 stats: None,
                 target_pilot_spp: tracer.target_pilot_spp(),
                 band_index: tracer.band_index_report(),
+                samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
                 choice: None,
                 stopped_early: false,
                 state: None,
             }
         };
         let mut metadata = self.metadata(&settings, gate, &output)?;
+        let mut warnings = Vec::new();
         if output.truncated_traversals > 0 {
-            metadata.push((
-                "warning".into(),
-                format!(
-                    "{} ray traversals were cut short by the device (lavapipe ends a shader's loops after 65535 \
-                     iterations); the image may miss geometry",
-                    output.truncated_traversals
-                ),
+            warnings.push(format!(
+                "{} ray traversals were cut short by the device (lavapipe ends a shader's loops after 65535 iterations); \
+                 the image may miss geometry",
+                output.truncated_traversals
             ));
+        }
+        if let Some(needed) = output.samples_to_visit_every_bin.filter(|&n| (output.film.spp as u64) < n) {
+            warnings.push(format!(
+                "{} samples per pixel ended before every bin had one ({needed} do); the bins without one are \
+                 estimated from the others (unbiased, but noisier)",
+                output.film.spp
+            ));
+        }
+        if !warnings.is_empty() {
+            metadata.push(("warning".into(), warnings.join("; ")));
         }
         Ok((film_array(py, &output.film)?, metadata))
     }
