@@ -16,6 +16,7 @@ independent batches (different seeds), scales each laser spot by the peer's equi
     of the total instead.
 
     tools/nlos_peer_check.py PEER.npz [--method path] [--spp 8192] [--batches 8] [--block 1] [--pixels 1]
+        [--worst N]
 
 Needs numpy; the gatetrace binary is target/release/gatetrace (built with cargo build --release).
 """
@@ -58,6 +59,9 @@ def main():
     p.add_argument("--block", type=int, default=1, help="bins per block")
     p.add_argument("--pixels", type=int, default=1, help="sensed points per block side (divides the grid)")
     p.add_argument("--alpha", type=float, default=0.01, help="family-wise false-alarm rate of the limit")
+    p.add_argument("--worst", type=int, default=0, metavar="N",
+                   help="also list the N blocks of largest |z|: position, bin, both means and standard "
+                        "errors, and in how many of our batches the block had light")
     args = p.parse_args()
     peer = np.load(args.peer)
     meta = json.loads(str(peer["meta"]))
@@ -103,6 +107,17 @@ def main():
     print(f"block z-scores over {n} blocks of {q}x{q} sensed point(s) x {k} bin(s) the peer reached: mean {z.mean():+.3f}, std {z.std():.3f}, "
           f"|z| > 3: {np.mean(np.abs(z) > 3) * 100:.2f} % (normal: 0.27 %), max |z| {np.abs(z).max():.2f} "
           f"(Sidak limit at alpha {args.alpha}, Student's t with {dof} dof: {limit:.2f})")
+    if args.worst > 0:
+        lit = block(np.array([(b != 0).astype(np.float64) for b in batches]).sum(axis=0))
+        zz = np.zeros(o.shape)
+        zz[live] = z
+        print(f"largest |z| (block y, x of {q}x{q} sensed points; bins from {meta['start']} m, "
+              f"{meta['bin_width'] * 1e3 * k:.3g} mm a block; channel):")
+        for i in np.argsort(-np.abs(zz), axis=None)[:args.worst]:
+            by, bx, bt, c = np.unravel_index(i, o.shape)
+            print(f"  z {zz[by, bx, bt, c]:+7.2f}  block ({by}, {bx}) bin {bt * k} channel {c}: ours "
+                  f"{o[by, bx, bt, c]:.4e} +- {math.sqrt(ov[by, bx, bt, c]):.2e} (light in {lit[by, bx, bt, c] / (q * q * k):.1f} "
+                  f"of {len(batches)} batches), peer {pm[by, bx, bt, c]:.4e} +- {math.sqrt(pv[by, bx, bt, c]):.2e}")
 
 
 def _t_quantile(z, dof):
