@@ -18,6 +18,8 @@ variance estimate: counted, not tested), twice:
 - with the first hidden segment shortened as Mitsuba's spawned rays shorten it: their origin
   lies (1 + max |x_s|) x 1500 x 2^-24 m off the wall along its normal (Mitsuba's RayEpsilon), so
   the distance to the hit is that much times the cosine at the wall shorter than the segment.
+Peer data made with `tools/peer_reference.py --mitsuba-segment-lengths` fits the second; the
+tool's default (exact segment lengths) should fit the first.
 
 Needs the release build (cargo build --release). Standard library + numpy;
 tools/peer_reference.py's glTF reader, tools/nlos_peer_check.py's renders.

@@ -16,7 +16,7 @@ independent batches (different seeds), scales each laser spot by the peer's equi
     of the total instead.
 
     tools/nlos_peer_check.py PEER.npz [--method path] [--spp 8192] [--batches 8] [--block 1] [--pixels 1]
-        [--worst N]
+        [--worst N] [--save-ours OURS.npz]
 
 Needs numpy; the gatetrace binary is target/release/gatetrace (built with cargo build --release).
 """
@@ -62,6 +62,9 @@ def main():
     p.add_argument("--worst", type=int, default=0, metavar="N",
                    help="also list the N blocks of largest |z|: position, bin, both means and standard "
                         "errors, and in how many of our batches the block had light")
+    p.add_argument("--save-ours", metavar="OURS.npz",
+                   help="also write our capture (rescaled to the peer's laser powers) as transient_mean "
+                        "and transient_var (variance of the mean over the batches), [grid_y, grid_x, T, 3]")
     args = p.parse_args()
     peer = np.load(args.peer)
     meta = json.loads(str(peer["meta"]))
@@ -77,6 +80,9 @@ def main():
             batches.append(film * scale)
     ours = np.mean(batches, axis=0)
     ours_var = np.var(batches, axis=0, ddof=1) / len(batches)
+    if args.save_ours:
+        np.savez_compressed(args.save_ours, transient_mean=ours.astype(np.float32),
+                            transient_var=ours_var.astype(np.float32))
 
     total_o, total_p = ours.sum(), peer_mean.sum()
     var_total_o = np.var([b.sum() for b in batches], ddof=1) / len(batches)
