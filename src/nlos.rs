@@ -95,6 +95,24 @@ pub fn cell_uv(i: u32, j: u32, width: u32, height: u32) -> Vec2 {
 /// The point of the relay wall at texture coordinates `uv` (m): interpolated on the first wall
 /// triangle whose TEXCOORD_0 triangle holds uv.
 pub fn wall_point_at(scene: &Scene, wall: &str, uv: Vec2) -> Result<Vec3> {
+    Ok(wall_target_at(scene, wall, uv)?.position)
+}
+
+/// A point of the relay wall and where it lies in the scene's triangles.
+#[derive(Clone, Copy, Debug)]
+pub struct WallTarget {
+    /// The point (m).
+    pub position: Vec3,
+    /// Its triangle: an index into the scene's triangles (load order, not BVH order).
+    pub triangle: usize,
+    /// Barycentric coordinate of the point on that triangle (weight of vertex 1).
+    pub b1: f32,
+    /// Barycentric coordinate of the point on that triangle (weight of vertex 2).
+    pub b2: f32,
+}
+
+/// [`wall_point_at`], with the triangle and barycentric coordinates of the point.
+pub fn wall_target_at(scene: &Scene, wall: &str, uv: Vec2) -> Result<WallTarget> {
     let name = &scene.source;
     let node = scene.node(wall).with_context(|| {
         format!("{name}: no node named `{wall}`: an NLOS capture needs the relay wall's mesh node (see --relay-wall)")
@@ -117,33 +135,47 @@ pub fn wall_point_at(scene: &Scene, wall: &str, uv: Vec2) -> Result<Vec3> {
         let b2 = e1.perp_dot(p) / det;
         let tol = -1e-6;
         if b1 >= tol && b2 >= tol && b1 + b2 <= 1.0 - tol {
+            // Onto the triangle itself where uv lies a rounding error outside it.
+            let (b1, b2) = (b1.clamp(0.0, 1.0), b2.clamp(0.0, 1.0));
+            let (b1, b2) = if b1 + b2 > 1.0 { (b1 / (b1 + b2), b2 / (b1 + b2)) } else { (b1, b2) };
             let [p0, p1, p2] = scene.triangles[k].positions;
-            return Ok(p0 + b1 * (p1 - p0) + b2 * (p2 - p0));
+            return Ok(WallTarget { position: p0 + b1 * (p1 - p0) + b2 * (p2 - p0), triangle: k, b1, b2 });
         }
     }
     bail!("{name}: the relay wall `{wall}`'s texture coordinates do not cover ({}, {})", uv.x, uv.y)
 }
 
-/// What a ray from `origin` towards `target` hits first: a wall point with no power and no
-/// length offset yet, and whether the hit is the target itself (and not something in front).
-fn first_hit(scene: &PreparedScene, origin: Vec3, target: Vec3) -> (WallPoint, bool) {
-    let to = target - origin;
+/// What a ray from `origin` towards a wall point meets first: a wall point with no power and
+/// no length offset yet, and whether it is the target itself (and not something in front).
+/// Where nothing lies in front, the point is the target on its own triangle: a ray aimed at an
+/// edge between two triangles of the wall (the diagonal of a two-triangle wall holds the centres
+/// of a square grid's diagonal cells) can pass between them in f32 and hit nothing.
+/// `bvh_position`: the BVH position of every scene triangle ([`crate::bvh::Bvh::positions`]).
+fn first_hit(scene: &PreparedScene, bvh_position: &[u32], origin: Vec3, target: &WallTarget) -> (WallPoint, bool) {
+    let to = target.position - origin;
     let distance = to.length();
     let direction = to / distance;
     let hit = trace_closest(&scene.bvh.nodes, &scene.triangles, origin, direction, f32::MAX, NONE);
-    if hit.triangle == NONE {
-        let point = WallPoint { position: target, origin, triangle: NONE, ..Default::default() };
-        return (point, false);
+    let tolerance = 1e-4 * distance.max(1.0);
+    if hit.triangle == NONE || hit.t >= distance - tolerance {
+        let point = WallPoint {
+            position: target.position,
+            origin,
+            triangle: bvh_position[target.triangle],
+            b1: target.b1,
+            b2: target.b2,
+            ..Default::default()
+        };
+        return (point, true);
     }
     let tri = &scene.triangles[hit.triangle as usize];
     let position = tri.v0 + hit.b1 * tri.e1 + hit.b2 * tri.e2;
-    let on_target = (position - target).length() <= 1e-4 * distance.max(1.0);
     let point = WallPoint { position, origin, triangle: hit.triangle, b1: hit.b1, b2: hit.b2, ..Default::default() };
-    (point, on_target)
+    (point, false)
 }
 
 /// The `wall_points` table of a width x height capture: the sensed point of every pixel
-/// (row-major), then the laser spot of every pixel. Fails when the laser hits nothing.
+/// (row-major), then the laser spot of every pixel.
 pub fn wall_points(scene: &PreparedScene, capture: &NlosCapture, width: u32, height: u32) -> Result<Vec<WallPoint>> {
     Ok(wall_points_and_warnings(scene, capture, width, height)?.0)
 }
@@ -163,10 +195,11 @@ pub fn wall_points_and_warnings(
     let mut points = Vec::with_capacity(2 * pixels);
     let mut targets = Vec::with_capacity(pixels);
     let mut hidden = 0;
+    let bvh_position = scene.bvh.positions();
     for j in 0..height {
         for i in 0..width {
-            let target = wall_point_at(&scene.scene, wall, cell_uv(i, j, width, height))?;
-            let (mut p, on_target) = first_hit(scene, capture.sensor_origin, target);
+            let target = wall_target_at(&scene.scene, wall, cell_uv(i, j, width, height))?;
+            let (mut p, on_target) = first_hit(scene, &bvh_position, capture.sensor_origin, &target);
             hidden += !on_target as usize;
             let d = (p.position - capture.sensor_origin).length();
             p.length_offset = if capture.count_first_and_last { 0.0 } else { -d };
@@ -183,19 +216,13 @@ pub fn wall_points_and_warnings(
     }
     let mut blocked = Vec::new();
     let power = Vec3::splat(capture.laser_power);
-    let mut spot = |target: Vec3| -> Result<WallPoint> {
-        let (mut p, on_target) = first_hit(scene, capture.laser_origin, target);
-        ensure!(
-            p.triangle != NONE,
-            "{name}: the laser beam from {} towards {} hits nothing",
-            fmt_point(capture.laser_origin),
-            fmt_point(target)
-        );
+    let mut spot = |target: &WallTarget| -> Result<WallPoint> {
+        let (mut p, on_target) = first_hit(scene, &bvh_position, capture.laser_origin, target);
         if !on_target {
             blocked.push(format!(
                 "{name}: the laser beam from {} towards {} meets other geometry first, at {}",
                 fmt_point(capture.laser_origin),
-                fmt_point(target),
+                fmt_point(target.position),
                 fmt_point(p.position)
             ));
         }
@@ -205,11 +232,11 @@ pub fn wall_points_and_warnings(
     };
     match capture.aim {
         LaserAim::Spot(uv) => {
-            let s = spot(wall_point_at(&scene.scene, wall, uv)?)?;
+            let s = spot(&wall_target_at(&scene.scene, wall, uv)?)?;
             points.extend(std::iter::repeat_n(s, pixels));
         }
         LaserAim::Confocal => {
-            for &t in &targets {
+            for t in &targets {
                 points.push(spot(t)?);
             }
         }

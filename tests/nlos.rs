@@ -188,6 +188,53 @@ fn wall_points_follow_the_grid() {
     assert!((points[256].length_offset - (points[256].position - counted.laser_origin).length()).abs() < 1e-6);
 }
 
+/// The centres of a 64x64 grid's diagonal cells lie on the edge between the example wall's two
+/// triangles, where a ray aimed at them can pass between the triangles in f32 (three of them
+/// did: the laser "hit nothing" and the capture failed; with the host's points fixed, the
+/// device's sensor rays slipped through and left those pixels black). Every sensed point and
+/// laser spot is the cell's own point of the wall, and the diagonal's sensed points are lit,
+/// for the camera paths of `ellipsoidal` (extend_subpaths) and of `path` (extend_path).
+#[test]
+fn cells_on_an_edge_of_the_wall_are_sensed_and_lit() {
+    let scene = example_scene();
+    let n = 64usize;
+    let capture_settings = |method: Method| RenderSettings {
+        target_pilot_spp: 0,
+        ..common::example_capture(n as u32, n as u32, Gate::Transient { start: 0.9, width: 0.12, bins: 10 },
+                                  LaserAim::Confocal, method)
+    };
+    let capture = capture_settings(Method::Path).nlos.unwrap();
+    let points = gatetrace::nlos::wall_points(&scene, &capture, n as u32, n as u32).unwrap();
+    for j in 0..n {
+        for i in 0..n {
+            let cell = |k: usize| (k as f32 + 0.5) / n as f32 - 0.5;
+            let expected = Vec3::new(cell(i), cell(j), 0.0);
+            for (what, p) in [("sensed point", &points[j * n + i]), ("laser spot", &points[n * n + j * n + i])] {
+                assert!(
+                    p.triangle != gatetrace::gpu::layout::NONE && (p.position - expected).length() < 1e-5,
+                    "cell ({i}, {j}): {what} at {} on triangle {}, not {expected}",
+                    p.position,
+                    p.triangle
+                );
+            }
+        }
+    }
+    let ctx = common::gpu();
+    let pixel_totals = |method: Method, spp: u32| -> Vec<f64> {
+        let film = common::render_films(&ctx, &scene, &capture_settings(method), 1, spp).remove(0);
+        film.data.chunks(film.data.len() / (n * n)).map(|c| c.iter().map(|&v| v as f64).sum()).collect()
+    };
+    let ellipsoidal = pixel_totals(Method::Ellipsoidal, 4);
+    let black: Vec<usize> = (0..n).filter(|&k| ellipsoidal[k * n + k] == 0.0).collect();
+    assert!(black.is_empty(), "ellipsoidal: black sensed points on the wall's diagonal: {black:?}");
+    // `path` reaches some sensed points rarely: only those at least as bright as the average
+    // pixel (by the ellipsoidal capture) must have light at 256 spp.
+    let mean = ellipsoidal.iter().sum::<f64>() / (n * n) as f64;
+    let path = pixel_totals(Method::Path, 256);
+    let black: Vec<usize> = (0..n).filter(|&k| ellipsoidal[k * n + k] >= mean && path[k * n + k] == 0.0).collect();
+    assert!(black.is_empty(), "path: black sensed points on the wall's diagonal: {black:?}");
+}
+
 /// A capture names its wall: a missing node, or one without texture coordinates, is a clear error.
 #[test]
 fn a_missing_relay_wall_is_named() {

@@ -502,7 +502,8 @@ pub struct WallPoint {
     pub length_offset: f32,
     /// The sensor origin (sensed points) or the laser origin (laser spots) (m).
     pub origin: Vec3,
-    /// The triangle hit (BVH order), or NONE when the ray from the origin hit nothing.
+    /// The point's triangle (BVH order): the wall's, or what lies in front of it seen from the
+    /// origin (NONE only in hand-made tables: the capture set-up always finds one).
     pub triangle: u32,
     /// Laser spots: the beam's power per channel (W); zero for sensed points.
     pub power: Vec3,
