@@ -1127,6 +1127,11 @@ fn run_nlos(
         } else {
             String::new()
         };
+        // The band index is built before the first sample (a minute on a large mesh and grid
+        // on lavapipe): say so until the first pass reports.
+        if settings.band_index {
+            bar.set_message(format!("{label}building the band index"));
+        }
         let output = render_resumable(&ctx, &scene, &settings, budget, Default::default(), |_, p| {
             match budget {
                 Budget::Samples(_) => bar.set_position(p.spp),
