@@ -1158,13 +1158,8 @@ fn run_nlos(
         last = Some((settings, output));
     }
     let (settings, output) = last.expect("at least one laser spot");
-    if let Some(needed) = output.samples_to_visit_every_bin.filter(|&n| (output.film.spp as u64) < n) {
-        eprintln!(
-            "warning: {} samples per pixel over {} bins: the capture ended before visiting every bin once ({needed} samples \
-             per pixel do); bins it did not visit are estimated from the others (unbiased, but noisier): give it more time",
-            output.film.spp,
-            settings.gate.bins()
-        );
+    if let Some(warning) = output.unvisited_bins_warning() {
+        eprintln!("warning: {warning}");
     }
     let mut metadata = render_metadata(&ctx, scene_path, &args.gate, &settings, &output);
     metadata.retain(|(k, _)| k != "units");

@@ -377,13 +377,7 @@ impl Renderer {
                 output.truncated_traversals
             ));
         }
-        if let Some(needed) = output.samples_to_visit_every_bin.filter(|&n| (output.film.spp as u64) < n) {
-            warnings.push(format!(
-                "{} samples per pixel ended before every bin had one ({needed} do); the bins without one are \
-                 estimated from the others (unbiased, but noisier)",
-                output.film.spp
-            ));
-        }
+        warnings.extend(output.unvisited_bins_warning());
         if !warnings.is_empty() {
             metadata.push(("warning".into(), warnings.join("; ")));
         }

@@ -455,6 +455,17 @@ pub struct RenderOutput {
 }
 
 impl RenderOutput {
+    /// A warning for a render that ended before every bin of its stratified target lengths had
+    /// a sample (see [`Integrator::samples_to_visit_every_bin`]), or None.
+    pub fn unvisited_bins_warning(&self) -> Option<String> {
+        let needed = self.samples_to_visit_every_bin.filter(|&n| (self.film.spp as u64) < n)?;
+        Some(format!(
+            "{} samples per pixel over {} bins ended before visiting every bin once ({needed} samples per pixel do); \
+             bins it did not visit are estimated from the others (unbiased, but noisier): give it more time",
+            self.film.spp, self.film.bins
+        ))
+    }
+
     /// The black image of a render that traced nothing (no path can reach its gate), after
     /// `elapsed` of setup.
     pub fn black(settings: &RenderSettings, elapsed: Duration) -> Self {
