@@ -24,16 +24,25 @@ pub struct BenchSettings {
     /// Gate of `path` and `direct`, and gate of `ellipsoidal` (which needs target lengths), as
     /// `render --gate` takes them.
     pub gates: (String, String),
+    /// Time every dispatch (`render --profile`) and report each measurement's GPU time per
+    /// stage; the timestamps cost a little throughput.
+    pub profile: bool,
+    /// Also write the adapter, the scene and every measurement to this JSON file.
+    pub json: Option<std::path::PathBuf>,
 }
 
 /// Renders the scene with each method at each resolution and prints pixel samples per second
 /// with the adapter's name. Each measurement builds its tracer, renders one warm-up pass
 /// (lavapipe compiles kernels at their first dispatch), then times whole passes for at least
 /// `seconds` (upload and kernel builds excluded). Rows start with `bench:` for scripts
-/// (tools/throughput.py).
+/// (tools/throughput.py); with `profile`, each is followed by its GPU time per stage, in rows
+/// that start with `stage:`. With `json`, the same goes to a file (tools/device_bench.sh).
 pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
+    let loading = Instant::now();
     let scene = PreparedScene::new(load_gltf(scene_path)?)?;
-    let ctx = GpuContext::new()?;
+    let load_seconds = loading.elapsed().as_secs_f64();
+    let mut ctx = GpuContext::new()?;
+    let mut rows = Vec::new();
     println!("adapter: {}", ctx.adapter_description());
     println!(
         "scene: {} ({} triangles), max bounces {}",
@@ -61,9 +70,16 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
                 ..Default::default()
             };
             let settings = variant.settings(&base);
+            if s.profile {
+                // A profiler of its own, so that each measurement's stages are its own.
+                ctx.enable_profiling()?;
+            }
+            let building = Instant::now();
             let mut tracer = create_integrator(&ctx, &scene, &settings)?;
             tracer.render_pass(tracer.samples_per_pass())?;
+            let setup_seconds = building.elapsed().as_secs_f64();
             tracer.reset_film();
+            let before = ctx.profile_totals()?.unwrap_or_default();
             let start = Instant::now();
             while start.elapsed() < Duration::from_secs_f64(s.seconds) {
                 tracer.render_pass(tracer.samples_per_pass())?;
@@ -79,7 +95,52 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
                 elapsed,
                 samples / elapsed / 1e6
             );
+            // GPU time per stage over the timed passes (the warm-up pass left out).
+            let mut stages: Vec<(String, f64, u64)> = ctx
+                .profile_totals()?
+                .unwrap_or_default()
+                .into_iter()
+                .map(|(label, t)| {
+                    let b = before.get(&label).copied().unwrap_or_default();
+                    (label, (t.nanoseconds - b.nanoseconds) / 1e6, t.dispatches - b.dispatches)
+                })
+                .filter(|(_, _, dispatches)| *dispatches > 0)
+                .collect();
+            stages.sort_by(|a, b| b.1.total_cmp(&a.1));
+            for (label, ms, dispatches) in &stages {
+                println!("stage: {:<14} {label:<38} {ms:>10.1} ms {dispatches:>8} dispatches", variant.name());
+            }
+            rows.push(serde_json::json!({
+                "method": variant.name(),
+                "gate": spec,
+                "width": width,
+                "height": height,
+                "spp": tracer.samples_done(),
+                "seconds": elapsed,
+                "samples_per_second": samples / elapsed,
+                "setup_seconds": setup_seconds,
+                "stages": stages.iter().map(|(label, ms, dispatches)| serde_json::json!({
+                    "stage": label, "milliseconds": ms, "dispatches": dispatches,
+                })).collect::<Vec<_>>(),
+            }));
         }
+    }
+    if let Some(path) = &s.json {
+        let report = serde_json::json!({
+            "adapter": ctx.adapter_info.name,
+            "backend": format!("{:?}", ctx.adapter_info.backend),
+            "device_type": format!("{:?}", ctx.adapter_info.device_type),
+            "driver": ctx.adapter_info.driver,
+            "driver_info": ctx.adapter_info.driver_info,
+            "scene": scene_path.display().to_string(),
+            "triangles": scene.triangles.len(),
+            "load_and_build_seconds": load_seconds,
+            "max_bounces": s.max_bounces,
+            "profiled": s.profile,
+            "measurements": rows,
+        });
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
 }

@@ -395,6 +395,14 @@ struct BenchArgs {
     /// the README's equal-time figures.
     #[arg(long, default_value = "box:3.16..3.1625")]
     ellipsoidal_gate: String,
+    /// Also print each measurement's GPU time per stage (ms; timestamp queries around every
+    /// dispatch, which cost a little throughput).
+    #[arg(long)]
+    profile: bool,
+    /// Also write the adapter, the scene (with its load and BVH build time, s) and every
+    /// measurement (samples/s, set-up s, GPU ms per stage) to this JSON file.
+    #[arg(long, value_name = "FILE.json")]
+    json: Option<PathBuf>,
 }
 
 /// How ellipsoid queries weigh the triangles they pick from (render --query-weights).
@@ -613,6 +621,8 @@ fn main() {
                 methods: args.methods,
                 resolutions: args.res,
                 gates: (args.gate, args.ellipsoidal_gate),
+                profile: args.profile,
+                json: args.json,
             };
             let scene = args.scene.unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
             gatetrace::bench::run_bench(&settings, &scene)

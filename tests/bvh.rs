@@ -1,10 +1,13 @@
-//! The stackless BVH: the CPU traversal against brute force, the GPU traversal against the CPU
-//! twin, and the split (multi-binding) layout against the single-binding one.
+//! The BVHs: the binary BVH's stackless layout and CPU traversal against brute force; the wide
+//! BVH's collapse and quantisation, its CPU traversal (both modes, any budget) against brute
+//! force, the GPU traversal against the CPU twin, and the split (multi-binding) layout against
+//! the single-binding one.
 
 mod common;
 
 use gatetrace::bvh::Bvh;
 use gatetrace::bvh::traverse::{brute_force_closest, trace_any, trace_closest};
+use gatetrace::bvh::wide::{self, WideBvh};
 use gatetrace::gpu::layout::{NONE, Triangle};
 use gatetrace::integrator::{Integrator, Method, PathTracer, RenderSettings};
 use gatetrace::rng::Rng;
@@ -88,6 +91,103 @@ fn cpu_traversal_matches_brute_force() {
 }
 
 #[test]
+fn wide_bvh_is_a_conservative_collapse() {
+    // A soup (a deep, irregular tree) and the Cornell box (huge and tiny children side by side).
+    for (name, soup) in [("soup", common::random_soup(3000, 7)), ("cornell box", common::cornell_box().scene.triangles.iter().map(|t| t.positions).collect())] {
+        let bvh = Bvh::build(&soup);
+        let wide = WideBvh::build(&bvh);
+        let mut seen = vec![0u32; soup.len()];
+        let mut leaves = 0;
+        for (i, node) in wide.nodes.iter().enumerate() {
+            if i > 0 {
+                // The parent link names a node before this one whose slot holds it.
+                let (parent, slot) = ((node.parent >> 2) as usize, (node.parent & 3) as usize);
+                assert!(parent < i && wide.nodes[parent].children[slot] == i as u32, "{name}: node {i}'s parent link");
+            } else {
+                assert_eq!(node.parent, NONE);
+            }
+            for (slot, &child) in node.children.iter().enumerate() {
+                if child == NONE {
+                    continue;
+                }
+                let (lo, hi) = wide::child_box(node, slot);
+                // Every triangle below the slot lies inside its decoded box, exactly.
+                let range = if child >= gatetrace::gpu::layout::WIDE_LEAF {
+                    leaves += 1;
+                    let first = child & (gatetrace::gpu::layout::WIDE_LEAF - 1);
+                    first..first + (child >> 28)
+                } else {
+                    assert!(child as usize > i, "{name}: children follow their parent");
+                    let below = subtree_triangles(&wide, child);
+                    below.start..below.end
+                };
+                for k in range {
+                    if child >= gatetrace::gpu::layout::WIDE_LEAF {
+                        seen[k as usize] += 1;
+                    }
+                    for p in soup[bvh.order[k as usize] as usize] {
+                        assert!(p.cmpge(lo).all() && p.cmple(hi).all(), "{name}: triangle {k} pokes out of node {i} slot {slot}: {p} not in {lo}..{hi}");
+                    }
+                }
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1), "{name}: every triangle is in exactly one leaf");
+        assert_eq!(leaves, wide.leaves);
+        // Four children per node, except where the binary tree ran out of inner nodes.
+        let full = wide.nodes.iter().filter(|n| n.children.iter().all(|&c| c != NONE)).count();
+        println!("{name}: {} binary nodes -> {} wide nodes ({full} full), {} leaves, depth {}", bvh.nodes.len(), wide.nodes.len(), wide.leaves, wide.depth);
+        assert!(wide.nodes.len() * 3 <= bvh.nodes.len(), "{name}: the collapse leaves too many nodes");
+    }
+}
+
+/// The triangle range (BVH positions) below wide node `node`.
+fn subtree_triangles(wide: &WideBvh, node: u32) -> std::ops::Range<u32> {
+    let (mut lo, mut hi) = (u32::MAX, 0);
+    for &child in &wide.nodes[node as usize].children {
+        if child == NONE {
+            continue;
+        }
+        let r = if child >= gatetrace::gpu::layout::WIDE_LEAF {
+            let first = child & (gatetrace::gpu::layout::WIDE_LEAF - 1);
+            first..first + (child >> 28)
+        } else {
+            subtree_triangles(wide, child)
+        };
+        lo = lo.min(r.start);
+        hi = hi.max(r.end);
+    }
+    lo..hi
+}
+
+#[test]
+fn wide_traversal_matches_brute_force_at_any_budget() {
+    // Budgets of 1 to 3 steps stop nearly every ray (in stack mode, then again and again in
+    // resume mode), a stack of 32 entries is full in deep trees: every call sequence must find
+    // what brute force finds.
+    let soup = common::random_soup(2000, 11);
+    let bvh = Bvh::build(&soup);
+    let wide = WideBvh::build(&bvh);
+    let tris = bvh_triangles(&soup, &bvh);
+    let (mut hits, mut stops) = (0, 0u64);
+    for (i, (o, d, t_max, ignore)) in random_rays(6000, tris.len(), 3).into_iter().enumerate() {
+        let b = brute_force_closest(&tris, o, d, t_max, ignore);
+        let budget = [1, 2, 3, wide::TRAVERSAL_BUDGET][i % 4];
+        let (a, n) = wide::trace_closest_in_steps(&wide, &tris, (o, d, t_max), ignore, budget);
+        stops += n as u64;
+        // The wide twin tests triangles without the early division: t may differ in the last
+        // bits, and a tie may pick either triangle.
+        assert!((a.t - b.t).abs() <= 1e-6 * b.t.max(1.0), "ray {i} (budget {budget}): t {} vs brute force {}", a.t, b.t);
+        if a.triangle != b.triangle {
+            assert!(a.triangle != NONE && b.triangle != NONE, "ray {i}: hit {} vs brute force {}", a.triangle, b.triangle);
+        }
+        let (any, _) = wide::trace_any_in_steps(&wide, &tris, (o, d, t_max), (ignore, NONE), budget);
+        assert_eq!(any, b.triangle != NONE, "ray {i} (budget {budget}): any-hit disagrees with brute force");
+        hits += (b.triangle != NONE) as usize;
+    }
+    assert!(hits > 600 && stops > 3000, "the rays should hit and stop often ({hits} hits, {stops} stops)");
+}
+
+#[test]
 fn gpu_traversal_matches_cpu_twin() {
     // The Cornell box (a shallow tree) and a soup of 2000 triangles (a deep one), with random
     // rays from inside and around them. Both sides run the same Moller-Trumbore arithmetic in
@@ -106,7 +206,7 @@ fn gpu_traversal_matches_cpu_twin() {
         let mut hits = 0;
         for (i, (o, d, t_max, ignore)) in rays.iter().enumerate() {
             let o = *o * scale;
-            let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, o, *d, *t_max, *ignore);
+            let cpu = wide::trace_closest(&scene.wide, &scene.triangles, o, *d, *t_max, *ignore);
             let (gpu_t, gpu_tri) = (out[2 * i][0], out[2 * i][1].to_bits());
             if gpu_tri != cpu.triangle {
                 // Only near-ties: both hit, at the same distance.
@@ -121,7 +221,7 @@ fn gpu_traversal_matches_cpu_twin() {
                 // fused multiply-adds in near-degenerate (grazing) cases.
                 assert!((out[2 * i][2] - cpu.b1).abs() < 1e-4 && (out[2 * i][3] - cpu.b2).abs() < 1e-4);
             }
-            let cpu_any = trace_any(&scene.bvh.nodes, &scene.triangles, o, *d, *t_max, *ignore, NONE);
+            let cpu_any = wide::trace_any(&scene.wide, &scene.triangles, o, *d, *t_max, *ignore, NONE);
             assert_eq!(out[2 * i + 1][0] == 1.0, cpu_any, "{name} ray {i}: any-hit differs");
         }
         assert!(hits > 1000, "{name}: too few hits ({hits}) to test anything");
@@ -132,7 +232,9 @@ fn gpu_traversal_matches_cpu_twin() {
 fn split_buffers_render_identically() {
     use gatetrace::film::Gate;
     use gatetrace::gpu::resources::ChunkLayout;
-    let scene = common::soup_scene(60, 3, "split_buffers");
+    // Vertex normals, so that the shading data is uploaded (and split) too.
+    let scene = common::soup_scene_with(60, 3, "split_buffers", true);
+    assert!(scene.has_shading_normals());
     // Find a binding limit that splits every array into 2-4 chunks; the transient film's size
     // is tuned with its bin count.
     let (t, n) = (scene.triangles.len() as u64, scene.bvh.nodes.len() as u64);
@@ -249,15 +351,16 @@ fn slab_field(slabs: bool, name: &str) -> gatetrace::scene::PreparedScene {
 
 #[test]
 fn deep_traversals_resume_until_they_are_complete() {
-    // Every camera ray and every shadow ray crosses the whole slab field: far more nodes than
-    // one invocation may visit (TRAVERSAL_BUDGET). Closest-hit traversals resume in later
+    // Every camera ray and every shadow ray crosses the whole slab field: far more steps than
+    // one invocation may take (TRAVERSAL_BUDGET). Closest-hit traversals resume in later
     // rounds and shadow rays in resume passes: nothing is cut short, and the images equal
     // those of the wall alone (same random numbers, same hits, same lights).
     use gatetrace::integrator::{Method, create_integrator};
     let ctx = common::gpu();
     let with = slab_field(true, "slabs_with");
     let without = slab_field(false, "slabs_without");
-    assert!(with.bvh.nodes.len() as u32 > 4 * gatetrace::bvh::TRAVERSAL_BUDGET, "{} nodes", with.bvh.nodes.len());
+    let steps = with.wide.nodes.len() + with.wide.leaves;
+    assert!(steps as u32 > 4 * wide::TRAVERSAL_BUDGET, "{steps} steps to visit every node and leaf");
     for method in [Method::Path, Method::Direct] {
         let settings = RenderSettings { width: 4, height: 4, max_bounces: 1, method, seed: 3, ..Default::default() };
         let render = |scene| {

@@ -1,21 +1,25 @@
 #!/usr/bin/env python3
 """Samples per second of gatetrace's methods against Mitsuba 3 + mitransient, in one run.
 
-Measures mitransient's ``transient_path`` (one time bin covering every path
-length, i.e. the steady image) on a scene (the Cornell box by default) at the same resolution and
-bounce count, then ``gatetrace bench`` (path, direct, ellipsoidal), then the
-peer again, and prints each method's samples/s and its ratio to the mean of
-the two peer measurements (the bracket shows how much the machine drifted).
+For each scene (the Cornell box by default; --scaling adds the displaced spheres of
+tools/make_sphere_scene.py, made in target/scenes when missing), measures mitransient's
+``transient_path`` (one time bin covering every path length, i.e. the steady image) at the same
+resolution and bounce count, then ``gatetrace bench`` (path, direct, ellipsoidal), then the
+peer again, and prints each method's samples/s and its ratio to the mean of the two peer
+measurements (the bracket shows how much the machine drifted). At the end, one markdown table
+of every scene (for the README).
 
 A sample is one path per pixel: samples/s = spp x pixels / seconds, warm-up
 (kernel compilation) excluded on both sides.
 
-Usage: tools/throughput.py [--scene S.glb] [--seconds S] [--res N] [--max-bounces B]
+Usage: tools/throughput.py [--scene S.glb ...] [--scaling] [--triangles N,N,...] [--seconds S]
+                           [--res N] [--max-bounces B] [--exe PATH]
 Requires: a built gatetrace (cargo build --release) and, for the peer,
 ``pip install mitsuba mitransient`` (+ ``apt-get install libllvm19``).
 """
 
 import argparse
+import math
 import os
 import re
 import subprocess
@@ -25,6 +29,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 SCENE = os.path.join(ROOT, "assets", "scenes", "cornell_box.gltf")
+SCALING = "20480,327680,1310720"
 sys.path.insert(0, HERE)
 
 
@@ -43,48 +48,87 @@ def peer_samples_per_second(scene_path, res, max_bounces, seconds, spp=256):
     return passes * spp * res * res / elapsed
 
 
-def gatetrace_bench(scene_path, res, max_bounces, seconds, methods):
-    exe = os.path.join(ROOT, "target", "release", "gatetrace")
+def gatetrace_bench(exe, scene_path, res, max_bounces, seconds, methods):
     cmd = [exe, "bench", "--seconds", str(seconds), "--max-bounces", str(max_bounces),
            "--res", f"{res}x{res}", "--methods", methods, "--scene", scene_path]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    rows, adapter = [], ""
+    rows, adapter, triangles = [], "", 0
     for line in out.splitlines():
         if line.startswith("adapter:"):
             adapter = line.split(":", 1)[1].strip()
+        m = re.match(r"scene: .* \((\d+) triangles\)", line)
+        if m:
+            triangles = int(m.group(1))
         m = re.match(r"bench: (\S+)\s+(\S+)\s+\S+\s+\d+\s+[\d.]+\s+([\d.]+)$", line)
         if m:
             rows.append((m.group(1), m.group(2), float(m.group(3)) * 1e6))
-    return adapter, rows
+    return adapter, triangles, rows
+
+
+def sphere_scene(triangles):
+    """target/scenes/sphere_N.glb of N = 20 f^2 triangles, made when missing."""
+    f = round(math.sqrt(triangles / 20))
+    if 20 * f * f != triangles:
+        sys.exit(f"throughput.py: {triangles} is not 20 f^2 for an integer f (e.g. 20480, 327680, 1310720)")
+    path = os.path.join(ROOT, "target", "scenes", f"sphere_{triangles}.glb")
+    if not os.path.exists(path):
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        subprocess.run([sys.executable, os.path.join(HERE, "make_sphere_scene.py"), "--frequency", str(f),
+                        "--out", path], check=True)
+    return path
 
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--scene", default=SCENE, help="glTF 2.0 scene (default: the Cornell box)")
+    p.add_argument("--scene", action="append", help="glTF 2.0 scene (repeatable; default: the Cornell box)")
+    p.add_argument("--scaling", action="store_true",
+                   help="also the Cornell box holding displaced spheres of --triangles triangles")
+    p.add_argument("--triangles", default=SCALING, help=f"sphere sizes of --scaling (default {SCALING})")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds per measurement (default 10)")
     p.add_argument("--res", type=int, default=64, help="square image size in pixels (default 64)")
     p.add_argument("--max-bounces", type=int, default=5, help="scattering vertices (default 5)")
     p.add_argument("--methods", default="path,direct,ellipsoidal", help="gatetrace bench --methods")
+    p.add_argument("--exe", default=os.path.join(ROOT, "target", "release", "gatetrace"),
+                   help="gatetrace binary (default target/release/gatetrace)")
     args = p.parse_args()
+    scenes = list(args.scene or [SCENE])
+    if args.scaling:
+        scenes += [sphere_scene(int(n)) for n in args.triangles.split(",")]
 
-    try:
-        before = peer_samples_per_second(args.scene, args.res, args.max_bounces, args.seconds)
-    except ImportError as e:
-        before = None
-        print(f"peer not measured ({e}); pip install mitsuba mitransient", file=sys.stderr)
-    adapter, rows = gatetrace_bench(args.scene, args.res, args.max_bounces, args.seconds, args.methods)
-    after = peer_samples_per_second(args.scene, args.res, args.max_bounces, args.seconds) if before else None
+    table = []
+    for scene in scenes:
+        try:
+            before = peer_samples_per_second(scene, args.res, args.max_bounces, args.seconds)
+        except ImportError as e:
+            before = None
+            print(f"peer not measured ({e}); pip install mitsuba mitransient", file=sys.stderr)
+        adapter, triangles, rows = gatetrace_bench(args.exe, scene, args.res, args.max_bounces, args.seconds,
+                                                   args.methods)
+        after = peer_samples_per_second(scene, args.res, args.max_bounces, args.seconds) if before else None
 
-    print(f"{os.path.basename(args.scene)}, {args.res}x{args.res}, {args.max_bounces} bounces, {args.seconds:g} s per measurement")
-    print(f"gatetrace on {adapter}")
-    if before:
-        print(f"peer: Mitsuba 3 + mitransient transient_path (llvm_ad_rgb), one bin: "
-              f"{before / 1e6:.3f} M samples/s before, {after / 1e6:.3f} after")
-    print(f"{'method':<14} {'gate':<20} {'Msamples/s':>11} {'/ peer':>8}")
-    peer = (before + after) / 2 if before else None
-    for name, gate, rate in rows:
-        ratio = f"{rate / peer:8.3f}" if peer else "       -"
-        print(f"{name:<14} {gate:<20} {rate / 1e6:11.3f} {ratio}")
+        print(f"{os.path.basename(scene)} ({triangles} triangles), {args.res}x{args.res}, {args.max_bounces} "
+              f"bounces, {args.seconds:g} s per measurement")
+        print(f"gatetrace on {adapter}")
+        if before:
+            print(f"peer: Mitsuba 3 + mitransient transient_path (llvm_ad_rgb), one bin: "
+                  f"{before / 1e6:.3f} M samples/s before, {after / 1e6:.3f} after")
+        print(f"{'method':<14} {'gate':<20} {'Msamples/s':>11} {'/ peer':>8}")
+        peer = (before + after) / 2 if before else None
+        for name, gate, rate in rows:
+            ratio = f"{rate / peer:8.3f}" if peer else "       -"
+            print(f"{name:<14} {gate:<20} {rate / 1e6:11.3f} {ratio}")
+        print(flush=True)
+        table.append((os.path.basename(scene), triangles, before, after, rows))
+
+    methods = [name for name, _, _ in table[0][4]]
+    print("| scene | triangles | peer M samples/s (before, after) | "
+          + " | ".join(f"`{m}` M samples/s (/ peer)" for m in methods) + " |")
+    print("|---|---|---|" + "---|" * len(methods))
+    for name, triangles, before, after, rows in table:
+        peer = (before + after) / 2 if before else None
+        cells = [f"{rate / 1e6:.3f} ({rate / peer:.2f}×)" if peer else f"{rate / 1e6:.3f}" for _, _, rate in rows]
+        bracket = f"{before / 1e6:.2f}, {after / 1e6:.2f}" if before else "-"
+        print(f"| {name} | {triangles:,} | {bracket} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

@@ -1,28 +1,18 @@
-//! The BVH: built on the host with obvhs (PLOC with reinsertion and an SAH leaf collapse), then
-//! flattened into the stackless layout every traversal uses (DESIGN.md section 6): nodes in
-//! depth-first order, an inner node's first child right after it, and a `skip` link from every
-//! node to the first node after its subtree. Triangles are reordered so each leaf addresses a
-//! contiguous range.
+//! The BVHs: a binary one built on the host with obvhs (PLOC with reinsertion and an SAH leaf
+//! collapse), flattened into the stackless layout the ellipsoid queries walk (DESIGN.md section
+//! 6): nodes in depth-first order, an inner node's first child right after it, and a `skip` link
+//! from every node to the first node after its subtree. Triangles are reordered so each leaf
+//! addresses a contiguous range. Rays traverse the four-wide BVH collapsed from it (`wide`),
+//! which keeps its leaves.
 
 pub mod traverse;
+pub mod wide;
 
 use glam::{DMat3, DVec3, Vec3};
 use obvhs::{BvhBuildParams, triangle::Triangle as ObvhsTriangle};
 
 use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, NodeSurface, Triangle};
 use crate::scene::materials::pack2x16float;
-
-/// Most nodes one invocation's ray traversal visits before it stops and a later dispatch
-/// resumes it (the TRAVERSAL_BUDGET override of shaders/lib/bvh.wesl, passed to every kernel):
-/// at most half of them are leaves of at most 4 triangles (`Bvh::build`), so a traversal stays
-/// below 3 x TRAVERSAL_BUDGET loop iterations, far below lavapipe's 65535 per invocation.
-pub const TRAVERSAL_BUDGET: u32 = 12_000;
-
-/// Whether a traversal of a BVH of `node_count` nodes can stop at TRAVERSAL_BUDGET (each node
-/// is visited at most once, so only BVHs of more nodes need resumption; the RESUMABLE override).
-pub fn traversals_can_stop(node_count: usize) -> bool {
-    node_count > TRAVERSAL_BUDGET as usize
-}
 
 /// Scenes of at most this many triangles are not traversed: every ray tests all of them (read
 /// from a uniform buffer once per invocation, see shaders/lib/bvh.wesl `load_small_scene` and the

@@ -144,6 +144,13 @@ impl GpuContext {
         Ok(())
     }
 
+    /// The profiler's sums per stage (pipeline label) so far (None unless profiling).
+    pub fn profile_totals(&self) -> Result<Option<std::collections::BTreeMap<String, super::profiler::StageTime>>> {
+        let Some(profiler) = &self.profiler else { return Ok(None) };
+        self.wait_idle()?;
+        Ok(Some(profiler.lock().unwrap().totals().clone()))
+    }
+
     /// The per-stage table of the profiler (None unless profiling).
     pub fn profile_report(&self) -> Result<Option<String>> {
         let Some(profiler) = &self.profiler else { return Ok(None) };

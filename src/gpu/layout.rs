@@ -104,6 +104,34 @@ impl BvhNode {
     }
 }
 
+/// A node of the wide BVH that rays traverse (`bvh::wide`): four children whose boxes are
+/// stored inline, quantised to 8 bits per plane on a grid of steps 2^e (m) from `origin`, so a
+/// node is one 64-byte cache line. Nodes are in depth-first order, the root first.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct WideNode {
+    /// Lower corner of the union of the children's boxes (m): the origin of the planes' grid.
+    pub origin: Vec3,
+    /// Biased exponents e + 127 of the grid steps 2^e (m): bits 0-7 x, 8-15 y, 16-23 z.
+    pub exponents: u32,
+    /// Quantised lower and upper x planes, then y planes, one byte per child (child k in bits
+    /// 8k..8k+7): a child's box is origin + step * [lo, hi] on each axis, rounded outwards.
+    pub planes_xy: [u32; 4],
+    /// Quantised lower and upper z planes, as `planes_xy`.
+    pub planes_z: [u32; 2],
+    /// `(parent << 2) | slot`: the parent node and this node's slot in it ([`NONE`] at the
+    /// root); resumed traversals climb with it.
+    pub parent: u32,
+    /// Padding.
+    pub reserved: u32,
+    /// Per slot: a child node's index (below [`WIDE_LEAF`]), a leaf `(count << 28) | first`
+    /// (count 1 to 4, BVH positions as in [`BvhNode::leaf`]), or [`NONE`] for an empty slot.
+    pub children: [u32; 4],
+}
+
+/// [`WideNode::children`] at or above this value are leaves (or [`NONE`]).
+pub const WIDE_LEAF: u32 = 1 << 28;
+
 /// What the ellipsoid queries' stochastic descent knows of the surface below a BVH node (one
 /// per node, in node order): the area of its triangles and the first two moments of a point
 /// drawn uniformly on them, from which `node_estimate` (shaders/lib/ellipsoid_query.wesl)

@@ -88,7 +88,8 @@ impl Resources {
     }
 }
 
-/// How an array is laid out over up to [`MAX_CHUNKS`] bindings.
+/// How an array is laid out over up to [`MAX_CHUNKS`] bindings (fewer for some arrays, see
+/// [`chunk_names`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ChunkLayout {
     /// log2 of the elements per chunk; 0 when the array fits one binding.
@@ -97,7 +98,7 @@ pub struct ChunkLayout {
     pub chunks: u32,
 }
 
-/// Bindings an array may be split into (`name`, `name_1`, `name_2`, `name_3` in WGSL).
+/// Most bindings an array may be split into (`name`, `name_1`, `name_2`, `name_3` in WGSL).
 pub const MAX_CHUNKS: u64 = 4;
 
 impl ChunkLayout {
@@ -109,9 +110,10 @@ impl ChunkLayout {
         let per_chunk = (limit / element_size).max(1);
         let bits = 63 - per_chunk.leading_zeros();
         let chunks = count.div_ceil(1 << bits);
-        if chunks > MAX_CHUNKS || bits == 0 {
+        let most = split_array_names(name).map_or(MAX_CHUNKS, |names| names.len() as u64);
+        if chunks > most || bits == 0 {
             bail!(
-                "`{name}` needs {:.1} MiB, more than {MAX_CHUNKS} bindings of {:.1} MiB allow on this device; \
+                "`{name}` needs {:.1} MiB, more than {most} bindings of {:.1} MiB allow on this device; \
                  reduce its size (the film: resolution and bins; scene arrays: triangle count)",
                 (count * element_size) as f64 / 1048576.0,
                 limit as f64 / 1048576.0
@@ -130,19 +132,24 @@ impl ChunkLayout {
     }
 }
 
-/// WGSL names of the chunks of array `name`.
-pub fn chunk_names(name: &'static str) -> [&'static str; 4] {
-    match name {
-        "triangles" => ["triangles", "triangles_1", "triangles_2", "triangles_3"],
-        "triangle_shading" => ["triangle_shading", "triangle_shading_1", "triangle_shading_2", "triangle_shading_3"],
-        "bvh_nodes" => ["bvh_nodes", "bvh_nodes_1", "bvh_nodes_2", "bvh_nodes_3"],
-        "bvh_node_surfaces" => {
-            ["bvh_node_surfaces", "bvh_node_surfaces_1", "bvh_node_surfaces_2", "bvh_node_surfaces_3"]
-        }
-        "film" => ["film", "film_1", "film_2", "film_3"],
-        "band_entries" => ["band_entries", "band_entries_1", "band_entries_2", "band_entries_3"],
-        other => panic!("`{other}` is not a split array"),
-    }
+/// WGSL names of the chunks of array `name` (bindings.wesl): four for most arrays, three for
+/// the binary BVH's (the ellipsoidal connections bind both BVHs, and a kernel may bind at most
+/// 32 storage buffers).
+pub fn chunk_names(name: &str) -> &'static [&'static str] {
+    split_array_names(name).unwrap_or_else(|| panic!("`{name}` is not a split array"))
+}
+
+/// [`chunk_names`], or None for a name that is not a split array.
+fn split_array_names(name: &str) -> Option<&'static [&'static str]> {
+    Some(match name {
+        "triangles" => &["triangles", "triangles_1", "triangles_2", "triangles_3"],
+        "triangle_shading" => &["triangle_shading", "triangle_shading_1", "triangle_shading_2", "triangle_shading_3"],
+        "bvh_nodes" => &["bvh_nodes", "bvh_nodes_1", "bvh_nodes_2"],
+        "bvh_node_surfaces" => &["bvh_node_surfaces", "bvh_node_surfaces_1", "bvh_node_surfaces_2"],
+        "film" => &["film", "film_1", "film_2", "film_3"],
+        "band_entries" => &["band_entries", "band_entries_1", "band_entries_2", "band_entries_3"],
+        _ => return None,
+    })
 }
 
 impl Resources {
@@ -156,7 +163,7 @@ impl Resources {
         limit: u64,
     ) -> Result<ChunkLayout> {
         let layout = ChunkLayout::new(name, data.len() as u64, size_of::<T>() as u64, limit)?;
-        for (c, chunk_name) in chunk_names(name).into_iter().enumerate() {
+        for (c, &chunk_name) in chunk_names(name).iter().enumerate() {
             let r = layout.range(c as u32, data.len() as u64);
             self.storage_init(ctx, chunk_name, &data[r.start as usize..r.end as usize])?;
         }
@@ -173,7 +180,7 @@ impl Resources {
         limit: u64,
     ) -> Result<ChunkLayout> {
         let layout = ChunkLayout::new(name, count, element_size, limit)?;
-        for (c, chunk_name) in chunk_names(name).into_iter().enumerate() {
+        for (c, &chunk_name) in chunk_names(name).iter().enumerate() {
             let r = layout.range(c as u32, count);
             self.storage_zeroed(ctx, chunk_name, (r.end - r.start) * element_size, wgpu::BufferUsages::empty())?;
         }
@@ -268,5 +275,8 @@ mod tests {
         let covered: Vec<u64> = (0..l.chunks).flat_map(|c| l.range(c, 60)).collect();
         assert_eq!(covered, (0..60).collect::<Vec<_>>());
         assert!(ChunkLayout::new("a", 1000, 48, 1000).is_err(), "more than four chunks");
+        // The binary BVH's arrays take three chunks at most (its kernels' binding count).
+        assert_eq!(ChunkLayout::new("bvh_nodes", 40, 32, 512).unwrap(), ChunkLayout { bits: 4, chunks: 3 });
+        assert!(ChunkLayout::new("bvh_nodes", 50, 32, 512).is_err(), "more than three chunks");
     }
 }

@@ -180,7 +180,8 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
 struct Stages {
     generate_subpaths: Kernel,
     setup_dispatch_rays: Kernel,
-    intersect_closest: Kernel,
+    /// Only where traversals can stop (RESUMABLE); else extend_subpaths finds the hits.
+    intersect_closest: Option<Kernel>,
     extend_subpaths: Kernel,
     connect: Kernel,
     /// Ellipsoidal connections: connect_spherical, queue_ellipsoid_queries and
@@ -188,19 +189,21 @@ struct Stages {
     ellipsoidal: Option<[Kernel; 3]>,
     shadow_rays: ShadowRayStages,
     accumulate: Kernel,
-    splat_light_paths: Kernel,
+    /// Not where the connection kernels splat light-tracing contributions themselves
+    /// (`inline_shadow_rays`).
+    splat_light_paths: Option<Kernel>,
 }
 
 /// Bind groups; `[even, odd]` rounds swap ray_queue and next_ray_queue.
 struct Bindings {
     generate_subpaths: wgpu::BindGroup,
     setup_dispatch_rays: [wgpu::BindGroup; 2],
-    intersect_closest: [wgpu::BindGroup; 2],
+    intersect_closest: Option<[wgpu::BindGroup; 2]>,
     extend_subpaths: [wgpu::BindGroup; 2],
     connect: wgpu::BindGroup,
     ellipsoidal: Option<[wgpu::BindGroup; 3]>,
     accumulate: wgpu::BindGroup,
-    splat_light_paths: wgpu::BindGroup,
+    splat_light_paths: Option<wgpu::BindGroup>,
 }
 
 /// Bidirectional path tracing with direct connections, bound to one scene and one set of
@@ -216,13 +219,6 @@ pub struct BidirectionalTracer<'a> {
     query_work: [u64; QUERY_COUNTERS],
     /// Which connections join the subpaths.
     method: Method,
-    /// The BVH has more than TRAVERSAL_BUDGET nodes (traversals can stop and resume):
-    /// intersect_closest finds the subpaths' hits and connections queue their shadow rays.
-    resumable: bool,
-    /// `ellipsoidal` in a BVH whose traversals cannot stop: the connection kernels trace their
-    /// shadow rays, sum a query's camera-subpath contributions and splat light-tracing ones
-    /// straight into splat_film (splat_light_paths does not run).
-    inline_shadow_rays: bool,
     /// Samples per pixel of a pilot render that shapes the target lengths' extra visits
     /// (`RenderSettings::target_pilot_spp`; 0 where the gate is not stratified or the
     /// per-pixel tables do not fit a binding).
@@ -264,7 +260,7 @@ impl<'a> BidirectionalTracer<'a> {
         // RESUMABLE): no shadow queue, one contribution per strategy.
         let rays_per_connection = if ellipsoidal { 2 } else { 1 };
         let k = settings.connections_per_query as u64;
-        let resumable = crate::bvh::traversals_can_stop(scene.bvh.nodes.len());
+        let resumable = scene.wide.traversals_can_stop();
         let inline_shadow_rays = ellipsoidal && !resumable;
         let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
         let splats_per_slot = light_vertices * k + if directional { b as u64 } else { 0 };
@@ -397,42 +393,53 @@ impl<'a> BidirectionalTracer<'a> {
             c.push(("QUEUE", queue));
             c
         };
-        let splatting = |name: &str| Kernel::new(ctx, name, None, &constants);
-        let connect_kernel = splatting;
-        let stages = Stages {
-            generate_subpaths: Kernel::new(ctx, "generate_subpaths", None, &constants),
-            setup_dispatch_rays: Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0)),
-            intersect_closest: Kernel::new(ctx, "intersect_closest", None, &constants),
-            extend_subpaths: Kernel::new(ctx, "extend_subpaths", None, &constants),
-            connect: connect_kernel(if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }),
-            ellipsoidal: ellipsoidal.then(|| {
-                [
-                    connect_kernel("connect_spherical"),
-                    Kernel::new(ctx, "queue_ellipsoid_queries", None, &constants),
-                    Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0)),
-                ]
-            }),
-            shadow_rays: ShadowRayStages::new(ctx, &constants, &r),
-            accumulate: Kernel::new(ctx, "accumulate", None, &constants),
-            splat_light_paths: splatting("splat_light_paths"),
-        };
+        let build = |name: &str| Kernel::new(ctx, name, None, &constants);
+        // The connection kernels are by far the largest: the driver compiles them on threads of
+        // their own while this one builds the rest (pipeline creation is CPU work, kernel by
+        // kernel, even when the driver finds the compiled code in its disk cache).
+        let stages = std::thread::scope(|scope| {
+            let connect = scope.spawn(|| build(if ellipsoidal { "connect_ellipsoidal" } else { "connect_direct" }));
+            let spherical = ellipsoidal.then(|| scope.spawn(|| build("connect_spherical")));
+            let generate_subpaths = build("generate_subpaths");
+            let setup_dispatch_rays = Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0));
+            let intersect_closest = resumable.then(|| build("intersect_closest"));
+            let extend_subpaths = build("extend_subpaths");
+            let queue = ellipsoidal.then(|| {
+                [build("queue_ellipsoid_queries"), Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0))]
+            });
+            let shadow_rays = ShadowRayStages::new(ctx, &constants, &r);
+            let accumulate = build("accumulate");
+            let splat_light_paths = (!inline_shadow_rays).then(|| build("splat_light_paths"));
+            let joined = |h: std::thread::ScopedJoinHandle<Kernel>| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+            Stages {
+                generate_subpaths,
+                setup_dispatch_rays,
+                intersect_closest,
+                extend_subpaths,
+                connect: joined(connect),
+                ellipsoidal: spherical.zip(queue).map(|(spherical, [queue, setup])| [joined(spherical), queue, setup]),
+                shadow_rays,
+                accumulate,
+                splat_light_paths,
+            }
+        });
         let even = r.clone();
         let odd = r.swapped("ray_queue", "next_ray_queue");
         let both = |k: &Kernel| [k.bind(ctx, &even), k.bind(ctx, &odd)];
         let bindings = Bindings {
             generate_subpaths: stages.generate_subpaths.bind(ctx, &odd),
             setup_dispatch_rays: both(&stages.setup_dispatch_rays),
-            intersect_closest: both(&stages.intersect_closest),
+            intersect_closest: stages.intersect_closest.as_ref().map(both),
             extend_subpaths: both(&stages.extend_subpaths),
             connect: stages.connect.bind(ctx, &even),
             ellipsoidal: stages.ellipsoidal.as_ref().map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
             accumulate: stages.accumulate.bind(ctx, &even),
-            splat_light_paths: stages.splat_light_paths.bind(ctx, &even),
+            splat_light_paths: stages.splat_light_paths.as_ref().map(|k| k.bind(ctx, &even)),
         };
         let stats = settings.stats.then(|| {
             strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
         });
-        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
+        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave), scene.wide.most_stops());
         Ok(Self {
             wf,
             stages,
@@ -440,8 +447,6 @@ impl<'a> BidirectionalTracer<'a> {
             stats,
             query_work: [0; QUERY_COUNTERS],
             method: settings.method,
-            resumable,
-            inline_shadow_rays,
             target_pilot_spp,
             target_pilot_pending: target_pilot_spp > 0,
             target_pilot_ran: false,
@@ -555,8 +560,8 @@ impl<'a> BidirectionalTracer<'a> {
             |pass, r| {
                 let parity = (r % 2) as usize;
                 s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
-                if self.resumable {
-                    s.intersect_closest.dispatch_indirect(pass, &b.intersect_closest[parity], args, 0);
+                if let (Some(kernel), Some(groups)) = (&s.intersect_closest, &b.intersect_closest) {
+                    kernel.dispatch_indirect(pass, &groups[parity], args, 0);
                 }
                 s.extend_subpaths.dispatch_indirect(pass, &b.extend_subpaths[parity], args, 0);
             },
@@ -580,8 +585,8 @@ impl<'a> BidirectionalTracer<'a> {
         }
         self.wf.submit_pass("accumulate", |pass| {
             s.accumulate.dispatch(pass, &b.accumulate, wave.pixel_count);
-            if !self.inline_shadow_rays {
-                s.splat_light_paths.dispatch(pass, &b.splat_light_paths, wave.slot_count);
+            if let (Some(kernel), Some(group)) = (&s.splat_light_paths, &b.splat_light_paths) {
+                kernel.dispatch(pass, group, wave.slot_count);
             }
         });
         ctx.wait_idle()?;

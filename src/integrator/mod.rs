@@ -23,7 +23,7 @@ use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
 use crate::gpu::Resources;
 use crate::gpu::layout::{
-    MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, TargetParams, WaveParams,
+    MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, TargetParams, TriangleShading, WaveParams,
 };
 use crate::gpu::resources::ChunkLayout;
 use crate::scene::PreparedScene;
@@ -705,9 +705,17 @@ pub fn upload_scene(
     r.uniform_init(ctx, "params", params);
     r.uniform_init(ctx, "wave", &WaveParams::default());
     let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
-    let triangle_shading =
-        r.storage_chunked_init(ctx, "triangle_shading", &scene.shading, limit)?;
+    // The kernels read shading data only for vertex normals and texture coordinates
+    // (scene.wesl `surface_at`): flat untextured scenes upload none (64 bytes a triangle, which
+    // would not fit the bindings of a 10-million-triangle mesh on lavapipe).
+    let shading: &[TriangleShading] = if scene.has_shading_normals() || scene.has_textures() {
+        &scene.shading
+    } else {
+        &scene.shading[..1]
+    };
+    let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
+    r.storage_init(ctx, "wide_nodes", &scene.wide.nodes)?;
     let bvh_node_surfaces =
         r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
@@ -787,12 +795,12 @@ pub fn upload_scene(
             bvh_node_surfaces.bits as f64,
         ),
         ("FILM_CHUNK_BITS", film.bits as f64),
-        ("TRAVERSAL_BUDGET", crate::bvh::TRAVERSAL_BUDGET as f64),
+        ("TRAVERSAL_BUDGET", crate::bvh::wide::TRAVERSAL_BUDGET as f64),
         ("SMALL_SCENE_TRIANGLES", small as f64),
         ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
         (
             "RESUMABLE",
-            flag(crate::bvh::traversals_can_stop(scene.bvh.nodes.len())),
+            flag(scene.wide.traversals_can_stop()),
         ),
         ("NLOS", flag(settings.nlos.is_some())),
     ];

@@ -23,7 +23,7 @@
 //!                                       the budget goes back to the queue: one round later);
 //!                                       two vertices per round where paths sum their own
 //!                                       contributions (SUM_PER_PATH)
-//!     [setup_dispatch(shadow_rays)      BVHs of more than TRAVERSAL_BUDGET nodes: the shadow
+//!     [setup_dispatch(shadow_rays)      BVHs whose traversals can stop (RESUMABLE): the shadow
 //!      trace_shadow_rays                rays extend_paths queued (it traces them itself in
 //!      setup_dispatch(shadow_resume)    smaller BVHs), resume passes for those that stopped
 //!      trace_shadow_rays(resume)] x R   at the budget (empty when none did), and a count of
@@ -74,8 +74,8 @@ struct Rounds {
     generate_camera_rays_binding: wgpu::BindGroup,
     setup_dispatch_rays_bindings: [wgpu::BindGroup; 2],
     extend_paths_bindings: [wgpu::BindGroup; 2],
-    /// Resume passes of each round's shadow rays: as many as a ray can need (each resumes at
-    /// least TRAVERSAL_BUDGET nodes further on), at most MAX_SHADOW_RESUMES.
+    /// Resume passes of each round's shadow rays: as many as a ray can need
+    /// (`WideBvh::most_stops`), at most MAX_SHADOW_RESUMES.
     shadow_resumes: u32,
     /// Vertices extend_paths adds to a path before it goes back to the queue.
     vertices_per_round: u32,
@@ -111,8 +111,9 @@ pub struct PathTracer<'a> {
 
 /// Most resume passes a round of the path tracer runs for shadow rays that stopped at the
 /// traversal budget (a resume pass costs two empty dispatches when every ray was decided):
-/// shadow rays visiting more than (1 + MAX_SHADOW_RESUMES) TRAVERSAL_BUDGET nodes, which only
-/// adversarial geometry asks for, are counted as cut short.
+/// shadow rays that stop more than MAX_SHADOW_RESUMES times (which takes more than
+/// MAX_SHADOW_RESUMES - 1 budgets of resume-mode steps, asked for only by adversarial
+/// geometry) are counted as cut short.
 const MAX_SHADOW_RESUMES: u32 = 8;
 
 impl<'a> PathTracer<'a> {
@@ -120,7 +121,7 @@ impl<'a> PathTracer<'a> {
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let params = super::render_params(scene, settings);
-        let resumable = crate::bvh::traversals_can_stop(params.node_count as usize);
+        let resumable = scene.wide.traversals_can_stop();
         let sum_per_path = settings.gate.kind() != crate::film::GateKind::Transient && !resumable;
         let whole_paths = sum_per_path && !crate::bvh::small_scene_triangles(&scene.triangles).is_empty();
 
@@ -181,14 +182,14 @@ impl<'a> PathTracer<'a> {
                 setup_dispatch_rays,
                 extend_paths,
                 shadow_resumes: if resumable {
-                    (params.node_count / crate::bvh::TRAVERSAL_BUDGET).min(MAX_SHADOW_RESUMES)
+                    scene.wide.most_stops().min(MAX_SHADOW_RESUMES)
                 } else {
                     0
                 },
                 vertices_per_round,
             }))
         };
-        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave));
+        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave), scene.wide.most_stops());
         Ok(Self { wf, tracing, accumulate, accumulate_binding, sum_per_path })
     }
 

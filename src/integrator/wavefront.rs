@@ -5,7 +5,6 @@ use anyhow::{Result, ensure};
 
 use super::checkpoint::RenderState;
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
-use crate::bvh::TRAVERSAL_BUDGET;
 use crate::film::{Film, fixed};
 use crate::film::target::{StratumFactors, next_target_seed};
 use crate::gpu::layout::{QueueCounters, RenderParams, TargetParams, WaveParams};
@@ -79,6 +78,8 @@ pub struct Wavefront<'a> {
     pub slots_per_wave: u64,
     /// Samples per pixel of a full pass.
     pub samples_per_pass: u32,
+    /// Most times one ray traversal can stop before it is complete (`WideBvh::most_stops`).
+    pub most_traversal_stops: u32,
     /// Samples per pixel accumulated in the film since the last reset.
     pub samples_in_film: u64,
     /// Index of the next sample to trace (never reused, so batches are independent).
@@ -97,6 +98,7 @@ impl<'a> Wavefront<'a> {
         film_layout: ChunkLayout,
         constants: Vec<(&'static str, f64)>,
         (samples_per_pass, slots_per_wave): (u32, u64),
+        most_traversal_stops: u32,
     ) -> Self {
         Self {
             ctx,
@@ -106,6 +108,7 @@ impl<'a> Wavefront<'a> {
             constants,
             slots_per_wave,
             samples_per_pass,
+            most_traversal_stops,
             samples_in_film: 0,
             next_sample: 0,
             target_visits: Vec::new(),
@@ -184,9 +187,9 @@ impl<'a> Wavefront<'a> {
     ) -> Result<()> {
         let ctx = self.ctx;
         let rounds = (self.params.max_bounces as u64 + 1).div_ceil(vertices_per_round.max(1) as u64);
-        // Each stop resumes at least TRAVERSAL_BUDGET nodes further on: a bound that only a bug
+        // A path waits one round per stop of its closest-hit traversal: a bound that only a bug
         // can reach.
-        let most = rounds * (self.params.node_count as u64 / TRAVERSAL_BUDGET as u64 + 2);
+        let most = rounds * (self.most_traversal_stops as u64 + 2);
         let mut first = 0u64;
         loop {
             let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });

@@ -7,6 +7,7 @@ use super::Scene;
 use super::lights::LightTable;
 use super::materials::{gpu_materials, gpu_textures};
 use crate::bvh::Bvh;
+use crate::bvh::wide::WideBvh;
 use crate::gpu::layout::{Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
 
 /// Everything the kernels read about a scene.
@@ -16,6 +17,8 @@ pub struct PreparedScene {
     pub scene: Scene,
     /// Its BVH.
     pub bvh: Bvh,
+    /// The wide BVH that rays traverse, collapsed from `bvh` (same leaves and triangle order).
+    pub wide: WideBvh,
     /// Triangles in BVH order.
     pub triangles: Vec<Triangle>,
     /// Per BVH node: the area and spread of its triangles, see `Bvh::node_surfaces`.
@@ -86,10 +89,12 @@ impl PreparedScene {
         let (texture_infos, texels) = gpu_textures(&scene);
         let ray_epsilon = 1e-6 * scene.triangle_extent();
         let node_surfaces = bvh.node_surfaces(&triangles);
+        let wide = WideBvh::build(&bvh);
         Ok(Self {
             materials: gpu_materials(&scene),
             scene,
             bvh,
+            wide,
             triangles,
             node_surfaces,
             normals,

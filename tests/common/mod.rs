@@ -227,13 +227,24 @@ pub fn random_soup(n: usize, seed: u32) -> Vec<[glam::Vec3; 3]> {
 
 /// A soup of `n` random triangles (half-size 0.5) in front of an emitter, seen from +z.
 pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::PreparedScene {
+    soup_scene_with(n, seed, name, false)
+}
+
+/// `soup_scene`, with vertex normals (tilted from the geometric normal) when `normals`, so that
+/// the kernels read shading data.
+pub fn soup_scene_with(n: usize, seed: u32, name: &str, normals: bool) -> gatetrace::scene::PreparedScene {
     use gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
     use gatetrace::scene::{PreparedScene, load_gltf};
-    let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
+    let mut mesh = Mesh { positions: vec![], normals: normals.then(Vec::new), uvs: None, indices: vec![], material: Some(0) };
     for t in &random_soup(n, seed) {
-        for p in t {
+        let geometric = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+        for (k, p) in t.iter().enumerate() {
             mesh.indices.push(mesh.positions.len() as u32);
             mesh.positions.push((*p * 0.5).to_array());
+            if let Some(normals) = &mut mesh.normals {
+                let tilt = glam::Vec3::new(0.2 * k as f32, 0.1, -0.1);
+                normals.push((geometric + tilt).normalize().to_array());
+            }
         }
     }
     let gltf = Scene {

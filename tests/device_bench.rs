@@ -1,0 +1,41 @@
+//! The device benchmark (tools/device_bench.sh), run on this machine's adapter (lavapipe in CI)
+//! in its smoke mode: it must end well and write every measurement it promises, so that a run
+//! on a GPU machine, which builds nothing and cannot be fixed there, works the first time.
+
+mod common;
+
+use std::process::Command;
+
+#[test]
+fn device_bench_smoke_run_writes_every_measurement() {
+    let dir = common::scratch_dir("device_bench");
+    let out = dir.join("device_bench.json");
+    let run = Command::new("bash")
+        .arg(common::repo_path("tools/device_bench.sh"))
+        .args(["--smoke", "--seconds", "0.3", "--exe", env!("CARGO_BIN_EXE_gatetrace"), "--out"])
+        .arg(&out)
+        .output()
+        .expect("bash runs");
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "tools/device_bench.sh --smoke failed:\n{log}");
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(!report["adapter"].as_str().unwrap().is_empty(), "no adapter name");
+    let scenes = report["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 2, "the Cornell box and one mesh");
+    assert!(scenes[1]["triangles"].as_u64().unwrap() > 1000, "the mesh is the 1,280-triangle sphere in the box");
+    for scene in scenes {
+        let name = scene["scene"].as_str().unwrap();
+        let methods: Vec<&str> = scene["measurements"].as_array().unwrap().iter().map(|m| m["method"].as_str().unwrap()).collect();
+        assert_eq!(methods, ["path", "direct", "ellipsoidal"], "{name}");
+        for m in scene["measurements"].as_array().unwrap() {
+            let method = m["method"].as_str().unwrap();
+            assert!(m["samples_per_second"].as_f64().unwrap() > 0.0, "{name} {method}: no samples");
+            let stages = m["stages"].as_array().unwrap();
+            let total: f64 = stages.iter().map(|s| s["milliseconds"].as_f64().unwrap()).sum();
+            assert!(!stages.is_empty() && total > 0.0, "{name} {method}: no GPU time per stage");
+        }
+        let rows = scene["equal_time"].as_array().unwrap();
+        let compared: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
+        assert_eq!(compared, ["direct", "ellipsoidal"], "{name}: equal-time rows");
+    }
+}

@@ -1,0 +1,120 @@
+#!/usr/bin/env bash
+# The device benchmark: samples per second of every method, GPU time per stage and a short
+# equal-time comparison on whatever GPU the machine has, in one JSON file.
+#
+#   tools/device_bench.sh [--exe PATH] [--out FILE.json] [--seconds S] [--smoke]
+#
+# It builds nothing: it runs a release binary built on another machine (default
+# target/release/gatetrace; copy it over with the repository) and needs only a Vulkan loader and
+# driver, and python3 (standard library only) to make the test meshes and write the JSON. On a
+# GPU it ends within 8 minutes.
+#
+# Scenes: the Cornell box, and the displaced spheres of 327,680 and 1,310,720 triangles in the
+# box (tools/make_sphere_scene.py; made in target/scenes when missing). For each scene:
+#   - `gatetrace bench` (path, direct, ellipsoidal at the 2.5 mm gate; 64x64, 5 bounces) for
+#     --seconds each: samples/s, set-up time, the scene's load and BVH build time;
+#   - the same with --profile for a second each: GPU time per stage (ms);
+#   - `gatetrace equal-time` of direct and ellipsoidal at the 2.5 mm gate: MSE at equal time
+#     against a reference render.
+# --smoke runs the same on the Cornell box and a sphere of 1,280 triangles at 16x16 for a
+# fraction of a second each (the test suite runs it on lavapipe: tests/device_bench.rs).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+exe="$ROOT/target/release/gatetrace"
+out="device_bench.json"
+seconds=8
+smoke=0
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --exe) exe="$2"; shift 2 ;;
+        --out) out="$2"; shift 2 ;;
+        --seconds) seconds="$2"; shift 2 ;;
+        --smoke) smoke=1; shift ;;
+        -h|--help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        *) echo "device_bench.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+    esac
+done
+if [ ! -x "$exe" ]; then
+    echo "device_bench.sh: no gatetrace binary at $exe: build one with 'cargo build --release' (on any machine) and pass it with --exe" >&2
+    exit 2
+fi
+command -v python3 >/dev/null || { echo "device_bench.sh: python3 is needed (meshes, JSON)" >&2; exit 2; }
+
+scenes_dir="$ROOT/target/scenes"
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+if [ "$smoke" = 1 ]; then
+    res=16x16
+    profile_seconds=0.2
+    equal_seconds=0.3
+    reference_seconds=1
+    frequencies=(8)
+    scenes_dir="$work"
+else
+    res=64x64
+    profile_seconds=1
+    equal_seconds=4
+    reference_seconds=24
+    frequencies=(128 256)
+fi
+scenes=("$ROOT/assets/scenes/cornell_box.gltf")
+mkdir -p "$scenes_dir"
+for f in "${frequencies[@]}"; do
+    mesh="$scenes_dir/sphere_$((20 * f * f)).glb"
+    if [ ! -f "$mesh" ]; then
+        python3 "$ROOT/tools/make_sphere_scene.py" --frequency "$f" --out "$mesh" >&2
+    fi
+    scenes+=("$mesh")
+done
+
+gate='box:3.16..3.1625'
+i=0
+for scene in "${scenes[@]}"; do
+    echo "device_bench: $(basename "$scene")" >&2
+    "$exe" bench --scene "$scene" --seconds "$seconds" --res "$res" --json "$work/bench_$i.json" >&2
+    "$exe" bench --scene "$scene" --seconds "$profile_seconds" --res "$res" --profile --json "$work/profile_$i.json" >&2
+    "$exe" equal-time "$scene" --methods direct,ellipsoidal --gates "$gate" --seconds "$equal_seconds" --repeats 1 \
+        --reference-method ellipsoidal --reference-seconds "$reference_seconds" --res "$res" --csv "$work/equal_$i.csv" >&2
+    i=$((i + 1))
+done
+
+python3 - "$work" "$i" "$out" "$seconds" "$smoke" <<'EOF'
+import csv, json, sys
+work, count, out, seconds, smoke = sys.argv[1], int(sys.argv[2]), sys.argv[3], float(sys.argv[4]), sys.argv[5] == "1"
+scenes = []
+for i in range(count):
+    bench = json.load(open(f"{work}/bench_{i}.json"))
+    profile = json.load(open(f"{work}/profile_{i}.json"))
+    stages = {m["method"]: m["stages"] for m in profile["measurements"]}
+    for m in bench["measurements"]:
+        m["stages"] = stages.get(m["method"], [])
+    with open(f"{work}/equal_{i}.csv") as f:
+        equal = list(csv.DictReader(f))
+    scenes.append({
+        "scene": bench["scene"],
+        "triangles": bench["triangles"],
+        "load_and_build_seconds": bench["load_and_build_seconds"],
+        "measurements": bench["measurements"],
+        "equal_time": equal,
+    })
+first = json.load(open(f"{work}/bench_0.json"))
+report = {
+    "adapter": first["adapter"],
+    "backend": first["backend"],
+    "device_type": first["device_type"],
+    "driver": first["driver"],
+    "driver_info": first["driver_info"],
+    "smoke": smoke,
+    "seconds_per_measurement": seconds,
+    "max_bounces": first["max_bounces"],
+    "scenes": scenes,
+}
+with open(out, "w") as f:
+    json.dump(report, f, indent=2)
+    f.write("\n")
+print(f"device_bench: {report['adapter']} ({report['device_type']}): wrote {out}", file=sys.stderr)
+for s in scenes:
+    rates = ", ".join(f"{m['method']} {m['samples_per_second'] / 1e6:.3f}" for m in s["measurements"])
+    print(f"  {s['scene'].split('/')[-1]} ({s['triangles']} triangles): M samples/s {rates}", file=sys.stderr)
+EOF
