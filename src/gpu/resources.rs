@@ -89,11 +89,11 @@ impl Resources {
 }
 
 /// How an array is laid out over up to [`MAX_CHUNKS`] bindings (fewer for some arrays, see
-/// [`chunk_names`]).
+/// [`chunk_names`]): as many elements in each binding as fit, the last one holding the rest.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ChunkLayout {
-    /// log2 of the elements per chunk; 0 when the array fits one binding.
-    pub bits: u32,
+    /// Elements per chunk; 0 when the array fits one binding (the kernels' <NAME>_PER_CHUNK).
+    pub per_chunk: u64,
     /// Number of bindings in use.
     pub chunks: u32,
 }
@@ -105,13 +105,12 @@ impl ChunkLayout {
     /// Layout of `count` elements of `element_size` bytes with at most `limit` bytes per binding.
     pub fn new(name: &str, count: u64, element_size: u64, limit: u64) -> Result<Self> {
         if count * element_size <= limit {
-            return Ok(Self { bits: 0, chunks: 1 });
+            return Ok(Self { per_chunk: 0, chunks: 1 });
         }
-        let per_chunk = (limit / element_size).max(1);
-        let bits = 63 - per_chunk.leading_zeros();
-        let chunks = count.div_ceil(1 << bits);
+        let per_chunk = (limit / element_size).min(u32::MAX as u64);
+        let chunks = if per_chunk == 0 { u64::MAX } else { count.div_ceil(per_chunk) };
         let most = split_array_names(name).map_or(MAX_CHUNKS, |names| names.len() as u64);
-        if chunks > most || bits == 0 {
+        if chunks > most {
             bail!(
                 "`{name}` needs {:.1} MiB, more than {most} bindings of {:.1} MiB allow on this device; \
                  reduce its size (the film: resolution and bins; scene arrays: triangle count)",
@@ -119,15 +118,15 @@ impl ChunkLayout {
                 limit as f64 / 1048576.0
             );
         }
-        Ok(Self { bits, chunks: chunks as u32 })
+        Ok(Self { per_chunk, chunks: chunks as u32 })
     }
 
     /// Element range of chunk `c` for an array of `count` elements.
     pub fn range(&self, c: u32, count: u64) -> std::ops::Range<u64> {
-        if self.bits == 0 {
+        if self.per_chunk == 0 {
             return 0..count;
         }
-        let size = 1u64 << self.bits;
+        let size = self.per_chunk;
         (c as u64 * size).min(count)..((c as u64 + 1) * size).min(count)
     }
 }
@@ -268,15 +267,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn chunk_layouts_cover_the_array_in_power_of_two_chunks() {
-        assert_eq!(ChunkLayout::new("a", 10, 4, 40).unwrap(), ChunkLayout { bits: 0, chunks: 1 });
+    fn chunk_layouts_cover_the_array_in_full_chunks() {
+        assert_eq!(ChunkLayout::new("a", 10, 4, 40).unwrap(), ChunkLayout { per_chunk: 0, chunks: 1 });
         let l = ChunkLayout::new("a", 60, 48, 1000).unwrap();
-        assert_eq!(l, ChunkLayout { bits: 4, chunks: 4 }, "20 fit, 16 per chunk");
+        assert_eq!(l, ChunkLayout { per_chunk: 20, chunks: 3 }, "20 fit a binding");
         let covered: Vec<u64> = (0..l.chunks).flat_map(|c| l.range(c, 60)).collect();
         assert_eq!(covered, (0..60).collect::<Vec<_>>());
         assert!(ChunkLayout::new("a", 1000, 48, 1000).is_err(), "more than four chunks");
+        assert!(ChunkLayout::new("a", 3, 48, 40).is_err(), "an element larger than a binding");
         // The binary BVH's arrays take three chunks at most (its kernels' binding count).
-        assert_eq!(ChunkLayout::new("bvh_nodes", 40, 32, 512).unwrap(), ChunkLayout { bits: 4, chunks: 3 });
-        assert!(ChunkLayout::new("bvh_nodes", 50, 32, 512).is_err(), "more than three chunks");
+        assert_eq!(ChunkLayout::new("bvh_nodes", 48, 32, 512).unwrap(), ChunkLayout { per_chunk: 16, chunks: 3 });
+        assert!(ChunkLayout::new("bvh_nodes", 49, 32, 512).is_err(), "more than three chunks");
     }
 }
