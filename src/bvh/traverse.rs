@@ -1,5 +1,6 @@
-//! CPU twin of `shaders/lib/bvh.wesl`: the same stackless traversal over the same arrays, in f32.
-//! It is the oracle for the GPU traversal, and is itself checked against brute force.
+//! The binary BVH's stackless traversal on the CPU, in f32: the host's own ray casts (an NLOS
+//! capture's sensed points and laser spots) and an oracle of the tests, itself checked against
+//! brute force. The kernels' rays traverse the wide BVH, whose twin is `wide.rs`.
 
 use glam::Vec3;
 
@@ -42,7 +43,7 @@ fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_max: f32) -> 
     t_near <= t_far
 }
 
-/// Closest hit with t in (0, t_max), ignoring triangle `ignore` (twin of `trace_closest`).
+/// Closest hit with t in (0, t_max), ignoring triangle `ignore`.
 pub fn trace_closest(nodes: &[BvhNode], triangles: &[Triangle], origin: Vec3, direction: Vec3, t_max: f32, ignore: u32) -> Hit {
     let mut best = Hit { t: t_max, triangle: NONE, b1: 0.0, b2: 0.0 };
     let inv_dir = safe_inverse(direction);
@@ -72,7 +73,7 @@ pub fn trace_closest(nodes: &[BvhNode], triangles: &[Triangle], origin: Vec3, di
     best
 }
 
-/// Any hit with t in (0, t_max) other than `ignore0`, `ignore1` (twin of `trace_any`).
+/// Any hit with t in (0, t_max) other than `ignore0`, `ignore1`.
 pub fn trace_any(
     nodes: &[BvhNode],
     triangles: &[Triangle],

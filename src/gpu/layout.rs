@@ -391,8 +391,8 @@ pub struct PathState {
     pub origin_triangle: u32,
     /// Random numbers drawn so far (pixel and sample follow from the path's slot).
     pub dimension: u32,
-    /// BVH node at which the closest-hit traversal of the path's ray resumes in a later round;
-    /// 0 while it has not started or has finished.
+    /// Where the closest-hit traversal of the path's ray resumes in a later round (a resume
+    /// position, `bvh::wide::position`); 0 while it has not started or has finished.
     pub traversal: u32,
     /// Side of `origin_triangle` the ray leaves: +1 front, -1 back, 0 at the pinhole and point lights.
     pub side: f32,
@@ -428,8 +428,8 @@ pub struct ShadowRay {
     pub ignore0: u32,
     /// Triangle to ignore (the light's).
     pub ignore1: u32,
-    /// BVH node at which the traversal resumes in a later pass; 0 before the first pass and
-    /// once the ray is decided.
+    /// Where the traversal resumes in a later pass (a resume position, `bvh::wide::position`);
+    /// 0 before the first pass and once the ray is decided.
     pub resume: u32,
     /// Padding.
     pub reserved: u32,
