@@ -27,7 +27,9 @@ pub fn intersect_triangle(origin: Vec3, direction: Vec3, v0: Vec3, e1: Vec3, e2:
     (e2.dot(q) * inv_det, b1, b2)
 }
 
-fn safe_inverse(d: Vec3) -> Vec3 {
+/// 1 / direction with zero components replaced by a tiny value of their sign, so the slab tests
+/// never compute 0 * inf (twin of bvh.wesl `safe_inverse`; both BVHs' traversals use it).
+pub fn safe_inverse(d: Vec3) -> Vec3 {
     let tiny = 1e-30f32;
     let fix = |x: f32| if x.abs() < tiny { if x >= 0.0 { tiny } else { -tiny } } else { x };
     Vec3::new(1.0 / fix(d.x), 1.0 / fix(d.y), 1.0 / fix(d.z))

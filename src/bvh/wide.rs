@@ -14,6 +14,7 @@
 use glam::Vec3;
 
 use super::Bvh;
+use super::traverse::safe_inverse;
 use crate::gpu::layout::{Hit, NONE, Triangle, WIDE_LEAF, WideNode};
 
 /// Children per node.
@@ -219,14 +220,6 @@ pub fn intersect_triangle_scaled(origin: Vec3, direction: Vec3, tri: &Triangle) 
     if d > 0.0 && b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= d && t > 0.0 { [t, b1, b2, d] } else { [0.0; 4] }
 }
 
-/// 1 / direction with zero components replaced by a tiny value of their sign (twin of
-/// bvh.wesl `safe_inverse`).
-pub fn safe_inverse(d: Vec3) -> Vec3 {
-    let tiny = 1e-30f32;
-    let fix = |x: f32| if x.abs() < tiny { if x >= 0.0 { tiny } else { -tiny } } else { x };
-    Vec3::new(1.0 / fix(d.x), 1.0 / fix(d.y), 1.0 / fix(d.z))
-}
-
 /// What a traversal looks for: the closest hit (ignoring one triangle) or any hit within t_max
 /// (ignoring two).
 #[derive(Clone, Copy)]
@@ -321,7 +314,7 @@ fn traverse(
                 current = if order[0].0 < FAR { order[0].1 } else { NONE };
             }
             if stopped {
-                return Traversal { hit: best, resume: position(0, 0) };
+                return Traversal { hit: best, resume: resume_position(0, 0) };
             }
             if leaf == 0 {
                 return Traversal { hit: best, resume: TRAVERSAL_COMPLETE };
@@ -374,8 +367,8 @@ fn traverse(
     }
 }
 
-/// `resume` of resume mode at `node`'s slot `slot`.
-pub fn position(node: u32, slot: u32) -> u32 {
+/// `resume` of resume mode at `node`'s slot `slot` (twin of bvh.wesl `resume_position`).
+pub fn resume_position(node: u32, slot: u32) -> u32 {
     ((node << 2) | slot) + 1
 }
 

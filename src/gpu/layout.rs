@@ -392,7 +392,7 @@ pub struct PathState {
     /// Random numbers drawn so far (pixel and sample follow from the path's slot).
     pub dimension: u32,
     /// Where the closest-hit traversal of the path's ray resumes in a later round (a resume
-    /// position, `bvh::wide::position`); 0 while it has not started or has finished.
+    /// position, `bvh::wide::resume_position`); 0 while it has not started or has finished.
     pub traversal: u32,
     /// Side of `origin_triangle` the ray leaves: +1 front, -1 back, 0 at the pinhole and point lights.
     pub side: f32,
@@ -428,7 +428,7 @@ pub struct ShadowRay {
     pub ignore0: u32,
     /// Triangle to ignore (the light's).
     pub ignore1: u32,
-    /// Where the traversal resumes in a later pass (a resume position, `bvh::wide::position`);
+    /// Where the traversal resumes in a later pass (a resume position, `bvh::wide::resume_position`);
     /// 0 before the first pass and once the ray is decided.
     pub resume: u32,
     /// Padding.
