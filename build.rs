@@ -121,9 +121,7 @@ fn build_kernel(dir: &str, name: &str, feature: Option<&str>, out_dir: &Path) ->
         }
         let kind = match var.space {
             naga::AddressSpace::Uniform => "Uniform",
-            naga::AddressSpace::Storage { access } if access.contains(naga::StorageAccess::STORE) => {
-                "StorageReadWrite"
-            }
+            naga::AddressSpace::Storage { access } if access.contains(naga::StorageAccess::STORE) => "StorageReadWrite",
             naga::AddressSpace::Storage { .. } => "StorageRead",
             other => return Err(format!("unsupported address space {other:?}")),
         };

@@ -44,12 +44,7 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     let mut ctx = GpuContext::new()?;
     let mut rows = Vec::new();
     println!("adapter: {}", ctx.adapter_description());
-    println!(
-        "scene: {} ({} triangles), max bounces {}",
-        scene_path.display(),
-        scene.triangles.len(),
-        s.max_bounces
-    );
+    println!("scene: {} ({} triangles), max bounces {}", scene_path.display(), scene.triangles.len(), s.max_bounces);
     println!(
         "bench: {:<14} {:<20} {:>10} {:>8} {:>9} {:>11}",
         "method", "gate", "resolution", "spp", "seconds", "Msamples/s"
@@ -62,13 +57,8 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
         };
         let gate = Gate::parse(spec).with_context(|| format!("{option} {spec}"))?;
         for &(width, height) in &s.resolutions {
-            let base = RenderSettings {
-                width,
-                height,
-                max_bounces: s.max_bounces,
-                gate: gate.clone(),
-                ..Default::default()
-            };
+            let base =
+                RenderSettings { width, height, max_bounces: s.max_bounces, gate: gate.clone(), ..Default::default() };
             let settings = variant.settings(&base);
             if s.profile {
                 // A profiler of its own, so that each measurement's stages are its own.
@@ -167,24 +157,13 @@ impl Variant {
         use clap::ValueEnum;
         let mut parts = s.split(':').map(str::trim);
         let name = parts.next().unwrap_or_default();
-        let method = crate::integrator::Method::from_str(name, true).map_err(|_| {
-            anyhow::anyhow!(
-                "`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"
-            )
-        })?;
-        let connections_per_query =
-            crate::integrator::bidirectional::default_connections_per_query(method);
-        let mut variant = Self {
-            method,
-            connections_per_query,
-            query: Default::default(),
-        };
+        let method = crate::integrator::Method::from_str(name, true)
+            .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"))?;
+        let connections_per_query = crate::integrator::bidirectional::default_connections_per_query(method);
+        let mut variant = Self { method, connections_per_query, query: Default::default() };
         for option in parts {
             anyhow::ensure!(
-                matches!(
-                    method,
-                    crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto
-                ),
+                matches!(method, crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto),
                 "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
                  split=R, bottom=N, reflection)"
             );
@@ -193,13 +172,11 @@ impl Variant {
             } else if option == "reflection" {
                 variant.query.reflection_weights = true;
             } else if let Some(r) = option.strip_prefix("split=") {
-                variant.query.split = r
-                    .parse()
-                    .map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
+                variant.query.split =
+                    r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
             } else if let Some(n) = option.strip_prefix("bottom=") {
-                variant.query.bottom_nodes = n.parse().map_err(|_| {
-                    anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`")
-                })?;
+                variant.query.bottom_nodes =
+                    n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
             } else {
                 variant.connections_per_query = option.parse().map_err(|_| {
                     anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, reflection)")
@@ -212,15 +189,10 @@ impl Variant {
     /// The name it was given by (options in a fixed order).
     pub fn name(&self) -> String {
         let mut name = self.method.name().to_owned();
-        if self.connections_per_query
-            != crate::integrator::bidirectional::default_connections_per_query(self.method)
-        {
+        if self.connections_per_query != crate::integrator::bidirectional::default_connections_per_query(self.method) {
             name += &format!(":{}", self.connections_per_query);
         }
-        if matches!(
-            self.method,
-            crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto
-        ) {
+        if matches!(self.method, crate::integrator::Method::Ellipsoidal | crate::integrator::Method::Auto) {
             let default = crate::integrator::QuerySettings::default();
             if self.query.split == 0.0 {
                 name += ":exhaustive";
@@ -282,27 +254,16 @@ fn render_for(
 ) -> Result<(crate::film::Film, f64, Option<Method>)> {
     let budget = crate::integrator::Budget::Time(Duration::from_secs_f64(seconds));
     let output = crate::integrator::render(ctx, scene, settings, budget, |_| {})?;
-    Ok((
-        output.film,
-        output.rendering.as_secs_f64(),
-        output.choice.map(|c| c.chosen),
-    ))
+    Ok((output.film, output.rendering.as_secs_f64(), output.choice.map(|c| c.chosen)))
 }
 
 /// Work of one ellipsoid query: (loop iterations, triangles tested), from a short render with
 /// `--stats` (None for methods without queries).
-fn query_cost(
-    ctx: &GpuContext,
-    scene: &PreparedScene,
-    settings: &RenderSettings,
-) -> Result<Option<(f64, f64)>> {
+fn query_cost(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Option<(f64, f64)>> {
     if settings.method != crate::integrator::Method::Ellipsoidal {
         return Ok(None);
     }
-    let settings = RenderSettings {
-        stats: true,
-        ..settings.clone()
-    };
+    let settings = RenderSettings { stats: true, ..settings.clone() };
     let mut tracer = crate::integrator::BidirectionalTracer::new(ctx, scene, &settings)?;
     use crate::integrator::Integrator;
     tracer.render_samples(2)?;
@@ -348,17 +309,9 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
     for scene_path in scene_paths {
         let scene = PreparedScene::new(crate::scene::load_gltf_at(scene_path, s.anim_time)?)?;
         let triangles = scene.triangles.len();
-        let posed = s
-            .anim_time
-            .map_or(String::new(), |t| format!(", posed at {t} s"));
-        println!(
-            "\nscene {} ({triangles} triangles{posed})",
-            scene_path.display()
-        );
-        let scene_name = scene_path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let posed = s.anim_time.map_or(String::new(), |t| format!(", posed at {t} s"));
+        println!("\nscene {} ({triangles} triangles{posed})", scene_path.display());
+        let scene_name = scene_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         for (spec, gate) in &s.gates {
             // Reference: 8 batches, mean and variance of the mean per element.
             let batches = 8;
@@ -367,21 +320,10 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
             for _ in 0..batches {
                 reference_seed += 1;
                 let seed = reference_seed;
-                let settings = RenderSettings {
-                    gate: gate.clone(),
-                    seed,
-                    ..s.reference.settings(b)
-                };
-                let (film, _, _) = render_for(
-                    &ctx,
-                    &scene,
-                    &settings,
-                    s.reference_seconds / batches as f64,
-                )?;
+                let settings = RenderSettings { gate: gate.clone(), seed, ..s.reference.settings(b) };
+                let (film, _, _) = render_for(&ctx, &scene, &settings, s.reference_seconds / batches as f64)?;
                 ref_spp += film.spp;
-                let (sum, sq) = stats.get_or_insert_with(|| {
-                    (vec![0.0; film.data.len()], vec![0.0; film.data.len()])
-                });
+                let (sum, sq) = stats.get_or_insert_with(|| (vec![0.0; film.data.len()], vec![0.0; film.data.len()]));
                 for (i, &v) in film.data.iter().enumerate() {
                     sum[i] += v as f64;
                     sq[i] += (v as f64) * (v as f64);
@@ -390,11 +332,8 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
             let (sum, sq) = stats.unwrap();
             let n = batches as f64;
             let reference: Vec<f64> = sum.iter().map(|x| x / n).collect();
-            let ref_var: Vec<f64> = sq
-                .iter()
-                .zip(&reference)
-                .map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n)
-                .collect();
+            let ref_var: Vec<f64> =
+                sq.iter().zip(&reference).map(|(q, m)| ((q / n - m * m) * n / (n - 1.0)).max(0.0) / n).collect();
             let elements = reference.len() as f64;
             let ref_noise = ref_var.iter().sum::<f64>() / elements;
             let ref_power = reference.iter().map(|x| x * x).sum::<f64>() / elements;
@@ -404,46 +343,26 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
             );
             println!(
                 "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9} {}",
-                "method",
-                "spp",
-                "MSE",
-                "rel. MSE",
-                "MSE / first",
-                "iter/query",
-                "tri/query",
-                "chosen"
+                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query", "chosen"
             );
             // Repeat-major: repeat r of every method before repeat r + 1 of any, so that a
             // stretch where the device runs slower (other load, clocks) falls on all methods
             // alike instead of on one method's repeats.
             let mut bases = Vec::new();
             for variant in &s.methods {
-                let base = RenderSettings {
-                    gate: gate.clone(),
-                    ..variant.settings(b)
-                };
+                let base = RenderSettings { gate: gate.clone(), ..variant.settings(b) };
                 let cost = query_cost(&ctx, &scene, &base)?;
                 bases.push((base, cost));
             }
             let mut results: Vec<(Vec<f64>, Vec<u64>, Vec<&str>)> = vec![Default::default(); s.methods.len()];
             for repeat in 0..s.repeats {
-                for ((variant, (base, cost)), (mses, spps, choices)) in
-                    s.methods.iter().zip(&bases).zip(&mut results)
-                {
+                for ((variant, (base, cost)), (mses, spps, choices)) in s.methods.iter().zip(&bases).zip(&mut results) {
                     let (iterations, tested) = cost_columns(*cost);
-                    let settings = RenderSettings {
-                        seed: REPEAT_SEEDS + repeat,
-                        ..base.clone()
-                    };
+                    let settings = RenderSettings { seed: REPEAT_SEEDS + repeat, ..base.clone() };
                     let (film, secs, chosen) = render_for(&ctx, &scene, &settings, s.seconds)?;
                     let chosen = chosen.map_or("", Method::name);
-                    let se: f64 = film
-                        .data
-                        .iter()
-                        .zip(&reference)
-                        .map(|(&x, r)| (x as f64 - r).powi(2))
-                        .sum::<f64>()
-                        / elements;
+                    let se: f64 =
+                        film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
                     let mse = se - ref_noise;
                     writeln!(
                         csv,
@@ -472,11 +391,7 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 for method in [Method::Direct, Method::Ellipsoidal] {
                     let n = choices.iter().filter(|&&c| c == method.name()).count();
                     if n > 0 {
-                        chosen += &format!(
-                            "{}{} x{n}",
-                            if chosen.is_empty() { "" } else { ", " },
-                            method.name()
-                        );
+                        chosen += &format!("{}{} x{n}", if chosen.is_empty() { "" } else { ", " }, method.name());
                     }
                 }
                 println!(

@@ -72,7 +72,9 @@ pub fn frame_seed(seed: u32, frame: u32) -> u32 {
 /// Parses `A..B` (inclusive) or `A` (one frame).
 pub fn parse_frame_range(text: &str) -> Result<(u32, u32)> {
     let number = |s: &str| {
-        s.trim().parse::<u32>().with_context(|| format!("`{text}` is not a frame range: give A..B or A (0-based frames)"))
+        s.trim()
+            .parse::<u32>()
+            .with_context(|| format!("`{text}` is not a frame range: give A..B or A (0-based frames)"))
     };
     match text.split_once("..") {
         Some((a, b)) => Ok((number(a)?, number(b)?)),
@@ -112,11 +114,10 @@ pub fn frame_path(pattern: &str, frame: u32) -> Result<PathBuf> {
     let number = match spec {
         "" => frame.to_string(),
         _ => {
-            let digits = spec
-                .strip_prefix(":0")
-                .and_then(|d| d.parse::<usize>().ok())
-                .filter(|&d| d <= 12)
-                .with_context(|| format!("output `{pattern}`: `{{frame{spec}}}` is not {{frame}} or {{frame:0N}}"))?;
+            let digits =
+                spec.strip_prefix(":0").and_then(|d| d.parse::<usize>().ok()).filter(|&d| d <= 12).with_context(
+                    || format!("output `{pattern}`: `{{frame{spec}}}` is not {{frame}} or {{frame:0N}}"),
+                )?;
             format!("{frame:0digits$}")
         }
     };

@@ -10,9 +10,7 @@ use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
 use gatetrace::film::output::{OutputFormat, check_writable, write_film};
-use gatetrace::frames::{
-    FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range,
-};
+use gatetrace::frames::{FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::checkpoint::{
     check_fingerprint, checkpoint_path, fingerprint, merge_states, read_checkpoint, read_state_file, write_checkpoint,
@@ -24,10 +22,7 @@ use gatetrace::integrator::{
 use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
 
 /// The scene rendered when none is given.
-const DEFAULT_SCENE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/assets/scenes/cornell_box.gltf"
-);
+const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
 
 /// gatetrace: a physically based GPU renderer for time-of-flight cameras.
 ///
@@ -235,12 +230,7 @@ struct RenderArgs {
     frames: u32,
     /// Move the gate by D per frame: metres of optical path, or with a mm/ps/ns suffix
     /// (negative: earlier). A CW gate's phase moves by -360 f D / c degrees.
-    #[arg(
-        long,
-        default_value = "0",
-        value_name = "D",
-        allow_hyphen_values = true
-    )]
+    #[arg(long, default_value = "0", value_name = "D", allow_hyphen_values = true)]
     gate_step: String,
     /// Sample the scene's glTF animations (node translation, rotation, scale; all animations on
     /// one clock) at --frames evenly spaced times from T0 to T1 (seconds of the animation
@@ -480,11 +470,7 @@ fn run_stress(args: StressArgs) -> Result<()> {
     );
     println!("{}", Report::header());
     for family in Family::all() {
-        let count = if family == Family::Random {
-            args.configs
-        } else {
-            args.configs.div_ceil(4)
-        };
+        let count = if family == Family::Random { args.configs } else { args.configs.div_ceil(4) };
         let configs = generate(family, count, args.seed);
         let device = run_on_device(&ctx, &configs)?;
         println!("{}", compare(&family.name(), &configs, &device).row());
@@ -493,20 +479,10 @@ fn run_stress(args: StressArgs) -> Result<()> {
 }
 
 fn run_equal_time(args: EqualTimeArgs) -> Result<()> {
-    let scenes = if args.scenes.is_empty() {
-        vec![PathBuf::from(DEFAULT_SCENE)]
-    } else {
-        args.scenes.clone()
-    };
-    let gates = args
-        .gates
-        .split(';')
-        .map(|g| Ok((g.trim().to_owned(), Gate::parse(g.trim())?)))
-        .collect::<Result<Vec<_>>>()?;
-    ensure!(
-        args.seconds > 0.0 && args.reference_seconds > 0.0,
-        "--seconds and --reference-seconds must be positive"
-    );
+    let scenes = if args.scenes.is_empty() { vec![PathBuf::from(DEFAULT_SCENE)] } else { args.scenes.clone() };
+    let gates =
+        args.gates.split(';').map(|g| Ok((g.trim().to_owned(), Gate::parse(g.trim())?))).collect::<Result<Vec<_>>>()?;
+    ensure!(args.seconds > 0.0 && args.reference_seconds > 0.0, "--seconds and --reference-seconds must be positive");
     ensure!(args.repeats >= 1, "--repeats must be at least 1");
     let settings = gatetrace::bench::EqualTimeSettings {
         methods: args.methods,
@@ -533,14 +509,9 @@ fn parse_variant(s: &str) -> Result<gatetrace::bench::Variant, String> {
 
 fn parse_point(s: &str) -> Result<glam::Vec3, String> {
     let bad = || format!("`{s}` is not X,Y,Z (three finite numbers in metres, e.g. -1.2,0,0.6)");
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|c| c.trim().parse::<f32>().map_err(|_| bad()))
-        .collect::<Result<_, _>>()?;
+    let v: Vec<f32> = s.split(',').map(|c| c.trim().parse::<f32>().map_err(|_| bad())).collect::<Result<_, _>>()?;
     match v[..] {
-        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => {
-            Ok(glam::Vec3::new(x, y, z))
-        }
+        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => Ok(glam::Vec3::new(x, y, z)),
         _ => Err(bad()),
     }
 }
@@ -548,10 +519,7 @@ fn parse_point(s: &str) -> Result<glam::Vec3, String> {
 fn parse_uv(s: &str) -> Result<glam::Vec2, String> {
     let bad = || format!("`{s}` is not U,V (two texture coordinates in [0, 1], e.g. 0.5,0.5)");
     let (u, v) = s.split_once(',').ok_or_else(bad)?;
-    let (u, v) = (
-        u.trim().parse::<f32>().map_err(|_| bad())?,
-        v.trim().parse::<f32>().map_err(|_| bad())?,
-    );
+    let (u, v) = (u.trim().parse::<f32>().map_err(|_| bad())?, v.trim().parse::<f32>().map_err(|_| bad())?);
     if !((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)) {
         return Err(bad());
     }
@@ -569,10 +537,7 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
 fn parse_pair(s: &str, what: &str) -> Result<(u32, u32), String> {
     let bad = || format!("`{s}` is not {what} (two non-negative integers, e.g. 1,2)");
     let (a, b) = s.split_once(',').ok_or_else(bad)?;
-    Ok((
-        a.trim().parse().map_err(|_| bad())?,
-        b.trim().parse().map_err(|_| bad())?,
-    ))
+    Ok((a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?))
 }
 
 fn parse_shard(s: &str) -> Result<(u32, u32), String> {
@@ -588,14 +553,9 @@ fn parse_shard(s: &str) -> Result<(u32, u32), String> {
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let bad = || format!("`{s}` is not WIDTHxHEIGHT (e.g. 256x256)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h) = (
-        w.trim().parse::<u32>().map_err(|_| bad())?,
-        h.trim().parse::<u32>().map_err(|_| bad())?,
-    );
+    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
     if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!(
-            "resolution {w}x{h} must be between 1x1 and 16384x16384"
-        ));
+        return Err(format!("resolution {w}x{h} must be between 1x1 and 16384x16384"));
     }
     Ok((w, h))
 }
@@ -609,7 +569,9 @@ fn main() {
     }
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(args) => interrupt::install().context("cannot watch for SIGINT and SIGTERM").and_then(|_| run_render(args)),
+        Command::Render(args) => {
+            interrupt::install().context("cannot watch for SIGINT and SIGTERM").and_then(|_| run_render(args))
+        }
         Command::View(args) => run_view(args),
         Command::EqualTime(args) => run_equal_time(args),
         Command::StressEllipsoid(args) => run_stress(args),
@@ -645,34 +607,19 @@ fn run_view(args: ViewArgs) -> Result<()> {
         "--method auto chooses per render from a pilot; the viewer renders progressively: start it with path, direct \
          or ellipsoidal"
     );
-    let scene = args
-        .scene
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
-    let (gate, tau, gate_width) =
-        match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
-            Gate::None => (GateChoice::None, 3.165, 0.05),
-            Gate::Box { start, end } => (GateChoice::Box, 0.5 * (start + end), end - start),
-            Gate::Gaussian { mean, sigma } => (GateChoice::Gaussian, mean, sigma),
-            other => bail!(
-                "--gate {}: the viewer shows none, box or gaussian gates (got {})",
-                args.gate,
-                other.describe()
-            ),
-        };
+    let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let (gate, tau, gate_width) = match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
+        Gate::None => (GateChoice::None, 3.165, 0.05),
+        Gate::Box { start, end } => (GateChoice::Box, 0.5 * (start + end), end - start),
+        Gate::Gaussian { mean, sigma } => (GateChoice::Gaussian, mean, sigma),
+        other => bail!("--gate {}: the viewer shows none, box or gaussian gates (got {})", args.gate, other.describe()),
+    };
     if args.screenshot.is_some() {
         ensure!(args.after_frames >= 1, "--after-frames must be at least 1");
     }
-    let scrub_step = args
-        .scrub_step
-        .as_deref()
-        .map(gatetrace::units::parse_length)
-        .transpose()
-        .context("--scrub-step")?;
-    ensure!(
-        scrub_step.is_none() || args.screenshot.is_some(),
-        "--scrub-step needs --screenshot"
-    );
+    let scrub_step =
+        args.scrub_step.as_deref().map(gatetrace::units::parse_length).transpose().context("--scrub-step")?;
+    ensure!(scrub_step.is_none() || args.screenshot.is_some(), "--scrub-step needs --screenshot");
     run_viewer(ViewOptions {
         scene,
         width: args.res.0,
@@ -695,10 +642,7 @@ fn run_view(args: ViewArgs) -> Result<()> {
 
 /// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
 /// (each overrides the glTF camera node's extras; an aperture radius of 0 makes a pinhole).
-fn with_lens_options(
-    mut scene: gatetrace::scene::Scene,
-    args: &RenderArgs,
-) -> Result<gatetrace::scene::Scene> {
+fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &RenderArgs) -> Result<gatetrace::scene::Scene> {
     scene
         .camera
         .override_lens(args.aperture_radius, args.focus_distance, "--focus-distance METRES")
@@ -707,10 +651,7 @@ fn with_lens_options(
 }
 
 fn run_render(args: RenderArgs) -> Result<()> {
-    let scene_path = args
-        .scene
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
     let budget = match (args.spp, args.time) {
         (_, Some(t)) => match Duration::try_from_secs_f64(t) {
@@ -721,26 +662,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
         (Some(n), None) => Budget::Samples(n),
         (None, None) => Budget::Samples(64),
     };
-    let range = args
-        .frame_range
-        .as_deref()
-        .map(parse_frame_range)
-        .transpose()
-        .context("--frame-range")?;
+    let range = args.frame_range.as_deref().map(parse_frame_range).transpose().context("--frame-range")?;
     let gate_step = gatetrace::units::parse_length(&args.gate_step).context("--gate-step")?;
-    let anim_time = args
-        .anim_time
-        .as_deref()
-        .map(parse_time_range)
-        .transpose()
-        .context("--anim-time")?;
+    let anim_time = args.anim_time.as_deref().map(parse_time_range).transpose().context("--anim-time")?;
     let plan = FramePlan::new(args.frames, gate_step, anim_time, range)?;
     let sequence = args.frames > 1 || args.frame_range.is_some();
-    let stem = scene_path
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or("render")
-        .to_owned();
+    let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render").to_owned();
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from(if let Some((i, n)) = args.shard {
             format!("{stem}.shard_{i}_of_{n}")
@@ -791,10 +718,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         },
         nlos: None,
         target_pilot_spp: args.target_pilot.unwrap_or(
-            if args.nlos.is_some()
-                && args.method == Method::Ellipsoidal
-                && matches!(gate, Gate::Transient { .. })
-            {
+            if args.nlos.is_some() && args.method == Method::Ellipsoidal && matches!(gate, Gate::Transient { .. }) {
                 gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
             } else {
                 0
@@ -856,19 +780,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
     // Every frame's settings and output, checked before any work.
     let mut frames = Vec::new();
     for frame in plan.frames() {
-        let path = if is_frame_pattern(&pattern) {
-            frame_path(&pattern, frame)?
-        } else {
-            out.clone()
-        };
+        let path = if is_frame_pattern(&pattern) { frame_path(&pattern, frame)? } else { out.clone() };
         if args.shard.is_none() {
             OutputFormat::of(&path)?;
         }
-        let settings = RenderSettings {
-            gate: plan.gate(&gate, frame)?,
-            seed: frame_seed(args.seed, frame),
-            ..settings.clone()
-        };
+        let settings =
+            RenderSettings { gate: plan.gate(&gate, frame)?, seed: frame_seed(args.seed, frame), ..settings.clone() };
         if settings.debug_strategy.is_some() && settings.method != Method::Direct {
             bail!("--debug-strategy needs --method direct");
         }
@@ -884,15 +801,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
-        None => Some(PreparedScene::new(with_lens_options(
-            load_gltf(&scene_path)?,
-            &args,
-        )?)?),
+        None => Some(PreparedScene::new(with_lens_options(load_gltf(&scene_path)?, &args)?)?),
         Some(_) => {
-            with_lens_options(
-                load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?,
-                &args,
-            )?;
+            with_lens_options(load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?, &args)?;
             None
         }
     };
@@ -908,9 +819,8 @@ fn run_render(args: RenderArgs) -> Result<()> {
     // A sequence shows a bar over its frames above each frame's bar over passes.
     let frames_bar = sequence.then(|| {
         let bar = bars.add(indicatif::ProgressBar::new(frames.len() as u64));
-        let style = indicatif::ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:30}] {pos}/{len} frames (ETA {eta})",
-        );
+        let style =
+            indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames (ETA {eta})");
         bar.set_style(style.unwrap().progress_chars("=> "));
         bar
     });
@@ -928,13 +838,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         }
         let incomplete = checkpoint_path(path).exists();
         if sequence && path.exists() && !args.force && !incomplete {
-            say(
-                &bars,
-                format!(
-                    "frame {frame}: {} exists, skipped (--force renders it again)",
-                    path.display()
-                ),
-            )?;
+            say(&bars, format!("frame {frame}: {} exists, skipped (--force renders it again)", path.display()))?;
         } else {
             let resume = args.resume && incomplete;
             if sequence && incomplete && !args.resume {
@@ -1010,14 +914,8 @@ fn run_nlos(
     budget: Budget,
 ) -> Result<()> {
     use gatetrace::nlos::{self, LaserAim, NlosCapture, Scan};
-    let stem = scene_path
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or("render");
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("{stem}_nlos.npy")));
+    let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{stem}_nlos.npy")));
     let format = OutputFormat::of(&out)?;
     ensure!(
         scan != Scan::Exhaustive || format == OutputFormat::Npy,
@@ -1030,10 +928,7 @@ fn run_nlos(
          three-bounce paths spot -> hidden point -> sensed point)",
         base.max_bounces
     );
-    ensure!(
-        args.laser_grid.is_none() || scan == Scan::Exhaustive,
-        "--laser-grid needs --nlos exhaustive"
-    );
+    ensure!(args.laser_grid.is_none() || scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
     film_elements(&base)?;
     check_writable(&out)?;
     let mut loaded = load_gltf_for_capture(scene_path)?;
@@ -1046,14 +941,9 @@ fn run_nlos(
         base.band_index = false;
     }
     let origin = |given: Option<glam::Vec3>, node: &str, flag: &str| -> Result<glam::Vec3> {
-        given
-            .or_else(|| nlos::origin_from_nodes(&loaded, node))
-            .with_context(|| {
-                format!(
-                    "{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)",
-                    scene_path.display()
-                )
-            })
+        given.or_else(|| nlos::origin_from_nodes(&loaded, node)).with_context(|| {
+            format!("{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)", scene_path.display())
+        })
     };
     let (sensor_origin, laser_origin) = (
         origin(args.sensor_origin, "sensor_origin", "--sensor-origin")?,
@@ -1073,11 +963,7 @@ fn run_nlos(
         relay_wall: args.relay_wall.clone(),
         sensor_origin,
         laser_origin,
-        aim: if scan == Scan::Confocal {
-            LaserAim::Confocal
-        } else {
-            LaserAim::Spot(args.laser_spot)
-        },
+        aim: if scan == Scan::Confocal { LaserAim::Confocal } else { LaserAim::Spot(args.laser_spot) },
         laser_power: args.laser_power,
         count_first_and_last: args.count_first_last,
     };
@@ -1090,9 +976,7 @@ fn run_nlos(
     };
     let aims: Vec<LaserAim> = match scan {
         Scan::Exhaustive => (0..laser_h)
-            .flat_map(|j| {
-                (0..laser_w).map(move |i| LaserAim::Spot(nlos::cell_uv(i, j, laser_w, laser_h)))
-            })
+            .flat_map(|j| (0..laser_w).map(move |i| LaserAim::Spot(nlos::cell_uv(i, j, laser_w, laser_h))))
             .collect(),
         _ => vec![capture.aim],
     };
@@ -1105,10 +989,7 @@ fn run_nlos(
     let (mut data, mut spots, mut sensed) = (Vec::new(), Vec::new(), Vec::new());
     let mut last = None;
     for (k, &aim) in aims.iter().enumerate() {
-        let capture = NlosCapture {
-            aim,
-            ..capture.clone()
-        };
+        let capture = NlosCapture { aim, ..capture.clone() };
         let (points, warnings) = nlos::wall_points_and_warnings(&scene, &capture, w, h)?;
         if k == 0 {
             for warning in warnings {
@@ -1116,27 +997,11 @@ fn run_nlos(
             }
         }
         sensed = points[..pixels].to_vec();
-        spots.extend_from_slice(if scan == Scan::Confocal {
-            &points[pixels..]
-        } else {
-            &points[pixels..pixels + 1]
-        });
-        let seed = if aims.len() > 1 {
-            frame_seed(base.seed, k as u32)
-        } else {
-            base.seed
-        };
-        let settings = RenderSettings {
-            nlos: Some(capture),
-            seed,
-            ..base.clone()
-        };
+        spots.extend_from_slice(if scan == Scan::Confocal { &points[pixels..] } else { &points[pixels..pixels + 1] });
+        let seed = if aims.len() > 1 { frame_seed(base.seed, k as u32) } else { base.seed };
+        let settings = RenderSettings { nlos: Some(capture), seed, ..base.clone() };
         let bar = bars.add(progress_bar(budget));
-        let label = if aims.len() > 1 {
-            format!("laser spot {}/{}: ", k + 1, aims.len())
-        } else {
-            String::new()
-        };
+        let label = if aims.len() > 1 { format!("laser spot {}/{}: ", k + 1, aims.len()) } else { String::new() };
         // The band index is built before the first sample (a minute on a large mesh and grid
         // on lavapipe): say so until the first pass reports.
         if settings.band_index {
@@ -1201,9 +1066,7 @@ fn run_nlos(
     }
     let extras = nlos::capture_record(&scene, &capture, scan, &sensed, w, &spots, laser_w);
     let film = &output.film;
-    let bin_ranges: Vec<(f64, f64)> = (0..settings.gate.bins())
-        .filter_map(|b| settings.gate.bin_range(b))
-        .collect();
+    let bin_ranges: Vec<(f64, f64)> = (0..settings.gate.bins()).filter_map(|b| settings.gate.bin_range(b)).collect();
     if scan == Scan::Exhaustive {
         let bins = film.bins as usize;
         let mut shape = vec![laser_h as usize, laser_w as usize, h as usize, w as usize];
@@ -1227,10 +1090,7 @@ fn run_nlos(
         format!(
             "{}: NLOS {} capture, {}x{} sensed points, {} laser spot(s), gate {} | {} spp, {:.2} s rendering{} on {} | \
          total {total:.6e} -> {}",
-            scene_path
-                .file_name()
-                .map(|n| n.to_string_lossy())
-                .unwrap_or_default(),
+            scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
             scan.name(),
             w,
             h,
@@ -1238,11 +1098,7 @@ fn run_nlos(
             args.gate,
             film.spp,
             output.rendering.as_secs_f64(),
-            if aims.len() > 1 {
-                " per laser spot"
-            } else {
-                ""
-            },
+            if aims.len() > 1 { " per laser spot" } else { "" },
             ctx.adapter_info.name,
             out.display()
         ),
@@ -1287,7 +1143,11 @@ fn render_shard(
     })?;
     bar.finish_and_clear();
     if let Some(signal) = interrupt::received().filter(|_| output.stopped_early) {
-        eprintln!("{}: shard {index}/{count} stopped; {} was not written (rerun the shard)", interrupt::name(signal), out.display());
+        eprintln!(
+            "{}: shard {index}/{count} stopped; {} was not written (rerun the shard)",
+            interrupt::name(signal),
+            out.display()
+        );
         return Err(interrupt::Interrupted { signal }.into());
     }
     let state = output.state.as_ref().expect("the render keeps its state");
@@ -1323,8 +1183,10 @@ fn run_merge(args: MergeArgs) -> Result<()> {
         parts.push((path, read_state_file(path)?));
     }
     let (first_path, (first_fingerprint, _, first_header)) = &parts[0];
-    let not_a_shard = |path: &Path| anyhow::anyhow!("{}: not a shard (gatetrace render --shard I/N writes them)", path.display());
-    let count: u32 = first_fingerprint.get("shards").and_then(|n| n.parse().ok()).ok_or_else(|| not_a_shard(first_path))?;
+    let not_a_shard =
+        |path: &Path| anyhow::anyhow!("{}: not a shard (gatetrace render --shard I/N writes them)", path.display());
+    let count: u32 =
+        first_fingerprint.get("shards").and_then(|n| n.parse().ok()).ok_or_else(|| not_a_shard(first_path))?;
     let mut by_index: Vec<Option<usize>> = vec![None; count as usize];
     for (k, (path, (fingerprint, _, header))) in parts.iter().enumerate() {
         let problem = format!("not a shard of the render {} belongs to", first_path.display());
@@ -1335,7 +1197,8 @@ fn run_merge(args: MergeArgs) -> Result<()> {
         }
         by_index[index] = Some(k);
     }
-    let missing: Vec<String> = by_index.iter().enumerate().filter(|(_, k)| k.is_none()).map(|(i, _)| i.to_string()).collect();
+    let missing: Vec<String> =
+        by_index.iter().enumerate().filter(|(_, k)| k.is_none()).map(|(i, _)| i.to_string()).collect();
     ensure!(missing.is_empty(), "shards {} of {count} are missing", missing.join(", "));
     let order: Vec<usize> = by_index.into_iter().flatten().collect();
     let states: Vec<_> = order.iter().map(|&k| parts[k].1.1.clone()).collect();
@@ -1413,10 +1276,7 @@ fn render_one(
         None
     };
     let bar = bars.add(progress_bar(budget));
-    let prefix = label
-        .as_deref()
-        .map(|l| format!("{l}: "))
-        .unwrap_or_default();
+    let prefix = label.as_deref().map(|l| format!("{l}: ")).unwrap_or_default();
     let mut last_save = Instant::now();
     let keep_state = checkpoints.every.is_some();
     let start = gatetrace::integrator::RenderStart { resume: resumed.as_ref(), skip_samples: 0, keep_state };
@@ -1425,14 +1285,8 @@ fn render_one(
             Budget::Samples(_) => bar.set_position(p.spp),
             Budget::Time(_) => bar.set_position(p.rendering.as_millis() as u64),
         }
-        let rate = (p.spp * (settings.width * settings.height) as u64) as f64
-            / p.elapsed.as_secs_f64().max(1e-9);
-        bar.set_message(format!(
-            "{prefix}{} passes, {} spp, {:.2} Msamples/s",
-            p.passes,
-            p.spp,
-            rate / 1e6
-        ));
+        let rate = (p.spp * (settings.width * settings.height) as u64) as f64 / p.elapsed.as_secs_f64().max(1e-9);
+        bar.set_message(format!("{prefix}{} passes, {} spp, {:.2} Msamples/s", p.passes, p.spp, rate / 1e6));
         let stop = interrupt::received().is_some();
         if stop || checkpoints.every.is_some_and(|every| last_save.elapsed() >= every) {
             let mut state = tracer.save_state()?;
@@ -1452,10 +1306,7 @@ fn render_one(
     if let Some((index, plan)) = frame {
         metadata.push(("frame".into(), index.to_string()));
         metadata.push(("frames".into(), plan.count.to_string()));
-        metadata.push((
-            "gate_shift_m".into(),
-            (plan.gate_step * index as f64).to_string(),
-        ));
+        metadata.push(("gate_shift_m".into(), (plan.gate_step * index as f64).to_string()));
         if let Some(t) = plan.anim_time(index) {
             metadata.push(("anim_time_s".into(), t.to_string()));
         }
@@ -1503,10 +1354,7 @@ fn render_one(
         format!(
             "{}{}: {}x{} {} gate {} | {} spp{} in {:.2} s ({:.2} s rendering, {:.2} Msamples/s) on {} | mean RGB [{:.5}, {:.5}, {:.5}] -> {}",
             label.map(|l| format!("{l} ")).unwrap_or_default(),
-            scene_path
-                .file_name()
-                .map(|n| n.to_string_lossy())
-                .unwrap_or_default(),
+            scene_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
             settings.width,
             settings.height,
             match &output.choice {
@@ -1533,10 +1381,7 @@ fn render_one(
         ),
     )?;
     if let Some(choice) = &output.choice {
-        say(
-            bars,
-            format!("auto chose {}: {}", choice.chosen.name(), choice.reason),
-        )?;
+        say(bars, format!("auto chose {}: {}", choice.chosen.name(), choice.reason))?;
     }
     print_stats(settings, &output);
     Ok(())
@@ -1547,10 +1392,7 @@ fn print_stats(settings: &RenderSettings, output: &gatetrace::integrator::Render
     if let Some(report) = &output.stats {
         print!("{report}");
     } else if settings.stats {
-        println!(
-            "--stats: method {} keeps no per-strategy statistics",
-            settings.method.name()
-        );
+        println!("--stats: method {} keeps no per-strategy statistics", settings.method.name());
     }
 }
 
@@ -1570,12 +1412,7 @@ fn progress_bar(budget: Budget) -> indicatif::ProgressBar {
         Budget::Time(t) => (t.as_millis() as u64, "ms"),
     };
     let bar = indicatif::ProgressBar::new(len);
-    let template =
-        format!("{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{msg}} (ETA {{eta}})");
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(&template)
-            .unwrap()
-            .progress_chars("=> "),
-    );
+    let template = format!("{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {unit} {{msg}} (ETA {{eta}})");
+    bar.set_style(indicatif::ProgressStyle::with_template(&template).unwrap().progress_chars("=> "));
     bar
 }

@@ -283,7 +283,10 @@ pub fn wall_normal(scene: &PreparedScene, p: &WallPoint) -> Vec3 {
 /// Positions and normals of `points` as nested JSON arrays [rows][columns][3].
 fn grid_json(scene: &PreparedScene, points: &[WallPoint], width: u32) -> (serde_json::Value, serde_json::Value) {
     let rows = |f: &dyn Fn(&WallPoint) -> Vec3| -> serde_json::Value {
-        points.chunks(width as usize).map(|row| row.iter().map(|p| f(p).to_array().to_vec()).collect::<Vec<_>>()).collect()
+        points
+            .chunks(width as usize)
+            .map(|row| row.iter().map(|p| f(p).to_array().to_vec()).collect::<Vec<_>>())
+            .collect()
     };
     (rows(&|p| p.position), rows(&|p| wall_normal(scene, p)))
 }
@@ -357,7 +360,12 @@ pub struct ShellPreparation {
 /// Prepares a capture's scene for the shell connections of the band index (band_index.wesl)
 /// at bins `bin_width` metres wide: `close_surfaces`, then `refine_for_shells`. `outside`: the
 /// points every path starts and ends beyond the hidden scene (the sensor and laser origins).
-pub fn prepare_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64, outside: &[Vec3]) -> Result<ShellPreparation> {
+pub fn prepare_for_shells(
+    scene: &mut Scene,
+    relay_wall: &str,
+    bin_width: f64,
+    outside: &[Vec3],
+) -> Result<ShellPreparation> {
     let closed_meshes = close_surfaces(scene, relay_wall, outside)?;
     let mut done = refine_for_shells(scene, relay_wall, bin_width)?;
     done.closed_meshes = closed_meshes;
@@ -390,7 +398,10 @@ pub fn close_surfaces(scene: &mut Scene, relay_wall: &str, outside: &[Vec3]) -> 
     let mut one_sided: HashMap<u32, u32> = HashMap::new();
     let ranges: Vec<std::ops::Range<usize>> = scene.nodes.iter().map(|n| n.triangles.clone()).collect();
     for range in ranges {
-        if range.is_empty() || range == wall || !scene.triangles[range.clone()].iter().any(|t| scene.materials[t.material as usize].double_sided) {
+        if range.is_empty()
+            || range == wall
+            || !scene.triangles[range.clone()].iter().any(|t| scene.materials[t.material as usize].double_sided)
+        {
             continue;
         }
         let (lo, hi) = bounds(range.clone(), scene);
@@ -455,7 +466,8 @@ pub fn refine_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64) ->
         let [a, b, c] = t.positions;
         let longest = a.distance(b).max(a.distance(c)).max(b.distance(c)) as f64;
         // The nearest vertex's distance from the wall's box (at least 1 cm) stands for d.
-        let d = [a, b, c].iter().map(|&p| (p - p.clamp(lo, hi)).length()).fold(f32::INFINITY, f32::min).max(0.01) as f64;
+        let d =
+            [a, b, c].iter().map(|&p| (p - p.clamp(lo, hi)).length()).fold(f32::INFINITY, f32::min).max(0.01) as f64;
         let edge = scale * (0.75 * bin_width.max(REFINE_FINEST_BIN) * d).sqrt().min(d / 20.0);
         (longest / edge).ceil().clamp(1.0, MAX_REFINE_PIECES as f64) as u32
     };

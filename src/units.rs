@@ -10,17 +10,10 @@ pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
 /// `ps` or `ns` (times are converted to the distance light travels in that time).
 pub fn parse_length(text: &str) -> Result<f64> {
     let s = text.trim();
-    let units: [(&str, f64); 5] = [
-        ("mm", 1e-3),
-        ("um", 1e-6),
-        ("ps", SPEED_OF_LIGHT * 1e-12),
-        ("ns", SPEED_OF_LIGHT * 1e-9),
-        ("m", 1.0),
-    ];
-    let (number, scale) = units
-        .iter()
-        .find_map(|(suffix, scale)| s.strip_suffix(suffix).map(|n| (n.trim(), *scale)))
-        .unwrap_or((s, 1.0));
+    let units: [(&str, f64); 5] =
+        [("mm", 1e-3), ("um", 1e-6), ("ps", SPEED_OF_LIGHT * 1e-12), ("ns", SPEED_OF_LIGHT * 1e-9), ("m", 1.0)];
+    let (number, scale) =
+        units.iter().find_map(|(suffix, scale)| s.strip_suffix(suffix).map(|n| (n.trim(), *scale))).unwrap_or((s, 1.0));
     match number.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v * scale),
         _ => bail!("`{text}` is not a length: give metres (3.14, 3.14m, 2.5mm) or a time (12.5ps, 1ns)"),

@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, Result, anyhow, bail};
 use eframe::egui;
 
-use crate::film::{Gate, fixed};
 use crate::film::output::{Metadata, write_film};
+use crate::film::{Gate, fixed};
 use crate::gpu::layout::{DISPLAY_LINEAR, DISPLAY_LOG, DisplayParams};
 use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::integrator::{Integrator, Method, PassSizer, RenderSettings, create_integrator};
@@ -208,7 +208,11 @@ impl<'a> Viewer<'a> {
         viewer.sync()?;
         if let Some((x, y)) = viewer.options.profile_pixel {
             if x >= viewer.options.width || y >= viewer.options.height {
-                bail!("--profile-pixel {x},{y} lies outside the {}x{} image", viewer.options.width, viewer.options.height);
+                bail!(
+                    "--profile-pixel {x},{y} lies outside the {}x{} image",
+                    viewer.options.width,
+                    viewer.options.height
+                );
             }
             viewer.select_pixel((x, y))?;
         }
@@ -230,7 +234,8 @@ impl<'a> Viewer<'a> {
 
     fn settings(&self) -> RenderSettings {
         let o = &self.options;
-        let method = if o.gate == GateChoice::None && o.method == Method::Ellipsoidal { Method::Direct } else { o.method };
+        let method =
+            if o.gate == GateChoice::None && o.method == Method::Ellipsoidal { Method::Direct } else { o.method };
         RenderSettings {
             width: o.width,
             height: o.height,
@@ -297,7 +302,12 @@ impl<'a> Viewer<'a> {
         let view = texture.create_view(&Default::default());
         let texture_id = match &self.display {
             Some(old) => {
-                self.renderer.write().update_egui_texture_from_wgpu_texture(&ctx.device, &view, wgpu::FilterMode::Nearest, old.texture_id);
+                self.renderer.write().update_egui_texture_from_wgpu_texture(
+                    &ctx.device,
+                    &view,
+                    wgpu::FilterMode::Nearest,
+                    old.texture_id,
+                );
                 old.texture_id
             }
             None => self.renderer.write().register_native_texture(&ctx.device, &view, wgpu::FilterMode::Nearest),
@@ -342,16 +352,24 @@ impl<'a> Viewer<'a> {
         };
         let ctx = self.ctx;
         ctx.queue.write_buffer(&display.params, 0, bytemuck::bytes_of(&params));
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("resolve_display") });
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("resolve_display") });
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("resolve_display"), timestamp_writes: None });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("resolve_display"),
+                timestamp_writes: None,
+            });
             display.kernel.dispatch(&mut pass, &display.bind_group, self.options.width * self.options.height);
         }
         let (w, h) = (self.options.width, self.options.height);
         encoder.copy_buffer_to_texture(
             wgpu::TexelCopyBufferInfo {
                 buffer: &display.pixels,
-                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(display.stride * 4), rows_per_image: Some(h) },
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(display.stride * 4),
+                    rows_per_image: Some(h),
+                },
             },
             display.texture.as_image_copy(),
             wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
@@ -415,7 +433,8 @@ impl<'a> Viewer<'a> {
         if bins < 8 {
             bail!("the time profile needs at least 8 bins per pixel; this image is too large for one binding");
         }
-        let range = (self.lengths.0, self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)));
+        let range =
+            (self.lengths.0, self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)));
         let gate = Gate::Transient { start: range.0, width: (range.1 - range.0) / bins as f64, bins };
         let settings = RenderSettings {
             width: self.options.width,
@@ -473,7 +492,10 @@ impl<'a> Viewer<'a> {
             ui.selectable_value(&mut o.gate, GateChoice::Box, "box");
             ui.selectable_value(&mut o.gate, GateChoice::Gaussian, "gaussian");
         });
-        let (lo, hi) = (self.lengths.0 * 0.95, self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)));
+        let (lo, hi) = (
+            self.lengths.0 * 0.95,
+            self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)),
+        );
         ui.add_enabled_ui(o.gate != GateChoice::None, |ui| {
             ui.label("centre τ (m of optical path)");
             ui.add(egui::Slider::new(&mut o.tau, lo..=hi).max_decimals(5));
@@ -556,16 +578,22 @@ impl<'a> Viewer<'a> {
             metres_to_ps((p.range.1 - p.range.0) / p.bins as f64)
         ));
         let width = (p.range.1 - p.range.0) / p.bins as f64;
-        let points: Vec<[f64; 2]> = p.values.iter().enumerate().map(|(i, &v)| [p.range.0 + (i as f64 + 0.5) * width, v]).collect();
+        let points: Vec<[f64; 2]> =
+            p.values.iter().enumerate().map(|(i, &v)| [p.range.0 + (i as f64 + 0.5) * width, v]).collect();
         let gate = self.gate();
-        Plot::new("time_profile").height(ui.available_height().max(120.0)).x_axis_label("path length (m)").show(ui, |plot| {
-            plot.line(Line::new("radiance", points));
-            match gate {
-                Gate::Box { start, end } => plot.span(Span::new("gate", start..=end).fill(egui::Color32::from_rgba_unmultiplied(255, 200, 0, 60))),
-                Gate::Gaussian { mean, .. } => plot.vline(VLine::new("gate", mean)),
-                _ => {}
-            }
-        });
+        Plot::new("time_profile").height(ui.available_height().max(120.0)).x_axis_label("path length (m)").show(
+            ui,
+            |plot| {
+                plot.line(Line::new("radiance", points));
+                match gate {
+                    Gate::Box { start, end } => plot.span(
+                        Span::new("gate", start..=end).fill(egui::Color32::from_rgba_unmultiplied(255, 200, 0, 60)),
+                    ),
+                    Gate::Gaussian { mean, .. } => plot.vline(VLine::new("gate", mean)),
+                    _ => {}
+                }
+            },
+        );
     }
 
     fn screenshot_mode(&mut self, ctx: &egui::Context) -> Result<()> {
@@ -636,7 +664,8 @@ impl<'a> Viewer<'a> {
             let room = ui.available_size() * egui::vec2(1.0, 0.62);
             let zoom = (room.x / w).min(room.y / h).floor().max(1.0);
             let size = egui::vec2(w * zoom, h * zoom);
-            let image = egui::Image::new((display.texture_id, size)).fit_to_exact_size(size).sense(egui::Sense::click());
+            let image =
+                egui::Image::new((display.texture_id, size)).fit_to_exact_size(size).sense(egui::Sense::click());
             let response = ui.add(image);
             self.image_rect = Some(response.rect);
             if response.clicked()
@@ -667,9 +696,16 @@ impl eframe::App for Viewer<'_> {
 
 /// Writes the window's pixels as PNG and, beside it (FILE.json), the image's rectangle in those
 /// pixels, its samples per pixel and the display settings, for comparison with a headless render.
-fn save_screenshot(path: &Path, image: &egui::ColorImage, rect: Option<egui::Rect>, ppp: f32, viewer: &Viewer) -> Result<()> {
+fn save_screenshot(
+    path: &Path,
+    image: &egui::ColorImage,
+    rect: Option<egui::Rect>,
+    ppp: f32,
+    viewer: &Viewer,
+) -> Result<()> {
     let [w, h] = image.size;
-    let file = std::fs::File::create(path).with_context(|| format!("{}: cannot write the screenshot", path.display()))?;
+    let file =
+        std::fs::File::create(path).with_context(|| format!("{}: cannot write the screenshot", path.display()))?;
     let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
     encoder.set_color(png::ColorType::Rgba);
     encoder.set_depth(png::BitDepth::Eight);

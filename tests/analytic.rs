@@ -44,7 +44,8 @@ fn pixels_on_an_emitter_return_its_radiance() {
         }
     }
     // A gate beyond every path length gives black, not NaN.
-    let settings = RenderSettings { width: 16, height: 12, gate: Gate::Box { start: 5.0, end: 6.0 }, ..Default::default() };
+    let settings =
+        RenderSettings { width: 16, height: 12, gate: Gate::Box { start: 5.0, end: 6.0 }, ..Default::default() };
     let film = common::render_films(&ctx, &scene, &settings, 1, 4).remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
 }
@@ -53,7 +54,8 @@ fn pixels_on_an_emitter_return_its_radiance() {
 fn one_sided_emitters_are_dark_from_behind() {
     let scene = emitter_wall(7.5, false, 0.9, "emitter_back");
     let ctx = common::gpu();
-    let film = common::render_films(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 4).remove(0);
+    let film = common::render_films(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 4)
+        .remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
 }
 
@@ -126,7 +128,10 @@ fn first_return_of_a_plane_lit_from_the_camera() {
                 assert_eq!(mean[i], mean[i + 1], "grey scene: channels must agree");
             }
             let z = (sum - expected) / sum_var.sqrt().max(1e-12 * expected);
-            assert!(z.abs() < threshold, "pixel ({x}, {y}): {sum} vs closed form {expected} (z = {z:.2}, limit {threshold:.2})");
+            assert!(
+                z.abs() < threshold,
+                "pixel ({x}, {y}): {sum} vs closed form {expected} (z = {z:.2}, limit {threshold:.2})"
+            );
             // Light arrives only in the bins the pixel's path lengths cover.
             let nearest = |a: f64, b: f64| if a <= 0.0 && b >= 0.0 { 0.0 } else { a.abs().min(b.abs()) };
             let r_min2 = nearest(x0, x1).powi(2) + nearest(y0, y1).powi(2);
@@ -135,7 +140,11 @@ fn first_return_of_a_plane_lit_from_the_camera() {
             for b in 0..bins {
                 let (lo, hi) = (start + b as f64 * width, start + (b + 1) as f64 * width);
                 if hi < shortest - slack || lo > longest + slack {
-                    assert_eq!(mean[(p * bins + b) * 3], 0.0, "pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]");
+                    assert_eq!(
+                        mean[(p * bins + b) * 3],
+                        0.0,
+                        "pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]"
+                    );
                 }
             }
             let centre = (x == w / 2 - 1 || x == w / 2) && (y == h / 2 - 1 || y == h / 2);
@@ -158,7 +167,13 @@ fn smooth_gates_weigh_each_path_by_its_length() {
     let batches = 16;
     let threshold = t_critical(sidak(0.01, gates.len() * (PLANE_RES * PLANE_RES) as usize), (batches - 1) as f64);
     for gate in gates {
-        let settings = RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, gate: gate.clone(), ..Default::default() };
+        let settings = RenderSettings {
+            width: PLANE_RES,
+            height: PLANE_RES,
+            max_bounces: 1,
+            gate: gate.clone(),
+            ..Default::default()
+        };
         let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
         let (mean, var) = (stats.mean(), stats.var_of_mean());
         let (kind, g, table) = (gate.kind(), gate.to_gpu(), gate.table());
@@ -179,7 +194,12 @@ fn smooth_gates_weigh_each_path_by_its_length() {
                 let expected = PLANE_RHO * PLANE_I / (std::f64::consts::PI * PLANE_D * PLANE_D) * acc / (n * n) as f64;
                 let i = ((y * PLANE_RES + x) * 3) as usize;
                 let z = (mean[i] - expected) / var[i].sqrt().max(1e-9 * expected.abs());
-                assert!(z.abs() < threshold, "{}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2})", gate.describe(), mean[i]);
+                assert!(
+                    z.abs() < threshold,
+                    "{}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2})",
+                    gate.describe(),
+                    mean[i]
+                );
             }
         }
     }
@@ -232,7 +252,8 @@ fn cw_gates_accumulate_signed_weights() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let base = RenderSettings { width: 16, height: 16, max_bounces: 4, seed: 8, ..Default::default() };
-    let render = |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, 8).remove(0);
+    let render =
+        |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, 8).remove(0);
     let steady = render(Gate::None);
     let cw0 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 0.0 });
     let cw180 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 180.0 });
@@ -326,7 +347,10 @@ fn pixels_partly_on_the_light_read_radiance_times_coverage() {
             } else {
                 partial += 1;
                 let z = (got - expected) / var[i].sqrt();
-                assert!(z.abs() < limit, "pixel ({x}, {y}): {got:.5} vs {expected:.5} (coverage {coverage:.5}, z = {z:.2})");
+                assert!(
+                    z.abs() < limit,
+                    "pixel ({x}, {y}): {got:.5} vs {expected:.5} (coverage {coverage:.5}, z = {z:.2})"
+                );
             }
         }
     }
@@ -401,7 +425,8 @@ fn a_spot_light_lights_the_plane_by_its_falloff() {
     let threshold = t_critical(sidak(0.01, methods.len() * (PLANE_RES * PLANE_RES) as usize), (batches - 1) as f64);
     let n = 48;
     for method in methods {
-        let settings = RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, method, ..Default::default() };
+        let settings =
+            RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, method, ..Default::default() };
         let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
         let (mean, var) = (stats.mean(), stats.var_of_mean());
         let (mut lit, mut dark, mut edge) = (0, 0, 0);
@@ -431,13 +456,21 @@ fn a_spot_light_lights_the_plane_by_its_falloff() {
                 // The cone bounds it from above: its light is that of the cone's faint edge.
                 let lit_samples = inside as f64 / (n * n) as f64 * (batches * 64) as f64;
                 if lit_samples < 100.0 {
-                    assert!(mean[i] >= 0.0 && mean[i] < 0.01 * PLANE_RHO * PLANE_I / PLANE_D.powi(2), "{method:?}: edge pixel ({x}, {y}) {}", mean[i]);
+                    assert!(
+                        mean[i] >= 0.0 && mean[i] < 0.01 * PLANE_RHO * PLANE_I / PLANE_D.powi(2),
+                        "{method:?}: edge pixel ({x}, {y}) {}",
+                        mean[i]
+                    );
                     edge += 1;
                     continue;
                 }
                 lit += 1;
                 let z = (mean[i] - expected) / var[i].sqrt().max(1e-9 * expected);
-                assert!(z.abs() < threshold, "{method:?}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2}, limit {threshold:.2})", mean[i]);
+                assert!(
+                    z.abs() < threshold,
+                    "{method:?}: pixel ({x}, {y}) {} vs {expected} (z = {z:.2}, limit {threshold:.2})",
+                    mean[i]
+                );
             }
         }
         assert!(lit > 20 && dark > 20 && edge < 16, "{method:?}: {lit} lit, {edge} edge and {dark} dark pixels");
@@ -498,7 +531,10 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
         // them, so `direct` is judged by its image mean (about 650 splats) and per pixel only by
         // where its light arrives.
         if method == Method::Direct {
-            let image: Vec<f64> = films.iter().map(|f| f.data.iter().step_by(3).map(|&v| v as f64).sum::<f64>() / (w * h) as f64).collect();
+            let image: Vec<f64> = films
+                .iter()
+                .map(|f| f.data.iter().step_by(3).map(|&v| v as f64).sum::<f64>() / (w * h) as f64)
+                .collect();
             let n = image.len() as f64;
             let m = image.iter().sum::<f64>() / n;
             let v = image.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0) / n;
@@ -520,7 +556,10 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
                     // exactly rho E / pi (to f32 rounding of the factors, a few ulps): the variance
                     // can vanish, so allow 8 f32 ulps.
                     let z = (sum - expected) / sum_var.sqrt().max(8.0 * f32::EPSILON as f64 * expected);
-                    assert!(z.abs() < threshold, "{method:?}: pixel ({x}, {y}) {sum} vs {expected} (z = {z:.2}, limit {threshold:.2})");
+                    assert!(
+                        z.abs() < threshold,
+                        "{method:?}: pixel ({x}, {y}) {sum} vs {expected} (z = {z:.2}, limit {threshold:.2})"
+                    );
                 }
                 let nearest = |a: f64, b: f64| if a <= 0.0 && b >= 0.0 { 0.0 } else { a.abs().min(b.abs()) };
                 let r_min2 = nearest(x0, x1).powi(2) + nearest(y0, y1).powi(2);
@@ -529,7 +568,11 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
                 for b in 0..bins {
                     let (lo, hi) = (start + b as f64 * width, start + (b + 1) as f64 * width);
                     if hi < shortest - slack || lo > longest + slack {
-                        assert_eq!(mean[(p * bins + b) * 3], 0.0, "{method:?}: pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]");
+                        assert_eq!(
+                            mean[(p * bins + b) * 3],
+                            0.0,
+                            "{method:?}: pixel ({x}, {y}) bin [{lo}, {hi}) outside [{shortest}, {longest}]"
+                        );
                     }
                 }
             }

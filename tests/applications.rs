@@ -18,7 +18,8 @@ fn scene_gate(name: &str) -> Gate {
 
 fn gated_mean(scene: &PreparedScene, gate: Gate, method: Method) -> f64 {
     let ctx = common::gpu();
-    let settings = RenderSettings { width: 16, height: 16, max_bounces: 3, gate, method, seed: 5, ..Default::default() };
+    let settings =
+        RenderSettings { width: 16, height: 16, max_bounces: 3, gate, method, seed: 5, ..Default::default() };
     let film = common::render_films(&ctx, scene, &settings, 1, 16).remove(0);
     film.mean_rgb()[0]
 }
@@ -29,7 +30,10 @@ fn fence_scene_renders_its_gate_through_the_thin_lens() {
     assert!(scene.camera.lens.is_some(), "the fence is seen through a thin lens");
     let scene = PreparedScene::new(scene).unwrap();
     for method in [Method::Path, Method::Direct, Method::Ellipsoidal] {
-        assert!(gated_mean(&scene, scene_gate("fence.gltf"), method) > 0.0, "{method:?}: the gate holds the figure's light");
+        assert!(
+            gated_mean(&scene, scene_gate("fence.gltf"), method) > 0.0,
+            "{method:?}: the gate holds the figure's light"
+        );
     }
 }
 
@@ -59,7 +63,10 @@ fn cw_room_code_selects_the_figure_depth() {
     let (gated, steady) = (render(scene_gate("cw_room.gltf")), render(Gate::None));
     let centre = |film: &gatetrace::film::Film| -> f64 {
         // The 4 x 4 pixels about the centre, red channel.
-        (6..10).flat_map(|y| (6..10).map(move |x| (y, x))).map(|(y, x)| film.data[((y * 16 + x) * 3) as usize] as f64).sum()
+        (6..10)
+            .flat_map(|y| (6..10).map(move |x| (y, x)))
+            .map(|(y, x)| film.data[((y * 16 + x) * 3) as usize] as f64)
+            .sum()
     };
     let whole = |film: &gatetrace::film::Film| film.mean_rgb()[0];
     let kept_by_figure = centre(&gated) / centre(&steady);

@@ -18,9 +18,7 @@ fn auto_settings(gate: &str) -> RenderSettings {
         max_bounces: 4,
         method: Method::Auto,
         gate: Gate::parse(gate).unwrap(),
-        connections_per_query: gatetrace::integrator::bidirectional::default_connections_per_query(
-            Method::Auto,
-        ),
+        connections_per_query: gatetrace::integrator::bidirectional::default_connections_per_query(Method::Auto),
         seed: 11,
         ..Default::default()
     }
@@ -32,46 +30,22 @@ fn pilot_picks_ellipsoidal_for_a_millimetre_gate_and_direct_for_a_metre() {
     let scene = common::cornell_box();
     // At 1 mm (0.03 % of the box's path lengths) the pilots measured ratios of hundreds in
     // ellipsoidal's favour; at 1 m, direct's by 2-3x (README: auto).
-    for (gate, expected) in [
-        ("box:3.14..3.141", Method::Ellipsoidal),
-        ("box:3.14..4.14", Method::Direct),
-    ] {
-        let output = render(
-            &ctx,
-            &scene,
-            &auto_settings(gate),
-            Budget::Samples(256),
-            |_| {},
-        )
-        .unwrap();
+    for (gate, expected) in [("box:3.14..3.141", Method::Ellipsoidal), ("box:3.14..4.14", Method::Direct)] {
+        let output = render(&ctx, &scene, &auto_settings(gate), Budget::Samples(256), |_| {}).unwrap();
         let choice = output.choice.expect("auto reports its choice");
         assert_eq!(choice.chosen, expected, "gate {gate}: {}", choice.reason);
-        assert_eq!(
-            output.film.spp, 256,
-            "the film holds the budget's samples, the pilot's discarded"
-        );
+        assert_eq!(output.film.spp, 256, "the film holds the budget's samples, the pilot's discarded");
         assert_eq!(choice.candidates.len(), 2);
         // At 1 mm one method is hundreds of times ahead and the pilot stops after 4 batches of
         // each; at 1 m it is 2-3 times ahead and the pilot runs its 8.
         let early = choice.reason.contains("stopped after 4 of 8 batches");
-        assert_eq!(
-            early,
-            expected == Method::Ellipsoidal,
-            "gate {gate}: {}",
-            choice.reason
-        );
+        assert_eq!(early, expected == Method::Ellipsoidal, "gate {gate}: {}", choice.reason);
         for c in &choice.candidates {
             // 256 / 16 samples per method, in batches of 2.
             assert_eq!(c.spp, if early { 8 } else { 16 }, "{:?}", c.method);
-            assert!(
-                c.seconds > 0.0 && c.variance_per_sample.is_finite(),
-                "{c:?}"
-            );
+            assert!(c.seconds > 0.0 && c.variance_per_sample.is_finite(), "{c:?}");
         }
-        assert!(
-            output.film.mean_rgb()[0] > 0.0,
-            "gate {gate}: light reaches the gate"
-        );
+        assert!(output.film.mean_rgb()[0] > 0.0, "gate {gate}: light reaches the gate");
     }
 }
 
@@ -79,11 +53,7 @@ fn pilot_picks_ellipsoidal_for_a_millimetre_gate_and_direct_for_a_metre() {
 fn pilot_renders_a_smaller_image_and_the_render_is_the_chosen_methods() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let settings = RenderSettings {
-        width: 64,
-        height: 64,
-        ..auto_settings("box:3.14..3.141")
-    };
+    let settings = RenderSettings { width: 64, height: 64, ..auto_settings("box:3.14..3.141") };
     let auto = render(&ctx, &scene, &settings, Budget::Samples(16), |_| {}).unwrap();
     let choice = auto.choice.expect("auto reports its choice");
     assert_eq!(choice.chosen, Method::Ellipsoidal, "{}", choice.reason);
@@ -96,36 +66,17 @@ fn pilot_renders_a_smaller_image_and_the_render_is_the_chosen_methods() {
     // The pilot ran from a seed of its own: the image is ellipsoidal's with the same seed, bit
     // for bit (the film's sums are exact), where another seed differs by the noise itself.
     let direct = gatetrace::integrator::auto::candidate_settings(&settings, Method::Ellipsoidal);
-    let same = render(&ctx, &scene, &direct, Budget::Samples(16), |_| {})
-        .unwrap()
-        .film;
-    let other = render(
-        &ctx,
-        &scene,
-        &RenderSettings { seed: 12, ..direct },
-        Budget::Samples(16),
-        |_| {},
-    )
-    .unwrap()
-    .film;
+    let same = render(&ctx, &scene, &direct, Budget::Samples(16), |_| {}).unwrap().film;
+    let other = render(&ctx, &scene, &RenderSettings { seed: 12, ..direct }, Budget::Samples(16), |_| {}).unwrap().film;
     let largest = same.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-    let difference = |a: &[f32], b: &[f32]| {
-        a.iter()
-            .zip(b)
-            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()))
-            / largest
-    };
+    let difference = |a: &[f32], b: &[f32]| a.iter().zip(b).fold(0.0f32, |m, (x, y)| m.max((x - y).abs())) / largest;
     assert!(largest > 0.0);
     assert!(
         auto.film.data == same.data,
         "auto's image differs from ellipsoidal's by {}",
         difference(&auto.film.data, &same.data)
     );
-    assert!(
-        difference(&other.data, &same.data) > 1e-2,
-        "{}",
-        difference(&other.data, &same.data)
-    );
+    assert!(difference(&other.data, &same.data) > 1e-2, "{}", difference(&other.data, &same.data));
 }
 
 #[test]
@@ -135,15 +86,11 @@ fn steady_state_takes_direct_without_a_pilot_and_directional_lights_get_one() {
     let output = render(&ctx, &scene, &auto_settings("none"), Budget::Samples(4), |_| {}).unwrap();
     let choice = output.choice.unwrap();
     assert_eq!(choice.chosen, Method::Direct);
-    assert!(
-        choice.candidates.is_empty() && choice.pilot_seconds == 0.0,
-        "{choice:?}"
-    );
+    assert!(choice.candidates.is_empty() && choice.pilot_seconds == 0.0, "{choice:?}");
     assert!(choice.reason.contains("need a gate"), "{}", choice.reason);
 
     let path = common::repo_path("assets/scenes/cornell_box_directional.gltf");
-    let scene =
-        gatetrace::scene::PreparedScene::new(gatetrace::scene::load_gltf(&path).unwrap()).unwrap();
+    let scene = gatetrace::scene::PreparedScene::new(gatetrace::scene::load_gltf(&path).unwrap()).unwrap();
     let output = render(&ctx, &scene, &auto_settings("box:3.6..3.7"), Budget::Samples(4), |_| {}).unwrap();
     // Ellipsoidal connections serve directional lights too: both methods are measured.
     let choice = output.choice.unwrap();
@@ -157,26 +104,13 @@ fn a_time_budget_counts_the_pilot() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let budget = Budget::Time(std::time::Duration::from_secs_f64(2.0));
-    let output = render(
-        &ctx,
-        &scene,
-        &auto_settings("box:3.14..3.19"),
-        budget,
-        |_| {},
-    )
-    .unwrap();
+    let output = render(&ctx, &scene, &auto_settings("box:3.14..3.19"), budget, |_| {}).unwrap();
     let choice = output.choice.unwrap();
     let rendering = output.rendering.as_secs_f64();
-    assert!(
-        choice.pilot_seconds > 0.0 && choice.pilot_seconds < rendering,
-        "{choice:?} in {rendering} s"
-    );
+    assert!(choice.pilot_seconds > 0.0 && choice.pilot_seconds < rendering, "{choice:?} in {rendering} s");
     // The pilot's share is 5 % of the budget, or more when 8 one-sample batches of each method
     // take longer; the render ends within its budget (plus at most one pass's overrun).
-    assert!(
-        rendering < 2.0 * 1.5,
-        "rendering took {rendering} s of a 2 s budget"
-    );
+    assert!(rendering < 2.0 * 1.5, "rendering took {rendering} s of a 2 s budget");
     assert!(output.film.spp >= 1);
 }
 
@@ -185,17 +119,7 @@ fn cli_records_the_choice_and_refuses_auto_where_it_does_not_apply() {
     let dir = common::scratch_dir("auto_cli");
     let out = dir.join("auto.npy");
     let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
-        .args([
-            "render",
-            "--method",
-            "auto",
-            "--gate",
-            "box:3.14..3.141",
-            "--res",
-            "16x16",
-            "--spp",
-            "32",
-        ])
+        .args(["render", "--method", "auto", "--gate", "box:3.14..3.141", "--res", "16x16", "--spp", "32"])
         .arg("--out")
         .arg(&out)
         .output()
@@ -207,36 +131,16 @@ fn cli_records_the_choice_and_refuses_auto_where_it_does_not_apply() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("auto.json")).unwrap()).unwrap();
     assert_eq!(meta["method"], "auto");
     assert_eq!(meta["chosen_method"], "ellipsoidal");
-    assert!(
-        meta["auto_pilot_direct"]
-            .as_str()
-            .unwrap()
-            .contains("variance per sample"),
-        "{meta}"
-    );
+    assert!(meta["auto_pilot_direct"].as_str().unwrap().contains("variance per sample"), "{meta}");
     assert_eq!(meta["connections_per_query"], "4");
 
     for (args, message) in [
-        (
-            &["view", "--method", "auto"][..],
-            "viewer renders progressively",
-        ),
-        (
-            &[
-                "render", "--method", "auto", "--nlos", "confocal", "--res", "4x4",
-            ][..],
-            "NLOS",
-        ),
+        (&["view", "--method", "auto"][..], "viewer renders progressively"),
+        (&["render", "--method", "auto", "--nlos", "confocal", "--res", "4x4"][..], "NLOS"),
     ] {
-        let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
-            .args(args)
-            .output()
-            .unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_gatetrace")).args(args).output().unwrap();
         let stderr = String::from_utf8_lossy(&o.stderr);
-        assert!(
-            !o.status.success() && stderr.contains(message),
-            "{args:?}: {stderr}"
-        );
+        assert!(!o.status.success() && stderr.contains(message), "{args:?}: {stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }

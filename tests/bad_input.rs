@@ -12,7 +12,8 @@ use serde_json::{Value, json};
 
 /// The Cornell box's glTF document (one embedded buffer).
 fn cornell_box_json() -> Value {
-    serde_json::from_str(&std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.gltf")).unwrap()).unwrap()
+    serde_json::from_str(&std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.gltf")).unwrap())
+        .unwrap()
 }
 
 /// A quad lit by an emissive quad behind the camera, with the given first-quad positions.
@@ -64,7 +65,12 @@ struct Case {
 }
 
 /// Builds a case whose files are written by `setup` into its directory.
-fn case(name: &'static str, setup: impl FnOnce(&Path) + 'static, args: Vec<String>, needles: &[&str]) -> (Case, Box<dyn FnOnce(&Path)>) {
+fn case(
+    name: &'static str,
+    setup: impl FnOnce(&Path) + 'static,
+    args: Vec<String>,
+    needles: &[&str],
+) -> (Case, Box<dyn FnOnce(&Path)>) {
     let c = Case { name, args, needles: needles.iter().map(|s| s.to_string()).collect() };
     let setup: Box<dyn FnOnce(&Path)> = Box::new(setup);
     (c, setup)
@@ -113,7 +119,13 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
     let render = |scene: &str, extra: &[&str]| -> Vec<String> {
         let tiny = ["--res", "8x8", "--spp", "1", "--max-bounces", "2"];
         let tail = ["--out", "{out}"];
-        std::iter::once("render").chain([scene]).chain(tiny).chain(extra.iter().copied()).chain(tail).map(String::from).collect()
+        std::iter::once("render")
+            .chain([scene])
+            .chain(tiny)
+            .chain(extra.iter().copied())
+            .chain(tail)
+            .map(String::from)
+            .collect()
     };
     // `render` of the default scene with `extra` options, writing {out}.
     let default_scene = |extra: &[&str]| -> Vec<String> {
@@ -122,117 +134,297 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
     let plain = |args: &[&str]| -> Vec<String> { args.iter().map(|s| s.to_string()).collect() };
     vec![
         // --- files that are not glTF ---
-        case("empty file", |d| std::fs::write(d.join("empty.gltf"), b"").unwrap(), render("{dir}/empty.gltf", &[]),
-             &["empty.gltf", "not a valid glTF"]),
-        case("malformed JSON", |d| std::fs::write(d.join("bad.gltf"), b"{\"asset\": {\"version\": \"2.0\"},").unwrap(),
-             render("{dir}/bad.gltf", &[]), &["bad.gltf", "not a valid glTF"]),
-        case("truncated glTF", |d| {
-            let text = std::fs::read(common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
-            std::fs::write(d.join("half.gltf"), &text[..text.len() / 2]).unwrap();
-        }, render("{dir}/half.gltf", &[]), &["half.gltf", "not a valid glTF"]),
-        case("truncated GLB", |d| {
-            let bytes = glb(&cornell_box_json());
-            std::fs::write(d.join("half.glb"), &bytes[..bytes.len() / 2]).unwrap();
-        }, render("{dir}/half.glb", &[]), &["half.glb", "not a valid glTF"]),
+        case(
+            "empty file",
+            |d| std::fs::write(d.join("empty.gltf"), b"").unwrap(),
+            render("{dir}/empty.gltf", &[]),
+            &["empty.gltf", "not a valid glTF"],
+        ),
+        case(
+            "malformed JSON",
+            |d| std::fs::write(d.join("bad.gltf"), b"{\"asset\": {\"version\": \"2.0\"},").unwrap(),
+            render("{dir}/bad.gltf", &[]),
+            &["bad.gltf", "not a valid glTF"],
+        ),
+        case(
+            "truncated glTF",
+            |d| {
+                let text = std::fs::read(common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
+                std::fs::write(d.join("half.gltf"), &text[..text.len() / 2]).unwrap();
+            },
+            render("{dir}/half.gltf", &[]),
+            &["half.gltf", "not a valid glTF"],
+        ),
+        case(
+            "truncated GLB",
+            |d| {
+                let bytes = glb(&cornell_box_json());
+                std::fs::write(d.join("half.glb"), &bytes[..bytes.len() / 2]).unwrap();
+            },
+            render("{dir}/half.glb", &[]),
+            &["half.glb", "not a valid glTF"],
+        ),
         case("missing scene file", none, render("{dir}/nowhere.gltf", &[]), &["nowhere.gltf", "cannot read"]),
         // --- buffers and images ---
-        case("missing buffer", box_with("missing_buffer.gltf", |d| d["buffers"][0]["uri"] = json!("gone.bin")),
-             render("{dir}/missing_buffer.gltf", &[]), &["missing_buffer.gltf", "cannot load a buffer"]),
-        case("short buffer", box_with("short_buffer.gltf", |d| {
-            let n = d["buffers"][0]["byteLength"].as_u64().unwrap();
-            d["buffers"][0]["byteLength"] = json!(n + 64);
-        }), render("{dir}/short_buffer.gltf", &[]), &["short_buffer.gltf", "buffer"]),
-        case("missing image", box_with("missing_image.gltf", |d| {
-            d["images"] = json!([{"uri": "gone.png"}]);
-            d["textures"] = json!([{"source": 0}]);
-            d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
-        }), render("{dir}/missing_image.gltf", &[]), &["missing_image.gltf", "cannot load an image"]),
-        case("corrupt image", |d| {
-            std::fs::write(d.join("noise.png"), b"\x89PNG\r\n\x1a\n this is not a PNG").unwrap();
-            box_with("corrupt_image.gltf", |d| {
-                d["images"] = json!([{"uri": "noise.png"}]);
+        case(
+            "missing buffer",
+            box_with("missing_buffer.gltf", |d| d["buffers"][0]["uri"] = json!("gone.bin")),
+            render("{dir}/missing_buffer.gltf", &[]),
+            &["missing_buffer.gltf", "cannot load a buffer"],
+        ),
+        case(
+            "short buffer",
+            box_with("short_buffer.gltf", |d| {
+                let n = d["buffers"][0]["byteLength"].as_u64().unwrap();
+                d["buffers"][0]["byteLength"] = json!(n + 64);
+            }),
+            render("{dir}/short_buffer.gltf", &[]),
+            &["short_buffer.gltf", "buffer"],
+        ),
+        case(
+            "missing image",
+            box_with("missing_image.gltf", |d| {
+                d["images"] = json!([{"uri": "gone.png"}]);
                 d["textures"] = json!([{"source": 0}]);
                 d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
-            })(d)
-        }, render("{dir}/corrupt_image.gltf", &[]), &["corrupt_image.gltf", "image"]),
+            }),
+            render("{dir}/missing_image.gltf", &[]),
+            &["missing_image.gltf", "cannot load an image"],
+        ),
+        case(
+            "corrupt image",
+            |d| {
+                std::fs::write(d.join("noise.png"), b"\x89PNG\r\n\x1a\n this is not a PNG").unwrap();
+                box_with("corrupt_image.gltf", |d| {
+                    d["images"] = json!([{"uri": "noise.png"}]);
+                    d["textures"] = json!([{"source": 0}]);
+                    d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
+                })(d)
+            },
+            render("{dir}/corrupt_image.gltf", &[]),
+            &["corrupt_image.gltf", "image"],
+        ),
         // --- accessors ---
-        case("POSITION accessor of type SCALAR", box_with("scalar_positions.gltf", |d| {
-            // min and max stay VEC3-sized, so only the type is wrong.
-            d["accessors"][0]["type"] = json!("SCALAR");
-        }), render("{dir}/scalar_positions.gltf", &[]), &["scalar_positions.gltf", "POSITION", "VEC3"]),
-        case("POSITION accessor of unsigned bytes", box_with("byte_positions.gltf", |d| d["accessors"][0]["componentType"] = json!(5121)),
-             render("{dir}/byte_positions.gltf", &[]), &["byte_positions.gltf", "POSITION", "float"]),
-        case("index accessor of type VEC2", box_with("vec2_indices.gltf", |d| {
-            // Half the count, so that the bytes still fit the view and only the type is wrong.
-            d["accessors"][2]["type"] = json!("VEC2");
-            d["accessors"][2]["count"] = json!(3);
-        }),
-             render("{dir}/vec2_indices.gltf", &[]), &["vec2_indices.gltf", "indices", "SCALAR"]),
-        case("accessor of no elements", box_with("empty_accessor.gltf", |d| d["accessors"][0]["count"] = json!(0)),
-             render("{dir}/empty_accessor.gltf", &[]), &["empty_accessor.gltf", "accessors[0]", "count 0"]),
-        case("buffer view past its buffer", box_with("long_view.gltf", |d| d["bufferViews"][1]["byteLength"] = json!(18_446_744_073_709_551_615u64)),
-             render("{dir}/long_view.gltf", &[]), &["long_view.gltf", "bufferViews[1]", "outside buffer 0"]),
-        case("accessor past its buffer", box_with("long_accessor.gltf", |d| d["accessors"][0]["count"] = json!(4000)),
-             render("{dir}/long_accessor.gltf", &[]), &["long_accessor.gltf"]),
-        case("index out of range", |d| {
-            let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
-            s.meshes[0].indices = vec![0, 1, 7];
-            s.write(d, "bad_index.gltf");
-        }, render("{dir}/bad_index.gltf", &[]), &["bad_index.gltf", "index 7 is out of range"]),
+        case(
+            "POSITION accessor of type SCALAR",
+            box_with("scalar_positions.gltf", |d| {
+                // min and max stay VEC3-sized, so only the type is wrong.
+                d["accessors"][0]["type"] = json!("SCALAR");
+            }),
+            render("{dir}/scalar_positions.gltf", &[]),
+            &["scalar_positions.gltf", "POSITION", "VEC3"],
+        ),
+        case(
+            "POSITION accessor of unsigned bytes",
+            box_with("byte_positions.gltf", |d| d["accessors"][0]["componentType"] = json!(5121)),
+            render("{dir}/byte_positions.gltf", &[]),
+            &["byte_positions.gltf", "POSITION", "float"],
+        ),
+        case(
+            "index accessor of type VEC2",
+            box_with("vec2_indices.gltf", |d| {
+                // Half the count, so that the bytes still fit the view and only the type is wrong.
+                d["accessors"][2]["type"] = json!("VEC2");
+                d["accessors"][2]["count"] = json!(3);
+            }),
+            render("{dir}/vec2_indices.gltf", &[]),
+            &["vec2_indices.gltf", "indices", "SCALAR"],
+        ),
+        case(
+            "accessor of no elements",
+            box_with("empty_accessor.gltf", |d| d["accessors"][0]["count"] = json!(0)),
+            render("{dir}/empty_accessor.gltf", &[]),
+            &["empty_accessor.gltf", "accessors[0]", "count 0"],
+        ),
+        case(
+            "buffer view past its buffer",
+            box_with("long_view.gltf", |d| d["bufferViews"][1]["byteLength"] = json!(18_446_744_073_709_551_615u64)),
+            render("{dir}/long_view.gltf", &[]),
+            &["long_view.gltf", "bufferViews[1]", "outside buffer 0"],
+        ),
+        case(
+            "accessor past its buffer",
+            box_with("long_accessor.gltf", |d| d["accessors"][0]["count"] = json!(4000)),
+            render("{dir}/long_accessor.gltf", &[]),
+            &["long_accessor.gltf"],
+        ),
+        case(
+            "index out of range",
+            |d| {
+                let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
+                s.meshes[0].indices = vec![0, 1, 7];
+                s.write(d, "bad_index.gltf");
+            },
+            render("{dir}/bad_index.gltf", &[]),
+            &["bad_index.gltf", "index 7 is out of range"],
+        ),
         // --- coordinates ---
-        case("NaN vertex", |d| write_with_bounds(d, "nan.gltf", [f32::NAN, -1.0, -1.0]),
-             render("{dir}/nan.gltf", &[]), &["nan.gltf", "vertex 1 is not finite"]),
-        case("infinite vertex", |d| write_with_bounds(d, "inf.gltf", [1.0, f32::INFINITY, -1.0]),
-             render("{dir}/inf.gltf", &[]), &["inf.gltf", "vertex 1 is not finite"]),
-        case("non-finite vertex without bounds", |d| {
-            lit_scene(vec![[-1.0, -1.0, -1.0], [f32::INFINITY, -1.0, -1.0], [0.0, 1.0, -1.0]]).write(d, "inf_no_bounds.gltf");
-        }, render("{dir}/inf_no_bounds.gltf", &[]), &["inf_no_bounds.gltf", "POSITION", "min"]),
-        case("vertex at 1e30 m", |d| { lit_scene(vec![[-1.0, -1.0, -1.0], [1e30, -1.0, -1.0], [0.0, 1.0, -1.0]]).write(d, "far_vertex.gltf"); },
-             render("{dir}/far_vertex.gltf", &[]), &["far_vertex.gltf", "1e30", "m"]),
-        case("node translated by 1e30 m", box_with("far_node.gltf", |d| d["nodes"][0]["translation"] = json!([1e30, 0.0, 0.0])),
-             render("{dir}/far_node.gltf", &[]), &["far_node.gltf", "node `floor`", "1e30"]),
-        case("only degenerate triangles", |d| {
-            let mut s = lit_scene(vec![[0.0, 0.0, -1.0]; 6]);
-            s.meshes[1] = Mesh { positions: vec![[1.0, 1.0, 1.0]; 3], normals: None, uvs: None, indices: vec![0, 1, 2], material: Some(1) };
-            s.write(d, "degenerate.gltf");
-        }, render("{dir}/degenerate.gltf", &[]), &["degenerate.gltf", "zero area"]),
+        case(
+            "NaN vertex",
+            |d| write_with_bounds(d, "nan.gltf", [f32::NAN, -1.0, -1.0]),
+            render("{dir}/nan.gltf", &[]),
+            &["nan.gltf", "vertex 1 is not finite"],
+        ),
+        case(
+            "infinite vertex",
+            |d| write_with_bounds(d, "inf.gltf", [1.0, f32::INFINITY, -1.0]),
+            render("{dir}/inf.gltf", &[]),
+            &["inf.gltf", "vertex 1 is not finite"],
+        ),
+        case(
+            "non-finite vertex without bounds",
+            |d| {
+                lit_scene(vec![[-1.0, -1.0, -1.0], [f32::INFINITY, -1.0, -1.0], [0.0, 1.0, -1.0]])
+                    .write(d, "inf_no_bounds.gltf");
+            },
+            render("{dir}/inf_no_bounds.gltf", &[]),
+            &["inf_no_bounds.gltf", "POSITION", "min"],
+        ),
+        case(
+            "vertex at 1e30 m",
+            |d| {
+                lit_scene(vec![[-1.0, -1.0, -1.0], [1e30, -1.0, -1.0], [0.0, 1.0, -1.0]]).write(d, "far_vertex.gltf");
+            },
+            render("{dir}/far_vertex.gltf", &[]),
+            &["far_vertex.gltf", "1e30", "m"],
+        ),
+        case(
+            "node translated by 1e30 m",
+            box_with("far_node.gltf", |d| d["nodes"][0]["translation"] = json!([1e30, 0.0, 0.0])),
+            render("{dir}/far_node.gltf", &[]),
+            &["far_node.gltf", "node `floor`", "1e30"],
+        ),
+        case(
+            "only degenerate triangles",
+            |d| {
+                let mut s = lit_scene(vec![[0.0, 0.0, -1.0]; 6]);
+                s.meshes[1] = Mesh {
+                    positions: vec![[1.0, 1.0, 1.0]; 3],
+                    normals: None,
+                    uvs: None,
+                    indices: vec![0, 1, 2],
+                    material: Some(1),
+                };
+                s.write(d, "degenerate.gltf");
+            },
+            render("{dir}/degenerate.gltf", &[]),
+            &["degenerate.gltf", "zero area"],
+        ),
         // --- camera and lights ---
-        case("no camera", |d| { let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]); s.camera = None; s.write(d, "no_camera.gltf"); },
-             render("{dir}/no_camera.gltf", &[]), &["no_camera.gltf", "no camera"]),
-        case("no light", box_with("no_light.gltf", |d| {
-            for m in d["materials"].as_array_mut().unwrap() {
-                m.as_object_mut().unwrap().remove("emissiveFactor");
-            }
-        }), render("{dir}/no_light.gltf", &[]), &["no_light.gltf", "no light"]),
-        case("zero-power light", |d| {
-            let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
-            s.materials[1] = Material::diffuse([0.5; 3]);
-            s.point_lights = vec![PointLight { position: [0.0, 0.0, 0.0], intensity: 0.0 }];
-            s.write(d, "dark_light.gltf");
-        }, render("{dir}/dark_light.gltf", &[]), &["dark_light.gltf", "no power"]),
+        case(
+            "no camera",
+            |d| {
+                let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
+                s.camera = None;
+                s.write(d, "no_camera.gltf");
+            },
+            render("{dir}/no_camera.gltf", &[]),
+            &["no_camera.gltf", "no camera"],
+        ),
+        case(
+            "no light",
+            box_with("no_light.gltf", |d| {
+                for m in d["materials"].as_array_mut().unwrap() {
+                    m.as_object_mut().unwrap().remove("emissiveFactor");
+                }
+            }),
+            render("{dir}/no_light.gltf", &[]),
+            &["no_light.gltf", "no light"],
+        ),
+        case(
+            "zero-power light",
+            |d| {
+                let mut s = lit_scene(vec![[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [0.0, 1.0, -1.0]]);
+                s.materials[1] = Material::diffuse([0.5; 3]);
+                s.point_lights = vec![PointLight { position: [0.0, 0.0, 0.0], intensity: 0.0 }];
+                s.write(d, "dark_light.gltf");
+            },
+            render("{dir}/dark_light.gltf", &[]),
+            &["dark_light.gltf", "no power"],
+        ),
         // --- animations ---
-        case("animation keys out of order", |d| {
-            let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box_moving_block.gltf")).unwrap()).unwrap();
-            let input = doc["animations"][0]["samplers"][0]["input"].as_u64().unwrap() as usize;
-            doc["accessors"][input]["count"] = json!(1);
-            doc["animations"][0]["samplers"][0]["output"] = json!(input);
-            write_json(d, "bad_animation.gltf", &doc);
-        }, render("{dir}/bad_animation.gltf", &["--anim-time", "0.5"]), &["bad_animation.gltf", "animation"]),
-        case("--anim-time without animation", none, default_scene(&["--res", "8x8", "--spp", "1", "--anim-time", "0.5"]),
-             &["--anim-time", "no animation"]),
+        case(
+            "animation keys out of order",
+            |d| {
+                let mut doc: Value = serde_json::from_str(
+                    &std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box_moving_block.gltf")).unwrap(),
+                )
+                .unwrap();
+                let input = doc["animations"][0]["samplers"][0]["input"].as_u64().unwrap() as usize;
+                doc["accessors"][input]["count"] = json!(1);
+                doc["animations"][0]["samplers"][0]["output"] = json!(input);
+                write_json(d, "bad_animation.gltf", &doc);
+            },
+            render("{dir}/bad_animation.gltf", &["--anim-time", "0.5"]),
+            &["bad_animation.gltf", "animation"],
+        ),
+        case(
+            "--anim-time without animation",
+            none,
+            default_scene(&["--res", "8x8", "--spp", "1", "--anim-time", "0.5"]),
+            &["--anim-time", "no animation"],
+        ),
         // --- gates ---
-        case("box gate ending before it starts", none, default_scene(&["--gate", "box:3.2..3.1"]), &["--gate box:3.2..3.1", "must exceed"]),
-        case("gaussian gate with sigma 0", none, default_scene(&["--gate", "gaussian:3,0"]), &["--gate gaussian:3,0", "sigma"]),
-        case("cw gate at a negative frequency", none, default_scene(&["--gate", "cw:-20e6,0"]), &["--gate cw:-20e6,0", "frequency"]),
-        case("cw gate with an unknown code", none, default_scene(&["--gate", "cw:20e6,0,zigzag"]), &["--gate cw:20e6,0,zigzag", "unknown cw code"]),
-        case("transient gate of 0 bins", none, default_scene(&["--gate", "transient:3,0.01,0"]), &["--gate transient:3,0.01,0", "bins"]),
-        case("transient gate of negative width", none, default_scene(&["--gate", "transient:3,-0.01,8"]), &["--gate transient:3,-0.01,8", "width"]),
-        case("unknown gate kind", none, default_scene(&["--gate", "wobble:1"]), &["--gate wobble:1", "unknown gate kind"]),
-        case("gate length that is no number", none, default_scene(&["--gate", "box:1x..2"]), &["--gate box:1x..2", "not a length"]),
-        case("malformed gate table", |d| std::fs::write(d.join("gate.csv"), "3.0,1.0\n3.1,heavy\n").unwrap(),
-             default_scene(&["--gate", "table:{dir}/gate.csv"]), &["gate.csv:2", "length,weight"]),
-        case("gate table with decreasing lengths", |d| std::fs::write(d.join("gate.csv"), "3.1,1.0\n3.0,0.5\n").unwrap(),
-             default_scene(&["--gate", "table:{dir}/gate.csv"]), &["gate.csv", "increase"]),
+        case(
+            "box gate ending before it starts",
+            none,
+            default_scene(&["--gate", "box:3.2..3.1"]),
+            &["--gate box:3.2..3.1", "must exceed"],
+        ),
+        case(
+            "gaussian gate with sigma 0",
+            none,
+            default_scene(&["--gate", "gaussian:3,0"]),
+            &["--gate gaussian:3,0", "sigma"],
+        ),
+        case(
+            "cw gate at a negative frequency",
+            none,
+            default_scene(&["--gate", "cw:-20e6,0"]),
+            &["--gate cw:-20e6,0", "frequency"],
+        ),
+        case(
+            "cw gate with an unknown code",
+            none,
+            default_scene(&["--gate", "cw:20e6,0,zigzag"]),
+            &["--gate cw:20e6,0,zigzag", "unknown cw code"],
+        ),
+        case(
+            "transient gate of 0 bins",
+            none,
+            default_scene(&["--gate", "transient:3,0.01,0"]),
+            &["--gate transient:3,0.01,0", "bins"],
+        ),
+        case(
+            "transient gate of negative width",
+            none,
+            default_scene(&["--gate", "transient:3,-0.01,8"]),
+            &["--gate transient:3,-0.01,8", "width"],
+        ),
+        case(
+            "unknown gate kind",
+            none,
+            default_scene(&["--gate", "wobble:1"]),
+            &["--gate wobble:1", "unknown gate kind"],
+        ),
+        case(
+            "gate length that is no number",
+            none,
+            default_scene(&["--gate", "box:1x..2"]),
+            &["--gate box:1x..2", "not a length"],
+        ),
+        case(
+            "malformed gate table",
+            |d| std::fs::write(d.join("gate.csv"), "3.0,1.0\n3.1,heavy\n").unwrap(),
+            default_scene(&["--gate", "table:{dir}/gate.csv"]),
+            &["gate.csv:2", "length,weight"],
+        ),
+        case(
+            "gate table with decreasing lengths",
+            |d| std::fs::write(d.join("gate.csv"), "3.1,1.0\n3.0,0.5\n").unwrap(),
+            default_scene(&["--gate", "table:{dir}/gate.csv"]),
+            &["gate.csv", "increase"],
+        ),
         case("missing gate table", none, default_scene(&["--gate", "table:{dir}/none.csv"]), &["none.csv"]),
         // --- sizes and counts ---
         case("zero resolution", none, default_scene(&["--res", "0x4"]), &["--res", "resolution"]),
@@ -244,63 +436,176 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
         case("negative time", none, default_scene(&["--time", "-1"]), &["--time", "positive"]),
         case("negative bounces", none, default_scene(&["--max-bounces", "-1"]), &["--max-bounces"]),
         case("absurd bounces", none, default_scene(&["--max-bounces", "5000000"]), &["--max-bounces"]),
-        case("too many bidirectional bounces", none, default_scene(&["--method", "direct", "--max-bounces", "30"]),
-             &["at most 24 bounces"]),
-        case("transient cube that cannot fit", none, default_scene(&["--res", "16384x16384", "--gate", "transient:3,0.001,4096"]),
-             &["--res 16384x16384", "4096 bins", "GiB"]),
+        case(
+            "too many bidirectional bounces",
+            none,
+            default_scene(&["--method", "direct", "--max-bounces", "30"]),
+            &["at most 24 bounces"],
+        ),
+        case(
+            "transient cube that cannot fit",
+            none,
+            default_scene(&["--res", "16384x16384", "--gate", "transient:3,0.001,4096"]),
+            &["--res 16384x16384", "4096 bins", "GiB"],
+        ),
         // --- methods and options ---
         case("unknown method", none, default_scene(&["--method", "magic"]), &["--method", "magic"]),
         case("--spp with --time", none, default_scene(&["--spp", "4", "--time", "2"]), &["--spp", "--time"]),
-        case("ellipsoidal without a gate", none, default_scene(&["--method", "ellipsoidal"]),
-             &["ellipsoidal", "draws target path lengths from the gate"]),
-        case("--debug-strategy without direct", none, default_scene(&["--debug-strategy", "1,2"]), &["--debug-strategy", "needs --method direct"]),
-        case("--target-pilot with path", none, default_scene(&["--target-pilot", "16"]), &["--target-pilot", "ellipsoidal"]),
+        case(
+            "ellipsoidal without a gate",
+            none,
+            default_scene(&["--method", "ellipsoidal"]),
+            &["ellipsoidal", "draws target path lengths from the gate"],
+        ),
+        case(
+            "--debug-strategy without direct",
+            none,
+            default_scene(&["--debug-strategy", "1,2"]),
+            &["--debug-strategy", "needs --method direct"],
+        ),
+        case(
+            "--target-pilot with path",
+            none,
+            default_scene(&["--target-pilot", "16"]),
+            &["--target-pilot", "ellipsoidal"],
+        ),
         case("a lens without focus", none, default_scene(&["--aperture-radius", "0.1"]), &["give --focus-distance"]),
-        case("a negative focus distance", none, default_scene(&["--aperture-radius", "0.1", "--focus-distance", "-2"]),
-             &["--aperture-radius/--focus-distance", "focus distance -2 m is not a positive length"]),
-        case("a NaN aperture", none, default_scene(&["--aperture-radius", "nan", "--focus-distance", "2"]), &["--aperture-radius/--focus-distance", "aperture radius NaN m"]),
-        case("a strategy that does not exist", none, default_scene(&["--method", "direct", "--debug-strategy", "0,1"]),
-             &["--debug-strategy", "not a strategy"]),
-        case("a strategy of one number", none, default_scene(&["--method", "direct", "--debug-strategy", "1"]),
-             &["--debug-strategy", "S,T"]),
+        case(
+            "a negative focus distance",
+            none,
+            default_scene(&["--aperture-radius", "0.1", "--focus-distance", "-2"]),
+            &["--aperture-radius/--focus-distance", "focus distance -2 m is not a positive length"],
+        ),
+        case(
+            "a NaN aperture",
+            none,
+            default_scene(&["--aperture-radius", "nan", "--focus-distance", "2"]),
+            &["--aperture-radius/--focus-distance", "aperture radius NaN m"],
+        ),
+        case(
+            "a strategy that does not exist",
+            none,
+            default_scene(&["--method", "direct", "--debug-strategy", "0,1"]),
+            &["--debug-strategy", "not a strategy"],
+        ),
+        case(
+            "a strategy of one number",
+            none,
+            default_scene(&["--method", "direct", "--debug-strategy", "1"]),
+            &["--debug-strategy", "S,T"],
+        ),
         // --- checkpoints ---
-        case("--resume without a checkpoint", none, default_scene(&["--res", "8x8", "--resume"]), &["--resume", "out.npy.checkpoint"]),
-        case("--resume with another seed", |d| checkpointed(d, &["--seed", "1"]),
-             default_scene(&["--res", "8x8", "--spp", "8", "--max-bounces", "2", "--seed", "2", "--resume"]),
-             &["out.npy.checkpoint", "another render", "seed: 1"]),
-        case("--resume to fewer samples than taken", |d| checkpointed(d, &[]),
-             default_scene(&["--res", "8x8", "--spp", "2", "--max-bounces", "2", "--resume"]), &["out.npy.checkpoint", "4 spp already"]),
-        case("--resume from a corrupt checkpoint", |d| std::fs::write(d.join("out.npy.checkpoint"), b"GATETRACE-CHECKPOINT\n{").unwrap(),
-             default_scene(&["--res", "8x8", "--resume"]), &["out.npy.checkpoint", "header"]),
-        case("negative --checkpoint-every", none, default_scene(&["--checkpoint-every", "-1"]), &["--checkpoint-every", "seconds"]),
-        case("--resume of an NLOS capture", none,
-             render(&common::repo_path("assets/scenes/nlos_letter.gltf").display().to_string(), &["--nlos", "confocal", "--resume"]),
-             &["--resume", "NLOS"]),
+        case(
+            "--resume without a checkpoint",
+            none,
+            default_scene(&["--res", "8x8", "--resume"]),
+            &["--resume", "out.npy.checkpoint"],
+        ),
+        case(
+            "--resume with another seed",
+            |d| checkpointed(d, &["--seed", "1"]),
+            default_scene(&["--res", "8x8", "--spp", "8", "--max-bounces", "2", "--seed", "2", "--resume"]),
+            &["out.npy.checkpoint", "another render", "seed: 1"],
+        ),
+        case(
+            "--resume to fewer samples than taken",
+            |d| checkpointed(d, &[]),
+            default_scene(&["--res", "8x8", "--spp", "2", "--max-bounces", "2", "--resume"]),
+            &["out.npy.checkpoint", "4 spp already"],
+        ),
+        case(
+            "--resume from a corrupt checkpoint",
+            |d| std::fs::write(d.join("out.npy.checkpoint"), b"GATETRACE-CHECKPOINT\n{").unwrap(),
+            default_scene(&["--res", "8x8", "--resume"]),
+            &["out.npy.checkpoint", "header"],
+        ),
+        case(
+            "negative --checkpoint-every",
+            none,
+            default_scene(&["--checkpoint-every", "-1"]),
+            &["--checkpoint-every", "seconds"],
+        ),
+        case(
+            "--resume of an NLOS capture",
+            none,
+            render(
+                &common::repo_path("assets/scenes/nlos_letter.gltf").display().to_string(),
+                &["--nlos", "confocal", "--resume"],
+            ),
+            &["--resume", "NLOS"],
+        ),
         // --- shards ---
         case("--shard with --time", none, default_scene(&["--shard", "0/2", "--time", "1"]), &["--shard", "--spp"]),
-        case("--shard of auto", none, default_scene(&["--shard", "0/2", "--method", "auto", "--gate", "box:3.14..3.19"]),
-             &["--shard", "auto"]),
+        case(
+            "--shard of auto",
+            none,
+            default_scene(&["--shard", "0/2", "--method", "auto", "--gate", "box:3.14..3.19"]),
+            &["--shard", "auto"],
+        ),
         case("--shard past its count", none, default_scene(&["--shard", "4/4"]), &["--shard", "0 <= I < N"]),
         case("--shard that is no fraction", none, default_scene(&["--shard", "half"]), &["--shard", "I/N"]),
-        case("merge with a shard missing", |d| shards(d, &[0, 1, 3], &[]), plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/3.shard", "--out", "{out}"]),
-             &["shards 2 of 4 are missing"]),
-        case("merge with a shard twice", |d| shards(d, &[0, 1, 2, 3], &[]),
-             plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/1.shard", "{dir}/2.shard", "{dir}/3.shard", "--out", "{out}"]),
-             &["1.shard", "both shard 1/4"]),
-        case("merge of shards of two renders", |d| { shards(d, &[0, 1, 2], &[]); shards(d, &[3], &["--seed", "5"]); },
-             plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/2.shard", "{dir}/3.shard", "--out", "{out}"]),
-             &["3.shard", "not a shard of the render", "seed: 0"]),
-        case("merge of a checkpoint", |d| checkpointed(d, &[]), plain(&["merge", "{dir}/out.npy.checkpoint", "--out", "{dir}/m.npy"]),
-             &["out.npy.checkpoint", "not a shard"]),
+        case(
+            "merge with a shard missing",
+            |d| shards(d, &[0, 1, 3], &[]),
+            plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/3.shard", "--out", "{out}"]),
+            &["shards 2 of 4 are missing"],
+        ),
+        case(
+            "merge with a shard twice",
+            |d| shards(d, &[0, 1, 2, 3], &[]),
+            plain(&[
+                "merge",
+                "{dir}/0.shard",
+                "{dir}/1.shard",
+                "{dir}/1.shard",
+                "{dir}/2.shard",
+                "{dir}/3.shard",
+                "--out",
+                "{out}",
+            ]),
+            &["1.shard", "both shard 1/4"],
+        ),
+        case(
+            "merge of shards of two renders",
+            |d| {
+                shards(d, &[0, 1, 2], &[]);
+                shards(d, &[3], &["--seed", "5"]);
+            },
+            plain(&["merge", "{dir}/0.shard", "{dir}/1.shard", "{dir}/2.shard", "{dir}/3.shard", "--out", "{out}"]),
+            &["3.shard", "not a shard of the render", "seed: 0"],
+        ),
+        case(
+            "merge of a checkpoint",
+            |d| checkpointed(d, &[]),
+            plain(&["merge", "{dir}/out.npy.checkpoint", "--out", "{dir}/m.npy"]),
+            &["out.npy.checkpoint", "not a shard"],
+        ),
         // --- outputs ---
-        case("unknown output format", none, plain(&["render", "--res", "8x8", "--out", "{dir}/image.png"]), &["image.png", ".exr or .npy"]),
-        case("output under a regular file", |d| std::fs::write(d.join("file"), b"").unwrap(),
-             plain(&["render", "--res", "8x8", "--out", "{dir}/file/x.npy"]), &["file", "cannot create the directory"]),
-        case("output that is a directory", |d| std::fs::create_dir(d.join("x.npy")).unwrap(),
-             plain(&["render", "--res", "8x8", "--out", "{dir}/x.npy"]), &["x.npy", "cannot write the output file"]),
+        case(
+            "unknown output format",
+            none,
+            plain(&["render", "--res", "8x8", "--out", "{dir}/image.png"]),
+            &["image.png", ".exr or .npy"],
+        ),
+        case(
+            "output under a regular file",
+            |d| std::fs::write(d.join("file"), b"").unwrap(),
+            plain(&["render", "--res", "8x8", "--out", "{dir}/file/x.npy"]),
+            &["file", "cannot create the directory"],
+        ),
+        case(
+            "output that is a directory",
+            |d| std::fs::create_dir(d.join("x.npy")).unwrap(),
+            plain(&["render", "--res", "8x8", "--out", "{dir}/x.npy"]),
+            &["x.npy", "cannot write the output file"],
+        ),
         // Unwritable even for root (CI runs as root, for whom permission bits do not count).
-        case("output on a read-only file system", none, plain(&["render", "--res", "8x8", "--out", "/proc/gatetrace.npy"]),
-             &["/proc/gatetrace.npy", "cannot write the output file"]),
+        case(
+            "output on a read-only file system",
+            none,
+            plain(&["render", "--res", "8x8", "--out", "/proc/gatetrace.npy"]),
+            &["/proc/gatetrace.npy", "cannot write the output file"],
+        ),
     ]
 }
 
@@ -353,7 +658,13 @@ fn every_bad_input_gets_a_clear_error_and_no_output() {
             problems.push(format!("wrote {written:?}"));
         }
         if !problems.is_empty() {
-            failures.push(format!("{} ({}): {}\n    stderr: {}", c.name, args.join(" "), problems.join("; "), err.trim()));
+            failures.push(format!(
+                "{} ({}): {}\n    stderr: {}",
+                c.name,
+                args.join(" "),
+                problems.join("; "),
+                err.trim()
+            ));
         }
     }
     assert!(failures.is_empty(), "{} cases failed:\n{}", failures.len(), failures.join("\n"));
@@ -495,10 +806,12 @@ mod properties {
             .map(Just)
             .collect::<Vec<_>>()
             .into_iter()
-            .fold(None::<BoxedStrategy<Value>>, |acc, s| Some(match acc {
-                None => s.boxed(),
-                Some(a) => prop_oneof![a, s].boxed(),
-            }))
+            .fold(None::<BoxedStrategy<Value>>, |acc, s| {
+                Some(match acc {
+                    None => s.boxed(),
+                    Some(a) => prop_oneof![a, s].boxed(),
+                })
+            })
             .unwrap()
     }
 

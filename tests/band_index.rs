@@ -31,7 +31,8 @@ fn clusters_partition_the_triangles_into_small_subtrees() {
         assert_eq!(end, nodes[root as usize].skip, "a cluster is its root's whole subtree");
         assert!(end - root <= CLUSTER_NODES || nodes[root as usize].leaf != 0, "cluster at {root} too large");
         // Its leaves address exactly [first, last), with no gap.
-        let leaf_triangles: u32 = nodes[root as usize..end as usize].iter().filter_map(|n| n.leaf_range()).map(|r| r.len() as u32).sum();
+        let leaf_triangles: u32 =
+            nodes[root as usize..end as usize].iter().filter_map(|n| n.leaf_range()).map(|r| r.len() as u32).sum();
         assert_eq!(leaf_triangles, last - first, "cluster at {root}: its triangles are not contiguous");
         for t in first..last {
             covered[t as usize] += 1;
@@ -46,7 +47,14 @@ fn clusters_partition_the_triangles_into_small_subtrees() {
 /// example's occluder when `occluder`), with the band index (its scene prepared for shells as
 /// the command line does: the closed sphere one-sided, large triangles cut) or without; returns
 /// them and the index's report.
-fn capture(aim: LaserAim, band_index: bool, occluder: bool, seed: u32, batches: usize, spp: u32) -> (Vec<Film>, Option<String>) {
+fn capture(
+    aim: LaserAim,
+    band_index: bool,
+    occluder: bool,
+    seed: u32,
+    batches: usize,
+    spp: u32,
+) -> (Vec<Film>, Option<String>) {
     let ctx = common::gpu();
     let gate = Gate::Transient { start: 0.85, width: 0.0024, bins: 300 };
     let mut scene = common::nlos_sphere_scene_unprepared(16, occluder);
@@ -59,7 +67,10 @@ fn capture(aim: LaserAim, band_index: bool, occluder: bool, seed: u32, batches: 
     // Without the index: exhaustive queries (the exact arcs at each target length; the
     // stochastic descent reaches some slivers of the sphere's limb too rarely for a few thousand
     // samples to estimate its error there), each bin visited equally (no pilot).
-    let query = gatetrace::integrator::QuerySettings { reflection_weights: true, ..gatetrace::integrator::QuerySettings::EXHAUSTIVE };
+    let query = gatetrace::integrator::QuerySettings {
+        reflection_weights: true,
+        ..gatetrace::integrator::QuerySettings::EXHAUSTIVE
+    };
     let settings = gatetrace::integrator::RenderSettings {
         seed,
         band_index,
@@ -112,7 +123,13 @@ fn band_index_agrees_with_exhaustive_queries(scan: &str, aim: LaserAim, occluder
     );
     assert!(stray <= 1e-4 * total, "{scan}: {:.2e} of the energy where the queries found none", stray / total);
     let reached: Vec<(f64, f64, f64)> = reached.into_iter().copied().collect();
-    common::assert_groups_agree(&format!("{scan}, band index vs exhaustive queries"), "group", &reached, (BATCHES - 1) as f64, 0.01);
+    common::assert_groups_agree(
+        &format!("{scan}, band index vs exhaustive queries"),
+        "group",
+        &reached,
+        (BATCHES - 1) as f64,
+        0.01,
+    );
     // Whole-capture energy.
     let energy = common::compare_films(&indexed, &queried, 1, |_| Some(0))[0];
     println!("{scan}: energy {:.6e} vs {:.6e} (z {:+.2})", energy.0, energy.1, energy.2);
@@ -147,7 +164,6 @@ fn confocal_band_index_agrees_with_exhaustive_queries_behind_the_occluder() {
 fn single_scan_band_index_agrees_with_exhaustive_queries_on_a_hidden_sphere() {
     band_index_agrees_with_exhaustive_queries("single", LaserAim::Spot(glam::Vec2::new(0.3, 0.6)), false);
 }
-
 
 /// The occluder's two large triangles over 4000 bins of 0.3 mm (1 ps): indexing their cluster
 /// whole would take one invocation past lavapipe's loop limit, so the build fills it over
@@ -320,7 +336,12 @@ fn wgsl_strip_point_matches_its_twin() {
         let (x, y) = (a + (c - a) * rng.next_f32(), a + (c - a) * rng.next_f32());
         let (lo, hi) = (x.min(y), x.max(y));
         let (u1, u2) = (rng.next_f32(), rng.next_f32());
-        input.extend([[v[0].x, v[0].y, v[0].z, lo], [v[1].x, v[1].y, v[1].z, hi], [v[2].x, v[2].y, v[2].z, u1], [l[0], l[1], l[2], u2]]);
+        input.extend([
+            [v[0].x, v[0].y, v[0].z, lo],
+            [v[1].x, v[1].y, v[1].z, hi],
+            [v[2].x, v[2].y, v[2].z, u1],
+            [l[0], l[1], l[2], u2],
+        ]);
         let b = l[0].min(l[1]).max(l[0].max(l[1]).min(l[2]));
         expected.push((strip_point(v, l, lo, hi, u1, u2), tent_cdf(a, b, c, hi) - tent_cdf(a, b, c, lo), v));
     }
@@ -360,8 +381,11 @@ fn refining_for_shells_keeps_the_surface() {
             assert_eq!(uv.len(), b.triangles.len());
         }
     }
-    let normal = |t: &gatetrace::scene::SceneTriangle| (t.positions[1] - t.positions[0]).cross(t.positions[2] - t.positions[0]).normalize();
-    let occluder = (scene.node("occluder").unwrap().triangles.clone(), refined.node("occluder").unwrap().triangles.clone());
+    let normal = |t: &gatetrace::scene::SceneTriangle| {
+        (t.positions[1] - t.positions[0]).cross(t.positions[2] - t.positions[0]).normalize()
+    };
+    let occluder =
+        (scene.node("occluder").unwrap().triangles.clone(), refined.node("occluder").unwrap().triangles.clone());
     assert!(occluder.1.len() > 100 * occluder.0.len(), "the occluder was cut into {} pieces", occluder.1.len());
     for t in &refined.triangles[occluder.1.clone()] {
         let longest = (0..3).map(|i| t.positions[i].distance(t.positions[(i + 1) % 3])).fold(0.0f32, f32::max);
@@ -384,7 +408,10 @@ fn closed_surfaces_become_one_sided_and_nothing_else() {
     let origin = Vec3::new(-1.2, 0.0, 0.6);
     let scene = common::nlos_sphere_scene_unprepared(4, true);
     let sided = |s: &gatetrace::scene::Scene, node: &str| -> Vec<bool> {
-        s.triangles[s.node(node).unwrap().triangles.clone()].iter().map(|t| s.materials[t.material as usize].double_sided).collect()
+        s.triangles[s.node(node).unwrap().triangles.clone()]
+            .iter()
+            .map(|t| s.materials[t.material as usize].double_sided)
+            .collect()
     };
     assert!(sided(&scene, "hidden_sphere").iter().all(|&d| d), "the test expects a double-sided sphere");
     let mut closed = scene.clone();
@@ -417,8 +444,26 @@ fn the_command_line_decides_the_band_index_by_the_scene() {
     let letter = common::repo_path("assets/scenes/nlos_letter.gltf");
     let render = |name: &str, extra: &[&str]| -> serde_json::Value {
         let out = dir.join(format!("{name}.npy"));
-        let mut args = vec!["render", letter.to_str().unwrap(), "--nlos", "confocal", "--method", "ellipsoidal", "--res", "4x4", "--max-bounces", "3",
-                            "--gate", "transient:0.9,0.0048,80", "--spp", "96", "--seed", "3", "-o", out.to_str().unwrap()];
+        let mut args = vec![
+            "render",
+            letter.to_str().unwrap(),
+            "--nlos",
+            "confocal",
+            "--method",
+            "ellipsoidal",
+            "--res",
+            "4x4",
+            "--max-bounces",
+            "3",
+            "--gate",
+            "transient:0.9,0.0048,80",
+            "--spp",
+            "96",
+            "--seed",
+            "3",
+            "-o",
+            out.to_str().unwrap(),
+        ];
         args.extend_from_slice(extra);
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_gatetrace")).args(&args).output().unwrap();
         assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
@@ -432,5 +477,8 @@ fn the_command_line_decides_the_band_index_by_the_scene() {
     let report = on["band_index"].as_str().unwrap();
     assert!(report.contains("clusters") && !report.starts_with("off"), "{report}");
     let prepared = on["shell_preparation"].as_str().unwrap();
-    assert!(prepared.contains("triangles cut into pieces") && !prepared.starts_with("0 closed meshes made one-sided, 0 "), "{prepared}");
+    assert!(
+        prepared.contains("triangles cut into pieces") && !prepared.starts_with("0 closed meshes made one-sided, 0 "),
+        "{prepared}"
+    );
 }

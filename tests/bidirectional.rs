@@ -71,7 +71,11 @@ fn direct_matches_path_at_gaussian_cw_and_table_gates() {
 fn modified_cornell_box(point: bool, double_sided: bool) -> PreparedScene {
     let mut scene = load_gltf(&common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
     if point {
-        scene.point_lights.push(PointLight { position: glam::Vec3::new(0.2, -0.3, -0.1), intensity: glam::Vec3::new(0.3, 0.2, 0.1), spot: None });
+        scene.point_lights.push(PointLight {
+            position: glam::Vec3::new(0.2, -0.3, -0.1),
+            intensity: glam::Vec3::new(0.3, 0.2, 0.1),
+            spot: None,
+        });
     }
     for m in &mut scene.materials {
         m.double_sided |= double_sided;
@@ -108,7 +112,8 @@ fn debug_strategy_images_sum_to_the_full_render() {
     // (each MIS-weighted) add up to the full render up to f32 rounding.
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 7, ..Default::default() };
+    let base =
+        RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 7, ..Default::default() };
     let render = |s: &RenderSettings| {
         let mut tracer = BidirectionalTracer::new(&ctx, &scene, s).unwrap();
         tracer.render_samples(16).unwrap();
@@ -142,9 +147,9 @@ fn zero_weight_connections_trace_no_shadow_ray() {
     };
     let steady = render(Gate::None);
     let gated = render(Gate::Box { start: 3.14, end: 3.19 });
-    let total = |st: &[gatetrace::integrator::StrategyStats], f: fn(&gatetrace::integrator::StrategyStats) -> u64| -> u64 {
-        st.iter().map(f).sum()
-    };
+    let total = |st: &[gatetrace::integrator::StrategyStats],
+                 f: fn(&gatetrace::integrator::StrategyStats) -> u64|
+     -> u64 { st.iter().map(f).sum() };
     // Steady state: nothing is skipped; every shadow ray belongs to an evaluated connection.
     assert_eq!(total(&steady, |s| s.skipped_by_gate), 0);
     for st in steady.iter().chain(&gated) {
@@ -172,9 +177,20 @@ fn bidirectional_films_are_the_same_bits_however_additions_are_ordered_and_group
     // they are grouped into passes.
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    for (method, gate) in [(Method::Direct, Gate::None), (Method::Ellipsoidal, Gate::Box { start: 3.14, end: 3.19 }),
-                           (Method::Ellipsoidal, Gate::Transient { start: 3.0, width: 0.1, bins: 6 })] {
-        let base = RenderSettings { width: 16, height: 16, max_bounces: 3, method, gate: gate.clone(), seed: 9, ..Default::default() };
+    for (method, gate) in [
+        (Method::Direct, Gate::None),
+        (Method::Ellipsoidal, Gate::Box { start: 3.14, end: 3.19 }),
+        (Method::Ellipsoidal, Gate::Transient { start: 3.0, width: 0.1, bins: 6 }),
+    ] {
+        let base = RenderSettings {
+            width: 16,
+            height: 16,
+            max_bounces: 3,
+            method,
+            gate: gate.clone(),
+            seed: 9,
+            ..Default::default()
+        };
         let render = |per_pass: u32| {
             let s = RenderSettings { samples_per_pass: Some(per_pass), ..base.clone() };
             let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
@@ -201,14 +217,38 @@ fn assert_ellipsoidal_matches_direct(label: &str, scene: &PreparedScene, gate: G
 #[test]
 fn ellipsoidal_matches_direct_at_box_gates() {
     let scene = common::cornell_box();
-    assert_ellipsoidal_matches_direct("ellipsoidal box [3.14, 3.19)", &scene, Gate::Box { start: 3.14, end: 3.19 }, 32, 400);
-    assert_ellipsoidal_matches_direct("ellipsoidal box [2.0, 2.6)", &scene, Gate::Box { start: 2.0, end: 2.6 }, 32, 410);
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal box [3.14, 3.19)",
+        &scene,
+        Gate::Box { start: 3.14, end: 3.19 },
+        32,
+        400,
+    );
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal box [2.0, 2.6)",
+        &scene,
+        Gate::Box { start: 2.0, end: 2.6 },
+        32,
+        410,
+    );
 }
 
 #[test]
 fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
-    assert_ellipsoidal_matches_direct("ellipsoidal gaussian 3.2, 0.05", &common::cornell_box(), Gate::Gaussian { mean: 3.2, sigma: 0.05 }, 32, 420);
-    assert_ellipsoidal_matches_direct("ellipsoidal glossy box [3.0, 3.3)", &glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 32, 430);
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal gaussian 3.2, 0.05",
+        &common::cornell_box(),
+        Gate::Gaussian { mean: 3.2, sigma: 0.05 },
+        32,
+        420,
+    );
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal glossy box [3.0, 3.3)",
+        &glossy_cornell_box(),
+        Gate::Box { start: 3.0, end: 3.3 },
+        32,
+        430,
+    );
 }
 
 /// CW codes: a Hamiltonian code (zero over a third of its period, where connections trace no
@@ -219,7 +259,13 @@ fn ellipsoidal_matches_direct_at_a_gaussian_gate_and_on_the_glossy_box() {
 fn bidirectional_methods_match_at_cw_codes() {
     let scene = common::cornell_box();
     assert_direct_matches_path("direct cw ham3 300 MHz", &scene, Gate::parse("cw:300e6,40,ham3").unwrap(), 32, 480);
-    assert_ellipsoidal_matches_direct("ellipsoidal cw depthsel 4.7 GHz", &scene, Gate::parse("cw:4.7e9,-30,depthsel").unwrap(), 32, 490);
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal cw depthsel 4.7 GHz",
+        &scene,
+        Gate::parse("cw:4.7e9,-30,depthsel").unwrap(),
+        32,
+        490,
+    );
 }
 
 /// Transient gates draw target lengths bin by bin (stratified); with at least as many samples
@@ -228,8 +274,20 @@ fn bidirectional_methods_match_at_cw_codes() {
 #[test]
 fn ellipsoidal_matches_direct_per_bin_of_transient_gates() {
     let scene = common::cornell_box();
-    assert_ellipsoidal_matches_direct("ellipsoidal transient 3.0 + 6 x 0.1", &scene, Gate::Transient { start: 3.0, width: 0.1, bins: 6 }, 32, 460);
-    assert_ellipsoidal_matches_direct("ellipsoidal transient 2.5 + 40 x 0.02", &scene, Gate::Transient { start: 2.5, width: 0.02, bins: 40 }, 32, 470);
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal transient 3.0 + 6 x 0.1",
+        &scene,
+        Gate::Transient { start: 3.0, width: 0.1, bins: 6 },
+        32,
+        460,
+    );
+    assert_ellipsoidal_matches_direct(
+        "ellipsoidal transient 2.5 + 40 x 0.02",
+        &scene,
+        Gate::Transient { start: 2.5, width: 0.02, bins: 40 },
+        32,
+        470,
+    );
 }
 
 #[test]

@@ -69,7 +69,12 @@ fn wgsl_bsdf_matches_cpu_twin() {
             for k in 0..3 {
                 assert!((g[k] - c.wi[k]).abs() < 2e-4, "{material:?} record {i}: wi GPU {g:?} CPU {:?}", c.wi);
             }
-            assert!((g[3] - c.pdf).abs() <= 2e-3 * c.pdf + 1e-5, "{material:?} record {i}: pdf GPU {} CPU {}", g[3], c.pdf);
+            assert!(
+                (g[3] - c.pdf).abs() <= 2e-3 * c.pdf + 1e-5,
+                "{material:?} record {i}: pdf GPU {} CPU {}",
+                g[3],
+                c.pdf
+            );
         }
         // Evaluation at random directions of the upper hemisphere.
         let dirs: Vec<[f32; 4]> = uniforms(2048, 4)
@@ -144,7 +149,10 @@ fn bsdf_sampling_follows_its_pdf() {
             let (t0, t1) = (iz as f64 / nz as f64, (iz + 1) as f64 / nz as f64);
             let z = (1.0 - t1 * t1, 1.0 - t0 * t0);
             for ip in 0..nphi {
-                let p = (ip as f64 / nphi as f64 * std::f64::consts::TAU, (ip + 1) as f64 / nphi as f64 * std::f64::consts::TAU);
+                let p = (
+                    ip as f64 / nphi as f64 * std::f64::consts::TAU,
+                    (ip + 1) as f64 / nphi as f64 * std::f64::consts::TAU,
+                );
                 expected[iz * nphi + ip] = n as f64 * integrate_cell(&pdf, z, p, 12);
             }
         }
@@ -152,8 +160,13 @@ fn bsdf_sampling_follows_its_pdf() {
         observed.push(failed);
         expected.push((n as f64 - expected.iter().sum::<f64>()).max(0.0));
         let (stat, dof, p) = chi2_test(&observed, &expected);
-        println!("metallic {metallic} alpha {alpha} cos_wo {cos_wo}: chi2 {stat:.1} dof {dof} p {p:.3}, {failed} rejected");
-        assert!(p > sidak(ALPHA, configs.len()), "metallic {metallic} alpha {alpha} cos_wo {cos_wo}: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
+        println!(
+            "metallic {metallic} alpha {alpha} cos_wo {cos_wo}: chi2 {stat:.1} dof {dof} p {p:.3}, {failed} rejected"
+        );
+        assert!(
+            p > sidak(ALPHA, configs.len()),
+            "metallic {metallic} alpha {alpha} cos_wo {cos_wo}: chi2 {stat:.1}, dof {dof}, p {p:.2e}"
+        );
     }
 }
 
@@ -161,8 +174,9 @@ fn bsdf_sampling_follows_its_pdf() {
 fn white_furnace_albedo_matches_quadrature_and_stays_below_one() {
     let ctx = common::gpu();
     let scene = glossy_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, gate: Gate::None, ..Default::default() })
-        .unwrap();
+    let tracer =
+        PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, gate: Gate::None, ..Default::default() })
+            .unwrap();
     let n = 100_000;
     for (metallic, alpha) in [(1.0f32, 0.05f32), (1.0, 0.3), (1.0, 0.8), (0.5, 0.3), (0.0, 1.0)] {
         for cos_wo in [1.0f32, 0.5, 0.1] {
@@ -195,8 +209,14 @@ fn white_furnace_albedo_matches_quadrature_and_stays_below_one() {
             };
             let quad = integrate_cell(&fcos, (0.0, 1.0), (0.0, std::f64::consts::TAU), 600);
             let z = (mean - quad) / var.sqrt().max(1e-12);
-            println!("metallic {metallic} alpha {alpha} cos_wo {cos_wo}: sampled {mean:.5} +- {:.5}, quadrature {quad:.5}", var.sqrt());
-            assert!(z.abs() < 4.0 || (mean - quad).abs() < 2e-3, "sampled albedo {mean} vs quadrature {quad} (z = {z:.2})");
+            println!(
+                "metallic {metallic} alpha {alpha} cos_wo {cos_wo}: sampled {mean:.5} +- {:.5}, quadrature {quad:.5}",
+                var.sqrt()
+            );
+            assert!(
+                z.abs() < 4.0 || (mean - quad).abs() < 2e-3,
+                "sampled albedo {mean} vs quadrature {quad} (z = {z:.2})"
+            );
             assert!(quad <= 1.0 + 1e-3 && mean <= 1.0 + 4.0 * var.sqrt(), "energy gain: {mean} / {quad}");
             if metallic == 0.0 {
                 assert!((mean - 1.0).abs() < 1e-5, "white Lambertian albedo {mean}");

@@ -93,7 +93,10 @@ fn cpu_traversal_matches_brute_force() {
 #[test]
 fn wide_bvh_is_a_conservative_collapse() {
     // A soup (a deep, irregular tree) and the Cornell box (huge and tiny children side by side).
-    for (name, soup) in [("soup", common::random_soup(3000, 7)), ("cornell box", common::cornell_box().scene.triangles.iter().map(|t| t.positions).collect())] {
+    for (name, soup) in [
+        ("soup", common::random_soup(3000, 7)),
+        ("cornell box", common::cornell_box().scene.triangles.iter().map(|t| t.positions).collect()),
+    ] {
         let bvh = Bvh::build(&soup);
         let wide = WideBvh::build(&bvh);
         let mut seen = vec![0u32; soup.len()];
@@ -126,7 +129,10 @@ fn wide_bvh_is_a_conservative_collapse() {
                         seen[k as usize] += 1;
                     }
                     for p in soup[bvh.order[k as usize] as usize] {
-                        assert!(p.cmpge(lo).all() && p.cmple(hi).all(), "{name}: triangle {k} pokes out of node {i} slot {slot}: {p} not in {lo}..{hi}");
+                        assert!(
+                            p.cmpge(lo).all() && p.cmple(hi).all(),
+                            "{name}: triangle {k} pokes out of node {i} slot {slot}: {p} not in {lo}..{hi}"
+                        );
                     }
                 }
             }
@@ -135,7 +141,13 @@ fn wide_bvh_is_a_conservative_collapse() {
         assert_eq!(leaves, wide.leaves);
         // Four children per node, except where the binary tree ran out of inner nodes.
         let full = wide.nodes.iter().filter(|n| n.children.iter().all(|&c| c != NONE)).count();
-        println!("{name}: {} binary nodes -> {} wide nodes ({full} full), {} leaves, depth {}", bvh.nodes.len(), wide.nodes.len(), wide.leaves, wide.depth);
+        println!(
+            "{name}: {} binary nodes -> {} wide nodes ({full} full), {} leaves, depth {}",
+            bvh.nodes.len(),
+            wide.nodes.len(),
+            wide.leaves,
+            wide.depth
+        );
         assert!(wide.nodes.len() * 3 <= bvh.nodes.len(), "{name}: the collapse leaves too many nodes");
     }
 }
@@ -176,9 +188,19 @@ fn wide_traversal_matches_brute_force_at_any_budget() {
         stops += n as u64;
         // The wide twin tests triangles without the early division: t may differ in the last
         // bits, and a tie may pick either triangle.
-        assert!((a.t - b.t).abs() <= 1e-6 * b.t.max(1.0), "ray {i} (budget {budget}): t {} vs brute force {}", a.t, b.t);
+        assert!(
+            (a.t - b.t).abs() <= 1e-6 * b.t.max(1.0),
+            "ray {i} (budget {budget}): t {} vs brute force {}",
+            a.t,
+            b.t
+        );
         if a.triangle != b.triangle {
-            assert!(a.triangle != NONE && b.triangle != NONE, "ray {i}: hit {} vs brute force {}", a.triangle, b.triangle);
+            assert!(
+                a.triangle != NONE && b.triangle != NONE,
+                "ray {i}: hit {} vs brute force {}",
+                a.triangle,
+                b.triangle
+            );
         }
         let (any, _) = wide::trace_any_in_steps(&wide, &tris, (o, d, t_max), (ignore, NONE), budget);
         assert_eq!(any, b.triangle != NONE, "ray {i} (budget {budget}): any-hit disagrees with brute force");
@@ -194,8 +216,11 @@ fn gpu_traversal_matches_cpu_twin() {
     // f32; the device may fuse multiply-adds, which changes t by a few ulps (allowed: 1e-5
     // relative, about 80 ulps) and can flip a hit only for rays grazing an edge or a tie.
     let ctx = common::gpu();
-    for (name, scene, scale) in [("cornell box", common::cornell_box(), 0.6f32), ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4)] {
-        let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
+    for (name, scene, scale) in
+        [("cornell box", common::cornell_box(), 0.6f32), ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4)]
+    {
+        let tracer =
+            PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
         let rays = random_rays(4096, scene.triangles.len(), 5);
         let mut input = Vec::new();
         for (o, d, t_max, ignore) in &rays {
@@ -210,8 +235,12 @@ fn gpu_traversal_matches_cpu_twin() {
             let (gpu_t, gpu_tri) = (out[2 * i][0], out[2 * i][1].to_bits());
             if gpu_tri != cpu.triangle {
                 // Only near-ties: both hit, at the same distance.
-                assert!(gpu_tri != NONE && cpu.triangle != NONE && (gpu_t - cpu.t).abs() <= 1e-5 * cpu.t,
-                    "{name} ray {i}: GPU triangle {gpu_tri} at {gpu_t}, CPU {} at {}", cpu.triangle, cpu.t);
+                assert!(
+                    gpu_tri != NONE && cpu.triangle != NONE && (gpu_t - cpu.t).abs() <= 1e-5 * cpu.t,
+                    "{name} ray {i}: GPU triangle {gpu_tri} at {gpu_t}, CPU {} at {}",
+                    cpu.triangle,
+                    cpu.t
+                );
                 continue;
             }
             if cpu.triangle != NONE {
@@ -241,12 +270,19 @@ fn split_buffers_render_identically() {
     let (width, height) = (8u32, 8u32);
     let splits = |limit: u64, bins: u64| {
         let film = 3 * (width * height) as u64 * bins;
-        [("triangles", t, 48), ("triangle_shading", t, 64), ("bvh_nodes", n, 32), ("bvh_node_surfaces", n, 32), ("film", film, gatetrace::integrator::FILM_ELEMENT_BYTES)]
-            .iter()
-            .all(|&(name, count, size)| ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2))
+        [
+            ("triangles", t, 48),
+            ("triangle_shading", t, 64),
+            ("bvh_nodes", n, 32),
+            ("bvh_node_surfaces", n, 32),
+            ("film", film, gatetrace::integrator::FILM_ELEMENT_BYTES),
+        ]
+        .iter()
+        .all(|&(name, count, size)| ChunkLayout::new(name, count, size, limit).is_ok_and(|l| l.chunks >= 2))
     };
     // It must also be small enough that a wave holds fewer slots (paths) than there are pixels.
-    let splits_waves = |limit: u64| limit / (size_of::<gatetrace::gpu::layout::PathState>() as u64) < (width * height) as u64;
+    let splits_waves =
+        |limit: u64| limit / (size_of::<gatetrace::gpu::layout::PathState>() as u64) < (width * height) as u64;
     let (limit, bins) = (64..4096u64)
         .flat_map(|l| (1..64u64).map(move |b| (l, b)))
         .find(|&(l, b)| splits(l, b) && splits_waves(l))
@@ -342,7 +378,11 @@ fn slab_field(slabs: bool, name: &str) -> gatetrace::scene::PreparedScene {
         materials: vec![Material { double_sided: true, ..Material::diffuse([0.5; 3]) }],
         // Looking along +x (-z turned by -90 degrees about y); a field of view narrow enough
         // that no camera ray meets a slab.
-        camera: Some(Camera { position: [-1.0, -0.05, -0.05], rotation: [0.0, -0.70710678, 0.0, 0.70710678], yfov: 0.01 }),
+        camera: Some(Camera {
+            position: [-1.0, -0.05, -0.05],
+            rotation: [0.0, -0.70710678, 0.0, 0.70710678],
+            yfov: 0.01,
+        }),
         point_lights: vec![PointLight { position: [-0.5, -0.05, -0.05], intensity: 100.0 }],
     };
     let dir = common::scratch_dir(name);
@@ -373,7 +413,10 @@ fn deep_traversals_resume_until_they_are_complete() {
         let mean = b.mean_rgb()[0] as f32;
         assert!(mean > 0.0, "{method:?}: the wall is black");
         for (i, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
-            assert!((x - y).abs() <= 1e-4 * y.abs().max(mean), "{method:?} element {i}: {x} with the slabs, {y} without");
+            assert!(
+                (x - y).abs() <= 1e-4 * y.abs().max(mean),
+                "{method:?} element {i}: {x} with the slabs, {y} without"
+            );
         }
         println!("{method:?}: image mean {mean:.5} with and without the slabs");
     }

@@ -60,7 +60,8 @@ fn thin_lens_box_gate_matches_peer_with_ellipsoidal_connections() {
 fn thin_lens_transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
     let gate = Gate::Transient { start: 1.9, width: 0.1, bins: 20 };
-    let films = common::render_films(&ctx, &scene("cornell_box_thin_lens"), &settings(Method::Path, gate, 4), BATCHES, 64);
+    let films =
+        common::render_films(&ctx, &scene("cornell_box_thin_lens"), &settings(Method::Path, gate, 4), BATCHES, 64);
     check_transient("cornell_box_thin_lens_transient", &films, "cornell_box_thin_lens_peer/transient_1_9_step_0_1", 20);
 }
 
@@ -84,7 +85,8 @@ fn spot_light_transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
     let gate = Gate::Transient { start: 2.8, width: 0.1, bins: 20 };
     let films = common::render_films(&ctx, &scene("cornell_box_spot"), &settings(Method::Path, gate, 14), BATCHES, 64);
-    let bins = check_transient("cornell_box_spot_transient", &films, "cornell_box_spot_peer/transient_2_8_step_0_1", 20);
+    let bins =
+        check_transient("cornell_box_spot_transient", &films, "cornell_box_spot_peer/transient_2_8_step_0_1", 20);
     // Nothing arrives before the shortest path (spot -> floor -> camera).
     assert!(bins.iter().any(|b| b.0 > 0.0), "the spot light lights the cube");
 }
@@ -152,7 +154,13 @@ fn directional_light_ellipsoidal_matches_direct() {
         ("ellipsoidal, directional box [3.6, 3.7)", scene("cornell_box_directional"), box_gate.clone(), 16, 25),
         ("ellipsoidal, glossy directional box [3.6, 3.7)", PreparedScene::new(glossy).unwrap(), box_gate, 16, 35),
         ("ellipsoidal, directional transient 3.5 + 6 x 0.05", scene("cornell_box_directional"), transient, 13, 45),
-        ("ellipsoidal, directional, inside, transient 1 + 8 x 0.25", PreparedScene::new(inside).unwrap(), inside_transient, 13, 55),
+        (
+            "ellipsoidal, directional, inside, transient 1 + 8 x 0.25",
+            PreparedScene::new(inside).unwrap(),
+            inside_transient,
+            13,
+            55,
+        ),
     ] {
         let small = |method, seed| RenderSettings { width: 32, height: 32, ..settings(method, gate.clone(), seed) };
         let direct = common::render_films(&ctx, &scene, &small(Method::Direct, seed), BATCHES, 64);

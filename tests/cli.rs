@@ -28,12 +28,25 @@ fn help_explains_units() {
 fn npy_output_has_the_documented_layout_and_metadata() {
     let dir = common::scratch_dir("cli_npy");
     let out = dir.join("steady.npy");
-    let o = gatetrace(&["render", "--res", "12x8", "--spp", "4", "--max-bounces", "2", "--seed", "5", "--out", out.to_str().unwrap()]);
+    let o = gatetrace(&[
+        "render",
+        "--res",
+        "12x8",
+        "--spp",
+        "4",
+        "--max-bounces",
+        "2",
+        "--seed",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, data) = read_npy_f32(&out).unwrap();
     assert_eq!(shape, vec![8, 12, 3], "[H, W, 3]");
     assert!(data.iter().all(|v| v.is_finite()) && data.iter().any(|&v| v > 0.0));
-    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("steady.json")).unwrap()).unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("steady.json")).unwrap()).unwrap();
     for key in ["scene", "method", "gate", "spp", "seed", "elapsed_seconds", "adapter"] {
         assert!(meta.get(key).is_some(), "metadata lacks `{key}`: {meta}");
     }
@@ -42,7 +55,17 @@ fn npy_output_has_the_documented_layout_and_metadata() {
     assert_eq!(meta["method"], "path");
 
     let cube = dir.join("cube.npy");
-    let o = gatetrace(&["render", "--res", "6x4", "--spp", "2", "--gate", "transient:1.9,0.5,7", "--out", cube.to_str().unwrap()]);
+    let o = gatetrace(&[
+        "render",
+        "--res",
+        "6x4",
+        "--spp",
+        "2",
+        "--gate",
+        "transient:1.9,0.5,7",
+        "--out",
+        cube.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, _) = read_npy_f32(&cube).unwrap();
     assert_eq!(shape, vec![4, 6, 7, 3], "[H, W, T, 3]");
@@ -53,7 +76,17 @@ fn exr_output_has_a_layer_per_bin_and_metadata() {
     use exr::prelude::*;
     let dir = common::scratch_dir("cli_exr");
     let out = dir.join("cube.exr");
-    let o = gatetrace(&["render", "--res", "6x4", "--spp", "2", "--gate", "transient:6.5ns,200ps,5", "--out", out.to_str().unwrap()]);
+    let o = gatetrace(&[
+        "render",
+        "--res",
+        "6x4",
+        "--spp",
+        "2",
+        "--gate",
+        "transient:6.5ns,200ps,5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let image = read_all_data_from_file(&out).unwrap();
     assert_eq!(image.layer_data.len(), 5, "one layer per bin");
@@ -78,9 +111,20 @@ fn time_budget_renders_passes_sized_to_the_budget() {
     // time recorded apart from the setup's.
     let dir = common::scratch_dir("cli_time");
     let out = dir.join("timed.npy");
-    let o = gatetrace(&["render", "--res", "8x8", "--time", "0.5", "--samples-per-pass", "3", "--out", out.to_str().unwrap()]);
+    let o = gatetrace(&[
+        "render",
+        "--res",
+        "8x8",
+        "--time",
+        "0.5",
+        "--samples-per-pass",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
     let number = |key: &str| -> f64 { meta[key].as_str().unwrap().parse().unwrap() };
     assert!(number("spp") >= 1.0, "no sample rendered");
     let rendering = number("rendering_seconds");
@@ -108,8 +152,20 @@ fn stats_report_connections_per_strategy() {
     let dir = common::scratch_dir("cli_stats");
     let out = dir.join("gated.npy");
     let o = gatetrace(&[
-        "render", "--method", "direct", "--res", "8x8", "--spp", "2", "--max-bounces", "2", "--gate", "box:3.14..3.19",
-        "--stats", "--out", out.to_str().unwrap(),
+        "render",
+        "--method",
+        "direct",
+        "--res",
+        "8x8",
+        "--spp",
+        "2",
+        "--max-bounces",
+        "2",
+        "--gate",
+        "box:3.14..3.19",
+        "--stats",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout).to_string();
@@ -124,7 +180,10 @@ fn stats_report_connections_per_strategy() {
 fn profile_reports_gpu_time_per_stage() {
     // A gate of one bin on the Cornell box traces whole paths; a transient gate runs rounds.
     check_profile("box:3.14..3.19", &["trace_paths", "accumulate"]);
-    check_profile("transient:3.0,0.05,8", &["generate_camera_rays", "extend_paths", "accumulate", "setup_dispatch(rays)"]);
+    check_profile(
+        "transient:3.0,0.05,8",
+        &["generate_camera_rays", "extend_paths", "accumulate", "setup_dispatch(rays)"],
+    );
 }
 
 /// Renders the Cornell box with `--profile` and `gate`, and checks that each of `stages` has a
@@ -132,16 +191,33 @@ fn profile_reports_gpu_time_per_stage() {
 fn check_profile(gate: &str, stages: &[&str]) {
     let dir = common::scratch_dir("cli_profile");
     let out = dir.join("p.npy");
-    let o = gatetrace(&["render", "--res", "16x16", "--spp", "8", "--max-bounces", "3", "--gate", gate, "--profile", "--out", out.to_str().unwrap()]);
+    let o = gatetrace(&[
+        "render",
+        "--res",
+        "16x16",
+        "--spp",
+        "8",
+        "--max-bounces",
+        "3",
+        "--gate",
+        gate,
+        "--profile",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     let wall_seconds: f64 = {
-        let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
         meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
     };
     let mut total_ms = 0.0;
     for stage in stages {
-        let row = text.lines().find(|l| l.split_whitespace().next() == Some(stage)).unwrap_or_else(|| panic!("no row for {stage} ({gate}):\n{text}"));
+        let row = text
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(stage))
+            .unwrap_or_else(|| panic!("no row for {stage} ({gate}):\n{text}"));
         let cols: Vec<&str> = row.split_whitespace().collect();
         let ms: f64 = cols[1].parse().unwrap();
         let dispatches: u64 = cols[3].parse().unwrap();
@@ -150,5 +226,8 @@ fn check_profile(gate: &str, stages: &[&str]) {
     }
     // A check of the timestamp units, not of speed: the stages ran inside the render's wall
     // time (a wrong tick period would put them orders of magnitude off).
-    assert!(total_ms > 0.0 && total_ms / 1e3 <= wall_seconds + 1.0, "{total_ms} ms of stages in a {wall_seconds} s render");
+    assert!(
+        total_ms > 0.0 && total_ms / 1e3 <= wall_seconds + 1.0,
+        "{total_ms} ms of stages in a {wall_seconds} s render"
+    );
 }

@@ -81,11 +81,21 @@ fn light_sampling_bsdf_sampling_and_mis_agree() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let render = |strategy: LightStrategy, seed: u32| {
-        let settings = RenderSettings { width: 32, height: 32, max_bounces: 3, seed, light_strategy: strategy, ..Default::default() };
+        let settings = RenderSettings {
+            width: 32,
+            height: 32,
+            max_bounces: 3,
+            seed,
+            light_strategy: strategy,
+            ..Default::default()
+        };
         common::render_films(&ctx, &scene, &settings, BATCHES, 64)
     };
     let mis = render(LightStrategy::Mis, 11);
-    let others = [(LightStrategy::NextEvent, render(LightStrategy::NextEvent, 12)), (LightStrategy::Bsdf, render(LightStrategy::Bsdf, 13))];
+    let others = [
+        (LightStrategy::NextEvent, render(LightStrategy::NextEvent, 12)),
+        (LightStrategy::Bsdf, render(LightStrategy::Bsdf, 13)),
+    ];
     // Groups: 3 channel means + 16 blocks x 3 channels, for 2 comparisons.
     let groups = |i: usize| {
         let (p, c) = (i / 3, i % 3);
@@ -95,7 +105,9 @@ fn light_sampling_bsdf_sampling_and_mis_agree() {
     let tests = 2 * (3 + 48);
     let limit = t_critical(sidak(ALPHA, tests), (BATCHES - 1) as f64);
     for (strategy, films) in &others {
-        for (name, count, group) in [("image", 3, Box::new(|i: usize| i % 3) as Box<dyn Fn(usize) -> usize>), ("block", 48, Box::new(groups))] {
+        for (name, count, group) in
+            [("image", 3, Box::new(|i: usize| i % 3) as Box<dyn Fn(usize) -> usize>), ("block", 48, Box::new(groups))]
+        {
             let means = |fs: &[Film]| -> Vec<Vec<f64>> {
                 fs.iter()
                     .map(|f| {
@@ -114,7 +126,10 @@ fn light_sampling_bsdf_sampling_and_mis_agree() {
                 };
                 let ((ma, va), (mb, vb)) = (stat(&a), stat(&b));
                 let z = (ma - mb) / (va + vb).sqrt();
-                assert!(z.abs() < limit, "{strategy:?} vs MIS, {name} {g}: {mb} vs {ma} (z = {z:.2}, limit {limit:.2})");
+                assert!(
+                    z.abs() < limit,
+                    "{strategy:?} vs MIS, {name} {g}: {mb} vs {ma} (z = {z:.2}, limit {limit:.2})"
+                );
             }
         }
     }

@@ -34,9 +34,17 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
     // Bins of 0.1 mm over every path length the scene allows with 3 bounces.
     let width = 1e-4;
     let bins = ((longest + 0.01) / width).ceil() as u32;
-    let base = RenderSettings { width: 4, height: 4, max_bounces: bounces, method: Method::Path, seed: 17, ..Default::default() };
+    let base = RenderSettings {
+        width: 4,
+        height: 4,
+        max_bounces: bounces,
+        method: Method::Path,
+        seed: 17,
+        ..Default::default()
+    };
     let spp = 64;
-    let render = |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, spp).remove(0);
+    let render =
+        |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, spp).remove(0);
     let transient = render(Gate::Transient { start: 0.0, width, bins });
     let pixels = 16;
     let bins = bins as usize;
@@ -65,7 +73,8 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
             // The code's mean over each bin.
             let means: Vec<f64> = (0..bins)
                 .map(|b| {
-                    let (x0, x1) = ((b as f64 * width) * per_metre + phase, ((b + 1) as f64 * width) * per_metre + phase);
+                    let (x0, x1) =
+                        ((b as f64 * width) * per_metre + phase, ((b + 1) as f64 * width) * per_metre + phase);
                     (code_integral(&points, x1) - code_integral(&points, x0)) / (x1 - x0)
                 })
                 .collect();
@@ -74,7 +83,8 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
             let mut spread = 0.0f64;
             for p in 0..pixels {
                 for c in 0..3 {
-                    let integrated: f64 = (0..bins).map(|b| transient.data[(p * bins + b) * 3 + c] as f64 * means[b]).sum();
+                    let integrated: f64 =
+                        (0..bins).map(|b| transient.data[(p * bins + b) * 3 + c] as f64 * means[b]).sum();
                     let s = steady[p * 3 + c];
                     let ours = coded.data[p * 3 + c] as f64;
                     let bound = (within_bin + 1e-4) * s;

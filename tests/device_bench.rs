@@ -25,7 +25,8 @@ fn device_bench_smoke_run_writes_every_measurement() {
     assert!(scenes[1]["triangles"].as_u64().unwrap() > 1000, "the mesh is the 1,280-triangle sphere in the box");
     for scene in scenes {
         let name = scene["scene"].as_str().unwrap();
-        let methods: Vec<&str> = scene["measurements"].as_array().unwrap().iter().map(|m| m["method"].as_str().unwrap()).collect();
+        let methods: Vec<&str> =
+            scene["measurements"].as_array().unwrap().iter().map(|m| m["method"].as_str().unwrap()).collect();
         assert_eq!(methods, ["path", "direct", "ellipsoidal"], "{name}");
         for m in scene["measurements"].as_array().unwrap() {
             let method = m["method"].as_str().unwrap();

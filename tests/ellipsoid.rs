@@ -25,9 +25,24 @@ fn generic_configurations_match_the_oracle() {
         assert_eq!(r.non_finite, 0, "{}: non-finite outputs", r.family);
         assert!(r.cut > 10_000, "{}: only {} sections", r.family, r.cut);
         // Validity can differ only where g is within rounding of 0.
-        assert!(r.validity_mismatches <= r.configs / 1000, "{}: {} validity mismatches", r.family, r.validity_mismatches);
-        assert!(r.theta_total_error.quantile(0.99) < 1e-4, "{}: Theta p99 {}", r.family, r.theta_total_error.quantile(0.99));
-        assert!(r.length_error.quantile(0.99) < 1e-6, "{}: |L - tau|/tau p99 {}", r.family, r.length_error.quantile(0.99));
+        assert!(
+            r.validity_mismatches <= r.configs / 1000,
+            "{}: {} validity mismatches",
+            r.family,
+            r.validity_mismatches
+        );
+        assert!(
+            r.theta_total_error.quantile(0.99) < 1e-4,
+            "{}: Theta p99 {}",
+            r.family,
+            r.theta_total_error.quantile(0.99)
+        );
+        assert!(
+            r.length_error.quantile(0.99) < 1e-6,
+            "{}: |L - tau|/tau p99 {}",
+            r.family,
+            r.length_error.quantile(0.99)
+        );
         assert!(r.jacobian_error.quantile(0.99) < 1e-4, "{}: J p99 {}", r.family, r.jacobian_error.quantile(0.99));
         assert!(r.jacobian_error.quantile(0.5) < 1e-6, "{}: J median {}", r.family, r.jacobian_error.quantile(0.5));
     }
@@ -56,7 +71,6 @@ fn adversarial_configurations_stay_finite() {
         assert!(r.cut > 0, "{}: no section at all", r.family);
     }
 }
-
 
 /// Sum of Theta over every triangle of the scene (f64 oracle, brute force) and each triangle's.
 fn oracle_thetas(scene: &gatetrace::scene::PreparedScene, fs: glam::Vec3, fc: glam::Vec3, tau_e: f32) -> Vec<f64> {
@@ -104,12 +118,25 @@ fn run_queries_with(
     let input: Vec<[f32; 4]> = queries
         .iter()
         .flat_map(|(fs, fc, tau, u, key)| {
-            [[fs.x, fs.y, fs.z, *tau], [fc.x, fc.y, fc.z, *u], [f32::from_bits(key[0]), f32::from_bits(key[1]), f32::from_bits(key[2]), 0.0]]
+            [
+                [fs.x, fs.y, fs.z, *tau],
+                [fc.x, fc.y, fc.z, *u],
+                [f32::from_bits(key[0]), f32::from_bits(key[1]), f32::from_bits(key[2]), 0.0],
+            ]
         })
         .collect();
     let out = common::run_probe(ctx, tracer, "probe_ellipsoid_query", constants, &input, 2 * queries.len());
     out.chunks(2)
-        .map(|o| (o[0][0].to_bits(), o[0][1], o[0][2], o[0][3], glam::Vec3::new(o[1][0], o[1][1], o[1][2]), o[1][3].to_bits()))
+        .map(|o| {
+            (
+                o[0][0].to_bits(),
+                o[0][1],
+                o[0][2],
+                o[0][3],
+                glam::Vec3::new(o[1][0], o[1][1], o[1][2]),
+                o[1][3].to_bits(),
+            )
+        })
         .collect()
 }
 
@@ -121,8 +148,10 @@ fn bvh_queries_find_every_intersected_triangle() {
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let mut rng = gatetrace::rng::Rng::new(3, 0, 0);
-    for (name, scene) in [("cornell box", common::cornell_box()), ("soup", common::soup_scene(2000, 12, "query_soup"))] {
-        let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    for (name, scene) in [("cornell box", common::cornell_box()), ("soup", common::soup_scene(2000, 12, "query_soup"))]
+    {
+        let tracer =
+            PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
         let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
         let queries: Vec<_> = (0..400u32)
             .map(|i| {
@@ -150,7 +179,12 @@ fn bvh_queries_find_every_intersected_triangle() {
                 assert!((l - tau).abs() < 1e-5 * tau, "{name}: sampled point has L = {l}, tau_e = {tau}");
             }
         }
-        println!("{name}: {cut} of {} queries cut the scene; {:.1} nodes visited per query of {}", queries.len(), nodes as f64 / queries.len() as f64, scene.bvh.nodes.len());
+        println!(
+            "{name}: {cut} of {} queries cut the scene; {:.1} nodes visited per query of {}",
+            queries.len(),
+            nodes as f64 / queries.len() as f64,
+            scene.bvh.nodes.len()
+        );
         assert!(cut > 100);
         use gatetrace::integrator::Integrator;
         assert_eq!(tracer.truncated_traversals().unwrap(), 0, "{name}: queries ran out of the device's loop budget");
@@ -160,7 +194,10 @@ fn bvh_queries_find_every_intersected_triangle() {
 /// Runs 40,000 exhaustive queries (`constants`) of one spheroid on a 2000-triangle soup and
 /// checks with a chi-square test that they pick triangle i with probability q_i / sum q,
 /// q_i = Theta_i times `factor(i)`; returns the triangles with q > 0.
-fn check_picks(constants: &[(&'static str, f64)], factor: impl Fn(&gatetrace::scene::PreparedScene, usize) -> f64) -> usize {
+fn check_picks(
+    constants: &[(&'static str, f64)],
+    factor: impl Fn(&gatetrace::scene::PreparedScene, usize) -> f64,
+) -> usize {
     use common::stats::chi2_test;
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
@@ -329,7 +366,9 @@ fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
             .iter()
             .zip(&us)
             .enumerate()
-            .map(|(i, (&tau, &(_, u_theta)))| (fs.as_vec3(), fc.as_vec3(), tau as f32, u_theta as f32, [i as u32, 5, 6]))
+            .map(|(i, (&tau, &(_, u_theta)))| {
+                (fs.as_vec3(), fc.as_vec3(), tau as f32, u_theta as f32, [i as u32, 5, 6])
+            })
             .collect();
         let device: Vec<f64> = run_queries(&ctx, &tracer, &queries)
             .iter()

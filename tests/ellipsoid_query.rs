@@ -9,7 +9,7 @@
 
 mod common;
 
-use gatetrace::ellipsoid::query::{QueryScene, Query, arc_weight, pick, reached, reflection_factor};
+use gatetrace::ellipsoid::query::{Query, QueryScene, arc_weight, pick, reached, reflection_factor};
 use gatetrace::ellipsoid::{Spheroid, Triangle, clip_arcs};
 use gatetrace::gpu::layout::NONE;
 use gatetrace::integrator::QuerySettings;
@@ -18,7 +18,8 @@ use glam::{DVec3, DVec4, Vec3};
 const ALPHA: f64 = 0.01;
 /// The default query with reflection weights (as NLOS captures use), which the checks below
 /// test; with arcs alone the weights are the factor-free special case (tests/ellipsoid.rs).
-const REFLECTION: QuerySettings = QuerySettings { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true };
+const REFLECTION: QuerySettings =
+    QuerySettings { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true };
 /// Triangles are compared in groups of consecutive BVH positions.
 const GROUPS: usize = 12;
 
@@ -29,9 +30,15 @@ fn oracle_triangle(t: &gatetrace::gpu::layout::Triangle) -> Triangle {
 
 /// Every triangle's exact arcs' angle and reflection factor in a query for reflecting vertices
 /// (f64 oracle, brute force): the reservoir weight is their product.
-fn exact_arcs_and_factors(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<(f64, f64)> {
+fn exact_arcs_and_factors(
+    scene: &gatetrace::scene::PreparedScene,
+    fs: DVec3,
+    fc: DVec3,
+    tau_e: f64,
+) -> Vec<(f64, f64)> {
     let sp = Spheroid { focus_s: fs, focus_c: fc, length: tau_e };
-    let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
+    let query =
+        Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
     scene
         .triangles
         .iter()
@@ -51,7 +58,10 @@ fn exact_weights(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, 
 /// The arcs where the picks' density is positive (factor > 0): what a pick's weight, the
 /// inverse of its density in (triangle, theta), comes to.
 fn exact_sampled_arcs(scene: &gatetrace::scene::PreparedScene, fs: DVec3, fc: DVec3, tau_e: f64) -> Vec<f64> {
-    exact_arcs_and_factors(scene, fs, fc, tau_e).iter().map(|&(arcs, factor)| if factor > 0.0 { arcs } else { 0.0 }).collect()
+    exact_arcs_and_factors(scene, fs, fc, tau_e)
+        .iter()
+        .map(|&(arcs, factor)| if factor > 0.0 { arcs } else { 0.0 })
+        .collect()
 }
 
 /// Spheroids like a render's: foci at the light's centre, the pinhole and points on the sphere
@@ -145,7 +155,8 @@ fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
     let (mut rest_used, mut total_iterations) = (0, 0u64);
     for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
         let exact = grouped(&exact_weights(&scene, fs, fc, tau_e));
-        let query = Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
+        let query =
+            Query { focus_s: fs, focus_c: fc, tau_e, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
         let mut weights = Vec::new();
         let mut picks = Vec::new();
         for k in 0..keys {
@@ -174,12 +185,19 @@ fn check_twin(settings: &QuerySettings, allowance: u32, keys: u32) {
             let z = group_z(samples, &exact, 1e-9, moments);
             let worst = z.iter().fold(0.0f64, |a, b| a.max(b.abs()));
             println!("spheroid {s} {what}: worst group z {worst:.2} (limit {limit:.2})");
-            let means: Vec<f64> = (0..GROUPS).map(|g| samples.iter().map(|x| x[g]).sum::<f64>() / samples.len() as f64).collect();
+            let means: Vec<f64> =
+                (0..GROUPS).map(|g| samples.iter().map(|x| x[g]).sum::<f64>() / samples.len() as f64).collect();
             let hits: Vec<usize> = (0..GROUPS).map(|g| samples.iter().filter(|x| x[g] != 0.0).count()).collect();
-            assert!(worst < limit, "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:?} means {means:?} hits {hits:?}");
+            assert!(
+                worst < limit,
+                "spheroid {s} {what}: group z-scores {z:.2?} against the arcs {exact:?} means {means:?} hits {hits:?}"
+            );
         }
     }
-    println!("{:.1} iterations per query; {rest_used} queries went past the allowance", total_iterations as f64 / (keys as f64 * spheroids.len() as f64));
+    println!(
+        "{:.1} iterations per query; {rest_used} queries went past the allowance",
+        total_iterations as f64 / (keys as f64 * spheroids.len() as f64)
+    );
     if allowance < 100 {
         assert!(rest_used > keys, "the allowance of {allowance} was hardly ever reached ({rest_used} queries)");
     }
@@ -205,7 +223,8 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
     let scene = common::sphere_scene(32);
     let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let spheroids = spheroids(&scene);
-    let limit = common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
+    let limit =
+        common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
     let mut iterations = 0u64;
     for (s, &(fs, fc, tau_e)) in spheroids.iter().enumerate() {
         let arcs = exact_sampled_arcs(&scene, fs, fc, tau_e);
@@ -260,7 +279,10 @@ fn device_queries_are_unbiased() {
         2_000,
     );
     println!("loop iterations per query: {descent:.1} with the descent, {exhaustive:.1} exhaustive");
-    assert!(descent < 0.5 * exhaustive, "the descent ({descent:.1}) should cost far less than the exhaustive query ({exhaustive:.1})");
+    assert!(
+        descent < 0.5 * exhaustive,
+        "the descent ({descent:.1}) should cost far less than the exhaustive query ({exhaustive:.1})"
+    );
 }
 
 #[test]
@@ -337,7 +359,10 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
     let scene = common::sphere_scene(16);
     let nodes = &scene.bvh.nodes;
     // Foci outside the Cornell box, on one side of it (no node lies between them).
-    let foci = [(DVec3::new(0.3, 0.2, 3.0), DVec3::new(-0.4, -0.1, 2.5)), (DVec3::new(2.5, 0.1, 0.0), DVec3::new(2.5, 0.1, 0.0))];
+    let foci = [
+        (DVec3::new(0.3, 0.2, 3.0), DVec3::new(-0.4, -0.1, 2.5)),
+        (DVec3::new(2.5, 0.1, 0.0), DVec3::new(2.5, 0.1, 0.0)),
+    ];
     let mut checked = 0;
     for (i, node) in nodes.iter().enumerate().step_by(37) {
         let end = node.skip as usize;
@@ -365,13 +390,19 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
         let mean = points.iter().zip(&weights).map(|(p, w)| *p * *w).sum::<DVec3>() / area;
         let (lo, hi) = (node.min.as_dvec3(), node.max.as_dvec3());
         let diagonal2 = (hi - lo).length_squared();
-        assert!((surface.centroid.as_dvec3() - mean).length() <= 1e-5 * diagonal2.sqrt(), "node {i}: centroid {} against {mean}", surface.centroid);
+        assert!(
+            (surface.centroid.as_dvec3() - mean).length() <= 1e-5 * diagonal2.sqrt(),
+            "node {i}: centroid {} against {mean}",
+            surface.centroid
+        );
         // The centroid rule misses each sub-triangle's own spread, 1/4 of it per level: two
         // levels extrapolate to the exact covariance.
         let cov_at = |points: &[DVec3], weights: &[f64], a: usize, b: usize| {
             points.iter().zip(weights).map(|(p, w)| (p[a] - mean[a]) * (p[b] - mean[b]) * w).sum::<f64>() / area
         };
-        let cov = |a: usize, b: usize| (4.0 * cov_at(&points, &weights, a, b) - cov_at(&coarse_points, &coarse_weights, a, b)) / 3.0;
+        let cov = |a: usize, b: usize| {
+            (4.0 * cov_at(&points, &weights, a, b) - cov_at(&coarse_points, &coarse_weights, a, b)) / 3.0
+        };
         let stored = surface.spread.map(|w| unpack2x16float(w).as_dvec2() * diagonal2);
         for (got, (a, b)) in [stored[0].x, stored[0].y, stored[1].x, stored[1].y, stored[2].x, stored[2].y]
             .into_iter()
@@ -379,19 +410,33 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
         {
             // f16 keeps 11 significant bits (and steps of 6e-8 below 6e-5).
             let want = cov(a, b);
-            assert!((got - want).abs() <= 1e-3 * want.abs() + 1e-7 * diagonal2, "node {i}: covariance ({a}, {b}) {got} against {want}");
+            assert!(
+                (got - want).abs() <= 1e-3 * want.abs() + 1e-7 * diagonal2,
+                "node {i}: covariance ({a}, {b}) {got} against {want}"
+            );
         }
         for &(fs, fc) in &foci {
             let lengths: Vec<f64> = points.iter().map(|p| p.distance(fs) + p.distance(fc)).collect();
             let true_mean = lengths.iter().zip(&weights).map(|(l, w)| l * w).sum::<f64>() / area;
-            let true_sd = (lengths.iter().zip(&weights).map(|(l, w)| (l - true_mean).powi(2) * w).sum::<f64>() / area).sqrt();
+            let true_sd =
+                (lengths.iter().zip(&weights).map(|(l, w)| (l - true_mean).powi(2) * w).sum::<f64>() / area).sqrt();
             let distance = mean.distance(fs).min(mean.distance(fc));
             if diagonal2.sqrt() > 0.1 * distance || true_sd < 1e-3 * diagonal2.sqrt() {
                 continue;
             }
-            let query = Query { focus_s: fs, focus_c: fc, tau_e: true_mean, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
+            let query = Query {
+                focus_s: fs,
+                focus_c: fc,
+                tau_e: true_mean,
+                ignore: [NONE; 2],
+                lights_only: false,
+                reach: [DVec4::ZERO; 2],
+            };
             let (m, sd) = path_length_moments(lo, hi, &surface, &query);
-            assert!((m - true_mean).abs() <= 0.01 * true_sd.max(1e-3 * diagonal2.sqrt()), "node {i}: mean path length {m} against {true_mean} (sd {true_sd})");
+            assert!(
+                (m - true_mean).abs() <= 0.01 * true_sd.max(1e-3 * diagonal2.sqrt()),
+                "node {i}: mean path length {m} against {true_mean} (sd {true_sd})"
+            );
             assert!((sd / true_sd - 1.0).abs() <= 0.1, "node {i}: path length deviation {sd} against {true_sd}");
             checked += 1;
         }

@@ -37,7 +37,11 @@ fn a_gate_sweep_starts_at_the_single_image_and_ranges_reproduce_frames() {
     let pattern = dir.join("f_{frame:04}.npy");
     let single = dir.join("single.npy");
     let with = |extra: &[&str]| -> Vec<String> {
-        BASE.iter().map(|s| s.to_string()).chain(["11".into(), "--gate".into(), "box:3.14..3.19".into()]).chain(extra.iter().map(|s| s.to_string())).collect()
+        BASE.iter()
+            .map(|s| s.to_string())
+            .chain(["11".into(), "--gate".into(), "box:3.14..3.19".into()])
+            .chain(extra.iter().map(|s| s.to_string()))
+            .collect()
     };
     let args = with(&["--frames", "3", "--gate-step", "0.05", "--out", pattern.to_str().unwrap()]);
     let out = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
@@ -60,7 +64,8 @@ fn a_gate_sweep_starts_at_the_single_image_and_ranges_reproduce_frames() {
     assert_eq!(bits(&image(&single)), bits(&frames[0]), "frame 0 differs from the single image");
 
     // Existing frames are skipped; --frame-range 1..1 --force renders frame 1 again, bit for bit.
-    let args = with(&["--frames", "3", "--gate-step", "0.05", "--frame-range", "1..1", "--out", pattern.to_str().unwrap()]);
+    let args =
+        with(&["--frames", "3", "--gate-step", "0.05", "--frame-range", "1..1", "--out", pattern.to_str().unwrap()]);
     let out = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(out.contains("skipped"), "{out}");
     let frame1 = dir.join("f_0001.npy");
@@ -135,7 +140,8 @@ fn an_animated_scene_moves_with_every_method() {
             }
             sum
         };
-        let (a_left, a_right, b_left, b_right) = (region(&a, true), region(&a, false), region(&b, true), region(&b, false));
+        let (a_left, a_right, b_left, b_right) =
+            (region(&a, true), region(&a, false), region(&b, true), region(&b, false));
         println!("{method}: t = 0 left {a_left:.4} right {a_right:.4}; t = 1 left {b_left:.4} right {b_right:.4}");
         assert!(a_left > 0.0 && a_right > 0.0 && b_left > 0.0 && b_right > 0.0, "{method}: a black region");
         // Where the block stands, the floor behind it is hidden: that side loses light.

@@ -14,8 +14,13 @@ use gatetrace::scene::{PreparedScene, load_gltf_for_capture};
 
 /// Renders `first` samples per pixel, saves the state, loads it into a new integrator and
 /// renders `second` more; returns that film and the film of one integrator rendering both.
-fn continued_and_uninterrupted(ctx: &gatetrace::gpu::GpuContext, scene: &PreparedScene, settings: &RenderSettings,
-                               first: u64, second: u64) -> (Film, Film) {
+fn continued_and_uninterrupted(
+    ctx: &gatetrace::gpu::GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    first: u64,
+    second: u64,
+) -> (Film, Film) {
     let mut whole = create_integrator(ctx, scene, settings).unwrap();
     whole.render_samples(first).unwrap();
     let state = whole.save_state().unwrap();
@@ -30,7 +35,8 @@ fn continued_and_uninterrupted(ctx: &gatetrace::gpu::GpuContext, scene: &Prepare
 fn a_saved_state_continues_the_render() {
     let ctx = common::gpu();
     let cornell = common::cornell_box();
-    let base = RenderSettings { width: 16, height: 16, max_bounces: 4, samples_per_pass: Some(4), ..Default::default() };
+    let base =
+        RenderSettings { width: 16, height: 16, max_bounces: 4, samples_per_pass: Some(4), ..Default::default() };
     let gated = Gate::Box { start: 3.14, end: 3.19 };
     let transient = Gate::Transient { start: 3.0, width: 0.1, bins: 8 };
     // Every method's sums are exact (fixed point), so the resumed film equals the whole one bit
@@ -48,12 +54,19 @@ fn a_saved_state_continues_the_render() {
         check(&format!("{} {}", method.name(), gate.describe()), &resumed, &whole);
     }
     // An NLOS capture whose pilot render shapes the target lengths' visits per sensed point.
-    let letter = PreparedScene::new(load_gltf_for_capture(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap()).unwrap();
+    let letter =
+        PreparedScene::new(load_gltf_for_capture(&common::repo_path("assets/scenes/nlos_letter.gltf")).unwrap())
+            .unwrap();
     let settings = RenderSettings {
         target_pilot_spp: 8,
         samples_per_pass: Some(4),
-        ..common::example_capture(8, 8, Gate::Transient { start: 1.6, width: 0.02, bins: 40 }, gatetrace::nlos::LaserAim::Confocal,
-                                  Method::Ellipsoidal)
+        ..common::example_capture(
+            8,
+            8,
+            Gate::Transient { start: 1.6, width: 0.02, bins: 40 },
+            gatetrace::nlos::LaserAim::Confocal,
+            Method::Ellipsoidal,
+        )
     };
     let (resumed, whole) = continued_and_uninterrupted(&ctx, &letter, &settings, 8, 8);
     check("NLOS confocal ellipsoidal with a target pilot", &resumed, &whole);
@@ -96,8 +109,23 @@ fn metadata(path: &Path) -> serde_json::Value {
 /// uninterrupted render of as many samples, bit for bit.
 fn interrupt_and_resume(method: &str, signal_name: &str, status: i32, dir: &Path) {
     let args = |out: &str| -> Vec<String> {
-        ["render", "--method", method, "--res", "16x16", "--max-bounces", "3", "--gate", "box:3.14..3.19", "--samples-per-pass",
-         "4", "--out", out].map(String::from).to_vec()
+        [
+            "render",
+            "--method",
+            method,
+            "--res",
+            "16x16",
+            "--max-bounces",
+            "3",
+            "--gate",
+            "box:3.14..3.19",
+            "--samples-per-pass",
+            "4",
+            "--out",
+            out,
+        ]
+        .map(String::from)
+        .to_vec()
     };
     let out = dir.join("stopped.npy");
     let mut child = gatetrace()
@@ -152,8 +180,13 @@ fn closed_box(dir: &Path) -> std::path::PathBuf {
     use common::gltf_builder::{Camera, Material, Mesh, Scene};
     let face = |corner: [f32; 3], u: [f32; 3], v: [f32; 3], material| {
         let p = |a: f32, b: f32| [0, 1, 2].map(|i| corner[i] + a * u[i] + b * v[i]);
-        Mesh { positions: vec![p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)], normals: None, uvs: None,
-               indices: vec![0, 1, 2, 0, 2, 3], material: Some(material) }
+        Mesh {
+            positions: vec![p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)],
+            normals: None,
+            uvs: None,
+            indices: vec![0, 1, 2, 0, 2, 3],
+            material: Some(material),
+        }
     };
     let mut meshes = vec![];
     for axis in 0..3 {
@@ -188,8 +221,20 @@ fn a_second_signal_aborts_at_once() {
     // arrive during the first pass.
     let scene = closed_box(&dir);
     let child = gatetrace()
-        .args(["render", scene.to_str().unwrap(), "--res", "128x128", "--spp", "240", "--samples-per-pass", "240",
-               "--max-bounces", "100", "--out", out.to_str().unwrap()])
+        .args([
+            "render",
+            scene.to_str().unwrap(),
+            "--res",
+            "128x128",
+            "--spp",
+            "240",
+            "--samples-per-pass",
+            "240",
+            "--max-bounces",
+            "100",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()

@@ -30,7 +30,14 @@ fn ellipsoidal_on_a_large_mesh_is_never_cut_short_and_agrees_with_direct() {
     let cost: f64 = spheroids
         .iter()
         .map(|&(fs, fc, extra)| {
-            let q = Query { focus_s: fs, focus_c: fc, tau_e: fs.distance(fc) + extra, ignore: [NONE; 2], lights_only: false, reach: [DVec4::ZERO; 2] };
+            let q = Query {
+                focus_s: fs,
+                focus_c: fc,
+                tau_e: fs.distance(fc) + extra,
+                ignore: [NONE; 2],
+                lights_only: false,
+                reach: [DVec4::ZERO; 2],
+            };
             reached(QueryScene::of(&scene), &q, &exhaustive, u32::MAX, [1, 2, 3]).iterations as f64
         })
         .sum::<f64>()
@@ -40,14 +47,30 @@ fn ellipsoidal_on_a_large_mesh_is_never_cut_short_and_agrees_with_direct() {
 
     let ctx = common::gpu();
     let gate = Gate::Box { start: 3.0, end: 3.3 };
-    let settings = |method, seed| RenderSettings { width: 32, height: 32, max_bounces: 5, method, gate: gate.clone(), seed, ..Default::default() };
+    let settings = |method, seed| RenderSettings {
+        width: 32,
+        height: 32,
+        max_bounces: 5,
+        method,
+        gate: gate.clone(),
+        seed,
+        ..Default::default()
+    };
     let mut direct = BidirectionalTracer::new(&ctx, &scene, &settings(Method::Direct, 600)).unwrap();
     let direct_films = common::films_of(&mut direct, 16, 32);
-    let mut ellipsoidal = BidirectionalTracer::new(&ctx, &scene, &RenderSettings { stats: true, ..settings(Method::Ellipsoidal, 601) }).unwrap();
+    let mut ellipsoidal =
+        BidirectionalTracer::new(&ctx, &scene, &RenderSettings { stats: true, ..settings(Method::Ellipsoidal, 601) })
+            .unwrap();
     let ellipsoidal_films = common::films_of(&mut ellipsoidal, 16, 8);
     let (iterations, tested) = ellipsoidal.query_cost().unwrap();
     println!("ellipsoidal: {iterations:.1} loop iterations and {tested:.1} triangles tested per query");
     assert_eq!(direct.truncated_traversals().unwrap(), 0, "direct: traversals cut short");
     assert_eq!(ellipsoidal.truncated_traversals().unwrap(), 0, "ellipsoidal: traversals cut short");
-    common::assert_films_agree("ellipsoidal vs direct, 327,692 triangles, box [3.0, 3.3)", &ellipsoidal_films, &direct_films, 8, 0.01);
+    common::assert_films_agree(
+        "ellipsoidal vs direct, 327,692 triangles, box [3.0, 3.3)",
+        &ellipsoidal_films,
+        &direct_films,
+        8,
+        0.01,
+    );
 }

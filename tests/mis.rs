@@ -63,7 +63,11 @@ fn random_path(rng: &mut Rng, k: usize, light: Light) -> Vec<Vertex> {
             Vertex { kind, position: p, normal }
         } else if i == k - 1 {
             let image_area = 0.5 + rng.next();
-            Vertex { kind: VertexKind::Camera { image_area }, position: p, normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize() }
+            Vertex {
+                kind: VertexKind::Camera { image_area },
+                position: p,
+                normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize(),
+            }
         } else {
             let bsdf = Bsdf {
                 base_color: Vec3::new(0.8, 0.5, 0.2),

@@ -200,8 +200,13 @@ fn cells_on_an_edge_of_the_wall_are_sensed_and_lit() {
     let n = 64usize;
     let capture_settings = |method: Method| RenderSettings {
         target_pilot_spp: 0,
-        ..common::example_capture(n as u32, n as u32, Gate::Transient { start: 0.9, width: 0.12, bins: 10 },
-                                  LaserAim::Confocal, method)
+        ..common::example_capture(
+            n as u32,
+            n as u32,
+            Gate::Transient { start: 0.9, width: 0.12, bins: 10 },
+            LaserAim::Confocal,
+            method,
+        )
     };
     let capture = capture_settings(Method::Path).nlos.unwrap();
     let points = gatetrace::nlos::wall_points(&scene, &capture, n as u32, n as u32).unwrap();

@@ -60,11 +60,8 @@ struct Hidden {
 }
 
 /// Three-point Gauss-Legendre nodes and weights on [0, 1].
-const GAUSS: [(f64, f64); 3] = [
-    (0.5 - 0.387_298_334_620_741_7, 5.0 / 18.0),
-    (0.5, 8.0 / 18.0),
-    (0.5 + 0.387_298_334_620_741_7, 5.0 / 18.0),
-];
+const GAUSS: [(f64, f64); 3] =
+    [(0.5 - 0.387_298_334_620_741_7, 5.0 / 18.0), (0.5, 8.0 / 18.0), (0.5 + 0.387_298_334_620_741_7, 5.0 / 18.0)];
 
 /// Parameters t of the line p + t u (|u| = 1) where |h - a| + |h - b| = c: the line meets the
 /// spheroid with foci a and b. From |h - b| = (c^2 + |h-b|^2 - |h-a|^2) / 2c, linear in t, squared.
@@ -159,7 +156,8 @@ fn quadrature(
                 if bin < 0.0 || bin >= BINS as f64 {
                     continue;
                 }
-                let g: f64 = GAUSS.iter().map(|&(x, wt)| wt * geometry(p + (t0 + x * (t1 - t0)) * u)).sum::<f64>() * (t1 - t0);
+                let g: f64 =
+                    GAUSS.iter().map(|&(x, wt)| wt * geometry(p + (t0 + x * (t1 - t0)) * u)).sum::<f64>() * (t1 - t0);
                 let cell = &mut bins[bin as usize];
                 for ch in 0..3 {
                     cell[ch] += scale[ch] * g * across;
@@ -300,7 +298,12 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
     assert!(worst.0 < limit, "{name}: a bin differs from the quadrature (|z| = {:.2} >= {limit:.2})", worst.0);
     let dof = (BATCHES - 1) as f64;
     let t_rms = (dof / (dof - 2.0)).sqrt();
-    assert!(noise_zs.len() > zs.len() / 2, "{name}: the quadrature's error dominates {} of {} bins", zs.len() - noise_zs.len(), zs.len());
+    assert!(
+        noise_zs.len() > zs.len() / 2,
+        "{name}: the quadrature's error dominates {} of {} bins",
+        zs.len() - noise_zs.len(),
+        zs.len()
+    );
     assert!(rms > 0.9 && rms < t_rms + 0.05, "{name}: the z-scores' rms {rms:.3} is not that of noise");
 }
 

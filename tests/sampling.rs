@@ -68,7 +68,13 @@ fn triangle_sampling_is_uniform() {
     let expected: Vec<f64> = (0..g * g)
         .map(|k| {
             let (i, j) = (k / g, k % g);
-            let inside = if i + j + 2 <= g { 1.0 } else if i + j + 1 == g { 0.5 } else { 0.0 };
+            let inside = if i + j + 2 <= g {
+                1.0
+            } else if i + j + 1 == g {
+                0.5
+            } else {
+                0.0
+            };
             n as f64 * inside / (g * g) as f64 * 2.0
         })
         .collect();
@@ -163,7 +169,13 @@ fn light_sampling_follows_power_and_area() {
     // A grid cell's share of the triangle: whole, half (on the diagonal) or none.
     let share = |k: usize| {
         let (i, j) = (k / G, k % G);
-        if i + j + 2 <= G { 2.0 / (G * G) as f64 } else if i + j + 1 == G { 1.0 / (G * G) as f64 } else { 0.0 }
+        if i + j + 2 <= G {
+            2.0 / (G * G) as f64
+        } else if i + j + 1 == G {
+            1.0 / (G * G) as f64
+        } else {
+            0.0
+        }
     };
     let mut expected = vec![0.0; cells];
     for (i, l) in table.lights.iter().enumerate() {
@@ -216,7 +228,11 @@ const FEW_ULP: f32 = 4e-7;
 // the device may fuse into multiply-adds, and may cancel: they get 1e-5 relative (about 80 ulp)
 // plus 1e-6 absolute for components near zero.
 
-fn tracer_for<'a>(ctx: &'a gatetrace::gpu::GpuContext, scene: &gatetrace::scene::PreparedScene, gate: Gate) -> PathTracer<'a> {
+fn tracer_for<'a>(
+    ctx: &'a gatetrace::gpu::GpuContext,
+    scene: &gatetrace::scene::PreparedScene,
+    gate: Gate,
+) -> PathTracer<'a> {
     PathTracer::new(ctx, scene, &RenderSettings { width: 32, height: 24, gate, ..Default::default() }).unwrap()
 }
 
@@ -238,7 +254,9 @@ fn wgsl_sampling_matches_cpu_twins() {
     let scene = common::cornell_box();
     let tracer = tracer_for(&ctx, &scene, Gate::None);
     let input = uniform_inputs(4096, 1);
-    let run = |f: u32, input: &[[f32; 4]]| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len());
+    let run = |f: u32, input: &[[f32; 4]]| {
+        common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
+    };
 
     for (i, (x, g)) in input.iter().zip(run(0, &input)).enumerate() {
         let c = sample_cosine_hemisphere(Vec2::new(x[0], x[1]));
@@ -282,7 +300,9 @@ fn wgsl_camera_and_lights_match_cpu_twins() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let tracer = tracer_for(&ctx, &scene, Gate::None);
-    let run = |f: u32, input: &[[f32; 4]]| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len());
+    let run = |f: u32, input: &[[f32; 4]]| {
+        common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
+    };
     let camera = scene.scene.camera.to_gpu(32, 24);
     let film: Vec<[f32; 4]> = uniform_inputs(2048, 2).iter().map(|x| [x[0] * 32.0, x[1] * 24.0, 0.0, 0.0]).collect();
     for (i, (x, g)) in film.iter().zip(run(5, &film)).enumerate() {
@@ -356,12 +376,15 @@ fn wgsl_fixed_point_sums_match_cpu_twin() {
     let tracer = tracer_for(&ctx, &scene, Gate::None);
     let seed = gatetrace::integrator::Integrator::wavefront(&tracer).params.seed;
     // Values across the whole range, both signs, denormals, and ones rounded at random.
-    let mut values: Vec<f32> = (0..600).map(|i| f32::from_bits(0x0000_1000u32.wrapping_add(0x0071_c6a3u32.wrapping_mul(i)))).collect();
+    let mut values: Vec<f32> =
+        (0..600).map(|i| f32::from_bits(0x0000_1000u32.wrapping_add(0x0071_c6a3u32.wrapping_mul(i)))).collect();
     values.extend([0.0, -0.0, 1.0, -1.0, 1e-25, -3e-20, 5.4e-20, 2.7e-20, 1e18, -9.0e18, f32::MIN_POSITIVE]);
     let input: Vec<[f32; 4]> = values
         .iter()
         .enumerate()
-        .map(|(i, &a)| [a, f32::from_bits(i as u32 * 7919), -values[(i * 31) % values.len()] * 0.37, f32::from_bits(i as u32)])
+        .map(|(i, &a)| {
+            [a, f32::from_bits(i as u32 * 7919), -values[(i * 31) % values.len()] * 0.37, f32::from_bits(i as u32)]
+        })
         .collect();
     let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 11.0)], &input, input.len());
     for (x, g) in input.iter().zip(out) {
@@ -378,7 +401,9 @@ fn wgsl_surfaces_match_cpu_twin() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let tracer = tracer_for(&ctx, &scene, Gate::None);
-    let run = |f: u32, input: &[[f32; 4]]| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len());
+    let run = |f: u32, input: &[[f32; 4]]| {
+        common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
+    };
     let input: Vec<[f32; 4]> = uniform_inputs(2048, 9)
         .iter()
         .map(|x| {
@@ -414,7 +439,8 @@ fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
     let tracer = tracer_for(&ctx, &scene, Gate::None);
     let camera = scene.scene.camera.to_gpu(32, 24);
     let input: Vec<[f32; 4]> = uniform_inputs(2048, 7).iter().map(|x| [x[0] * 32.0, x[1] * 24.0, x[2], x[3]]).collect();
-    let run = |f: u32| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], &input, input.len());
+    let run =
+        |f: u32| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], &input, input.len());
     let (directions, origins, coordinates) = (run(16), run(17), run(18));
     for (i, x) in input.iter().enumerate() {
         let (origin, direction) = camera_ray(&camera, Vec2::new(x[0], x[1]), Vec2::new(x[2], x[3]), 32, 24);
@@ -431,12 +457,18 @@ fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
             assert_close("image coordinates (CPU)", i, c[k], aimed[k], 1e-5, 1e-5);
             assert_close("image coordinates (GPU)", i, coordinates[i][k], aimed[k], 1e-4, 1e-4);
         }
-        assert!(c.z > 0.0 && (coordinates[i][2] - c.z).abs() <= 1e-4, "record {i}: cosine {} vs {}", coordinates[i][2], c.z);
+        assert!(
+            c.z > 0.0 && (coordinates[i][2] - c.z).abs() <= 1e-4,
+            "record {i}: cosine {} vs {}",
+            coordinates[i][2],
+            c.z
+        );
     }
 
     // A spot light with a wide falloff (inner 0.2 rad, outer 0.5 rad): intensity and the density
     // of its uniform cone sampling towards directions all around.
-    let mut spot_scene = gatetrace::scene::load_gltf(&common::repo_path("assets/scenes/cornell_box_spot.gltf")).unwrap();
+    let mut spot_scene =
+        gatetrace::scene::load_gltf(&common::repo_path("assets/scenes/cornell_box_spot.gltf")).unwrap();
     let spot = spot_scene.point_lights[0].spot.as_mut().expect("the scene's light is a spot");
     (spot.inner, spot.outer) = (0.2, 0.5);
     let spot_scene = gatetrace::scene::PreparedScene::new(spot_scene).unwrap();

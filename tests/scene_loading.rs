@@ -70,7 +70,9 @@ fn node_transforms_are_baked_and_the_camera_follows_its_parents() {
     }
     let ctx = common::gpu();
     let prepared = PreparedScene::new(scene).unwrap();
-    let film = common::render_films(&ctx, &prepared, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 2).remove(0);
+    let film =
+        common::render_films(&ctx, &prepared, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 2)
+            .remove(0);
     assert!(film.data.iter().all(|&v| v == 2.0), "the rotated camera sees the emitter in every pixel");
 }
 
@@ -133,7 +135,8 @@ fn bad_files_give_clear_errors() {
     assert!(e.contains("not finite"), "{e}");
 
     let mut doc = lit_quad().to_json();
-    doc["cameras"][0] = json!({"type": "orthographic", "orthographic": {"xmag": 1.0, "ymag": 1.0, "znear": 0.1, "zfar": 10.0}});
+    doc["cameras"][0] =
+        json!({"type": "orthographic", "orthographic": {"xmag": 1.0, "ymag": 1.0, "znear": 0.1, "zfar": 10.0}});
     let e = load_error(&dir, "orthographic.gltf", &doc);
     assert!(e.contains("orthographic"), "{e}");
 
@@ -145,13 +148,17 @@ fn bad_files_give_clear_errors() {
     let mut doc = lit_quad().to_json();
     doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
     doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "spot", "spot": {"innerConeAngle": 0.6, "outerConeAngle": 0.5}}]}});
-    doc["nodes"].as_array_mut().unwrap().push(json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+    doc["nodes"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
     doc["scenes"][0]["nodes"] = json!([0, 1, 2]);
     let e = load_error(&dir, "spot.gltf", &doc);
     assert!(e.contains("spot cone angles") && e.contains("lamp") && e.contains("spot.gltf"), "{e}");
 
     // Thin-lens extras on the camera node: both lengths, positive, numbers.
-    let camera_node = lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
+    let camera_node =
+        lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
     for (extras, needle) in [
         (json!({"aperture_radius": 0.1}), "needs `focus_distance`"),
         (json!({"focus_distance": 2.0}), "needs `aperture_radius`"),
@@ -169,7 +176,8 @@ fn bad_files_give_clear_errors() {
 #[test]
 fn thin_lens_extras_and_spot_cones_load() {
     let dir = common::scratch_dir("lens_and_spot");
-    let camera_node = lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
+    let camera_node =
+        lit_quad().to_json()["nodes"].as_array().unwrap().iter().position(|n| n.get("camera").is_some()).unwrap();
     let mut doc = lit_quad().to_json();
     doc["nodes"][camera_node]["extras"] = json!({"aperture_radius": 0.05, "focus_distance": 3.0, "note": "kept"});
     doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
@@ -229,9 +237,15 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
     // WGSL texture lookups against the CPU twin.
     let prepared = PreparedScene::new(scene).unwrap();
     let ctx = common::gpu();
-    let tracer = gatetrace::integrator::PathTracer::new(&ctx, &prepared, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = gatetrace::integrator::PathTracer::new(
+        &ctx,
+        &prepared,
+        &RenderSettings { width: 4, height: 4, ..Default::default() },
+    )
+    .unwrap();
     let mut rng = gatetrace::rng::Rng::new(5, 5, 5);
-    let input: Vec<[f32; 4]> = (0..2048).map(|_| [f32::from_bits(0), 3.0 * rng.next_f32() - 1.0, 3.0 * rng.next_f32() - 1.0, 0.0]).collect();
+    let input: Vec<[f32; 4]> =
+        (0..2048).map(|_| [f32::from_bits(0), 3.0 * rng.next_f32() - 1.0, 3.0 * rng.next_f32() - 1.0, 0.0]).collect();
     let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 7.0)], &input, input.len());
     for (x, g) in input.iter().zip(out) {
         let c = texture_bilinear(&prepared.texture_infos, &prepared.texels, 0, glam::Vec2::new(x[1], x[2]));

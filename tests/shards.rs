@@ -34,7 +34,8 @@ fn check_shards(dir: &Path, label: &str, options: &[&str], count: u32) {
     assert!(a == b, "{label}: the merged image differs from the unsplit render");
     let (_, data) = gatetrace::film::output::read_npy_f32(&merged).unwrap();
     assert!(data.iter().any(|&v| v > 0.0), "{label}: black image");
-    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(merged.with_extension("json")).unwrap()).unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(merged.with_extension("json")).unwrap()).unwrap();
     assert_eq!(meta["shards"], count.to_string().as_str());
 }
 

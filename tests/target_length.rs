@@ -8,8 +8,8 @@
 mod common;
 
 use gatetrace::film::Gate;
-use gatetrace::film::target::{TargetSampler, target_u};
 use gatetrace::film::gate::gate_weight;
+use gatetrace::film::target::{TargetSampler, target_u};
 use gatetrace::integrator::{Integrator, PathTracer, RenderSettings, target_sampler};
 
 fn gates() -> Vec<(&'static str, Gate)> {
@@ -20,7 +20,13 @@ fn gates() -> Vec<(&'static str, Gate)> {
         ("cw", Gate::Cw { frequency_hz: 1e8, phase_deg: 30.0 }),
         ("cw depth-selective", Gate::parse("cw:4.7e9,-30,depthsel").unwrap()),
         ("cw hamiltonian", Gate::parse("cw:300e6,75,ham4:3").unwrap()),
-        ("table", Gate::Table { points: vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)], source: "t.csv".into() }),
+        (
+            "table",
+            Gate::Table {
+                points: vec![(2.8, 0.0), (3.0, 1.0), (3.2, 1.0), (3.4, -0.5), (3.6, 0.0)],
+                source: "t.csv".into(),
+            },
+        ),
         ("transient", Gate::Transient { start: 1.94, width: 0.1, bins: 20 }),
     ]
 }
@@ -38,20 +44,32 @@ fn weighted_target_lengths_integrate_the_gate() {
         let (gp, kind, table) = (gate.to_gpu(), gate.kind(), gate.table());
         let n = 400_000;
         let h = (hi - lo) / n as f64;
-        let exact: f64 = (0..n).map(|i| {
-            let l = lo + (i as f64 + 0.5) * h;
-            gate_weight(kind, &gp, &table, l as f32) as f64 * g(l) * h
-        }).sum();
+        let exact: f64 = (0..n)
+            .map(|i| {
+                let l = lo + (i as f64 + 0.5) * h;
+                gate_weight(kind, &gp, &table, l as f32) as f64 * g(l) * h
+            })
+            .sum();
         // Estimate with stratified u.
         let m = 200_000;
-        let estimate: f64 = (0..m).map(|i| {
-            let (l, inv_pdf) = sampler.sample((i as f32 + 0.5) / m as f32);
-            let w = sampler.weight(l) * inv_pdf;
-            assert!((lo as f32..=hi as f32).contains(&l) && w.is_finite(), "{name}: tau {l}, weight {w}");
-            w as f64 * g(l as f64)
-        }).sum::<f64>() / m as f64;
+        let estimate: f64 = (0..m)
+            .map(|i| {
+                let (l, inv_pdf) = sampler.sample((i as f32 + 0.5) / m as f32);
+                let w = sampler.weight(l) * inv_pdf;
+                assert!((lo as f32..=hi as f32).contains(&l) && w.is_finite(), "{name}: tau {l}, weight {w}");
+                w as f64 * g(l as f64)
+            })
+            .sum::<f64>()
+            / m as f64;
         println!("{name}: [{lo:.4}, {hi:.4}] m, integral {exact:.6e}, estimate {estimate:.6e}");
-        let scale: f64 = (0..n).map(|i| (gate_weight(kind, &gp, &table, (lo + (i as f64 + 0.5) * h) as f32) as f64 * g(lo + (i as f64 + 0.5) * h)).abs() * h).sum();
+        let scale: f64 = (0..n)
+            .map(|i| {
+                (gate_weight(kind, &gp, &table, (lo + (i as f64 + 0.5) * h) as f32) as f64
+                    * g(lo + (i as f64 + 0.5) * h))
+                .abs()
+                    * h
+            })
+            .sum();
         assert!((estimate - exact).abs() <= 2e-3 * scale, "{name}: estimate {estimate} vs integral {exact}");
     }
 }
@@ -65,7 +83,9 @@ fn wgsl_target_lengths_match_cpu_twin() {
         let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
         let sampler: TargetSampler = target_sampler(&scene, &settings).unwrap();
         let input: Vec<[f32; 4]> = (0..4096u32)
-            .map(|i| [(i as f32 + 0.37) / 4096.0, f32::from_bits(i.wrapping_mul(2_246_822_519)), f32::from_bits(i % 97), 0.0])
+            .map(|i| {
+                [(i as f32 + 0.37) / 4096.0, f32::from_bits(i.wrapping_mul(2_246_822_519)), f32::from_bits(i % 97), 0.0]
+            })
             .collect();
         let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 14.0)], &input, input.len());
         for (i, (x, o)) in input.iter().zip(&out).enumerate() {
@@ -113,13 +133,18 @@ fn transient_gates() -> Vec<Gate> {
 fn random_rows(n: u32, extra: u32, pixels: u32, rng: &mut gatetrace::rng::Rng) -> Vec<u32> {
     let mut rows = Vec::new();
     for _ in 0..pixels {
-        let weights: Vec<f64> = (0..n).map(|_| if rng.next_f32() < 0.3 { 0.0 } else { (rng.next_f32() as f64).powi(3) }).collect();
+        let weights: Vec<f64> =
+            (0..n).map(|_| if rng.next_f32() < 0.3 { 0.0 } else { (rng.next_f32() as f64).powi(3) }).collect();
         let total: f64 = weights.iter().sum::<f64>().max(1e-30);
         let mut acc = 0.0;
         rows.push(0);
         for (j, w) in weights.iter().enumerate() {
             acc += w;
-            rows.push(if j + 1 == n as usize { extra } else { ((extra as f64 * acc / total).round() as u32).min(extra) });
+            rows.push(if j + 1 == n as usize {
+                extra
+            } else {
+                ((extra as f64 * acc / total).round() as u32).min(extra)
+            });
         }
     }
     rows
@@ -148,7 +173,11 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
         let n = t.strata;
         for _ in 0..20 {
             let pixel = (rng.next_f32() * 1e6) as u32;
-            let t = gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: (rng.next_f32() * 1e7) as u32, ..t };
+            let t = gatetrace::gpu::layout::TargetParams {
+                seed: settings.seed,
+                film_first_sample: (rng.next_f32() * 1e7) as u32,
+                ..t
+            };
             let first = t.film_first_sample.wrapping_add((rng.next_f32() * 1e7) as u32);
             let mut seen = vec![0u32; n as usize];
             for sample in first..first + n {
@@ -157,7 +186,11 @@ fn stratified_target_lengths_visit_every_bin_once_per_round() {
                 assert_eq!((v.visit, v.per_cycle), ((sample - t.film_first_sample) / n, 1));
                 let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, &[], pixel, sample);
                 assert_eq!(bin, t.first_bin + v.stratum);
-                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), tau), bin as i32, "{gate:?}: tau {tau} outside bin {bin}");
+                assert_eq!(
+                    gate_bin(gate.kind(), &gate.to_gpu(), tau),
+                    bin as i32,
+                    "{gate:?}: tau {tau} outside bin {bin}"
+                );
                 assert!((inv_pdf as f64 - n as f64 * width).abs() <= 1e-6 * n as f64 * width, "1/p {inv_pdf}");
             }
             assert!(seen.iter().all(|&c| c == 1), "{gate:?}: {n} consecutive samples from {first} of pixel {pixel}");
@@ -239,7 +272,11 @@ fn extra_visits_follow_the_pixels_rows() {
                 visits[v.stratum as usize].push(v.visit);
                 let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, row, pixel, sample);
                 assert_eq!(bin, t.first_bin + v.stratum);
-                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), tau), bin as i32, "{gate:?}: tau {tau} outside bin {bin}");
+                assert_eq!(
+                    gate_bin(gate.kind(), &gate.to_gpu(), tau),
+                    bin as i32,
+                    "{gate:?}: tau {tau} outside bin {bin}"
+                );
                 let expected = cycle as f64 * width / v.per_cycle as f64;
                 assert!((inv_pdf as f64 - expected).abs() <= 1e-6 * expected, "1/p {inv_pdf}, expected {expected}");
             }
@@ -256,7 +293,11 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
     use gatetrace::film::target::{golden_stride, samples_to_visit_every_bin, stratum_factors, target_visit};
     let scene = common::cornell_box();
     let settings = RenderSettings { max_bounces: 5, gate: transient_gates()[0].clone(), seed: 3, ..Default::default() };
-    let plain = gatetrace::gpu::layout::TargetParams { seed: 3, film_first_sample: 77, ..target_sampler(&scene, &settings).unwrap().params };
+    let plain = gatetrace::gpu::layout::TargetParams {
+        seed: 3,
+        film_first_sample: 77,
+        ..target_sampler(&scene, &settings).unwrap().params
+    };
     let n = plain.strata;
     let extra = 5 * n - 2;
     let mut rng = gatetrace::rng::Rng::new(1, 2, 3);
@@ -267,9 +308,22 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
         let cycle = (n + t.extra) as u64;
         let every = samples_to_visit_every_bin(&t);
         let n = n as u64;
-        let cases = [(0u32, n - 1), (7, n), (9, 3 * cycle + 5), (123, 10 * cycle + cycle - 1), (45, n + 3), (46, cycle), (47, every - 1), (48, every)];
+        let cases = [
+            (0u32, n - 1),
+            (7, n),
+            (9, 3 * cycle + 5),
+            (123, 10 * cycle + cycle - 1),
+            (45, n + 3),
+            (46, cycle),
+            (47, every - 1),
+            (48, every),
+        ];
         for (pixel, samples) in cases {
-            let row = if t.extra > 0 { &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)] } else { &[][..] };
+            let row = if t.extra > 0 {
+                &rows[pixel as usize * (n as usize + 1)..(pixel as usize + 1) * (n as usize + 1)]
+            } else {
+                &[][..]
+            };
             let done = stratum_factors(&t, row, pixel, samples, &mut factors);
             if samples < n && t.extra == 0 {
                 assert!(done.is_none(), "{samples} samples < {n} strata, no extra visits: nothing to change");
@@ -315,7 +369,10 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
             assert!(counts.iter().all(|&c| c > 0), "{samples} samples from the film's first visit every bin");
             for (j, (&f, &c)) in factors.iter().zip(&counts).enumerate() {
                 let expected = samples as f64 * per_cycle(j) / (cycle as f64 * c as f64);
-                assert!((f as f64 - expected).abs() <= 1e-6 * expected, "stratum {j}: factor {f}, {c} samples of {samples}");
+                assert!(
+                    (f as f64 - expected).abs() <= 1e-6 * expected,
+                    "stratum {j}: factor {f}, {c} samples of {samples}"
+                );
             }
         }
     }
@@ -327,7 +384,9 @@ fn stratum_factors_divide_each_bin_by_its_samples() {
 /// `samples_to_visit_every_bin` samples and not before.
 #[test]
 fn a_cycle_interleaves_base_and_extra_visits() {
-    use gatetrace::film::target::{base_visits_before, cycle_slot, golden_stride, samples_to_visit_every_bin, target_visit};
+    use gatetrace::film::target::{
+        base_visits_before, cycle_slot, golden_stride, samples_to_visit_every_bin, target_visit,
+    };
     let mut rng = gatetrace::rng::Rng::new(4, 5, 6);
     for (n, extra) in [(1u32, 5u32), (7, 3), (7, 7), (40, 15 * 40), (40, 15 * 40 + 13), (300, 65_535), (1000, 999)] {
         let t = gatetrace::gpu::layout::TargetParams {
@@ -346,7 +405,11 @@ fn a_cycle_interleaves_base_and_extra_visits() {
             assert_eq!(base_visits_before(&t, q as u64), bases_so_far, "({n}, {extra}) position {q}");
             let (is_base, i) = cycle_slot(&t, q);
             let seen = if is_base { &mut base[i as usize] } else { &mut extras[i as usize] };
-            assert!(!*seen, "({n}, {extra}): position {q} repeats {}", if is_base { "a base visit" } else { "an extra visit" });
+            assert!(
+                !*seen,
+                "({n}, {extra}): position {q} repeats {}",
+                if is_base { "a base visit" } else { "an extra visit" }
+            );
             *seen = true;
             // In order, and one base visit in each run of `run` positions up to the last.
             if is_base {
@@ -359,7 +422,11 @@ fn a_cycle_interleaves_base_and_extra_visits() {
         let rows = random_rows(n, extra, 3, &mut rng);
         let every = samples_to_visit_every_bin(&t);
         // The last base visit of the first cycle is its sample every - 1.
-        assert_eq!((base_visits_before(&t, every - 1), base_visits_before(&t, every)), (n as u64 - 1, n as u64), "({n}, {extra})");
+        assert_eq!(
+            (base_visits_before(&t, every - 1), base_visits_before(&t, every)),
+            (n as u64 - 1, n as u64),
+            "({n}, {extra})"
+        );
         for pixel in 0..3u32 {
             let row = &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize];
             let mut seen = vec![0u32; n as usize];
@@ -398,7 +465,11 @@ fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
     let shaped = (1.0 - PILOT_UNIFORM_SHARE) * extra as f64 / 36.0;
     for j in 0..strata as usize {
         let expected = even + if (92..128).contains(&j) { shaped } else { 0.0 };
-        assert!(((row[j + 1] - row[j]) as f64 - expected).abs() <= 1.0, "stratum {j}: {} extra visits, not {expected:.1}", row[j + 1] - row[j]);
+        assert!(
+            ((row[j + 1] - row[j]) as f64 - expected).abs() <= 1.0,
+            "stratum {j}: {} extra visits, not {expected:.1}",
+            row[j + 1] - row[j]
+        );
     }
     // A pixel the pilot saw nothing in (or nothing finite) gets its extra visits evenly.
     for row in rows.chunks(strata as usize + 1).skip(1) {
@@ -416,12 +487,14 @@ fn wgsl_stratified_target_lengths_match_cpu_twin() {
     let scene = common::cornell_box();
     let mut rng = gatetrace::rng::Rng::new(4, 4, 4);
     for gate in transient_gates() {
-        let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), seed: 21, ..Default::default() };
+        let settings =
+            RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), seed: 21, ..Default::default() };
         let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
         let sampler = target_sampler(&scene, &settings).unwrap();
         let n = sampler.params.strata;
         // Each bin once a cycle, then with extra visits from random rows of the 16 pixels.
-        let plain = gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: 123_456, ..sampler.params };
+        let plain =
+            gatetrace::gpu::layout::TargetParams { seed: settings.seed, film_first_sample: 123_456, ..sampler.params };
         let extra = 2 * n + 3;
         let shaped = gatetrace::gpu::layout::TargetParams { extra, extra_stride: golden_stride(extra), ..plain };
         let rows = random_rows(n, extra, 16, &mut rng);
@@ -434,15 +507,40 @@ fn wgsl_stratified_target_lengths_match_cpu_twin() {
             let input: Vec<[f32; 4]> = (0..4096u32)
                 .map(|i| [f32::from_bits(i % 16), f32::from_bits(i.wrapping_mul(2_246_822_519) >> 12), 0.0, 0.0])
                 .collect();
-            let out = common::run_probe_with(&ctx, &resources, tracer.constants(), "probe_functions", &[("FUNCTION", 15.0)], &input, input.len());
+            let out = common::run_probe_with(
+                &ctx,
+                &resources,
+                tracer.constants(),
+                "probe_functions",
+                &[("FUNCTION", 15.0)],
+                &input,
+                input.len(),
+            );
             for (i, (x, o)) in input.iter().zip(&out).enumerate() {
                 let pixel = x[0].to_bits();
-                let row = if t.extra > 0 { &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize] } else { &[][..] };
+                let row = if t.extra > 0 {
+                    &rows[(pixel * (n + 1)) as usize..((pixel + 1) * (n + 1)) as usize]
+                } else {
+                    &[][..]
+                };
                 let (tau, inv_pdf, bin) = sampler.stratified_sample(&t, row, pixel, x[1].to_bits());
                 assert_eq!(o[2] as u32 + t.first_bin, bin, "{gate:?} record {i}: stratum");
-                assert!((o[0] - tau).abs() <= 2.0 * f32::EPSILON * tau, "{gate:?} record {i}: tau GPU {} CPU {tau}", o[0]);
-                assert_eq!(gate_bin(gate.kind(), &gate.to_gpu(), o[0]), bin as i32, "{gate:?} record {i}: GPU tau {} outside bin {bin}", o[0]);
-                assert!((o[1] - inv_pdf).abs() <= 1e-6 * inv_pdf, "{gate:?} record {i}: 1/p GPU {} CPU {inv_pdf}", o[1]);
+                assert!(
+                    (o[0] - tau).abs() <= 2.0 * f32::EPSILON * tau,
+                    "{gate:?} record {i}: tau GPU {} CPU {tau}",
+                    o[0]
+                );
+                assert_eq!(
+                    gate_bin(gate.kind(), &gate.to_gpu(), o[0]),
+                    bin as i32,
+                    "{gate:?} record {i}: GPU tau {} outside bin {bin}",
+                    o[0]
+                );
+                assert!(
+                    (o[1] - inv_pdf).abs() <= 1e-6 * inv_pdf,
+                    "{gate:?} record {i}: 1/p GPU {} CPU {inv_pdf}",
+                    o[1]
+                );
             }
         }
     }

@@ -39,12 +39,28 @@ fn the_viewer_screenshot_matches_a_headless_render() {
     let (w, h) = (32u32, 32u32);
     let exposure_ev = 1.0;
     let o = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1280x900x24", env!("CARGO_BIN_EXE_gatetrace"), "view", "--res", "32x32", "--gate", "none"])
+        .args([
+            "-a",
+            "-s",
+            "-screen 0 1280x900x24",
+            env!("CARGO_BIN_EXE_gatetrace"),
+            "view",
+            "--res",
+            "32x32",
+            "--gate",
+            "none",
+        ])
         .args(["--max-bounces", "3", "--exposure", "1", "--after-frames", "12", "--screenshot", shot.to_str().unwrap()])
         .output()
         .unwrap();
-    assert!(o.status.success(), "the viewer failed:\n{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("shot.json")).unwrap()).unwrap();
+    assert!(
+        o.status.success(),
+        "the viewer failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("shot.json")).unwrap()).unwrap();
     println!("{meta}");
     let rect: Vec<i64> = meta["image_rect_px"].as_array().unwrap().iter().map(|v| v.as_i64().unwrap()).collect();
     let spp = meta["spp"].as_u64().unwrap();
@@ -71,7 +87,15 @@ fn the_viewer_screenshot_matches_a_headless_render() {
     // (exposure, clamp to 1).
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let settings = RenderSettings { width: w, height: h, method: Method::Path, gate: Gate::None, max_bounces: 3, seed: 77, ..Default::default() };
+    let settings = RenderSettings {
+        width: w,
+        height: h,
+        method: Method::Path,
+        gate: Gate::None,
+        max_bounces: 3,
+        seed: 77,
+        ..Default::default()
+    };
     let batches = 8;
     let films = common::render_films(&ctx, &scene, &settings, batches, spp as u32);
     let exposure = 2f64.powf(exposure_ev);

@@ -64,7 +64,12 @@ impl Scene {
     /// FileNotFoundError when the file does not exist; ValueError when it cannot be used.
     #[staticmethod]
     #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None))]
-    fn load(py: Python<'_>, path: PathBuf, aperture_radius: Option<f32>, focus_distance: Option<f32>) -> PyResult<Self> {
+    fn load(
+        py: Python<'_>,
+        path: PathBuf,
+        aperture_radius: Option<f32>,
+        focus_distance: Option<f32>,
+    ) -> PyResult<Self> {
         if !path.exists() {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
         }
@@ -205,9 +210,7 @@ fn parse_method(name: &str) -> PyResult<Method> {
         "ellipsoidal" => Method::Ellipsoidal,
         "auto" => Method::Auto,
         other => {
-            return Err(PyValueError::new_err(format!(
-                "method `{other}`: choose path, direct, ellipsoidal or auto"
-            )));
+            return Err(PyValueError::new_err(format!("method `{other}`: choose path, direct, ellipsoidal or auto")));
         }
     })
 }
@@ -253,7 +256,12 @@ impl Renderer {
             samples_per_pass,
             connections_per_query: connections_per_query
                 .unwrap_or(gatetrace::integrator::bidirectional::default_connections_per_query(method)),
-            query: QuerySettings { split: query_split, bottom_nodes: query_bottom_nodes, reflection_weights, ..Default::default() },
+            query: QuerySettings {
+                split: query_split,
+                bottom_nodes: query_bottom_nodes,
+                reflection_weights,
+                ..Default::default()
+            },
             ..Default::default()
         };
         gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
@@ -411,7 +419,12 @@ impl Renderer {
 
 impl Renderer {
     /// The metadata the command line writes beside its outputs, and the camera.
-    fn metadata(&self, settings: &RenderSettings, gate: &str, output: &RenderOutput) -> PyResult<Vec<(String, String)>> {
+    fn metadata(
+        &self,
+        settings: &RenderSettings,
+        gate: &str,
+        output: &RenderOutput,
+    ) -> PyResult<Vec<(String, String)>> {
         let mut metadata = render_metadata(device()?, &self.path, gate, settings, output);
         metadata.push(("camera".into(), self.scene.scene.camera.describe()));
         Ok(metadata)

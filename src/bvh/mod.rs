@@ -41,10 +41,8 @@ impl Bvh {
     /// Builds the BVH of `triangles` (vertex positions, m).
     pub fn build(triangles: &[[Vec3; 3]]) -> Self {
         assert!(!triangles.is_empty(), "a BVH needs at least one triangle");
-        let tris: Vec<ObvhsTriangle> = triangles
-            .iter()
-            .map(|t| ObvhsTriangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() })
-            .collect();
+        let tris: Vec<ObvhsTriangle> =
+            triangles.iter().map(|t| ObvhsTriangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
         let params = BvhBuildParams { max_prims_per_leaf: 4, ..BvhBuildParams::medium_build() };
         let bvh2 = obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
         let mut out = Bvh { nodes: Vec::with_capacity(bvh2.nodes.len()), order: Vec::with_capacity(triangles.len()) };

@@ -46,7 +46,14 @@ fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_max: f32) -> 
 }
 
 /// Closest hit with t in (0, t_max), ignoring triangle `ignore`.
-pub fn trace_closest(nodes: &[BvhNode], triangles: &[Triangle], origin: Vec3, direction: Vec3, t_max: f32, ignore: u32) -> Hit {
+pub fn trace_closest(
+    nodes: &[BvhNode],
+    triangles: &[Triangle],
+    origin: Vec3,
+    direction: Vec3,
+    t_max: f32,
+    ignore: u32,
+) -> Hit {
     let mut best = Hit { t: t_max, triangle: NONE, b1: 0.0, b2: 0.0 };
     let inv_dir = safe_inverse(direction);
     let mut i = 0usize;

@@ -73,11 +73,9 @@ impl WideBvh {
         let nodes = &bvh.nodes;
         let children_of = |i: usize| [i + 1, nodes[i + 1].skip as usize];
         while kids.len() < WIDTH {
-            let widest = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, k)| nodes[**k].leaf == 0)
-                .max_by(|a, b| half_area(nodes[*a.1].min, nodes[*a.1].max).total_cmp(&half_area(nodes[*b.1].min, nodes[*b.1].max)));
+            let widest = kids.iter().enumerate().filter(|(_, k)| nodes[**k].leaf == 0).max_by(|a, b| {
+                half_area(nodes[*a.1].min, nodes[*a.1].max).total_cmp(&half_area(nodes[*b.1].min, nodes[*b.1].max))
+            });
             let Some((slot, &k)) = widest else { break };
             let [first, second] = children_of(k);
             kids[slot] = first;
@@ -462,12 +460,27 @@ pub fn trace_any_in_steps(
 
 /// The closest hit with t in (0, t_max), ignoring `ignore` (the kernels' traversal, resumed
 /// until complete).
-pub fn trace_closest(bvh: &WideBvh, triangles: &[Triangle], origin: Vec3, direction: Vec3, t_max: f32, ignore: u32) -> Hit {
+pub fn trace_closest(
+    bvh: &WideBvh,
+    triangles: &[Triangle],
+    origin: Vec3,
+    direction: Vec3,
+    t_max: f32,
+    ignore: u32,
+) -> Hit {
     trace_closest_in_steps(bvh, triangles, (origin, direction, t_max), ignore, TRAVERSAL_BUDGET).0
 }
 
 /// Whether any triangle other than `ignore0` and `ignore1` is hit with t in (0, t_max) (the
 /// kernels' traversal, resumed until decided).
-pub fn trace_any(bvh: &WideBvh, triangles: &[Triangle], origin: Vec3, direction: Vec3, t_max: f32, ignore0: u32, ignore1: u32) -> bool {
+pub fn trace_any(
+    bvh: &WideBvh,
+    triangles: &[Triangle],
+    origin: Vec3,
+    direction: Vec3,
+    t_max: f32,
+    ignore0: u32,
+    ignore1: u32,
+) -> bool {
     trace_any_in_steps(bvh, triangles, (origin, direction, t_max), (ignore0, ignore1), TRAVERSAL_BUDGET).0
 }

@@ -98,7 +98,11 @@ impl Spheroid {
     pub fn bounds(&self) -> (DVec3, DVec3) {
         let e = self.axis();
         let (b2, c) = (self.b2(), self.c());
-        let half = DVec3::new((b2 + c * c * e.x * e.x).sqrt(), (b2 + c * c * e.y * e.y).sqrt(), (b2 + c * c * e.z * e.z).sqrt());
+        let half = DVec3::new(
+            (b2 + c * c * e.x * e.x).sqrt(),
+            (b2 + c * c * e.y * e.y).sqrt(),
+            (b2 + c * c * e.z * e.z).sqrt(),
+        );
         (self.centre() - half, self.centre() + half)
     }
 
@@ -150,7 +154,9 @@ impl Section {
         let m1_sq_prime = a / (k * k) * (b2 * g + a * a * g + a * a * b2 - 2.0 * a * a * b2 * g / k);
         let m2_sq_prime = a * (g * k + b2 * h * h) / (k * k);
         let (ct, st) = (theta.cos(), theta.sin());
-        u0_prime * self.m2 * ct + m1_sq_prime * (k.sqrt() / (2.0 * a)) * ct * ct + m2_sq_prime * (a / (2.0 * k.sqrt())) * st * st
+        u0_prime * self.m2 * ct
+            + m1_sq_prime * (k.sqrt() / (2.0 * a)) * ct * ct
+            + m2_sq_prime * (a / (2.0 * k.sqrt())) * st * st
     }
 }
 

@@ -295,7 +295,8 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
     let bounds = spheroid_bounds(q);
     let nodes = scene.nodes;
     let count = nodes.len();
-    let estimate = |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), &scene.node_surfaces[i], q, bounds);
+    let estimate =
+        |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), &scene.node_surfaces[i], q, bounds);
     let step_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0]);
     let rest_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0]);
     let split_size = settings.split as f64 * 0.5 * q.tau_e;
@@ -381,7 +382,11 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
             }
             if let Some((j, w)) = chosen {
                 let inv_p = total / w;
-                let bottom = if is_bottom(j, &nodes[j], settings) { Some((j, inv_p)) } else { descend(j, inv_p, &mut iterations) };
+                let bottom = if is_bottom(j, &nodes[j], settings) {
+                    Some((j, inv_p))
+                } else {
+                    descend(j, inv_p, &mut iterations)
+                };
                 if let Some((r, inv_p)) = bottom {
                     visit(r, nodes[r].skip as usize, inv_p, &mut iterations, &mut leaves);
                 }

@@ -359,8 +359,15 @@ impl Report {
     pub fn header() -> String {
         format!(
             "{:<24} {:>8} {:>8} {:>6} {:>4} | {:<25} | {:<25} | {:<25} | {}",
-            "family", "configs", "cut", "diff", "NaN", "Theta abs err (p50 p99 max)", "|L-tau|/tau (p50 p99 max)",
-            "J rel err (p50 p99 max)", "guard"
+            "family",
+            "configs",
+            "cut",
+            "diff",
+            "NaN",
+            "Theta abs err (p50 p99 max)",
+            "|L-tau|/tau (p50 p99 max)",
+            "J rel err (p50 p99 max)",
+            "guard"
         )
     }
 }

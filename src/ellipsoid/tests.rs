@@ -49,7 +49,12 @@ fn section_points_lie_on_the_spheroid_and_the_plane() {
         let Some(sec) = sp.section(point, n) else { continue };
         for k in 0..16 {
             let x = sec.point(k as f64 * TAU / 16.0);
-            assert!((sp.path_length(x) - sp.length).abs() < 1e-12 * sp.length, "L = {} vs {}", sp.path_length(x), sp.length);
+            assert!(
+                (sp.path_length(x) - sp.length).abs() < 1e-12 * sp.length,
+                "L = {} vs {}",
+                sp.path_length(x),
+                sp.length
+            );
             assert!(n.dot(x - point).abs() < 1e-12, "off the plane");
         }
         assert!(sec.m1 >= sec.m2 * (1.0 - 1e-12), "m1 {} < m2 {}", sec.m1, sec.m2);
@@ -133,7 +138,11 @@ fn clipped_arcs_match_a_dense_scan_of_the_ellipse() {
         let inside = (0..steps).filter(|&k| tri.contains(sec.point((k as f64 + 0.5) * TAU / steps as f64))).count();
         let scanned = inside as f64 * TAU / steps as f64;
         // The scan errs by at most one step per arc end (<= 6 ends).
-        assert!((arcs.total - scanned).abs() <= 6.0 * TAU / steps as f64 + 1e-12, "Theta {} vs scan {scanned}", arcs.total);
+        assert!(
+            (arcs.total - scanned).abs() <= 6.0 * TAU / steps as f64 + 1e-12,
+            "Theta {} vs scan {scanned}",
+            arcs.total
+        );
         for &(a, b) in &arcs.arcs {
             assert!(0.0 <= a && a < b && b <= TAU + 1e-12);
             assert!(tri.contains(sec.point(0.5 * (a + b))), "arc midpoint outside the triangle");
@@ -144,7 +153,8 @@ fn clipped_arcs_match_a_dense_scan_of_the_ellipse() {
             if arcs.total > 0.0 {
                 let b = tri.vertices;
                 let slack = 1e-9 * scale;
-                let inside_with_slack = (0..3).all(|i| (b[(i + 1) % 3] - b[i]).cross(x - b[i]).dot(n) >= -slack * scale);
+                let inside_with_slack =
+                    (0..3).all(|i| (b[(i + 1) % 3] - b[i]).cross(x - b[i]).dot(n) >= -slack * scale);
                 assert!(inside_with_slack, "sample outside the triangle");
             }
         }
@@ -167,7 +177,8 @@ fn sections_of_a_plane_through_the_centre_have_the_expected_axes() {
     // Bounds contain every section point.
     let (lo, hi) = sp.bounds();
     for k in 0..64 {
-        let x = sp.section(DVec3::new(0.1, 0.2, 0.0), DVec3::new(0.2, 0.5, 0.8).normalize()).unwrap().point(k as f64 * 0.1);
+        let x =
+            sp.section(DVec3::new(0.1, 0.2, 0.0), DVec3::new(0.2, 0.5, 0.8).normalize()).unwrap().point(k as f64 * 0.1);
         assert!(x.cmpge(lo - 1e-12).all() && x.cmple(hi + 1e-12).all());
     }
 }

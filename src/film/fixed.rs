@@ -87,7 +87,8 @@ mod tests {
             assert!((mean - exact).abs() < 5.0 * sigma + 1e-6, "{units} units: mean {mean}, exact {exact}");
         }
         // Sums are exact in any order.
-        let values: Vec<i128> = (0..1000).map(|i| fixed_from_f32((i as f32 * 0.37).sin() * 1e3, i, 3).unwrap()).collect();
+        let values: Vec<i128> =
+            (0..1000).map(|i| fixed_from_f32((i as f32 * 0.37).sin() * 1e3, i, 3).unwrap()).collect();
         let forward: i128 = values.iter().sum();
         let backward: i128 = values.iter().rev().sum();
         assert_eq!(forward, backward);

@@ -139,7 +139,10 @@ impl CwCode {
         let number = |i: usize, default: u32, what: &str| -> Result<u32> {
             match args.get(i) {
                 None => Ok(default),
-                Some(a) => a.trim().parse::<u32>().with_context(|| format!("cw code `{spec}`: {what} `{a}` is not a whole number")),
+                Some(a) => a
+                    .trim()
+                    .parse::<u32>()
+                    .with_context(|| format!("cw code `{spec}`: {what} `{a}` is not a whole number")),
             }
         };
         let most = |n: usize| -> Result<()> {
@@ -173,10 +176,14 @@ impl CwCode {
                 most(2)?;
                 CwCode::DepthSelective { chips: number(0, 32, "chips")?, neighbours: number(1, 3, "neighbours")? }
             }
-            other => bail!("unknown cw code `{other}`: use sine, square, ham3, ham4:I, mseq[:CHIPS] or depthsel[:CHIPS[:NEIGHBOURS]]"),
+            other => bail!(
+                "unknown cw code `{other}`: use sine, square, ham3, ham4:I, mseq[:CHIPS] or depthsel[:CHIPS[:NEIGHBOURS]]"
+            ),
         };
         match code {
-            CwCode::MSequence { chips } => ensure!(chips >= 2, "cw code `{spec}`: an m-sequence needs at least 2 chips"),
+            CwCode::MSequence { chips } => {
+                ensure!(chips >= 2, "cw code `{spec}`: an m-sequence needs at least 2 chips")
+            }
             CwCode::DepthSelective { chips, neighbours } => ensure!(
                 neighbours >= 1 && chips > neighbours && chips <= MAX_CHIPS,
                 "cw code `{spec}`: depth selection needs 1 <= neighbours < chips <= {MAX_CHIPS}"
@@ -203,7 +210,10 @@ impl CwCode {
     /// The largest |dC/dx| (per period) over the code's linear pieces.
     pub fn steepest_slope(&self) -> f64 {
         let p = self.breakpoints();
-        p.windows(2).filter(|w| w[1].0 > w[0].0).map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs()).fold(0.0, f64::max)
+        p.windows(2)
+            .filter(|w| w[1].0 > w[0].0)
+            .map(|w| ((w[1].1 - w[0].1) / (w[1].0 - w[0].0)).abs())
+            .fold(0.0, f64::max)
     }
 
     /// One period of C as (x, C(x)) points from x = 0 to x = 1 (C(1) = C(0)), x in periods,
@@ -249,7 +259,9 @@ impl Gate {
                 let (f, phase, code) = match args.split(',').collect::<Vec<_>>()[..] {
                     [f, phase] => (f, phase, None),
                     [f, phase, code] => (f, phase, CwCode::parse(code)?),
-                    _ => bail!("cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:4.7e9,0,depthsel, got `cw:{args}`"),
+                    _ => bail!(
+                        "cw gate: expected cw:FREQ_HZ,PHASE_DEG[,CODE], e.g. cw:20e6,90 or cw:4.7e9,0,depthsel, got `cw:{args}`"
+                    ),
                 };
                 let frequency_hz = parse_number(f, "cw frequency (Hz)")?;
                 let phase_deg = parse_number(phase, "cw phase (degrees)")?;
@@ -264,9 +276,12 @@ impl Gate {
             }
             "transient" => {
                 let [start, width, bins] = split_n(args, "transient:START,WIDTH,BINS")?;
-                let bins = bins.trim().parse::<u32>().ok().filter(|&b| b > 0).with_context(|| {
-                    format!("transient gate: `{bins}` is not a positive number of bins")
-                })?;
+                let bins = bins
+                    .trim()
+                    .parse::<u32>()
+                    .ok()
+                    .filter(|&b| b > 0)
+                    .with_context(|| format!("transient gate: `{bins}` is not a positive number of bins"))?;
                 Gate::Transient { start: parse_length(start)?, width: parse_length(width)?, bins }
             }
             other => bail!(
@@ -294,13 +309,17 @@ impl Gate {
             Gate::Box { start, end } if !(end > start) => bail!("box gate: end {end} m must exceed start {start} m"),
             Gate::Box { start, .. } if start < 0.0 => bail!("box gate: start {start} m is negative"),
             Gate::Gaussian { sigma, .. } if !(sigma > 0.0) => bail!("gaussian gate: sigma {sigma} m must be positive"),
-            Gate::Cw { frequency_hz, .. } | Gate::CwCode { frequency_hz, .. } if !(frequency_hz > 0.0 && frequency_hz.is_finite()) => {
+            Gate::Cw { frequency_hz, .. } | Gate::CwCode { frequency_hz, .. }
+                if !(frequency_hz > 0.0 && frequency_hz.is_finite()) =>
+            {
                 bail!("cw gate: frequency {frequency_hz} Hz must be positive")
             }
             Gate::Cw { phase_deg, .. } | Gate::CwCode { phase_deg, .. } if !phase_deg.is_finite() => {
                 bail!("cw gate: phase {phase_deg} degrees must be finite")
             }
-            Gate::Transient { width, .. } if !(width > 0.0) => bail!("transient gate: bin width {width} m must be positive"),
+            Gate::Transient { width, .. } if !(width > 0.0) => {
+                bail!("transient gate: bin width {width} m must be positive")
+            }
             Gate::Transient { start, .. } if start < 0.0 => bail!("transient gate: start {start} m is negative"),
             _ => Ok(()),
         }
@@ -323,7 +342,11 @@ impl Gate {
             }
             Gate::Table { points, source } => {
                 let points: Vec<(f64, f64)> = points.iter().map(|&(l, w)| (l + d, w)).collect();
-                ensure!(points[0].0 >= 0.0, "table gate {} shifted by {d} m starts below zero length", source.display());
+                ensure!(
+                    points[0].0 >= 0.0,
+                    "table gate {} shifted by {d} m starts below zero length",
+                    source.display()
+                );
                 Gate::Table { points, source }
             }
             Gate::Transient { start, width, bins } => Gate::Transient { start: start + d, width, bins },
@@ -400,7 +423,9 @@ impl Gate {
                 (2.0 * std::f64::consts::PI * frequency_hz / SPEED_OF_LIGHT, phase_deg.to_radians())
             }
             // Periods per metre and the phase in periods, in [0, 1).
-            Gate::CwCode { frequency_hz, phase_deg, .. } => (frequency_hz / SPEED_OF_LIGHT, (phase_deg / 360.0).rem_euclid(1.0)),
+            Gate::CwCode { frequency_hz, phase_deg, .. } => {
+                (frequency_hz / SPEED_OF_LIGHT, (phase_deg / 360.0).rem_euclid(1.0))
+            }
             Gate::Table { ref points, .. } => (points[0].0, points[points.len() - 1].0),
             Gate::Transient { start, width, .. } => (start, width),
         };
@@ -548,10 +573,26 @@ mod tests {
         assert_eq!(Gate::parse("box:3.14..3.19").unwrap(), Gate::Box { start: 3.14, end: 3.19 });
         assert_eq!(Gate::parse("gaussian:3,0.01").unwrap(), Gate::Gaussian { mean: 3.0, sigma: 0.01 });
         assert_eq!(Gate::parse("cw:20e6,90").unwrap(), Gate::Cw { frequency_hz: 20e6, phase_deg: 90.0 });
-        assert_eq!(Gate::parse("transient:1.94,0.1,20").unwrap(), Gate::Transient { start: 1.94, width: 0.1, bins: 20 });
+        assert_eq!(
+            Gate::parse("transient:1.94,0.1,20").unwrap(),
+            Gate::Transient { start: 1.94, width: 0.1, bins: 20 }
+        );
         let Gate::Transient { start, width, .. } = Gate::parse("transient:10ns,12.5ps,8").unwrap() else { panic!() };
         assert!((start - 2.99792458).abs() < 1e-12 && (width - 3.747405725e-3).abs() < 1e-12);
-        for bad in ["none:foo", "box:3.14..3.140000001", "gaussian:3,1e-50", "transient:1000,1e-9,3", "box:3", "box:3..2", "gaussian:1", "gaussian:1,0", "cw:-5,0", "transient:0,0.1,0", "transient:0,0,3", "x"] {
+        for bad in [
+            "none:foo",
+            "box:3.14..3.140000001",
+            "gaussian:3,1e-50",
+            "transient:1000,1e-9,3",
+            "box:3",
+            "box:3..2",
+            "gaussian:1",
+            "gaussian:1,0",
+            "cw:-5,0",
+            "transient:0,0.1,0",
+            "transient:0,0,3",
+            "x",
+        ] {
             assert!(Gate::parse(bad).is_err(), "`{bad}` must be rejected");
         }
     }
@@ -569,7 +610,10 @@ mod tests {
         assert!(eval(&c, 0.5).abs() < 1e-5 && (eval(&c, 1.0) + 1.0).abs() < 1e-5);
         let t = Gate::parse("transient:1,0.5,4").unwrap();
         let g = t.to_gpu();
-        assert_eq!((gate_bin(t.kind(), &g, 0.99), gate_bin(t.kind(), &g, 1.0), gate_bin(t.kind(), &g, 2.99)), (-1, 0, 3));
+        assert_eq!(
+            (gate_bin(t.kind(), &g, 0.99), gate_bin(t.kind(), &g, 1.0), gate_bin(t.kind(), &g, 2.99)),
+            (-1, 0, 3)
+        );
         assert_eq!(gate_bin(t.kind(), &g, 3.0), -1);
         assert_eq!(t.max_length(), Some(3.0));
         assert_eq!(t.bin_range(1), Some((1.5, 2.0)));
@@ -608,18 +652,39 @@ mod tests {
         assert_eq!(code("cw:1e9,30,mseq"), CwCode::MSequence { chips: 32 });
         assert_eq!(code("cw:1e9,30,depthsel"), CwCode::DepthSelective { chips: 32, neighbours: 3 });
         assert_eq!(code("cw:1e9,30,depthsel:64:5"), CwCode::DepthSelective { chips: 64, neighbours: 5 });
-        for bad in ["cw:1e9,30,ham4", "cw:1e9,30,ham4:0", "cw:1e9,30,mseq:1", "cw:1e9,30,depthsel:4:4", "cw:1e9,30,depthsel:4:0",
-                    "cw:1e9,30,cosine", "cw:1e9,30,ham3:1", "cw:0,30,square", "cw:1e9,inf,square", "cw:1e9,30,square,1"] {
+        for bad in [
+            "cw:1e9,30,ham4",
+            "cw:1e9,30,ham4:0",
+            "cw:1e9,30,mseq:1",
+            "cw:1e9,30,depthsel:4:4",
+            "cw:1e9,30,depthsel:4:0",
+            "cw:1e9,30,cosine",
+            "cw:1e9,30,ham3:1",
+            "cw:0,30,square",
+            "cw:1e9,inf,square",
+            "cw:1e9,30,square,1",
+        ] {
             assert!(Gate::parse(bad).is_err(), "{bad} should not parse");
         }
         let at = |c: CwCode, x: f64| -> f64 {
             let p = c.breakpoints();
             let i = p.partition_point(|q| q.0 <= x) - 1;
-            if i + 1 == p.len() { p[i].1 } else { p[i].1 + (p[i + 1].1 - p[i].1) * (x - p[i].0) / (p[i + 1].0 - p[i].0) }
+            if i + 1 == p.len() {
+                p[i].1
+            } else {
+                p[i].1 + (p[i + 1].1 - p[i].1) * (x - p[i].0) / (p[i + 1].0 - p[i].0)
+            }
         };
-        let integral = |c: CwCode| c.breakpoints().windows(2).map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0)).sum::<f64>();
-        for c in [CwCode::Square, CwCode::Hamiltonian3, CwCode::Hamiltonian4(1), CwCode::Hamiltonian4(4), CwCode::MSequence { chips: 7 },
-                  CwCode::DepthSelective { chips: 32, neighbours: 3 }] {
+        let integral =
+            |c: CwCode| c.breakpoints().windows(2).map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0)).sum::<f64>();
+        for c in [
+            CwCode::Square,
+            CwCode::Hamiltonian3,
+            CwCode::Hamiltonian4(1),
+            CwCode::Hamiltonian4(4),
+            CwCode::MSequence { chips: 7 },
+            CwCode::DepthSelective { chips: 32, neighbours: 3 },
+        ] {
             let p = c.breakpoints();
             assert_eq!((p[0].0, p[p.len() - 1].0), (0.0, 1.0), "{c:?} spans one period");
             assert_eq!(p[0].1, p[p.len() - 1].1, "{c:?} is periodic");
@@ -630,7 +695,10 @@ mod tests {
         // Square: a triangle of zero mean.
         assert_eq!((at(CwCode::Square, 0.25), at(CwCode::Square, 0.5), integral(CwCode::Square)), (0.0, -1.0, 0.0));
         // Hamiltonian K = 3: a third of a period at 1, ramps of a sixth.
-        assert_eq!((at(CwCode::Hamiltonian3, 1.0 / 12.0), at(CwCode::Hamiltonian3, 0.4), at(CwCode::Hamiltonian3, 0.8)), (0.5, 1.0, 0.0));
+        assert_eq!(
+            (at(CwCode::Hamiltonian3, 1.0 / 12.0), at(CwCode::Hamiltonian3, 0.4), at(CwCode::Hamiltonian3, 0.8)),
+            (0.5, 1.0, 0.0)
+        );
         assert!((integral(CwCode::Hamiltonian3) - 0.5).abs() < 1e-12);
         // Hamiltonian K = 4: at every twelfth the four measurements form a code word, and
         // neighbouring words differ in one measurement (a Hamiltonian cycle of 12 words).

@@ -84,7 +84,11 @@ pub fn write_film_with(
 }
 
 /// Writes the JSON sidecar of `npy`: `metadata` as strings and `extras` as they are.
-pub fn write_sidecar(npy: &Path, metadata: &Metadata, extras: &serde_json::Map<String, serde_json::Value>) -> Result<()> {
+pub fn write_sidecar(
+    npy: &Path,
+    metadata: &Metadata,
+    extras: &serde_json::Map<String, serde_json::Value>,
+) -> Result<()> {
     let sidecar = sidecar_path(npy);
     let mut map: serde_json::Map<String, serde_json::Value> =
         metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
@@ -117,7 +121,9 @@ fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, 
     let (w, h) = (film.width as usize, film.height as usize);
     let mut attributes = ImageAttributes::new(IntegerBounds::from_dimensions((w, h)));
     for (k, v) in metadata {
-        attributes.other.insert(Text::from(format!("gatetrace.{k}").as_str()), AttributeValue::Text(Text::from(v.as_str())));
+        attributes
+            .other
+            .insert(Text::from(format!("gatetrace.{k}").as_str()), AttributeValue::Text(Text::from(v.as_str())));
     }
     let bins = film.bins as usize;
     let layers: Vec<_> = (0..bins)
@@ -128,7 +134,9 @@ fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, 
                 layer_attributes.layer_name = Some(Text::from(format!("bin{b:05}").as_str()));
                 if let Some(&(start, end)) = bin_ranges.get(b) {
                     let range = format!("[{start}, {end}) m of optical path");
-                    layer_attributes.other.insert(Text::from("gatetrace.bin_range"), AttributeValue::Text(Text::from(range.as_str())));
+                    layer_attributes
+                        .other
+                        .insert(Text::from("gatetrace.bin_range"), AttributeValue::Text(Text::from(range.as_str())));
                 }
             }
             Layer::new(

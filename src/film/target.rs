@@ -26,9 +26,9 @@
 //! keeps a visit a cycle, and `stratum_factors` still divides each bin by its own visits.
 
 use super::gate::{Gate, gate_bin_position, gate_weight};
-use crate::units::SPEED_OF_LIGHT;
 use crate::gpu::layout::{GateParams, TargetParams};
 use crate::rng::pcg4d;
+use crate::units::SPEED_OF_LIGHT;
 
 /// Cells of the target table (fewest, for cw codes).
 pub const TARGET_CELLS: u32 = 1024;
@@ -95,7 +95,9 @@ impl TargetSampler {
         // and each cell's exact bound (the largest |W| at its ends and at the code's
         // breakpoints within it).
         let code = match gate {
-            Gate::CwCode { frequency_hz, phase_deg, code } => Some((frequency_hz / SPEED_OF_LIGHT, phase_deg / 360.0, code.breakpoints())),
+            Gate::CwCode { frequency_hz, phase_deg, code } => {
+                Some((frequency_hz / SPEED_OF_LIGHT, phase_deg / 360.0, code.breakpoints()))
+            }
             _ => None,
         };
         let cells = match &code {
@@ -112,7 +114,9 @@ impl TargetSampler {
                 let a = lo + i as f64 * h;
                 let sampled = w(a).max(w(a + 0.5 * h)).max(w(a + h));
                 match &code {
-                    Some((per_metre, phase, points)) => sampled.max(largest_between(points, a * per_metre + phase, (a + h) * per_metre + phase)),
+                    Some((per_metre, phase, points)) => {
+                        sampled.max(largest_between(points, a * per_metre + phase, (a + h) * per_metre + phase))
+                    }
                     None => sampled,
                 }
             })
@@ -485,7 +489,10 @@ pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u3
             masses[cell_of(j)] += pixel[base..base + 3].iter().map(|v| v.abs() as f64).sum::<f64>();
         }
         for (c, m) in spread.iter_mut().enumerate() {
-            *m = masses[c.saturating_sub(PILOT_SPREAD)..(c + PILOT_SPREAD + 1).min(cells)].iter().cloned().fold(0.0, f64::max);
+            *m = masses[c.saturating_sub(PILOT_SPREAD)..(c + PILOT_SPREAD + 1).min(cells)]
+                .iter()
+                .cloned()
+                .fold(0.0, f64::max);
         }
         // Bin j's share of the pixel's extra visits, their running sum rounded: the row.
         let share = |j: usize| spread[cell_of(j)] / bins_in_cell[cell_of(j)] as f64;
@@ -494,7 +501,11 @@ pub fn visit_tables(t: &TargetParams, film: &[f32], bins: usize) -> (u32, Vec<u3
         let mut acc = 0.0f64;
         rows.push(0);
         for j in 0..n {
-            acc += if even { 1.0 / n as f64 } else { (1.0 - PILOT_UNIFORM_SHARE) * share(j) / total + PILOT_UNIFORM_SHARE / n as f64 };
+            acc += if even {
+                1.0 / n as f64
+            } else {
+                (1.0 - PILOT_UNIFORM_SHARE) * share(j) / total + PILOT_UNIFORM_SHARE / n as f64
+            };
             rows.push(if j + 1 == n { extra } else { ((extra as f64 * acc).round() as u32).min(extra) });
         }
     }

@@ -166,12 +166,9 @@ fn choose_adapter(adapters: Vec<wgpu::Adapter>) -> Result<wgpu::Adapter> {
     if let Ok(wanted) = std::env::var("WGPU_ADAPTER_NAME") {
         let wanted_lower = wanted.to_lowercase();
         let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
-        return adapters
-            .into_iter()
-            .find(|a| a.get_info().name.to_lowercase().contains(&wanted_lower))
-            .with_context(|| {
-                format!("WGPU_ADAPTER_NAME={wanted:?} matches no adapter; available: {}", names.join(", "))
-            });
+        return adapters.into_iter().find(|a| a.get_info().name.to_lowercase().contains(&wanted_lower)).with_context(
+            || format!("WGPU_ADAPTER_NAME={wanted:?} matches no adapter; available: {}", names.join(", ")),
+        );
     }
     let rank = |a: &wgpu::Adapter| match a.get_info().device_type {
         wgpu::DeviceType::DiscreteGpu => 0,

@@ -97,10 +97,14 @@ impl Kernel {
         Self::from_source(ctx, kernel_variant(name, Some(feature)), Some(feature), constants)
     }
 
-    fn from_source(ctx: &GpuContext, source: &'static KernelSource, variant: Option<&str>, constants: &[(&str, f64)]) -> Self {
+    fn from_source(
+        ctx: &GpuContext,
+        source: &'static KernelSource,
+        variant: Option<&str>,
+        constants: &[(&str, f64)],
+    ) -> Self {
         let name = source.name;
-        let used: Vec<(&str, f64)> =
-            constants.iter().filter(|(k, _)| source.overrides.contains(k)).copied().collect();
+        let used: Vec<(&str, f64)> = constants.iter().filter(|(k, _)| source.overrides.contains(k)).copied().collect();
         let label = match variant {
             Some(v) => format!("{name}({v})"),
             None => name.to_owned(),
@@ -158,9 +162,10 @@ impl Kernel {
             .iter()
             .map(|b| wgpu::BindGroupEntry {
                 binding: b.binding,
-                resource: resources.get(b.name).unwrap_or_else(|| {
-                    panic!("kernel `{}` binds `{}`, which was never created", self.label, b.name)
-                }).as_entire_binding(),
+                resource: resources
+                    .get(b.name)
+                    .unwrap_or_else(|| panic!("kernel `{}` binds `{}`, which was never created", self.label, b.name))
+                    .as_entire_binding(),
             })
             .collect();
         ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {

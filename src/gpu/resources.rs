@@ -64,7 +64,10 @@ impl Resources {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(name),
                 size: size.max(16),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC | extra,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC
+                    | extra,
                 mapped_at_creation: false,
             })
         })?;
@@ -197,13 +200,23 @@ impl Resources {
         let mut out = Vec::with_capacity(count as usize);
         for c in 0..layout.chunks {
             let r = layout.range(c, count);
-            out.extend(read_buffer::<T>(ctx, &self.buffers[chunk_names(name)[c as usize]], (r.end - r.start) as usize)?);
+            out.extend(read_buffer::<T>(
+                ctx,
+                &self.buffers[chunk_names(name)[c as usize]],
+                (r.end - r.start) as usize,
+            )?);
         }
         Ok(out)
     }
 
     /// Writes `data` over split array `name` (as many elements as it was created with).
-    pub fn write_chunked<T: bytemuck::Pod>(&self, ctx: &GpuContext, name: &'static str, layout: ChunkLayout, data: &[T]) {
+    pub fn write_chunked<T: bytemuck::Pod>(
+        &self,
+        ctx: &GpuContext,
+        name: &'static str,
+        layout: ChunkLayout,
+        data: &[T],
+    ) {
         for c in 0..layout.chunks {
             let r = layout.range(c, data.len() as u64);
             let bytes = bytemuck::cast_slice(&data[r.start as usize..r.end as usize]);

@@ -86,11 +86,7 @@ pub const PILOT_MAX_SHRINK: u32 = 4;
 /// only where the two are within about 20 %. Returns (width, height, f).
 pub fn pilot_resolution(width: u32, height: u32) -> (u32, u32, u32) {
     let pixels = width as u64 * height as u64;
-    let fits = |f: u32| {
-        width % f == 0
-            && height % f == 0
-            && pixels / (f as u64 * f as u64) >= PILOT_MIN_PIXELS as u64
-    };
+    let fits = |f: u32| width % f == 0 && height % f == 0 && pixels / (f as u64 * f as u64) >= PILOT_MIN_PIXELS as u64;
     let f = (1..=PILOT_MAX_SHRINK).rev().find(|&f| fits(f)).unwrap_or(1);
     (width / f, height / f, f)
 }
@@ -157,16 +153,8 @@ pub struct MethodChoice {
 /// `settings` with `method`, and the connections per query it takes (1 for `direct`; the auto
 /// settings' own K for `ellipsoidal`).
 pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSettings {
-    let connections_per_query = if method == Method::Ellipsoidal {
-        settings.connections_per_query
-    } else {
-        1
-    };
-    RenderSettings {
-        method,
-        connections_per_query,
-        ..settings.clone()
-    }
+    let connections_per_query = if method == Method::Ellipsoidal { settings.connections_per_query } else { 1 };
+    RenderSettings { method, connections_per_query, ..settings.clone() }
 }
 
 /// Why `ellipsoidal` cannot render `settings`, if it cannot (then `auto` takes `direct` without
@@ -188,11 +176,7 @@ pub fn choose(
     settings: &RenderSettings,
     budget: Budget,
 ) -> Result<MethodChoice> {
-    ensure!(
-        settings.method == Method::Auto,
-        "auto::choose needs --method auto, got {}",
-        settings.method.name()
-    );
+    ensure!(settings.method == Method::Auto, "auto::choose needs --method auto, got {}", settings.method.name());
     ensure!(
         settings.nlos.is_none(),
         "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal"
@@ -209,8 +193,7 @@ pub fn choose(
         });
     }
     let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
-    let pixel_ratio =
-        (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
+    let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = match budget {
         Budget::Time(t) => PilotBudget::Seconds(t.as_secs_f64() * PILOT_SHARE / 2.0),
         Budget::Samples(n) => {
@@ -218,12 +201,7 @@ pub fn choose(
             PilotBudget::Samples((pilot_spp / PILOT_BATCHES as u64).clamp(1, u32::MAX as u64) as u32)
         }
     };
-    let pilot = RenderSettings {
-        width,
-        height,
-        seed: pilot_seed(settings.seed),
-        ..settings.clone()
-    };
+    let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut tracers = Vec::new();
     for method in [Method::Direct, Method::Ellipsoidal] {
         let mut tracer = create_integrator(ctx, scene, &candidate_settings(&pilot, method))?;
@@ -237,24 +215,15 @@ pub fn choose(
     for j in 1..=PILOT_BATCHES {
         pilot_batch(tracers[0].as_mut(), &mut direct, per_method)?;
         pilot_batch(tracers[1].as_mut(), &mut ellipsoidal, per_method)?;
-        if j == EARLY_STOP_BATCHES
-            && compare(&direct, &ellipsoidal, pixel_ratio).2 >= EARLY_STOP_RATIO
-        {
+        if j == EARLY_STOP_BATCHES && compare(&direct, &ellipsoidal, pixel_ratio).2 >= EARLY_STOP_RATIO {
             early = true;
             break;
         }
     }
     let (candidates, chosen, ratio) = compare(&direct, &ellipsoidal, pixel_ratio);
-    let shrunk = if shrink > 1 {
-        format!(" on a {width}x{height} image")
-    } else {
-        String::new()
-    };
-    let stopped = if early {
-        format!(", stopped after {EARLY_STOP_BATCHES} of {PILOT_BATCHES} batches")
-    } else {
-        String::new()
-    };
+    let shrunk = if shrink > 1 { format!(" on a {width}x{height} image") } else { String::new() };
+    let stopped =
+        if early { format!(", stopped after {EARLY_STOP_BATCHES} of {PILOT_BATCHES} batches") } else { String::new() };
     let reason = format!(
         "pilot{shrunk}{stopped}: variance x time per sample {:.3e} (direct) vs {:.3e} (ellipsoidal); {} predicted \
          {:.3}x lower MSE at equal time",
@@ -264,53 +233,30 @@ pub fn choose(
         ratio
     );
     let pilot_seconds = direct.wall_seconds + ellipsoidal.wall_seconds;
-    Ok(MethodChoice {
-        chosen,
-        candidates,
-        pilot_resolution: (width, height),
-        reason,
-        pilot_seconds,
-    })
+    Ok(MethodChoice { chosen, candidates, pilot_resolution: (width, height), reason, pilot_seconds })
 }
 
 /// The two methods' figures from their pilot batches so far, the method of the lower variance x
 /// time per sample, and how many times lower it is.
-fn compare(
-    direct: &Batches,
-    ellipsoidal: &Batches,
-    pixel_ratio: f64,
-) -> (Vec<CandidateFigures>, Method, f64) {
+fn compare(direct: &Batches, ellipsoidal: &Batches, pixel_ratio: f64) -> (Vec<CandidateFigures>, Method, f64) {
     let (v_direct, v_ellipsoidal) = per_sample_variances(direct, ellipsoidal);
-    let candidates: Vec<CandidateFigures> = [
-        (direct, v_direct, Method::Direct),
-        (ellipsoidal, v_ellipsoidal, Method::Ellipsoidal),
-    ]
-    .into_iter()
-    .map(|(p, v, method)| CandidateFigures {
-        method,
-        spp: p.samples,
-        seconds: p.seconds,
-        pixel_ratio,
-        variance_per_sample: v,
-    })
-    .collect();
+    let candidates: Vec<CandidateFigures> =
+        [(direct, v_direct, Method::Direct), (ellipsoidal, v_ellipsoidal, Method::Ellipsoidal)]
+            .into_iter()
+            .map(|(p, v, method)| CandidateFigures {
+                method,
+                spp: p.samples,
+                seconds: p.seconds,
+                pixel_ratio,
+                variance_per_sample: v,
+            })
+            .collect();
     let (d, el) = (&candidates[0], &candidates[1]);
     // Ties (both zero: nothing reaches the gate in the pilot) go to the faster method.
-    let pick_ellipsoidal = if d.cost() == el.cost() {
-        el.seconds_per_sample() < d.seconds_per_sample()
-    } else {
-        el.cost() < d.cost()
-    };
-    let chosen = if pick_ellipsoidal {
-        Method::Ellipsoidal
-    } else {
-        Method::Direct
-    };
-    let ratio = if pick_ellipsoidal {
-        d.cost() / el.cost()
-    } else {
-        el.cost() / d.cost()
-    };
+    let pick_ellipsoidal =
+        if d.cost() == el.cost() { el.seconds_per_sample() < d.seconds_per_sample() } else { el.cost() < d.cost() };
+    let chosen = if pick_ellipsoidal { Method::Ellipsoidal } else { Method::Direct };
+    let ratio = if pick_ellipsoidal { d.cost() / el.cost() } else { el.cost() / d.cost() };
     (candidates, chosen, ratio)
 }
 
@@ -338,12 +284,7 @@ impl Moments {
             self.weighted_sum = vec![0.0; values.len()];
             self.weighted_squares = vec![0.0; values.len()];
         }
-        for ((s, q), x) in self
-            .weighted_sum
-            .iter_mut()
-            .zip(&mut self.weighted_squares)
-            .zip(values)
-        {
+        for ((s, q), x) in self.weighted_sum.iter_mut().zip(&mut self.weighted_squares).zip(values) {
             *s += k * x;
             *q += k * x * x;
         }
@@ -395,8 +336,7 @@ impl Batches {
             None => self.unpaired = Some((k, image.to_vec())),
             Some((k_a, a)) => {
                 let squares: f64 = a.iter().zip(image).map(|(x, y)| (x - y) * (x - y)).sum();
-                self.pair_variances
-                    .push(squares / (1.0 / k_a as f64 + 1.0 / k as f64));
+                self.pair_variances.push(squares / (1.0 / k_a as f64 + 1.0 / k as f64));
             }
         }
         self.samples += k as u64;
@@ -426,19 +366,14 @@ pub const MISS_FACTOR: f64 = 10.0;
 
 /// Renders the next of a method's [`PILOT_BATCHES`] independent batches on `tracer`, sized to
 /// `budget`, and adds it to `batches`.
-fn pilot_batch(
-    tracer: &mut dyn Integrator,
-    batches: &mut Batches,
-    budget: PilotBudget,
-) -> Result<()> {
+fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, budget: PilotBudget) -> Result<()> {
     let k = match budget {
         PilotBudget::Samples(k) => k,
         // First one sample, then what spreads the time left over the batches left.
         PilotBudget::Seconds(_) if batches.count == 0 => 1,
         PilotBudget::Seconds(total) => {
             let per_sample = batches.seconds / batches.samples as f64;
-            let left =
-                (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
+            let left = (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
             ((left / per_sample.max(1e-12)) as u32).clamp(1, tracer.samples_per_pass())
         }
     };
@@ -449,11 +384,7 @@ fn pilot_batch(
     batches.seconds += pass.elapsed().as_secs_f64();
     let film = tracer.film()?;
     let image: Vec<f64> = film.data.iter().map(|&x| x as f64).collect();
-    batches.add(
-        k,
-        &image,
-        film.data.len() / (film.width as usize * film.height as usize).max(1),
-    );
+    batches.add(k, &image, film.data.len() / (film.width as usize * film.height as usize).max(1));
     batches.wall_seconds += start.elapsed().as_secs_f64();
     Ok(())
 }
@@ -470,9 +401,7 @@ fn per_sample_variances(a: &Batches, b: &Batches) -> (f64, f64) {
     // proportional to its mean (hits of one size). A pilot that found nothing is left to the
     // groups' test below.
     let magnitude = |m: &Batches| {
-        (0..m.groups.weighted_sum.len())
-            .map(|g| m.groups.get(g, m.count, m.samples).0.abs())
-            .sum::<f64>()
+        (0..m.groups.weighted_sum.len()).map(|g| m.groups.get(g, m.count, m.samples).0.abs()).sum::<f64>()
     };
     let (noise_a, noise_b) = (relative_noise(a), relative_noise(b));
     if noise_a > noise_b && magnitude(a) > 0.0 {
@@ -506,13 +435,8 @@ fn per_sample_variances(a: &Batches, b: &Batches) -> (f64, f64) {
 /// but not out of its mean).
 fn relative_noise(m: &Batches) -> f64 {
     let groups = (0..m.groups.weighted_sum.len()).map(|g| m.groups.get(g, m.count, m.samples));
-    let (variances, squares) =
-        groups.fold((0.0, 0.0), |(v, q), (mean, var)| (v + var, q + mean * mean));
-    if squares > 0.0 {
-        variances / (m.samples as f64 * squares)
-    } else {
-        f64::INFINITY
-    }
+    let (variances, squares) = groups.fold((0.0, 0.0), |(v, q), (mean, var)| (v + var, q + mean * mean));
+    if squares > 0.0 { variances / (m.samples as f64 * squares) } else { f64::INFINITY }
 }
 
 #[cfg(test)]
@@ -531,14 +455,10 @@ mod tests {
     /// Normal deviates from a small LCG (Box-Muller), so the test needs no crate.
     fn normals(seed: &mut u64, n: usize) -> Vec<f64> {
         let mut uniform = || {
-            *seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((*seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
         };
-        (0..n)
-            .map(|_| (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos())
-            .collect()
+        (0..n).map(|_| (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos()).collect()
     }
 
     #[test]
@@ -557,12 +477,7 @@ mod tests {
     #[test]
     fn pilot_seeds_are_their_own() {
         let seeds: Vec<u32> = (0..1000).map(pilot_seed).collect();
-        assert!(
-            seeds
-                .iter()
-                .enumerate()
-                .all(|(s, &p)| p != s as u32 && seeds[..s].iter().all(|&q| q != p))
-        );
+        assert!(seeds.iter().enumerate().all(|(s, &p)| p != s as u32 && seeds[..s].iter().all(|&q| q != p)));
     }
 
     #[test]
@@ -574,11 +489,7 @@ mod tests {
         let truth: Vec<f64> = (0..values).map(|i| (i % 17) as f64).collect();
         let image = |sigma: f64, k: u32, seed: &mut u64| -> Vec<f64> {
             let noise = normals(seed, values);
-            truth
-                .iter()
-                .zip(noise)
-                .map(|(t, z)| t + sigma / (k as f64).sqrt() * z)
-                .collect()
+            truth.iter().zip(noise).map(|(t, z)| t + sigma / (k as f64).sqrt() * z).collect()
         };
         let a: Vec<_> = (0..8).map(|_| image(1.0, 2, &mut seed)).collect();
         let b: Vec<_> = (0..8).map(|_| image(3.0, 5, &mut seed)).collect();
@@ -610,32 +521,16 @@ mod tests {
         let (values, p) = (4096, 0.05);
         let mut seed = 13u64;
         let mut uniform = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
-        let a: Vec<Vec<f64>> = (0..8)
-            .map(|_| {
-                (0..values)
-                    .map(|_| if uniform() < p { 1.15 / p } else { 0.0 })
-                    .collect()
-            })
-            .collect();
+        let a: Vec<Vec<f64>> =
+            (0..8).map(|_| (0..values).map(|_| if uniform() < p { 1.15 / p } else { 0.0 }).collect()).collect();
         let mut normal_seed = 17;
-        let b: Vec<Vec<f64>> = (0..8)
-            .map(|_| {
-                normals(&mut normal_seed, values)
-                    .into_iter()
-                    .map(|z| 1.0 + 0.01 * z)
-                    .collect()
-            })
-            .collect();
+        let b: Vec<Vec<f64>> =
+            (0..8).map(|_| normals(&mut normal_seed, values).into_iter().map(|z| 1.0 + 0.01 * z).collect()).collect();
         let (v_a, v_b) = per_sample_variances(&batches(&a, 1), &batches(&b, 1));
-        assert!(
-            (v_b / 1e-4 - 1.0).abs() < 0.1,
-            "B's variance stays its own: {v_b}"
-        );
+        assert!((v_b / 1e-4 - 1.0).abs() < 0.1, "B's variance stays its own: {v_b}");
         // A's own spread is 1.15^2 (1 - p) / p = 25 per value; the miss adds 8 x (0.15 x 4096)^2
         // / 4096 = 737 per value.
         assert!(v_a > 300.0, "A is charged the difference: {v_a}");
@@ -647,22 +542,13 @@ mod tests {
         // one that sees the image: its variance is at least the missed signal's square.
         let values = 256;
         let mut seed = 3;
-        let seen: Vec<_> = (0..8)
-            .map(|_| {
-                normals(&mut seed, values)
-                    .into_iter()
-                    .map(|z| 1.0 + 0.1 * z)
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        let seen: Vec<_> =
+            (0..8).map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + 0.1 * z).collect::<Vec<_>>()).collect();
         let missed = vec![vec![0.0; values]; 8];
         let (v_missed, v_seen) = per_sample_variances(&batches(&missed, 1), &batches(&seen, 1));
         // Missing a sum of 256 in 8 samples implies a per-sample variance of the sum of 8 x
         // 256^2, or 8 x 256 per value.
-        assert!(
-            (v_missed / 2048.0 - 1.0).abs() < 0.01,
-            "the empty pilot's variance per sample: {v_missed}"
-        );
+        assert!((v_missed / 2048.0 - 1.0).abs() < 0.01, "the empty pilot's variance per sample: {v_missed}");
         assert!((v_seen - 0.01).abs() < 0.002, "the other pilot's: {v_seen}");
     }
 
@@ -673,20 +559,11 @@ mod tests {
         // image's sum shows what the empty pilot missed.
         let values = 4096;
         let mut seed = 5;
-        let seen: Vec<_> = (0..8)
-            .map(|_| {
-                normals(&mut seed, values)
-                    .into_iter()
-                    .map(|z| 1.0 + z)
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        let seen: Vec<_> =
+            (0..8).map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + z).collect::<Vec<_>>()).collect();
         let missed = vec![vec![0.0; values]; 8];
         let (v_missed, v_seen) = per_sample_variances(&batches(&missed, 1), &batches(&seen, 1));
-        assert!(
-            (v_missed / (8.0 * 4096.0) - 1.0).abs() < 0.05,
-            "the empty pilot's variance per sample: {v_missed}"
-        );
+        assert!((v_missed / (8.0 * 4096.0) - 1.0).abs() < 0.05, "the empty pilot's variance per sample: {v_missed}");
         assert!((v_seen - 1.0).abs() < 0.1, "the other pilot's: {v_seen}");
     }
 }

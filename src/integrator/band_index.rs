@@ -20,9 +20,9 @@ use anyhow::Result;
 use glam::Vec3;
 
 use crate::gpu::layout::{BvhNode, RenderParams, Triangle};
-use crate::scene::PreparedScene;
 use crate::gpu::resources::{MAX_CHUNKS, chunk_names, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
+use crate::scene::PreparedScene;
 
 /// `render --band-index auto` builds the index for scenes of more triangles than this besides
 /// the relay wall (about what one cluster holds): a smaller hidden scene is searched whole by
@@ -164,8 +164,8 @@ impl BandIndex {
             r.storage_zeroed(ctx, "band_ranges", range_bytes, wgpu::BufferUsages::empty())?;
         }
         let width = params.gate.p1 as f64;
-        let refused = (clusters.len() < 2)
-            .then(|| "the BVH is one cluster, which every query searches whole anyway".to_owned());
+        let refused =
+            (clusters.len() < 2).then(|| "the BVH is one cluster, which every query searches whole anyway".to_owned());
         let costs = clusters.iter().map(|c| cluster_cost(&scene.bvh.nodes, &scene.triangles, c, width)).collect();
         let mut constants = constants.to_vec();
         constants.push(("BAND_INDEX", 1.0));
@@ -196,7 +196,8 @@ impl BandIndex {
                 (count_first, count_spent) = (c, 0);
             }
             count_spent += cost.count;
-            if cost.count > BATCH_ITERATIONS || cost.range + 1 + cost.per_window + cost.triangle_bins > BATCH_ITERATIONS {
+            if cost.count > BATCH_ITERATIONS || cost.range + 1 + cost.per_window + cost.triangle_bins > BATCH_ITERATIONS
+            {
                 return Err(format!(
                     "cluster {c} would take more loop iterations to index at these bins than one invocation may run"
                 ));
@@ -214,7 +215,8 @@ impl BandIndex {
             if c > fill_first {
                 fill_batches.push([fill_first, c - fill_first, 0, bins]);
             }
-            let per = (BATCH_ITERATIONS.saturating_sub(cost.range + 1 + cost.triangle_bins) / cost.per_window).max(1) as u32;
+            let per =
+                (BATCH_ITERATIONS.saturating_sub(cost.range + 1 + cost.triangle_bins) / cost.per_window).max(1) as u32;
             let step = per * WINDOW as u32;
             let mut lo = 0;
             while lo < bins {

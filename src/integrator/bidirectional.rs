@@ -158,10 +158,7 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
              by the extra visits)"
         );
     } else {
-        ensure!(
-            settings.connections_per_query == 1,
-            "--connections-per-query applies to --method ellipsoidal only"
-        );
+        ensure!(settings.connections_per_query == 1, "--connections-per-query applies to --method ellipsoidal only");
     }
     if settings.method != Method::Ellipsoidal {
         ensure!(settings.target_pilot_spp == 0, "--target-pilot applies to --method ellipsoidal only");
@@ -264,7 +261,8 @@ impl<'a> BidirectionalTracer<'a> {
         let inline_shadow_rays = ellipsoidal && !resumable;
         let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
         let splats_per_slot = light_vertices * k + if directional { b as u64 } else { 0 };
-        let queued_rays_per_slot = if inline_shadow_rays { 0 } else { rays_per_connection * (contributions_per_slot + splats_per_slot) };
+        let queued_rays_per_slot =
+            if inline_shadow_rays { 0 } else { rays_per_connection * (contributions_per_slot + splats_per_slot) };
         // Ellipsoid queries of a slot: the pairs (s, t) with s, t >= 1 and s + t <= B + 1.
         let queries_per_slot = if ellipsoidal { (b as u64 * (b as u64 + 1) / 2).max(1) } else { 1 };
         // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
@@ -329,7 +327,12 @@ impl<'a> BidirectionalTracer<'a> {
         r.storage_zeroed(ctx, "path_radiance", 4, none)?;
         // With shadow rays traced on the spot, light-tracing contributions go straight to splat_film.
         r.storage_zeroed(ctx, "splats", if inline_shadow_rays { per_slot[2] } else { slots * per_slot[2] }, none)?;
-        r.storage_zeroed(ctx, "shadow_queue", if inline_shadow_rays { per_slot[3] } else { slots * per_slot[3] }, none)?;
+        r.storage_zeroed(
+            ctx,
+            "shadow_queue",
+            if inline_shadow_rays { per_slot[3] } else { slots * per_slot[3] },
+            none,
+        )?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
         r.storage_zeroed(ctx, "ellipsoid_queries", if ellipsoidal { slots * per_slot[5] } else { 16 }, none)?;
@@ -405,12 +408,16 @@ impl<'a> BidirectionalTracer<'a> {
             let intersect_closest = resumable.then(|| build("intersect_closest"));
             let extend_subpaths = build("extend_subpaths");
             let queue = ellipsoidal.then(|| {
-                [build("queue_ellipsoid_queries"), Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0))]
+                [
+                    build("queue_ellipsoid_queries"),
+                    Kernel::new(ctx, "setup_dispatch", Some("ellipsoid_queries"), &with(2.0)),
+                ]
             });
             let shadow_rays = ShadowRayStages::new(ctx, &constants, &r);
             let accumulate = build("accumulate");
             let splat_light_paths = (!inline_shadow_rays).then(|| build("splat_light_paths"));
-            let joined = |h: std::thread::ScopedJoinHandle<Kernel>| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+            let joined =
+                |h: std::thread::ScopedJoinHandle<Kernel>| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
             Stages {
                 generate_subpaths,
                 setup_dispatch_rays,
@@ -436,10 +443,18 @@ impl<'a> BidirectionalTracer<'a> {
             accumulate: stages.accumulate.bind(ctx, &even),
             splat_light_paths: stages.splat_light_paths.as_ref().map(|k| k.bind(ctx, &even)),
         };
-        let stats = settings.stats.then(|| {
-            strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect()
-        });
-        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave), scene.wide.most_stops());
+        let stats = settings
+            .stats
+            .then(|| strategies(b).into_iter().map(|(s, t)| StrategyStats { s, t, ..Default::default() }).collect());
+        let wf = Wavefront::new(
+            ctx,
+            params,
+            r,
+            film,
+            constants,
+            (samples_per_pass, slots_per_wave),
+            scene.wide.most_stops(),
+        );
         Ok(Self {
             wf,
             stages,
@@ -463,7 +478,9 @@ impl<'a> BidirectionalTracer<'a> {
         let Some(index) = self.band_index.take() else { return Ok(()) };
         let wf = &mut self.wf;
         let result = index.build(wf.ctx, &mut wf.resources, &mut wf.params, self.binding_limit)?;
-        if let (Ok(_), Some(kernels), Some(groups)) = (&result, &self.stages.ellipsoidal, &mut self.bindings.ellipsoidal) {
+        if let (Ok(_), Some(kernels), Some(groups)) =
+            (&result, &self.stages.ellipsoidal, &mut self.bindings.ellipsoidal)
+        {
             // queue_ellipsoid_queries reads the index.
             groups[1] = kernels[1].bind(wf.ctx, &wf.resources);
         }
@@ -486,7 +503,10 @@ impl<'a> BidirectionalTracer<'a> {
     /// pilot's transient is noisy, and cost no samples. Returns whether it did.
     fn apply_band_allocation(&mut self) -> bool {
         let t = self.wf.params.target_length;
-        if self.band_masses.is_empty() || t.band_index == 0 || t.extra != 0 || self.wf.params.max_bounces != 3
+        if self.band_masses.is_empty()
+            || t.band_index == 0
+            || t.extra != 0
+            || self.wf.params.max_bounces != 3
             || self.band_masses.len() != (self.wf.params.width * self.wf.params.height) as usize * t.strata as usize
         {
             return false;
@@ -676,7 +696,11 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn save_state(&self) -> Result<super::checkpoint::RenderState> {
         let mut state = self.wf.save_state(self.method)?;
-        let splats: Vec<[u32; 4]> = read_buffer(self.wf.ctx, self.wf.resources.get("splat_film").unwrap(), self.wf.film_element_count() as usize)?;
+        let splats: Vec<[u32; 4]> = read_buffer(
+            self.wf.ctx,
+            self.wf.resources.get("splat_film").unwrap(),
+            self.wf.film_element_count() as usize,
+        )?;
         state.push("splat_film", &splats);
         state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_ran as u32]);
         Ok(state)
@@ -688,7 +712,11 @@ impl Integrator for BidirectionalTracer<'_> {
         self.wf.load_state(self.method, state)?;
         // The state's parameters say whether its render had a band index; this one uses its own.
         self.wf.params.target_length.band_index = matches!(self.band_index_result, Some(Ok(_))) as u32;
-        self.wf.ctx.queue.write_buffer(self.wf.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.wf.params));
+        self.wf.ctx.queue.write_buffer(
+            self.wf.resources.get("params").unwrap(),
+            0,
+            bytemuck::bytes_of(&self.wf.params),
+        );
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
         self.target_pilot_pending = flags[0] != 0;
         self.target_pilot_ran = flags[1] != 0;

@@ -83,7 +83,11 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
 /// What identifies a render: the scene file (its path and a hash of its bytes), every setting
 /// (`RenderSettings`, the seed included; not the budget), gatetrace's version, and `extra`
 /// (e.g. an animation time or a camera override). Equal fingerprints continue each other.
-pub fn fingerprint(scene: &Path, settings: &RenderSettings, extra: &[(&str, String)]) -> Result<BTreeMap<String, String>> {
+pub fn fingerprint(
+    scene: &Path,
+    settings: &RenderSettings,
+    extra: &[(&str, String)],
+) -> Result<BTreeMap<String, String>> {
     let bytes = std::fs::read(scene).with_context(|| format!("{}: cannot read the scene file", scene.display()))?;
     let mut f = BTreeMap::new();
     f.insert("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into());
@@ -136,7 +140,8 @@ pub fn write_state_file(
         file.into_inner().map_err(|e| e.into_error())?.sync_all()?;
         Ok(())
     };
-    crate::film::output::replace_atomically(path, write).with_context(|| format!("{}: cannot write the checkpoint", path.display()))
+    crate::film::output::replace_atomically(path, write)
+        .with_context(|| format!("{}: cannot write the checkpoint", path.display()))
 }
 
 /// Reads the checkpoint at `path` and checks that it was made by the render `fingerprint`
@@ -149,7 +154,12 @@ pub fn read_checkpoint(path: &Path, fingerprint: &BTreeMap<String, String>) -> R
 
 /// An error "`path`: `problem` (key: `A` then, `B` now)" for the first entry where the
 /// fingerprint `saved` differs from `now` (entries of either).
-pub fn check_fingerprint(path: &Path, problem: &str, saved: &BTreeMap<String, String>, now: &BTreeMap<String, String>) -> Result<()> {
+pub fn check_fingerprint(
+    path: &Path,
+    problem: &str,
+    saved: &BTreeMap<String, String>,
+    now: &BTreeMap<String, String>,
+) -> Result<()> {
     for key in now.keys().chain(saved.keys()) {
         let then = saved.get(key).map(String::as_str).unwrap_or("(none)");
         let value = now.get(key).map(String::as_str).unwrap_or("(none)");
@@ -166,9 +176,10 @@ pub fn read_state_file(path: &Path) -> Result<(BTreeMap<String, String>, RenderS
     let name = path.display();
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the checkpoint"))?;
     let body = bytes.strip_prefix(MAGIC).ok_or_else(|| anyhow!("{name}: not a gatetrace checkpoint"))?;
-    let end = body.iter().position(|&b| b == b'\n').ok_or_else(|| anyhow!("{name}: the checkpoint's header is cut off"))?;
-    let header: Value =
-        serde_json::from_slice(&body[..end]).map_err(|e| anyhow!("{name}: the checkpoint's header is not valid: {e}"))?;
+    let end =
+        body.iter().position(|&b| b == b'\n').ok_or_else(|| anyhow!("{name}: the checkpoint's header is cut off"))?;
+    let header: Value = serde_json::from_slice(&body[..end])
+        .map_err(|e| anyhow!("{name}: the checkpoint's header is not valid: {e}"))?;
     let bad = |what: &str| anyhow!("{name}: the checkpoint's header lacks a valid `{what}`");
     let format = header["format"].as_u64().ok_or_else(|| bad("format"))?;
     ensure!(format == FORMAT, "{name}: checkpoint format {format}, this gatetrace reads format {FORMAT}");
@@ -209,17 +220,28 @@ pub fn merge_states(parts: &[RenderState], names: &[String]) -> Result<RenderSta
     let summed = ["film", "splat_film"];
     let mut merged = first.clone();
     for (part, name) in parts.iter().zip(names).skip(1) {
-        ensure!(part.method == first.method, "{name}: rendered with {}, {} with {}", part.method.name(), names[0], first.method.name());
+        ensure!(
+            part.method == first.method,
+            "{name}: rendered with {}, {} with {}",
+            part.method.name(),
+            names[0],
+            first.method.name()
+        );
         let layout = |s: &RenderState| s.blobs.iter().map(|(n, b)| (n.clone(), b.len())).collect::<Vec<_>>();
         ensure!(layout(part) == layout(first), "{name}: its sums do not have the shape of {}'s", names[0]);
         for ((blob_name, sum), (_, add)) in merged.blobs.iter_mut().zip(&part.blobs) {
             if summed.contains(&blob_name.as_str()) {
                 for (a, b) in sum.chunks_exact_mut(16).zip(add.chunks_exact(16)) {
-                    let total = i128::from_le_bytes(a.try_into().unwrap()).wrapping_add(i128::from_le_bytes(b.try_into().unwrap()));
+                    let total = i128::from_le_bytes(a.try_into().unwrap())
+                        .wrapping_add(i128::from_le_bytes(b.try_into().unwrap()));
                     a.copy_from_slice(&total.to_le_bytes());
                 }
             } else {
-                ensure!(sum == add, "{name}: its `{blob_name}` differs from {}'s: the parts are not slices of one render", names[0]);
+                ensure!(
+                    sum == add,
+                    "{name}: its `{blob_name}` differs from {}'s: the parts are not slices of one render",
+                    names[0]
+                );
             }
         }
         merged.samples_in_film += part.samples_in_film;

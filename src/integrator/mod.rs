@@ -17,8 +17,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 
-use crate::film::target::TargetSampler;
 use crate::film::output::Metadata;
+use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
 use crate::gpu::GpuContext;
 use crate::gpu::Resources;
@@ -149,22 +149,12 @@ pub struct QuerySettings {
 
 impl QuerySettings {
     /// The exhaustive query (every node the spheroid may touch, up to the allowance).
-    pub const EXHAUSTIVE: Self = Self {
-        split: 0.0,
-        bottom_nodes: 31,
-        allowance: 4096,
-        reflection_weights: false,
-    };
+    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false };
 }
 
 impl Default for QuerySettings {
     fn default() -> Self {
-        Self {
-            split: 1.0,
-            bottom_nodes: 31,
-            allowance: 4096,
-            reflection_weights: false,
-        }
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false }
     }
 }
 
@@ -181,10 +171,7 @@ pub struct EllipsoidGuards {
 
 impl Default for EllipsoidGuards {
     fn default() -> Self {
-        Self {
-            needle: 1e-6,
-            length: 1e-5,
-        }
+        Self { needle: 1e-6, length: 1e-5 }
     }
 }
 
@@ -336,9 +323,7 @@ pub fn create_integrator<'a>(
 ) -> Result<Box<dyn Integrator + 'a>> {
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
-        Method::Direct | Method::Ellipsoidal => {
-            Box::new(BidirectionalTracer::new(ctx, scene, settings)?)
-        }
+        Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
         Method::Auto => anyhow::bail!(
             "--method auto has no integrator of its own: it renders with direct or ellipsoidal after a pilot of both \
              (integrator::render); measure those two instead"
@@ -511,7 +496,10 @@ pub fn render_metadata(
         ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
         ("adapter".into(), ctx.adapter_description()),
         ("truncated_traversals".into(), output.truncated_traversals.to_string()),
-        ("units".into(), "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into()),
+        (
+            "units".into(),
+            "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into(),
+        ),
         ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
     ];
     if let Some((s, t)) = settings.debug_strategy {
@@ -538,28 +526,14 @@ pub fn render_metadata(
     }
     if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
         let g = settings.ellipsoid_guards;
-        metadata.push((
-            "connections_per_query".into(),
-            settings.connections_per_query.to_string(),
-        ));
+        metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
         metadata.push(("query_split".into(), settings.query.split.to_string()));
         metadata.push((
             "query_weights".into(),
-            if settings.query.reflection_weights {
-                "reflection"
-            } else {
-                "arcs"
-            }
-            .into(),
+            if settings.query.reflection_weights { "reflection" } else { "arcs" }.into(),
         ));
-        metadata.push((
-            "ellipsoid_guards".into(),
-            format!("needle {:e}, length {:e}", g.needle, g.length),
-        ));
-        metadata.push((
-            "target_pilot_spp".into(),
-            output.target_pilot_spp.to_string(),
-        ));
+        metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
+        metadata.push(("target_pilot_spp".into(), output.target_pilot_spp.to_string()));
         if let Some(report) = &output.band_index {
             metadata.push(("band_index".into(), report.clone()));
         }
@@ -634,15 +608,10 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         gate: settings.gate.to_gpu(),
         target_length: TargetParams {
             seed: settings.seed,
-            ..target_sampler(scene, settings)
-                .map(|t| t.params)
-                .unwrap_or_default()
+            ..target_sampler(scene, settings).map(|t| t.params).unwrap_or_default()
         },
         light_bounds_min,
-        image_area: scene
-            .scene
-            .camera
-            .image_area(settings.width, settings.height),
+        image_area: scene.scene.camera.image_area(settings.width, settings.height),
         light_bounds_max,
         width: settings.width,
         height: settings.height,
@@ -660,11 +629,7 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
 /// The scattering vertices the kernels' subpaths may have: `max_bounces`, less one in an NLOS
 /// capture, whose laser spot is a bounce to the user and a light to the kernels.
 pub fn kernel_bounces(settings: &RenderSettings) -> u32 {
-    if settings.nlos.is_some() {
-        settings.max_bounces.saturating_sub(1)
-    } else {
-        settings.max_bounces
-    }
+    if settings.nlos.is_some() { settings.max_bounces.saturating_sub(1) } else { settings.max_bounces }
 }
 
 /// Target-length sampling of the settings' gate over the path lengths the scene allows with
@@ -680,10 +645,7 @@ pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Optio
                 lo.min(capture.sensor_origin).min(capture.laser_origin),
                 hi.max(capture.sensor_origin).max(capture.laser_origin),
             );
-            (
-                0.0,
-                (settings.max_bounces as f32 + 1.0) * (hi - lo).length(),
-            )
+            (0.0, (settings.max_bounces as f32 + 1.0) * (hi - lo).length())
         }
         None => scene.scene.path_length_bounds(settings.max_bounces),
     };
@@ -708,61 +670,30 @@ pub fn upload_scene(
     // The kernels read shading data only for vertex normals and texture coordinates
     // (scene.wesl `surface_at`): flat untextured scenes upload none (64 bytes a triangle, which
     // would not fit the bindings of a 10-million-triangle mesh on lavapipe).
-    let shading: &[TriangleShading] = if scene.has_shading_normals() || scene.has_textures() {
-        &scene.shading
-    } else {
-        &scene.shading[..1]
-    };
+    let shading: &[TriangleShading] =
+        if scene.has_shading_normals() || scene.has_textures() { &scene.shading } else { &scene.shading[..1] };
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
     r.storage_init(ctx, "wide_nodes", &scene.wide.nodes)?;
-    let bvh_node_surfaces =
-        r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
+    let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
-    let small_normals: Vec<[f32; 4]> = scene.normals[..small]
-        .iter()
-        .map(|n| [n[0], n[1], 0.0, 0.0])
-        .collect();
+    let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();
     let max_small = crate::bvh::MAX_SMALL_SCENE_TRIANGLES;
-    r.uniform_slice_init(
-        ctx,
-        "small_scene_triangles",
-        &padded_table(small_scene, max_small),
-    );
-    r.uniform_slice_init(
-        ctx,
-        "small_scene_shading",
-        &padded_table(&scene.shading[..small], max_small),
-    );
-    r.uniform_slice_init(
-        ctx,
-        "small_scene_normals",
-        &padded_table(&small_normals, max_small),
-    );
+    r.uniform_slice_init(ctx, "small_scene_triangles", &padded_table(small_scene, max_small));
+    r.uniform_slice_init(ctx, "small_scene_shading", &padded_table(&scene.shading[..small], max_small));
+    r.uniform_slice_init(ctx, "small_scene_normals", &padded_table(&small_normals, max_small));
     r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;
     r.storage_init(ctx, "lights", &scene.lights.lights)?;
     r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
-    let tables_in_uniforms = scene.materials.len() <= MAX_UNIFORM_MATERIALS
-        && scene.lights.lights.len() <= MAX_UNIFORM_LIGHTS;
-    r.uniform_slice_init(
-        ctx,
-        "uniform_materials",
-        &padded_table(&scene.materials, MAX_UNIFORM_MATERIALS),
-    );
-    r.uniform_slice_init(
-        ctx,
-        "uniform_lights",
-        &padded_table(&scene.lights.lights, MAX_UNIFORM_LIGHTS),
-    );
-    r.uniform_slice_init(
-        ctx,
-        "uniform_light_cdf",
-        &padded_table(&scene.lights.cdf, MAX_UNIFORM_LIGHTS),
-    );
+    let tables_in_uniforms =
+        scene.materials.len() <= MAX_UNIFORM_MATERIALS && scene.lights.lights.len() <= MAX_UNIFORM_LIGHTS;
+    r.uniform_slice_init(ctx, "uniform_materials", &padded_table(&scene.materials, MAX_UNIFORM_MATERIALS));
+    r.uniform_slice_init(ctx, "uniform_lights", &padded_table(&scene.lights.lights, MAX_UNIFORM_LIGHTS));
+    r.uniform_slice_init(ctx, "uniform_light_cdf", &padded_table(&scene.lights.cdf, MAX_UNIFORM_LIGHTS));
     r.storage_init(ctx, "gate_table", &gate.table())?;
     let wall_points = match &settings.nlos {
         Some(capture) => crate::nlos::wall_points(scene, capture, settings.width, settings.height)?,
@@ -782,10 +713,7 @@ pub fn upload_scene(
         ("HAS_TEXTURES", flag(scene.has_textures())),
         ("HAS_SHADING_NORMALS", flag(scene.has_shading_normals())),
         ("HAS_POINT_LIGHTS", flag(scene.has_point_lights())),
-        (
-            "HAS_DIRECTIONAL_LIGHTS",
-            flag(!scene.scene.directional_lights.is_empty()),
-        ),
+        ("HAS_DIRECTIONAL_LIGHTS", flag(!scene.scene.directional_lights.is_empty())),
         ("HAS_GLOSSY", flag(scene.has_glossy())),
         ("TRIANGLES_PER_CHUNK", triangles.per_chunk as f64),
         ("TRIANGLE_SHADING_PER_CHUNK", triangle_shading.per_chunk as f64),
@@ -795,10 +723,7 @@ pub fn upload_scene(
         ("TRAVERSAL_BUDGET", crate::bvh::wide::TRAVERSAL_BUDGET as f64),
         ("SMALL_SCENE_TRIANGLES", small as f64),
         ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
-        (
-            "RESUMABLE",
-            flag(scene.wide.traversals_can_stop()),
-        ),
+        ("RESUMABLE", flag(scene.wide.traversals_can_stop())),
         ("NLOS", flag(settings.nlos.is_some())),
     ];
     Ok((r, constants, film))
@@ -940,11 +865,7 @@ pub fn render_resumable(
              loops after 65535 iterations); the image may miss geometry. Use a GPU for this scene."
         );
     }
-    let stats = if settings.stats {
-        tracer.stats_report()?
-    } else {
-        None
-    };
+    let stats = if settings.stats { tracer.stats_report()? } else { None };
     let target_pilot_spp = tracer.target_pilot_spp();
     let state = match start_at.keep_state {
         true => Some(checkpoint::RenderState { rendering_seconds: rendering.as_secs_f64(), ..tracer.save_state()? }),
@@ -972,24 +893,12 @@ mod pass_sizer_tests {
     #[test]
     fn passes_fit_the_time_left() {
         let mut sizer = PassSizer::default();
-        assert_eq!(
-            sizer.next(10.0, 64),
-            Some(1),
-            "one sample before anything is measured"
-        );
+        assert_eq!(sizer.next(10.0, 64), Some(1), "one sample before anything is measured");
         sizer.record(10, 1.0);
         assert_eq!(sizer.next(100.0, 64), Some(64), "capped at a full pass");
-        assert_eq!(
-            sizer.next(0.5, 64),
-            Some(4),
-            "0.95 x 0.5 s at 0.1 s per sample"
-        );
+        assert_eq!(sizer.next(0.5, 64), Some(4), "0.95 x 0.5 s at 0.1 s per sample");
         assert_eq!(sizer.next(0.1, 64), None, "one sample would overrun");
         sizer.record(1, 0.01);
-        assert_eq!(
-            sizer.next(0.1, 64),
-            Some(9),
-            "the latest pass's rate counts"
-        );
+        assert_eq!(sizer.next(0.1, 64), Some(9), "the latest pass's rate counts");
     }
 }

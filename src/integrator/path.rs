@@ -181,15 +181,19 @@ impl<'a> PathTracer<'a> {
                 generate_camera_rays,
                 setup_dispatch_rays,
                 extend_paths,
-                shadow_resumes: if resumable {
-                    scene.wide.most_stops().min(MAX_SHADOW_RESUMES)
-                } else {
-                    0
-                },
+                shadow_resumes: if resumable { scene.wide.most_stops().min(MAX_SHADOW_RESUMES) } else { 0 },
                 vertices_per_round,
             }))
         };
-        let wf = Wavefront::new(ctx, params, r, film, constants, (samples_per_pass, slots_per_wave), scene.wide.most_stops());
+        let wf = Wavefront::new(
+            ctx,
+            params,
+            r,
+            film,
+            constants,
+            (samples_per_pass, slots_per_wave),
+            scene.wide.most_stops(),
+        );
         Ok(Self { wf, tracing, accumulate, accumulate_binding, sum_per_path })
     }
 
@@ -284,7 +288,7 @@ impl Integrator for PathTracer<'_> {
         self.wf.reset_film(&[]);
     }
 
-fn save_state(&self) -> Result<super::checkpoint::RenderState> {
+    fn save_state(&self) -> Result<super::checkpoint::RenderState> {
         self.wf.save_state(super::Method::Path)
     }
 
@@ -297,7 +301,7 @@ fn save_state(&self) -> Result<super::checkpoint::RenderState> {
         Ok(())
     }
 
-        fn restart(&mut self, seed: u32) {
+    fn restart(&mut self, seed: u32) {
         self.wf.restart(seed, &[]);
     }
 
@@ -338,7 +342,12 @@ pub(super) fn plan_waves(settings: &RenderSettings, fit: u64, target: u64) -> Re
 
 /// The waves of a pass of `samples` samples per pixel starting at sample `next_sample`: each
 /// holds `samples` samples of a block of pixels (all pixels when they fit `slots_per_wave`).
-pub(super) fn waves_of_pass(params: &RenderParams, slots_per_wave: u64, next_sample: u64, samples: u32) -> Result<Vec<WaveParams>> {
+pub(super) fn waves_of_pass(
+    params: &RenderParams,
+    slots_per_wave: u64,
+    next_sample: u64,
+    samples: u32,
+) -> Result<Vec<WaveParams>> {
     let sample_base = u32::try_from(next_sample + samples as u64 - 1)
         .map(|_| next_sample as u32)
         .map_err(|_| anyhow::anyhow!("more than 2^32 samples per pixel"))?;
@@ -401,7 +410,10 @@ mod tests {
                 let k = tracers_per_pixel(&w, max_bounces, TARGET_TRACERS_GPU);
                 assert!(k >= 1 && k <= samples, "{pixels} px, {samples} spp, {max_bounces}: {k}");
                 let vertices = samples.div_ceil(k) as u64 * (max_bounces as u64 + 1);
-                assert!(vertices <= MOST_VERTICES_PER_TRACER || k == samples, "{pixels} px, {samples} spp, {max_bounces}: {k}");
+                assert!(
+                    vertices <= MOST_VERTICES_PER_TRACER || k == samples,
+                    "{pixels} px, {samples} spp, {max_bounces}: {k}"
+                );
                 assert!(pixels * k >= TARGET_TRACERS_GPU.min(pixels * samples), "{pixels} px, {samples} spp: {k}");
             }
         }

@@ -5,8 +5,8 @@ use anyhow::{Result, ensure};
 
 use super::checkpoint::RenderState;
 use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
-use crate::film::{Film, fixed};
 use crate::film::target::{StratumFactors, next_target_seed};
+use crate::film::{Film, fixed};
 use crate::gpu::layout::{QueueCounters, RenderParams, TargetParams, WaveParams};
 use crate::gpu::resources::{ChunkLayout, read_buffer};
 use crate::gpu::{GpuContext, Kernel, Resources};
@@ -124,7 +124,10 @@ impl<'a> Wavefront<'a> {
         let gate = &settings.gate;
         let kind = self.constants.iter().find(|(n, _)| *n == "GATE_KIND").map(|c| c.1);
         let new = gate.to_gpu();
-        if kind != Some(gate.kind() as u32 as f64) || new.bins != self.params.gate.bins || new.table_len != self.params.gate.table_len {
+        if kind != Some(gate.kind() as u32 as f64)
+            || new.bins != self.params.gate.bins
+            || new.table_len != self.params.gate.table_len
+        {
             return Ok(false);
         }
         let sampler = super::target_sampler(scene, settings);
@@ -142,7 +145,8 @@ impl<'a> Wavefront<'a> {
         self.params.gate = new;
         let (seed, film_first_sample) = (self.params.target_length.seed, self.params.target_length.film_first_sample);
         // Extra visits were shaped for the old gate: each bin gets one a cycle again.
-        self.params.target_length = TargetParams { seed, film_first_sample, ..sampler.map(|t| t.params).unwrap_or_default() };
+        self.params.target_length =
+            TargetParams { seed, film_first_sample, ..sampler.map(|t| t.params).unwrap_or_default() };
         self.target_visits.clear();
         queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
         Ok(true)
@@ -192,13 +196,19 @@ impl<'a> Wavefront<'a> {
         let most = rounds * (self.most_traversal_stops as u64 + 2);
         let mut first = 0u64;
         loop {
-            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
+            let mut encoder =
+                ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("wave") });
             {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
+                let mut pass = encoder
+                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("wave"), timestamp_writes: None });
                 if first == 0 {
                     start(&mut pass);
                 }
-                let end = if first == 0 { rounds.min(ROUNDS_PER_SUBMISSION as u64) } else { first + ROUNDS_PER_SUBMISSION as u64 };
+                let end = if first == 0 {
+                    rounds.min(ROUNDS_PER_SUBMISSION as u64)
+                } else {
+                    first + ROUNDS_PER_SUBMISSION as u64
+                };
                 for r in first..end {
                     round(&mut pass, (r % 2) as u32);
                 }
@@ -215,9 +225,11 @@ impl<'a> Wavefront<'a> {
 
     /// Records `encode` into one compute pass labelled `label` and submits it.
     pub fn submit_pass(&self, label: &str, encode: impl FnOnce(&mut wgpu::ComputePass)) {
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        let mut encoder =
+            self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+            let mut pass =
+                encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
             encode(&mut pass);
         }
         self.ctx.queue.submit([encoder.finish()]);
@@ -261,13 +273,26 @@ impl<'a> Wavefront<'a> {
         ensure!(
             (a.width, a.height, a.gate.bins, a.max_bounces) == (b.width, b.height, b.gate.bins, b.max_bounces),
             "the checkpoint's image ({}x{}, {} bins, {} bounces) is not this render's ({}x{}, {} bins, {} bounces)",
-            a.width, a.height, a.gate.bins, a.max_bounces, b.width, b.height, b.gate.bins, b.max_bounces
+            a.width,
+            a.height,
+            a.gate.bins,
+            a.max_bounces,
+            b.width,
+            b.height,
+            b.gate.bins,
+            b.max_bounces
         );
         let film: Vec<[u32; 4]> = state.values("film", self.film_element_count() as usize)?;
         let visits: Vec<u32> = state.all_values("target_visits")?;
         if !visits.is_empty() {
-            let buffer = self.resources.get("target_visits").ok_or_else(|| anyhow::anyhow!("this render keeps no target visits"))?;
-            ensure!((visits.len() * 4) as u64 <= buffer.size(), "the checkpoint's target visits do not fit this render's");
+            let buffer = self
+                .resources
+                .get("target_visits")
+                .ok_or_else(|| anyhow::anyhow!("this render keeps no target visits"))?;
+            ensure!(
+                (visits.len() * 4) as u64 <= buffer.size(),
+                "the checkpoint's target visits do not fit this render's"
+            );
             self.ctx.queue.write_buffer(buffer, 0, bytemuck::cast_slice(&visits));
         }
         self.resources.write_chunked(self.ctx, "film", self.film_layout, &film);
@@ -302,7 +327,8 @@ impl<'a> Wavefront<'a> {
     /// Clears the film and the further buffers `also` (e.g. a splat film), and draws the next
     /// film's target-length seed.
     pub fn reset_film(&mut self, also: &[&str]) {
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
+        let mut encoder =
+            self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("reset_film") });
         self.resources.clear_chunked(&mut encoder, "film");
         for name in also {
             encoder.clear_buffer(self.resources.get(name).unwrap(), 0, None);

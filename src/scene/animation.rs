@@ -22,26 +22,31 @@ pub fn sample_animations(
     let mut trs: HashMap<usize, (Vec3, Quat, Vec3)> = HashMap::new();
     let mut animated = false;
     for animation in doc.animations() {
-        let anim_name = animation.name().map(|n| format!("animation `{n}`")).unwrap_or(format!("animation {}", animation.index()));
+        let anim_name =
+            animation.name().map(|n| format!("animation `{n}`")).unwrap_or(format!("animation {}", animation.index()));
         for channel in animation.channels() {
             animated = true;
             let what = format!("{name}: {anim_name}, channel {}", channel.index());
             check_channel(doc, animation.index(), &channel).map_err(|e| anyhow!("{what}: {e}"))?;
             let node = channel.target().node();
             let reader = channel.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let times: Vec<f32> = reader.read_inputs().ok_or_else(|| anyhow!("{what}: cannot read the key times"))?.collect();
+            let times: Vec<f32> =
+                reader.read_inputs().ok_or_else(|| anyhow!("{what}: cannot read the key times"))?.collect();
             ensure!(!times.is_empty(), "{what}: no keys");
             ensure!(
                 times.iter().all(|t| t.is_finite()) && times.windows(2).all(|w| w[1] > w[0]),
                 "{what}: key times must be finite and strictly increasing"
             );
-            let outputs: Vec<Vec4> = match reader.read_outputs().ok_or_else(|| anyhow!("{what}: cannot read the key values"))? {
-                ReadOutputs::Translations(it) | ReadOutputs::Scales(it) => it.map(|v| Vec3::from(v).extend(0.0)).collect(),
-                ReadOutputs::Rotations(r) => r.into_f32().map(Vec4::from).collect(),
-                ReadOutputs::MorphTargetWeights(_) => {
-                    bail!("{what}: morph-target animations are not supported (only translation, rotation, scale)")
-                }
-            };
+            let outputs: Vec<Vec4> =
+                match reader.read_outputs().ok_or_else(|| anyhow!("{what}: cannot read the key values"))? {
+                    ReadOutputs::Translations(it) | ReadOutputs::Scales(it) => {
+                        it.map(|v| Vec3::from(v).extend(0.0)).collect()
+                    }
+                    ReadOutputs::Rotations(r) => r.into_f32().map(Vec4::from).collect(),
+                    ReadOutputs::MorphTargetWeights(_) => {
+                        bail!("{what}: morph-target animations are not supported (only translation, rotation, scale)")
+                    }
+                };
             let interpolation = channel.sampler().interpolation();
             let per_key = if interpolation == Interpolation::CubicSpline { 3 } else { 1 };
             ensure!(
@@ -84,14 +89,23 @@ fn check_channel(doc: &gltf::Document, animation: usize, channel: &gltf::animati
     let Checked::Valid(property) = channel_json.target.path else {
         bail!("the target path is not translation, rotation, scale or weights");
     };
-    let sampler = json.samplers.get(channel_json.sampler.value()).ok_or_else(|| anyhow!("its sampler does not exist"))?;
+    let sampler =
+        json.samplers.get(channel_json.sampler.value()).ok_or_else(|| anyhow!("its sampler does not exist"))?;
     if !matches!(sampler.interpolation, Checked::Valid(_)) {
         bail!("the interpolation is not LINEAR, STEP or CUBICSPLINE");
     }
     let root = doc.as_json();
-    ensure!(channel_json.target.node.value() < root.nodes.len(), "its target node {} does not exist", channel_json.target.node.value());
+    ensure!(
+        channel_json.target.node.value() < root.nodes.len(),
+        "its target node {} does not exist",
+        channel_json.target.node.value()
+    );
     for (role, accessor) in [("key times", sampler.input), ("key values", sampler.output)] {
-        ensure!(accessor.value() < root.accessors.len(), "the accessor {} of its {role} does not exist", accessor.value());
+        ensure!(
+            accessor.value() < root.accessors.len(),
+            "the accessor {} of its {role} does not exist",
+            accessor.value()
+        );
     }
     let (input, output) = (channel.sampler().input(), channel.sampler().output());
     ensure!(
@@ -100,7 +114,9 @@ fn check_channel(doc: &gltf::Document, animation: usize, channel: &gltf::animati
         input.index()
     );
     let ok = match property {
-        Property::Translation | Property::Scale => output.dimensions() == Dimensions::Vec3 && output.data_type() == D::F32,
+        Property::Translation | Property::Scale => {
+            output.dimensions() == Dimensions::Vec3 && output.data_type() == D::F32
+        }
         Property::Rotation => {
             output.dimensions() == Dimensions::Vec4
                 && (output.data_type() == D::F32

@@ -74,7 +74,9 @@ impl CameraDesc {
     pub fn describe(&self) -> String {
         match self.lens {
             None => "pinhole".into(),
-            Some(l) => format!("thin lens: aperture radius {} m, focus distance {} m", l.aperture_radius, l.focus_distance),
+            Some(l) => {
+                format!("thin lens: aperture radius {} m, focus distance {} m", l.aperture_radius, l.focus_distance)
+            }
         }
     }
 

@@ -131,7 +131,14 @@ fn check_buffer_ranges(doc: &gltf::Document) -> Result<(), String> {
             }
             let (indices, values) = (sparse.indices(), sparse.values());
             let index_size = indices.index_type().size();
-            fits(&format!("{what}.sparse.indices"), indices.view(), indices.offset(), index_size, sparse.count(), index_size)?;
+            fits(
+                &format!("{what}.sparse.indices"),
+                indices.view(),
+                indices.offset(),
+                index_size,
+                sparse.count(),
+                index_size,
+            )?;
             fits(&format!("{what}.sparse.values"), values.view(), values.offset(), size, sparse.count(), size)?;
         }
     }
@@ -194,10 +201,11 @@ impl Loader<'_> {
         let camera = match c.camera {
             Some(camera) => camera,
             None if self.capture => {
-                let (lo, hi) = c.triangles.iter().flat_map(|t| t.positions).fold(
-                    (Vec3::INFINITY, Vec3::NEG_INFINITY),
-                    |(lo, hi), p| (lo.min(p), hi.max(p)),
-                );
+                let (lo, hi) = c
+                    .triangles
+                    .iter()
+                    .flat_map(|t| t.positions)
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
                 CameraDesc {
                     position: 0.5 * (lo + hi),
                     right: Vec3::X,
@@ -343,7 +351,10 @@ impl Loader<'_> {
                 let spot = match kind {
                     gltf::khr_lights_punctual::Kind::Spot { inner_cone_angle, outer_cone_angle } => {
                         let (inner, outer) = (inner_cone_angle, outer_cone_angle);
-                        if !(inner.is_finite() && outer.is_finite() && 0.0 <= inner && inner < outer
+                        if !(inner.is_finite()
+                            && outer.is_finite()
+                            && 0.0 <= inner
+                            && inner < outer
                             && outer <= std::f32::consts::FRAC_PI_2 + 1e-6)
                         {
                             bail!(
@@ -361,7 +372,9 @@ impl Loader<'_> {
             gltf::khr_lights_punctual::Kind::Directional => {
                 let irradiance = Vec3::from(light.color()) * light.intensity();
                 if !irradiance.is_finite() || irradiance.min_element() < 0.0 {
-                    bail!("{name}: {node_name}: directional light irradiance {irradiance} is not finite and non-negative");
+                    bail!(
+                        "{name}: {node_name}: directional light irradiance {irradiance} is not finite and non-negative"
+                    );
                 }
                 let direction = light_direction(world, name, node_name)?;
                 c.directional_lights.push(DirectionalLight { direction, irradiance });
@@ -512,7 +525,8 @@ impl Loader<'_> {
                 if let Some(&t) = texture_of_image.get(&key) {
                     Some(t)
                 } else {
-                    let data = self.images.get(image).ok_or_else(|| anyhow!("{name}: {label}: image {image} is missing"))?;
+                    let data =
+                        self.images.get(image).ok_or_else(|| anyhow!("{name}: {label}: image {image} is missing"))?;
                     let mut tex = decode_srgb_image(data).with_context(|| format!("{name}: {label}: image {image}"))?;
                     tex.clamp_u = clamp_u;
                     tex.clamp_v = clamp_v;
@@ -543,8 +557,8 @@ pub const MAX_COORDINATE: f32 = 1e9;
 /// would reinterpret others): POSITION and NORMAL float VEC3, TEXCOORD_n VEC2 of floats or
 /// normalised unsigned bytes or shorts, indices SCALAR unsigned bytes, shorts or ints.
 fn check_accessors(prim: &gltf::Primitive) -> Result<()> {
-    use gltf::accessor::{DataType as D, Dimensions};
     use gltf::Semantic;
+    use gltf::accessor::{DataType as D, Dimensions};
     let describe = |a: &gltf::Accessor| {
         let dimensions = match a.dimensions() {
             Dimensions::Scalar => "SCALAR",

@@ -88,7 +88,13 @@ fn f16_to_f32(h: u16) -> f32 {
     let mant = (h & 0x3ff) as f32;
     match exp {
         0 => sign * mant * 2f32.powi(-24),
-        0x1f => if mant == 0.0 { sign * f32::INFINITY } else { f32::NAN },
+        0x1f => {
+            if mant == 0.0 {
+                sign * f32::INFINITY
+            } else {
+                f32::NAN
+            }
+        }
         e => sign * (1.0 + mant / 1024.0) * 2f32.powi(e as i32 - 15),
     }
 }

@@ -81,7 +81,9 @@ impl PreparedScene {
                 u2: t.uvs[2].x,
                 v2: t.uvs[2].y,
                 flags: match t.normals {
-                    Some(n) if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) => SHADING_HAS_NORMALS,
+                    Some(n) if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) => {
+                        SHADING_HAS_NORMALS
+                    }
                     _ => 0,
                 },
             });

@@ -64,26 +64,29 @@ impl Scene {
         let mut bin: Vec<u8> = Vec::new();
         let mut views = Vec::new();
         let mut accessors = Vec::new();
-        let mut push = |data: Vec<u8>, count: usize, component: u32, kind: &str, min_max: Option<(Vec<f32>, Vec<f32>)>| {
-            while bin.len() % 4 != 0 {
-                bin.push(0);
-            }
-            views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len()}));
-            bin.extend_from_slice(&data);
-            let mut a = json!({"bufferView": views.len() - 1, "componentType": component, "count": count, "type": kind});
-            if let Some((lo, hi)) = min_max {
-                a["min"] = json!(lo);
-                a["max"] = json!(hi);
-            }
-            accessors.push(a);
-            accessors.len() - 1
-        };
+        let mut push =
+            |data: Vec<u8>, count: usize, component: u32, kind: &str, min_max: Option<(Vec<f32>, Vec<f32>)>| {
+                while bin.len() % 4 != 0 {
+                    bin.push(0);
+                }
+                views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len()}));
+                bin.extend_from_slice(&data);
+                let mut a =
+                    json!({"bufferView": views.len() - 1, "componentType": component, "count": count, "type": kind});
+                if let Some((lo, hi)) = min_max {
+                    a["min"] = json!(lo);
+                    a["max"] = json!(hi);
+                }
+                accessors.push(a);
+                accessors.len() - 1
+            };
         let mut meshes = Vec::new();
         let mut nodes = Vec::new();
         for m in &self.meshes {
             let pos: Vec<u8> = m.positions.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
             let lo: Vec<f32> = (0..3).map(|i| m.positions.iter().map(|p| p[i]).fold(f32::INFINITY, f32::min)).collect();
-            let hi: Vec<f32> = (0..3).map(|i| m.positions.iter().map(|p| p[i]).fold(f32::NEG_INFINITY, f32::max)).collect();
+            let hi: Vec<f32> =
+                (0..3).map(|i| m.positions.iter().map(|p| p[i]).fold(f32::NEG_INFINITY, f32::max)).collect();
             let finite = lo.iter().chain(&hi).all(|v| v.is_finite());
             let p = push(pos, m.positions.len(), 5126, "VEC3", finite.then_some((lo, hi)));
             let mut attributes = json!({"POSITION": p});
@@ -112,7 +115,9 @@ impl Scene {
         let mut lights = Vec::new();
         for l in &self.point_lights {
             lights.push(json!({"type": "point", "color": [1.0, 1.0, 1.0], "intensity": l.intensity}));
-            nodes.push(json!({"translation": l.position, "extensions": {"KHR_lights_punctual": {"light": lights.len() - 1}}}));
+            nodes.push(
+                json!({"translation": l.position, "extensions": {"KHR_lights_punctual": {"light": lights.len() - 1}}}),
+            );
         }
         let materials: Vec<Value> = self
             .materials

@@ -141,7 +141,12 @@ pub fn run_probe_with(
 /// (`group(i)` of element i, None: left out), the mean over films of the group's mean, for
 /// `a` and `b`, and the z-score of their difference with the variance measured over the films
 /// of each side (so correlations between pixels are included).
-pub fn compare_films(a: &[Film], b: &[Film], groups: usize, group: impl Fn(usize) -> Option<usize>) -> Vec<(f64, f64, f64)> {
+pub fn compare_films(
+    a: &[Film],
+    b: &[Film],
+    groups: usize,
+    group: impl Fn(usize) -> Option<usize>,
+) -> Vec<(f64, f64, f64)> {
     let means = |films: &[Film]| -> Vec<Vec<f64>> {
         films
             .iter()
@@ -224,7 +229,6 @@ pub fn random_soup(n: usize, seed: u32) -> Vec<[glam::Vec3; 3]> {
         .collect()
 }
 
-
 /// A soup of `n` random triangles (half-size 0.5) in front of an emitter, seen from +z.
 pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::PreparedScene {
     soup_scene_with(n, seed, name, false)
@@ -233,9 +237,10 @@ pub fn soup_scene(n: usize, seed: u32, name: &str) -> gatetrace::scene::Prepared
 /// `soup_scene`, with vertex normals (tilted from the geometric normal) when `normals`, so that
 /// the kernels read shading data.
 pub fn soup_scene_with(n: usize, seed: u32, name: &str, normals: bool) -> gatetrace::scene::PreparedScene {
-    use gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
     use gatetrace::scene::{PreparedScene, load_gltf};
-    let mut mesh = Mesh { positions: vec![], normals: normals.then(Vec::new), uvs: None, indices: vec![], material: Some(0) };
+    use gltf_builder::{Camera, Material, Mesh, Scene, quad_z};
+    let mut mesh =
+        Mesh { positions: vec![], normals: normals.then(Vec::new), uvs: None, indices: vec![], material: Some(0) };
     for t in &random_soup(n, seed) {
         let geometric = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
         for (k, p) in t.iter().enumerate() {
@@ -256,7 +261,6 @@ pub fn soup_scene_with(n: usize, seed: u32, name: &str, normals: bool) -> gatetr
     let dir = scratch_dir(name);
     PreparedScene::new(load_gltf(&gltf.write(&dir, "soup.gltf")).unwrap()).unwrap()
 }
-
 
 /// The Cornell box holding a white geodesic sphere (radius 0.25 m, 5 cm above the floor) of
 /// 20 f^2 flat triangles, each vertex pushed along its radius by +-4 % bumps: the scene
@@ -309,16 +313,43 @@ fn push_sphere(scene: &mut gatetrace::scene::Scene, centre: glam::Vec3, radius: 
     use glam::Vec3;
     let p = (1.0 + 5f32.sqrt()) / 2.0;
     let ico: Vec<Vec3> = [
-        (-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0), (0.0, -1.0, p), (0.0, 1.0, p),
-        (0.0, -1.0, -p), (0.0, 1.0, -p), (p, 0.0, -1.0), (p, 0.0, 1.0), (-p, 0.0, -1.0), (-p, 0.0, 1.0),
+        (-1.0, p, 0.0),
+        (1.0, p, 0.0),
+        (-1.0, -p, 0.0),
+        (1.0, -p, 0.0),
+        (0.0, -1.0, p),
+        (0.0, 1.0, p),
+        (0.0, -1.0, -p),
+        (0.0, 1.0, -p),
+        (p, 0.0, -1.0),
+        (p, 0.0, 1.0),
+        (-p, 0.0, -1.0),
+        (-p, 0.0, 1.0),
     ]
     .iter()
     .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
     .collect();
     let faces = [
-        (0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6),
-        (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10),
-        (8, 6, 7), (9, 8, 1),
+        (0, 11, 5),
+        (0, 5, 1),
+        (0, 1, 7),
+        (0, 7, 10),
+        (0, 10, 11),
+        (1, 5, 9),
+        (5, 11, 4),
+        (11, 10, 2),
+        (10, 7, 6),
+        (7, 1, 8),
+        (3, 9, 4),
+        (3, 4, 2),
+        (3, 2, 6),
+        (3, 6, 8),
+        (3, 8, 9),
+        (4, 9, 5),
+        (2, 4, 11),
+        (6, 2, 10),
+        (8, 6, 7),
+        (9, 8, 1),
     ];
     let waves = [
         (Vec3::new(0.36, 0.48, 0.80), 7.0, 0.3, 0.45),
@@ -357,8 +388,13 @@ fn push_sphere(scene: &mut gatetrace::scene::Scene, centre: glam::Vec3, radius: 
 /// An NLOS capture of assets/scenes/nlos_letter.gltf as the peer data was made: sensor and laser
 /// origins at (-1.2, 0, 0.6) m, a 1 W laser aimed by `aim`, a `width` x `height` grid of sensed
 /// points, three bounces, reflection-weighted ellipsoid queries (as `render --nlos` by default).
-pub fn example_capture(width: u32, height: u32, gate: gatetrace::film::Gate, aim: gatetrace::nlos::LaserAim,
-                       method: gatetrace::integrator::Method) -> RenderSettings {
+pub fn example_capture(
+    width: u32,
+    height: u32,
+    gate: gatetrace::film::Gate,
+    aim: gatetrace::nlos::LaserAim,
+    method: gatetrace::integrator::Method,
+) -> RenderSettings {
     let origin = glam::Vec3::new(-1.2, 0.0, 0.6);
     RenderSettings {
         width,

@@ -34,7 +34,13 @@ pub fn group_sums(values: &[f64], groups: usize, group: impl Fn(usize) -> Option
 /// peer's; returns the z-scores. The variance of a group mean is the variance over batches of
 /// the group's batch means (so pixel correlations are included); the peer's variance of a group
 /// mean adds its per-pixel variances (independent pixels).
-pub fn group_z(films: &[Film], peer_mean: &[f32], peer_var: &[f32], groups: usize, group: impl Fn(usize) -> Option<usize> + Copy) -> Vec<(f64, f64, f64)> {
+pub fn group_z(
+    films: &[Film],
+    peer_mean: &[f32],
+    peer_var: &[f32],
+    groups: usize,
+    group: impl Fn(usize) -> Option<usize> + Copy,
+) -> Vec<(f64, f64, f64)> {
     let n = films.len() as f64;
     let count = group_sums(&vec![1.0; peer_mean.len()], groups, group);
     let ours: Vec<Vec<f64>> = films
@@ -68,7 +74,8 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
     let (shape, peer_mean) = super::reference(&format!("{reference}_mean.npy"));
     let (_, peer_var) = super::reference(&format!("{reference}_var.npy"));
     assert_eq!(shape, vec![64, 64, 3]);
-    let write_failure = || super::write_failure_images(name, &shape, &batch_mean(films), &peer_mean).display().to_string();
+    let write_failure =
+        || super::write_failure_images(name, &shape, &batch_mean(films), &peer_mean).display().to_string();
     // Image mean per channel: |z| < 4 (the acceptance criterion).
     let channel = group_z(films, &peer_mean, &peer_var, 3, |i| Some(i % 3));
     for (c, (ours, peer, z)) in channel.iter().enumerate() {
@@ -84,7 +91,8 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
         Some(((y / 8) * 8 + x / 8) * 3 + c)
     });
     let limit = t_critical(sidak(ALPHA, blocks.len()), (films.len() - 1) as f64);
-    let (at, worst) = blocks.iter().enumerate().map(|(i, b)| (i, b.2.abs())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    let (at, worst) =
+        blocks.iter().enumerate().map(|(i, b)| (i, b.2.abs())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     let (ours, peer) = (blocks[at].0, blocks[at].1);
     println!(
         "{name}: worst block |z| {worst:.2} (limit {limit:.2}): block row {}, column {}, channel {}: ours {ours:.6}, peer {peer:.6}",
@@ -96,7 +104,6 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
         panic!("{name}: a block differs from the peer (|z| = {worst:.2} >= {limit:.2}); images in {}", write_failure());
     }
 }
-
 
 /// Compares a transient cube of `bins` bins with the peer's `{reference}_mean.npy` (and
 /// `_var`): the image mean of every bin and channel, Sidak-corrected. Returns the z-scores
