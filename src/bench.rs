@@ -388,7 +388,7 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 let first_mse = *first.get_or_insert(mse);
                 // auto: the methods its pilots chose, e.g. `direct x2, ellipsoidal x1`.
                 let mut chosen = String::new();
-                for method in [Method::Direct, Method::Ellipsoidal] {
+                for method in [Method::Path, Method::Direct, Method::Ellipsoidal] {
                     let n = choices.iter().filter(|&&c| c == method.name()).count();
                     if n > 0 {
                         chosen += &format!("{}{} x{n}", if chosen.is_empty() { "" } else { ", " }, method.name());

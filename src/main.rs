@@ -86,13 +86,13 @@ struct RenderArgs {
     /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
     /// bounces); `ellipsoidal` (bidirectional path tracing whose subpaths are joined through a
     /// vertex on the spheroid of a target length drawn from the gate, so every path has a
-    /// length the gate weighs; needs a gate; at most 24 bounces); `auto` (`direct` or
-    /// `ellipsoidal`, whichever a pilot of both on this render measures to have the lower
-    /// variance x time per sample; the pilot renders a smaller image (down to 32x32) from a seed
-    /// of its own, takes 5 % of a --time budget (half where one method is 8x ahead after half
-    /// its batches), or the work of 1/16 of --spp per method, and is discarded, so the image is
-    /// the chosen method's with the same seed; `direct` without a pilot in the steady state; the
-    /// metadata records the choice and the pilot's figures).
+    /// length the gate weighs; needs a gate; at most 24 bounces); `auto` (`path`, `direct` or,
+    /// with a gate, `ellipsoidal`, whichever a pilot of each on this render measures to have the
+    /// lowest variance x time per sample; the pilot renders a smaller image (down to 32x32) from
+    /// a seed of its own, takes 5 % of a --time budget (half where one method is 8x ahead of the
+    /// others after half its batches), or the work of 1/16 of --spp per method, and is
+    /// discarded, so the image is the chosen method's with the same seed; the metadata records
+    /// the choice and the pilot's figures).
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):

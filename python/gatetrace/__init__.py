@@ -161,8 +161,8 @@ class Renderer:
         scene: a :class:`Scene`, or the path of a glTF 2.0 file (.gltf, .glb).
         method: ``"path"`` (path tracing with next-event estimation), ``"direct"`` (bidirectional,
             direct connections), ``"ellipsoidal"`` (bidirectional, ellipsoidal connections: needs a
-            gate) or ``"auto"`` (direct or ellipsoidal after a pilot of both; builds its kernels
-            for every render).
+            gate) or ``"auto"`` (path, direct or, with a gate, ellipsoidal after a pilot of each;
+            builds its kernels for every render).
         max_bounces: most scattering vertices of a path (0: lights seen directly).
         res: image size (width, height) in pixels.
         rr_depth: Russian roulette from this many scattering vertices on (None: never).

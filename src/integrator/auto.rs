@@ -1,8 +1,8 @@
-//! `--method auto`: a short pilot of `direct` and `ellipsoidal` on the render's own scene, gate
-//! and image, then the whole budget on the one whose measured variance x time per sample is
-//! lower. The pilot's films are discarded and its random numbers are not reused, so the render
-//! is an unbiased estimate of the chosen method whatever the pilot saw (choosing from samples
-//! that are then kept would bias it).
+//! `--method auto`: a short pilot of `path`, `direct` and (with a gate) `ellipsoidal` on the
+//! render's own scene, gate and image, then the whole budget on the one whose measured variance
+//! x time per sample is lowest. The pilot's films are discarded and its random numbers are not
+//! reused, so the render is an unbiased estimate of the chosen method whatever the pilot saw
+//! (choosing from samples that are then kept would bias it).
 //!
 //! Why a pilot and not a rule of gate width: where one method wins depends on the gate's width
 //! against the scene's size, on where the gate sits in the scene's path lengths, on the
@@ -22,15 +22,15 @@
 //! has zero spread, though its true variance is huge, and per pixel the other pilot is often
 //! too sparse to show it (a pixel where one batch of 8 holds all of `ellipsoidal`'s light
 //! differs from a zero by just what that one batch's spread predicts). Summed over the image,
-//! the evidence is plain. Per group of values (one bin and channel, summed over the pixels),
-//! where the two pilots' means differ by more than [`MISS_FACTOR`] times the squared difference
-//! the groups' batch spreads predict, the excess is charged to the method whose groups' means
-//! have the larger relative variance (the one that saw fewer of the paths that make its
-//! estimate, and whose spread is the less trustworthy: an estimator of rare large values
-//! usually falls short of the truth and now and then overshoots it, both by more than its
-//! spread says): N times the
-//! excess is the per-sample variance of the group's sum that a mean of N samples that far off
-//! implies, and it is added to that method's variance.
+//! the evidence is plain. The pilot whose groups' means (one group per bin and channel, summed
+//! over the pixels) have the smallest relative variance is the reference; every other pilot is
+//! compared with it. Per group, where the two pilots' means differ by more than [`MISS_FACTOR`]
+//! times the squared difference the groups' batch spreads predict, the excess is charged to the
+//! other method (the one that saw fewer of the paths that make its estimate, and whose spread
+//! is the less trustworthy: an estimator of rare large values usually falls short of the truth
+//! and now and then overshoots it, both by more than its spread says): N times the excess is
+//! the per-sample variance of the group's sum that a mean of N samples that far off implies,
+//! and it is added to that method's variance.
 //! A pilot that found no light at all where the other found plenty scores M times the missed
 //! light's square, M the values the light spreads over, which is the order of its true
 //! variance (zero hits in N x M tries bound its hit rate by about 1 / (N M)).
@@ -140,9 +140,9 @@ impl CandidateFigures {
 pub struct MethodChoice {
     /// The method that rendered the image.
     pub chosen: Method,
-    /// The pilot's figures of each method measured (empty when only one method applied).
+    /// The pilot's figures of each method measured, in the order of [`candidate_methods`].
     pub candidates: Vec<CandidateFigures>,
-    /// Width and height of the pilot's image (pixels; the render's where no pilot ran).
+    /// Width and height of the pilot's image (pixels).
     pub pilot_resolution: (u32, u32),
     /// Why, in words (for logs and metadata).
     pub reason: String,
@@ -157,14 +157,14 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
     RenderSettings { method, connections_per_query, ..settings.clone() }
 }
 
-/// Why `ellipsoidal` cannot render `settings`, if it cannot (then `auto` takes `direct` without
-/// a pilot).
-fn ellipsoidal_unavailable(settings: &RenderSettings) -> Option<&'static str> {
-    if matches!(settings.gate, Gate::None) {
-        Some("ellipsoidal connections need a gate; the steady state has none")
-    } else {
-        None
+/// The methods `auto` measures for `settings`: `path` and `direct` always, and `ellipsoidal`
+/// where there is a gate (it has no steady state).
+pub fn candidate_methods(settings: &RenderSettings) -> Vec<Method> {
+    let mut methods = vec![Method::Path, Method::Direct];
+    if !matches!(settings.gate, Gate::None) {
+        methods.push(Method::Ellipsoidal);
     }
+    methods
 }
 
 /// Runs the pilot of `settings` (method `auto`) on its own image ([`pilot_resolution`]) and
@@ -181,21 +181,11 @@ pub fn choose(
         settings.nlos.is_none(),
         "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal"
     );
-    let resolution = (settings.width, settings.height);
-    if let Some(why) = ellipsoidal_unavailable(settings) {
-        let (candidates, reason) = (vec![], why.into());
-        return Ok(MethodChoice {
-            chosen: Method::Direct,
-            candidates,
-            pilot_resolution: resolution,
-            reason,
-            pilot_seconds: 0.0,
-        });
-    }
+    let methods = candidate_methods(settings);
     let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = match budget {
-        Budget::Time(t) => PilotBudget::Seconds(t.as_secs_f64() * PILOT_SHARE / 2.0),
+        Budget::Time(t) => PilotBudget::Seconds(t.as_secs_f64() * PILOT_SHARE / methods.len() as f64),
         Budget::Samples(n) => {
             let pilot_spp = (n as f64 * pixel_ratio / SAMPLE_BUDGET_DIVISOR as f64) as u64;
             PilotBudget::Samples((pilot_spp / PILOT_BATCHES as u64).clamp(1, u32::MAX as u64) as u32)
@@ -203,60 +193,62 @@ pub fn choose(
     };
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut tracers = Vec::new();
-    for method in [Method::Direct, Method::Ellipsoidal] {
+    for &method in &methods {
         let mut tracer = create_integrator(ctx, scene, &candidate_settings(&pilot, method))?;
         tracer.warm_up()?;
         tracers.push(tracer);
     }
     // The methods' batches alternate, so the pilot can stop after EARLY_STOP_BATCHES of each
-    // where one method is far ahead.
-    let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
+    // where one method is far ahead of all others.
+    let mut batches: Vec<Batches> = methods.iter().map(|_| Batches::default()).collect();
     let mut early = false;
     for j in 1..=PILOT_BATCHES {
-        pilot_batch(tracers[0].as_mut(), &mut direct, per_method)?;
-        pilot_batch(tracers[1].as_mut(), &mut ellipsoidal, per_method)?;
-        if j == EARLY_STOP_BATCHES && compare(&direct, &ellipsoidal, pixel_ratio).2 >= EARLY_STOP_RATIO {
+        for (tracer, b) in tracers.iter_mut().zip(&mut batches) {
+            pilot_batch(tracer.as_mut(), b, per_method)?;
+        }
+        if j == EARLY_STOP_BATCHES && compare(&methods, &batches, pixel_ratio).2 >= EARLY_STOP_RATIO {
             early = true;
             break;
         }
     }
-    let (candidates, chosen, ratio) = compare(&direct, &ellipsoidal, pixel_ratio);
+    let (candidates, chosen, ratio) = compare(&methods, &batches, pixel_ratio);
     let shrunk = if shrink > 1 { format!(" on a {width}x{height} image") } else { String::new() };
     let stopped =
         if early { format!(", stopped after {EARLY_STOP_BATCHES} of {PILOT_BATCHES} batches") } else { String::new() };
+    let costs: Vec<String> = candidates.iter().map(|c| format!("{:.3e} ({})", c.cost(), c.method.name())).collect();
     let reason = format!(
-        "pilot{shrunk}{stopped}: variance x time per sample {:.3e} (direct) vs {:.3e} (ellipsoidal); {} predicted \
-         {:.3}x lower MSE at equal time",
-        candidates[0].cost(),
-        candidates[1].cost(),
+        "pilot{shrunk}{stopped}: variance x time per sample {}; {} predicted {:.3}x lower MSE at equal time than the \
+         next best",
+        costs.join(" vs "),
         chosen.name(),
         ratio
     );
-    let pilot_seconds = direct.wall_seconds + ellipsoidal.wall_seconds;
+    let pilot_seconds = batches.iter().map(|b| b.wall_seconds).sum();
     Ok(MethodChoice { chosen, candidates, pilot_resolution: (width, height), reason, pilot_seconds })
 }
 
-/// The two methods' figures from their pilot batches so far, the method of the lower variance x
-/// time per sample, and how many times lower it is.
-fn compare(direct: &Batches, ellipsoidal: &Batches, pixel_ratio: f64) -> (Vec<CandidateFigures>, Method, f64) {
-    let (v_direct, v_ellipsoidal) = per_sample_variances(direct, ellipsoidal);
-    let candidates: Vec<CandidateFigures> =
-        [(direct, v_direct, Method::Direct), (ellipsoidal, v_ellipsoidal, Method::Ellipsoidal)]
-            .into_iter()
-            .map(|(p, v, method)| CandidateFigures {
-                method,
-                spp: p.samples,
-                seconds: p.seconds,
-                pixel_ratio,
-                variance_per_sample: v,
-            })
-            .collect();
-    let (d, el) = (&candidates[0], &candidates[1]);
-    // Ties (both zero: nothing reaches the gate in the pilot) go to the faster method.
-    let pick_ellipsoidal =
-        if d.cost() == el.cost() { el.seconds_per_sample() < d.seconds_per_sample() } else { el.cost() < d.cost() };
-    let chosen = if pick_ellipsoidal { Method::Ellipsoidal } else { Method::Direct };
-    let ratio = if pick_ellipsoidal { d.cost() / el.cost() } else { el.cost() / d.cost() };
+/// The methods' figures from their pilot batches so far, the method of the lowest variance x
+/// time per sample, and how many times lower it is than the next best's.
+fn compare(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> (Vec<CandidateFigures>, Method, f64) {
+    let variances = per_sample_variances(&batches.iter().collect::<Vec<_>>());
+    let candidates: Vec<CandidateFigures> = methods
+        .iter()
+        .zip(batches)
+        .zip(variances)
+        .map(|((&method, p), v)| CandidateFigures {
+            method,
+            spp: p.samples,
+            seconds: p.seconds,
+            pixel_ratio,
+            variance_per_sample: v,
+        })
+        .collect();
+    // Ties (all zero: nothing reaches the gate in the pilot) go to the faster method.
+    let key = |c: &CandidateFigures| (c.cost(), c.seconds_per_sample());
+    let mut order: Vec<&CandidateFigures> = candidates.iter().collect();
+    order.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
+    let (best, next) = (order[0], order[1]);
+    let (chosen, ratio) = (best.method, next.cost() / best.cost());
     (candidates, chosen, ratio)
 }
 
@@ -389,40 +381,43 @@ fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, budget: Pilot
     Ok(())
 }
 
-/// The per-sample variances of two methods' pilots, averaged over the image's values: each
-/// one's median pair estimate, plus the excesses of groups whose means differ beyond noise,
-/// charged to the method of the larger relative variance (the module's header).
-fn per_sample_variances(a: &Batches, b: &Batches) -> (f64, f64) {
-    let values = a.values.max(b.values);
-    let (mut v_a, mut v_b) = (a.variance(), b.variance());
+/// The per-sample variances of the methods' pilots, averaged over the image's values: each
+/// one's median pair estimate, plus the excesses of groups whose means differ beyond noise from
+/// those of the most trustworthy pilot (the one of the smallest relative variance, the
+/// reference), charged to the other method (the module's header). With two methods this is
+/// the same as charging the less trustworthy of the pair.
+fn per_sample_variances(pilots: &[&Batches]) -> Vec<f64> {
+    let values = pilots.iter().map(|p| p.values).max().unwrap_or(0);
+    let mut variances: Vec<f64> = pilots.iter().map(|p| p.variance()).collect();
     // A rare-event pilot's variance moves with the share of the rare paths it drew, and so does
-    // its mean: the less trustworthy method's variance is scaled by the other's mean over its
+    // its mean: a less trustworthy method's variance is scaled by the reference's mean over its
     // own (summed magnitudes of the groups' means), which is exact where its variance is
     // proportional to its mean (hits of one size). A pilot that found nothing is left to the
     // groups' test below.
     let magnitude = |m: &Batches| {
         (0..m.groups.weighted_sum.len()).map(|g| m.groups.get(g, m.count, m.samples).0.abs()).sum::<f64>()
     };
-    let (noise_a, noise_b) = (relative_noise(a), relative_noise(b));
-    if noise_a > noise_b && magnitude(a) > 0.0 {
-        v_a *= magnitude(b) / magnitude(a);
-    } else if noise_b > noise_a && magnitude(b) > 0.0 {
-        v_b *= magnitude(a) / magnitude(b);
-    }
-    for g in 0..a.groups.weighted_sum.len() {
-        let (mean_a, var_a) = a.groups.get(g, a.count, a.samples);
-        let (mean_b, var_b) = b.groups.get(g, b.count, b.samples);
-        let expected = var_a / a.samples as f64 + var_b / b.samples as f64;
-        let difference = (mean_a - mean_b).powi(2);
-        if difference > MISS_FACTOR * expected {
-            if noise_a > noise_b {
-                v_a += a.samples as f64 * (difference - expected);
-            } else {
-                v_b += b.samples as f64 * (difference - expected);
+    let noise: Vec<f64> = pilots.iter().map(|p| relative_noise(p)).collect();
+    let reference = (0..pilots.len()).fold(0, |r, i| if noise[i] < noise[r] { i } else { r });
+    let r = pilots[reference];
+    for (i, m) in pilots.iter().enumerate() {
+        if i == reference {
+            continue;
+        }
+        if noise[i] > noise[reference] && magnitude(m) > 0.0 {
+            variances[i] *= magnitude(r) / magnitude(m);
+        }
+        for g in 0..m.groups.weighted_sum.len().min(r.groups.weighted_sum.len()) {
+            let (mean_m, var_m) = m.groups.get(g, m.count, m.samples);
+            let (mean_r, var_r) = r.groups.get(g, r.count, r.samples);
+            let expected = var_m / m.samples as f64 + var_r / r.samples as f64;
+            let difference = (mean_m - mean_r).powi(2);
+            if difference > MISS_FACTOR * expected {
+                variances[i] += m.samples as f64 * (difference - expected);
             }
         }
     }
-    (v_a / values.max(1) as f64, v_b / values.max(1) as f64)
+    variances.iter().map(|v| v / values.max(1) as f64).collect()
 }
 
 /// The relative variance of a pilot's groups' means: the groups' per-sample variances, from the
@@ -442,6 +437,12 @@ fn relative_noise(m: &Batches) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The per-sample variances of two pilots.
+    fn two_variances(a: &Batches, b: &Batches) -> (f64, f64) {
+        let v = per_sample_variances(&[a, b]);
+        (v[0], v[1])
+    }
 
     /// Batches of given images, each of `k` samples.
     fn batches(images: &[Vec<f64>], k: u32) -> Batches {
@@ -493,7 +494,7 @@ mod tests {
         };
         let a: Vec<_> = (0..8).map(|_| image(1.0, 2, &mut seed)).collect();
         let b: Vec<_> = (0..8).map(|_| image(3.0, 5, &mut seed)).collect();
-        let (va, vb) = per_sample_variances(&batches(&a, 2), &batches(&b, 5));
+        let (va, vb) = two_variances(&batches(&a, 2), &batches(&b, 5));
         // Each estimate pools about 8 x 4096 squared deviations: relative error ~ 1/sqrt(16384).
         assert!((va - 1.0).abs() < 0.1, "variance of A: {va}, expected 1");
         assert!((vb - 9.0).abs() < 0.9, "variance of B: {vb}, expected 9");
@@ -508,7 +509,7 @@ mod tests {
         let mut seed = 9;
         let mut images: Vec<Vec<f64>> = (0..8).map(|_| normals(&mut seed, values)).collect();
         images[5][17] = 1000.0;
-        let (v, _) = per_sample_variances(&batches(&images, 1), &batches(&images, 1));
+        let (v, _) = two_variances(&batches(&images, 1), &batches(&images, 1));
         assert!((v - 1.0).abs() < 0.1, "variance with a firefly: {v}");
     }
 
@@ -529,7 +530,7 @@ mod tests {
         let mut normal_seed = 17;
         let b: Vec<Vec<f64>> =
             (0..8).map(|_| normals(&mut normal_seed, values).into_iter().map(|z| 1.0 + 0.01 * z).collect()).collect();
-        let (v_a, v_b) = per_sample_variances(&batches(&a, 1), &batches(&b, 1));
+        let (v_a, v_b) = two_variances(&batches(&a, 1), &batches(&b, 1));
         assert!((v_b / 1e-4 - 1.0).abs() < 0.1, "B's variance stays its own: {v_b}");
         // A's own spread is 1.15^2 (1 - p) / p = 25 per value; the miss adds 8 x (0.15 x 4096)^2
         // / 4096 = 737 per value.
@@ -545,11 +546,29 @@ mod tests {
         let seen: Vec<_> =
             (0..8).map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + 0.1 * z).collect::<Vec<_>>()).collect();
         let missed = vec![vec![0.0; values]; 8];
-        let (v_missed, v_seen) = per_sample_variances(&batches(&missed, 1), &batches(&seen, 1));
+        let (v_missed, v_seen) = two_variances(&batches(&missed, 1), &batches(&seen, 1));
         // Missing a sum of 256 in 8 samples implies a per-sample variance of the sum of 8 x
         // 256^2, or 8 x 256 per value.
         assert!((v_missed / 2048.0 - 1.0).abs() < 0.01, "the empty pilot's variance per sample: {v_missed}");
         assert!((v_seen - 0.01).abs() < 0.002, "the other pilot's: {v_seen}");
+    }
+
+    #[test]
+    fn three_pilots_are_each_compared_with_the_most_trustworthy() {
+        // A sees the image with per-sample deviation 0.1, B with 1 (both unbiased: neither is
+        // charged), C found nothing: only C is charged, once, for what it missed against A.
+        let values = 256;
+        let mut seed = 21;
+        let mut seen = |sigma: f64| -> Vec<Vec<f64>> {
+            (0..8).map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + sigma * z).collect()).collect()
+        };
+        let (a, b) = (seen(0.1), seen(1.0));
+        let missed = vec![vec![0.0; values]; 8];
+        let v = per_sample_variances(&[&batches(&b, 1), &batches(&missed, 1), &batches(&a, 1)]);
+        assert!((v[0] - 1.0).abs() < 0.1, "B keeps its own variance: {v:?}");
+        // Missing a sum of 256 in 8 samples: 8 x 256^2 for the sum, 8 x 256 per value.
+        assert!((v[1] / 2048.0 - 1.0).abs() < 0.01, "C is charged the miss once: {v:?}");
+        assert!((v[2] - 0.01).abs() < 0.002, "A keeps its own variance: {v:?}");
     }
 
     #[test]
@@ -562,7 +581,7 @@ mod tests {
         let seen: Vec<_> =
             (0..8).map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + z).collect::<Vec<_>>()).collect();
         let missed = vec![vec![0.0; values]; 8];
-        let (v_missed, v_seen) = per_sample_variances(&batches(&missed, 1), &batches(&seen, 1));
+        let (v_missed, v_seen) = two_variances(&batches(&missed, 1), &batches(&seen, 1));
         assert!((v_missed / (8.0 * 4096.0) - 1.0).abs() < 0.05, "the empty pilot's variance per sample: {v_missed}");
         assert!((v_seen - 1.0).abs() < 0.1, "the other pilot's: {v_seen}");
     }

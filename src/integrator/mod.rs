@@ -40,8 +40,8 @@ pub enum Method {
     Direct,
     /// Bidirectional path tracing with ellipsoidal connections.
     Ellipsoidal,
-    /// `direct` or `ellipsoidal`, whichever a short pilot of both on this render measures to
-    /// have the lower variance x time per sample (see [`auto`]).
+    /// `path`, `direct` or (with a gate) `ellipsoidal`, whichever a short pilot of each on this
+    /// render measures to have the lowest variance x time per sample (see [`auto`]).
     Auto,
 }
 
@@ -325,8 +325,8 @@ pub fn create_integrator<'a>(
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
         Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
         Method::Auto => anyhow::bail!(
-            "--method auto has no integrator of its own: it renders with direct or ellipsoidal after a pilot of both \
-             (integrator::render); measure those two instead"
+            "--method auto has no integrator of its own: it renders with path, direct or ellipsoidal after a pilot of \
+             each (integrator::render); measure those instead"
         ),
     })
 }
