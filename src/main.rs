@@ -792,7 +792,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         if settings.method != Method::Path {
             gatetrace::integrator::bidirectional::check_settings(&settings)?;
         } else if settings.connections_per_query != 1 {
-            bail!("--connections-per-query applies to --method ellipsoidal only");
+            bail!("--connections-per-query applies to --method ellipsoidal and combined only");
         }
         film_elements(&settings)?;
         check_writable(&path)?;

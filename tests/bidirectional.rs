@@ -331,3 +331,88 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
     );
     common::assert_films_agree("ellipsoidal needle guard 1e-2 box [3.14, 3.19)", &films, &direct, 8, ALPHA);
 }
+
+/// `combined` (direct and ellipsoidal connections in one estimator, family_mis.wesl): its image
+/// is the sum of its two halves, whose weights sum to one over both families only if both
+/// kernels weigh every path alike; against `direct` and `path`, independent estimators, at a
+/// narrow box gate with K = 4 (the ratio of the families' samples then 4), a wide one, on the
+/// glossy box, with a point light (no s = 0 strategy) and per bin of a stratified transient gate.
+#[test]
+fn combined_matches_direct_and_path() {
+    let ctx = common::gpu();
+    let combined = |scene: &PreparedScene, gate: Gate, k: u32, seed: u32| {
+        let s = RenderSettings { connections_per_query: k, ..settings(Method::Combined, gate, seed) };
+        let films = common::render_films(&ctx, scene, &s, BATCHES, 16);
+        assert!(films.iter().any(|f| f.mean_rgb()[0] != 0.0), "combined renders black");
+        films
+    };
+    let reference = |scene: &PreparedScene, method: Method, gate: Gate, seed: u32| {
+        common::render_films(&ctx, scene, &settings(method, gate, seed), BATCHES, 32)
+    };
+    let box_scene = common::cornell_box();
+    let narrow = Gate::Box { start: 3.14, end: 3.19 };
+    common::assert_films_agree(
+        "combined K = 4 box [3.14, 3.19)",
+        &combined(&box_scene, narrow.clone(), 4, 700),
+        &reference(&box_scene, Method::Direct, narrow, 701),
+        8,
+        ALPHA,
+    );
+    let wide = Gate::Box { start: 2.0, end: 3.0 };
+    common::assert_films_agree(
+        "combined box [2.0, 3.0)",
+        &combined(&box_scene, wide.clone(), 1, 710),
+        &reference(&box_scene, Method::Path, wide, 711),
+        8,
+        ALPHA,
+    );
+    let glossy = glossy_cornell_box();
+    let gate = Gate::Box { start: 3.0, end: 3.3 };
+    common::assert_films_agree(
+        "combined glossy box [3.0, 3.3)",
+        &combined(&glossy, gate.clone(), 4, 720),
+        &reference(&glossy, Method::Path, gate, 721),
+        8,
+        ALPHA,
+    );
+    let point = modified_cornell_box(true, false);
+    let gate = Gate::Box { start: 2.6, end: 3.2 };
+    common::assert_films_agree(
+        "combined point + area lights box [2.6, 3.2)",
+        &combined(&point, gate.clone(), 4, 730),
+        &reference(&point, Method::Direct, gate, 731),
+        8,
+        ALPHA,
+    );
+    let transient = Gate::Transient { start: 3.0, width: 0.1, bins: 6 };
+    common::assert_films_agree(
+        "combined transient 3.0 + 6 x 0.1",
+        &combined(&box_scene, transient.clone(), 4, 740),
+        &reference(&box_scene, Method::Direct, transient, 741),
+        8,
+        ALPHA,
+    );
+}
+
+/// What `combined` cannot render yet is refused with a clear error: no gate, a directional
+/// light, checkpoints.
+#[test]
+fn combined_refuses_what_it_cannot_render() {
+    let ctx = common::gpu();
+    let error =
+        |scene: &PreparedScene, s: &RenderSettings| match gatetrace::integrator::create_integrator(&ctx, scene, s) {
+            Ok(_) => panic!("combined accepted {s:?}"),
+            Err(e) => e.to_string(),
+        };
+    let no_gate = settings(Method::Combined, Gate::None, 1);
+    assert!(error(&common::cornell_box(), &no_gate).contains("needs a gate"));
+    let directional =
+        PreparedScene::new(load_gltf(&common::repo_path("assets/scenes/cornell_box_directional.gltf")).unwrap())
+            .unwrap();
+    let gated = settings(Method::Combined, Gate::Box { start: 3.0, end: 3.2 }, 1);
+    assert!(error(&directional, &gated).contains("directional lights"));
+    let mut tracer = gatetrace::integrator::create_integrator(&ctx, &common::cornell_box(), &gated).unwrap();
+    tracer.render_samples(1).unwrap();
+    let why = tracer.save_state().unwrap_err().to_string();
+    assert!(why.contains("--method combined cannot"), "{why}");
+}

@@ -4,7 +4,8 @@
 //! computed independently from the full path densities p_s = prod(light-side densities of
 //! x_0..x_{s-1}) x prod(camera-side densities of x_s..x_{k-2}); likewise the paper's approximate
 //! weights of ellipsoidal connections (with a directional light, e = 1 weighs the next-event
-//! connection that replaces the spheroid next to the light).
+//! connection that replaces the spheroid next to the light); and the combined estimator's
+//! weights of both families together.
 
 use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
 use gatetrace::scene::bsdf::Bsdf;
@@ -182,4 +183,83 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
         checked += 1;
     }
     assert!(checked > 1000, "only {checked} valid random paths");
+}
+
+/// The combined estimator's weights (family_mis.wesl `combined_weight`, CPU twin of the same
+/// name): each direct strategy's weight is the direct family's share times its power-heuristic
+/// weight, each spheroid vertex's the ellipsoidal family's share times the paper's weight, the
+/// share S_D / (S_D + r S_E) computed here from explicit products (S_D the sum of the direct
+/// strategies' densities, S_E that of the spheroid vertices' stand-in densities: the light-side
+/// densities of x_0..x_{m-1} times e(x_m) times the camera-side ones of x_{m+1}..x_{k-2}); and
+/// the weights of all strategies of both families sum to one.
+#[test]
+fn combined_weights_match_their_definition_and_sum_to_one() {
+    use gatetrace::integrator::bidirectional::Family;
+    use gatetrace::integrator::mis::{combined_weight, spheroid_vertex_density};
+    let mut rng = Rng(0x0DDB_1A5E_5BAD_5EED);
+    let mut checked = 0;
+    let mut shares = Vec::new();
+    for trial in 0..4000 {
+        let k = 3 + trial % 6;
+        // Area and point lights (a combined render refuses directional ones).
+        let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
+        let path = random_path(&mut rng, k, light);
+        if !is_valid(&path) {
+            continue;
+        }
+        // Target densities from those of a 1 mm gate (1000 m^-1) to a 10 m one's, 1 to 8
+        // ellipsoidal connections per direct one.
+        let p_tau = 10f32.powf(3.0 - 4.0 * rng.next());
+        let ratio = (1 + (rng.next() * 8.0) as u32) as f32;
+        let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
+        let sd: f64 = pdfs.iter().sum();
+        let sd2: f64 = pdfs.iter().map(|p| p * p).sum();
+        let c = |j: usize| if j == 1 || j == k - 1 { 0.5 } else { 1.0 };
+        let sc: f64 = (1..k).map(|j| c(j) * pdfs[j]).sum();
+        let mut se = 0.0f64;
+        for m in 1..=k - 2 {
+            let mut p = 1.0f64;
+            for i in 0..m {
+                p *= if i == 0 {
+                    path[0].light_origin_pdf() as f64
+                } else {
+                    vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]) as f64
+                };
+            }
+            let v = &path[m];
+            let e =
+                spheroid_vertex_density(path[m - 1].position, v.position, v.normal, path[m + 1].position, p_tau, 1e-6);
+            p *= e as f64;
+            for i in m + 1..k - 1 {
+                p *= vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) as f64;
+            }
+            se += p;
+        }
+        let share = sd / (sd + ratio as f64 * se);
+        if !(share.is_finite() && sd2.is_finite() && sd > 0.0 && sc > 0.0) {
+            continue;
+        }
+        let close = |w: f64, expected: f64| (w - expected).abs() <= 1e-3 * expected.max(1e-3);
+        let mut sum = 0.0f64;
+        let strategies = if light == Light::Area { 0..k } else { 1..k };
+        for s in strategies {
+            let w = combined_weight(&path, Family::Direct, s, p_tau, ratio, 1e-6) as f64;
+            let expected = share * pdfs[s] * pdfs[s] / sd2;
+            assert!(close(w, expected), "path of {k} vertices, direct s = {s}: weight {w}, definition {expected}");
+            sum += w;
+        }
+        for e in 1..=k - 2 {
+            let w = combined_weight(&path, Family::Ellipsoidal, e, p_tau, ratio, 1e-6) as f64;
+            let expected = (1.0 - share) * 0.5 * (pdfs[e] + pdfs[e + 1]) / sc;
+            assert!(close(w, expected), "path of {k} vertices, spheroid vertex {e}: weight {w}, definition {expected}");
+            sum += w;
+        }
+        assert!((sum - 1.0).abs() < 1e-4, "path of {k} vertices: the weights of both families sum to {sum}");
+        shares.push(share);
+        checked += 1;
+    }
+    assert!(checked > 1000, "only {checked} valid random paths");
+    // Both families carry weight on these paths: the test sees shares away from 0 and 1.
+    let between = shares.iter().filter(|&&s| s > 0.01 && s < 0.99).count();
+    assert!(between > checked / 10, "only {between} of {checked} paths share their weight between the families");
 }

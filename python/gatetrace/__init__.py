@@ -161,14 +161,15 @@ class Renderer:
         scene: a :class:`Scene`, or the path of a glTF 2.0 file (.gltf, .glb).
         method: ``"path"`` (path tracing with next-event estimation), ``"direct"`` (bidirectional,
             direct connections), ``"ellipsoidal"`` (bidirectional, ellipsoidal connections: needs a
-            gate) or ``"auto"`` (path, direct or, with a gate, ellipsoidal after a pilot of each;
-            builds its kernels for every render).
+            gate), ``"combined"`` (both connection families in one estimator: needs a gate) or
+            ``"auto"`` (path, direct or, with a gate, ellipsoidal after a pilot of each; builds its
+            kernels for every render).
         max_bounces: most scattering vertices of a path (0: lights seen directly).
         res: image size (width, height) in pixels.
         rr_depth: Russian roulette from this many scattering vertices on (None: never).
         samples_per_pass: samples per pixel traced together (None: chosen from the image size).
-        connections_per_query: ``ellipsoidal``: points drawn from each ellipsoid query (1-8;
-            None: 4).
+        connections_per_query: ``ellipsoidal`` and ``combined``: points drawn from each
+            ellipsoid query (1-8; None: 4).
         query_split, query_bottom_nodes, query_weights: ``ellipsoidal``'s ellipsoid queries, as
             ``render --query-split``, ``--query-bottom-nodes`` and ``--query-weights``.
     """

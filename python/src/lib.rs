@@ -208,9 +208,12 @@ fn parse_method(name: &str) -> PyResult<Method> {
         "path" => Method::Path,
         "direct" => Method::Direct,
         "ellipsoidal" => Method::Ellipsoidal,
+        "combined" => Method::Combined,
         "auto" => Method::Auto,
         other => {
-            return Err(PyValueError::new_err(format!("method `{other}`: choose path, direct, ellipsoidal or auto")));
+            return Err(PyValueError::new_err(format!(
+                "method `{other}`: choose path, direct, ellipsoidal, combined or auto"
+            )));
         }
     })
 }

@@ -91,12 +91,12 @@ def test_a_gate_sweep_on_one_renderer_builds_kernels_once_and_equals_fresh_rende
 def test_bidirectional_methods_agree_with_path_on_the_image_mean():
     gate = gatetrace.box(3.14, 3.24)
     means = {}
-    for method in ("path", "direct", "ellipsoidal"):
+    for method in ("path", "direct", "ellipsoidal", "combined"):
         image, meta = gatetrace.render(BOX, gate=gate, spp=64, res=(16, 16), max_bounces=3, method=method, seed=5,
                                        metadata=True)
         assert meta["method"] == method
         means[method] = float(image.mean())
-    for method in ("direct", "ellipsoidal"):
+    for method in ("direct", "ellipsoidal", "combined"):
         # 64 spp of 256 pixels: the image means agree to a few per cent.
         assert abs(means[method] / means["path"] - 1) < 0.1, means
 
@@ -121,6 +121,7 @@ def test_bidirectional_methods_agree_with_path_on_the_image_mean():
         (lambda: gatetrace.render(BOX, seconds=-1.0, res=(8, 8)), ValueError, "seconds"),
         (lambda: gatetrace.render(BOX, spp=1, seed=-1, res=(8, 8)), ValueError, "seed"),
         (lambda: gatetrace.render(BOX, spp=1, res=(8, 8), method="ellipsoidal"), ValueError, "gate"),
+        (lambda: gatetrace.render(BOX, spp=1, res=(8, 8), method="combined"), ValueError, "needs a gate"),
         (lambda: gatetrace.render(BOX, gate="table:/no/such.csv", spp=1, res=(8, 8)), ValueError, "such.csv"),
     ],
 )

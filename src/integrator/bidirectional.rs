@@ -76,7 +76,11 @@ pub const DEFAULT_NLOS_TARGET_PILOT: u32 = 256;
 /// DEFAULT_CONNECTIONS_PER_QUERY for `ellipsoidal` and for `auto` (whose `ellipsoidal` pilot and
 /// render use it), 1 (the only value they take) for the others.
 pub fn default_connections_per_query(method: Method) -> u32 {
-    if matches!(method, Method::Ellipsoidal | Method::Auto) { DEFAULT_CONNECTIONS_PER_QUERY } else { 1 }
+    if matches!(method, Method::Ellipsoidal | Method::Combined | Method::Auto) {
+        DEFAULT_CONNECTIONS_PER_QUERY
+    } else {
+        1
+    }
 }
 
 /// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
@@ -105,6 +109,24 @@ pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
 
 /// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
 pub fn check_settings(settings: &RenderSettings) -> Result<()> {
+    if settings.method == Method::Combined {
+        // Both halves must be valid; a combined render has no checkpoint of its own kind, no extra
+        // target visits and no captures yet.
+        ensure!(
+            !matches!(settings.gate, crate::film::Gate::None),
+            "--method combined weighs direct and ellipsoidal connections against each other and needs a gate (box, \
+             gaussian, cw, table or transient); without one use --method path or direct"
+        );
+        ensure!(
+            settings.nlos.is_none(),
+            "--method combined does not render --nlos captures yet: use --method ellipsoidal"
+        );
+        ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
+        for role in [Family::Direct, Family::Ellipsoidal] {
+            check_settings(&role.settings(settings))?;
+        }
+        return Ok(());
+    }
     if settings.method == Method::Auto {
         // Both candidates must be valid, ellipsoidal only where it applies (it needs a gate).
         check_settings(&super::auto::candidate_settings(settings, Method::Direct))?;
@@ -158,7 +180,10 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
              by the extra visits)"
         );
     } else {
-        ensure!(settings.connections_per_query == 1, "--connections-per-query applies to --method ellipsoidal only");
+        ensure!(
+            settings.connections_per_query == 1,
+            "--connections-per-query applies to --method ellipsoidal and combined only"
+        );
     }
     if settings.method != Method::Ellipsoidal {
         ensure!(settings.target_pilot_spp == 0, "--target-pilot applies to --method ellipsoidal only");
@@ -171,6 +196,38 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Which half of a combined render (`--method combined`, combined.rs) a tracer is: its
+/// connection kernels weigh each contribution by their family's share of the path
+/// (shaders/lib/family_mis.wesl).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// connect_direct's strategies.
+    Direct = 1,
+    /// connect_ellipsoidal's and connect_spherical's.
+    Ellipsoidal = 2,
+}
+
+impl Family {
+    /// The settings of this half of the combined render `settings`: its method, one connection
+    /// per strategy for the direct half, and for the ellipsoidal half a seed of its own, so its
+    /// subpaths are independent of the direct half's.
+    pub fn settings(self, settings: &RenderSettings) -> RenderSettings {
+        match self {
+            Family::Direct => RenderSettings { method: Method::Direct, connections_per_query: 1, ..settings.clone() },
+            Family::Ellipsoidal => RenderSettings {
+                method: Method::Ellipsoidal,
+                seed: ellipsoidal_half_seed(settings.seed),
+                ..settings.clone()
+            },
+        }
+    }
+}
+
+/// The seed of a combined render's ellipsoidal half, given the render's.
+pub fn ellipsoidal_half_seed(seed: u32) -> u32 {
+    seed ^ 0x5bd1_e995
 }
 
 /// Pipelines of the stages.
@@ -239,6 +296,18 @@ pub struct BidirectionalTracer<'a> {
 impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
+        Self::with_family(ctx, scene, settings, None)
+    }
+
+    /// A tracer of `settings.method` (direct or ellipsoidal) that is `family`'s half of a
+    /// combined render with K = `settings.connections_per_query` connections per spheroid, or a
+    /// method on its own (None).
+    pub fn with_family(
+        ctx: &'a GpuContext,
+        scene: &PreparedScene,
+        settings: &RenderSettings,
+        family: Option<(Family, u32)>,
+    ) -> Result<Self> {
         check_settings(settings)?;
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
@@ -370,6 +439,19 @@ impl<'a> BidirectionalTracer<'a> {
         constants.push(("LIGHT_VERTICES_TRACED", light_traced as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
+        if let Some((role, ratio)) = family {
+            ensure!(
+                scene.scene.directional_lights.is_empty(),
+                "--method combined does not weigh connections to directional lights yet: use --method direct or \
+                 ellipsoidal for this scene"
+            );
+            constants.push(("FAMILY", role as u32 as f64));
+            constants.push(("FAMILY_RATIO", ratio as f64));
+            if !ellipsoidal {
+                // (The direct half leaves out the spheroids its ellipsoidal half does.)
+                constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
+            }
+        }
         if ellipsoidal {
             constants.push(("CONNECTIONS_PER_QUERY", k as f64));
             constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));

@@ -1,6 +1,8 @@
 //! CPU twin of the multiple-importance weights of bidirectional path tracing
 //! (`mis_weight` in shaders/kernels/connect_direct.wesl, the densities of
-//! shaders/lib/subpath.wesl, and the forward/reverse densities extend_subpaths stores).
+//! shaders/lib/subpath.wesl, and the forward/reverse densities extend_subpaths stores), of the
+//! paper's weights of ellipsoidal connections (shaders/lib/ellipsoidal_mis.wesl) and of the
+//! combined estimator's weights over both families (shaders/lib/family_mis.wesl).
 //!
 //! A full path x_0 (on a light) ... x_{k-1} (the pinhole) can be sampled by k - 1 strategies
 //! (s, t) with s + t = k (t >= 1; s = 0 impossible for point lights). The weight of one of them
@@ -265,4 +267,86 @@ pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
         sum += c(j + 1) * r;
     }
     0.5 * (1.0 + r_next) / sum
+}
+
+/// `spheroid_vertex_density` of family_mis.wesl: the area density (m^-2) the families' weights
+/// give a spheroid's vertex at `x` (unit normal `normal`) between `prev` and `next`, with
+/// target-length density `p_tau` (m^-1) at the path's length: p_tau |grad_S L| / (2 pi b), b
+/// the spheroid's semi-minor axis; zero within the needle guard (`needle_guard`, relative).
+pub fn spheroid_vertex_density(prev: Vec3, x: Vec3, normal: Vec3, next: Vec3, p_tau: f32, needle_guard: f32) -> f32 {
+    let (d1, d2, d) = (x.distance(prev), x.distance(next), prev.distance(next));
+    let tau_e = d1 + d2;
+    if !(d1 > 0.0 && d2 > 0.0 && tau_e > d * (1.0 + needle_guard)) {
+        return 0.0;
+    }
+    let g = (x - prev) / d1 + (x - next) / d2;
+    let along_surface = (g - g.dot(normal) * normal).length();
+    let b = 0.5 * ((tau_e - d) * (tau_e + d)).sqrt();
+    p_tau * along_surface / (std::f32::consts::TAU * b)
+}
+
+/// `combined_weight` of family_mis.wesl: the weight of a combined render's contribution through
+/// `path` (x_0 on a light, the last vertex the pinhole), its family's share times its weight
+/// within the family, for strategy `own` of `family` (direct: `own` light-subpath vertices,
+/// weighted by the power heuristic; ellipsoidal: the vertex path[own] on a spheroid, weighted
+/// by the paper's approximation). The direct family's share is S_D / (S_D + ratio S_E), S_D the
+/// sum of the direct strategies' densities and S_E that of the spheroid vertices' stand-in
+/// densities (`spheroid_vertex_density` for the placed vertex, the subpaths' densities for the
+/// rest), with target-length density `p_tau` (m^-1) at the path's length and `ratio`
+/// ellipsoidal connections per direct one (paths of at least three vertices).
+pub fn combined_weight(
+    path: &[Vertex],
+    family: super::bidirectional::Family,
+    own: usize,
+    p_tau: f32,
+    ratio: f32,
+    needle_guard: f32,
+) -> f32 {
+    let k = path.len();
+    assert!(k >= 3);
+    let from_light = |i: usize| match i {
+        0 => path[0].light_origin_pdf(),
+        _ => vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]),
+    };
+    // (The pinhole's density from the camera side is 1: it is never sampled.)
+    let from_camera = |i: usize| if i + 1 < k { vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) } else { 1.0 };
+    let first = if path[0].is_delta_light() { 1 } else { 0 };
+    let (mut r, mut sd, mut sd2, mut sc, mut se, mut r_own, mut r_next) = (1.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for j in first..k {
+        sd += r;
+        sd2 += r * r;
+        if j >= 1 {
+            sc += if j == 1 || j + 1 == k { 0.5 } else { 1.0 } * r;
+        }
+        if j == own {
+            r_own = r;
+        }
+        if j == own + 1 {
+            r_next = r;
+        }
+        let camera = from_camera(j).max(1e-30);
+        if j >= 1 && j + 2 <= k && p_tau > 0.0 {
+            let v = &path[j];
+            let e = spheroid_vertex_density(
+                path[j - 1].position,
+                v.position,
+                v.normal,
+                path[j + 1].position,
+                p_tau,
+                needle_guard,
+            );
+            se += r * e / camera;
+        }
+        r *= (from_light(j) / camera).min(1e8);
+        if r > 1e10 || sd > 1e10 {
+            let f = 1e-10;
+            (r, sd, sd2, sc, se, r_own, r_next) = (r * f, sd * f, sd2 * f * f, sc * f, se * f, r_own * f, r_next * f);
+        }
+    }
+    let share_d = sd / (sd + ratio * se);
+    let w = match family {
+        super::bidirectional::Family::Direct => share_d * (r_own * r_own / sd2),
+        super::bidirectional::Family::Ellipsoidal => (1.0 - share_d) * (0.5 * (r_own + r_next) / sc),
+    };
+    if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }
 }

@@ -1,12 +1,13 @@
 //! Integrators and the render loop: `path` is the wavefront path tracer (DESIGN.md section
 //! 4.1); `bidirectional` serves `direct` and `ellipsoidal` (bidirectional path tracing with
-//! direct or ellipsoidal connections, sections 4.2 and 4.3); `mis` is the CPU twin of the
-//! direct connections' MIS weights.
+//! direct or ellipsoidal connections, sections 4.2 and 4.3); `combined` joins the two in one
+//! estimator; `mis` is the CPU twin of the connections' MIS weights.
 
 pub mod auto;
 pub mod band_index;
 pub mod bidirectional;
 pub mod checkpoint;
+pub mod combined;
 pub mod mis;
 pub mod path;
 pub mod wavefront;
@@ -40,6 +41,9 @@ pub enum Method {
     Direct,
     /// Bidirectional path tracing with ellipsoidal connections.
     Ellipsoidal,
+    /// Direct and ellipsoidal connections in one estimator: each pixel sample takes one sample
+    /// of each family, weighted by a balance heuristic between the families (see [`combined`]).
+    Combined,
     /// `path`, `direct` or (with a gate) `ellipsoidal`, whichever a short pilot of each on this
     /// render measures to have the lowest variance x time per sample (see [`auto`]).
     Auto,
@@ -52,6 +56,7 @@ impl Method {
             Method::Path => "path",
             Method::Direct => "direct",
             Method::Ellipsoidal => "ellipsoidal",
+            Method::Combined => "combined",
             Method::Auto => "auto",
         }
     }
@@ -324,6 +329,7 @@ pub fn create_integrator<'a>(
     Ok(match settings.method {
         Method::Path => Box::new(PathTracer::new(ctx, scene, settings)?),
         Method::Direct | Method::Ellipsoidal => Box::new(BidirectionalTracer::new(ctx, scene, settings)?),
+        Method::Combined => Box::new(combined::CombinedTracer::new(ctx, scene, settings)?),
         Method::Auto => anyhow::bail!(
             "--method auto has no integrator of its own: it renders with path, direct or ellipsoidal after a pilot of \
              each (integrator::render); measure those instead"
