@@ -340,58 +340,28 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
 #[test]
 fn combined_matches_direct_and_path() {
     let ctx = common::gpu();
-    let combined = |scene: &PreparedScene, gate: Gate, k: u32, seed: u32| {
-        let s = RenderSettings { connections_per_query: k, ..settings(Method::Combined, gate, seed) };
-        let films = common::render_films(&ctx, scene, &s, BATCHES, 16);
-        assert!(films.iter().any(|f| f.mean_rgb()[0] != 0.0), "combined renders black");
-        films
-    };
-    let reference = |scene: &PreparedScene, method: Method, gate: Gate, seed: u32| {
-        common::render_films(&ctx, scene, &settings(method, gate, seed), BATCHES, 32)
-    };
-    let box_scene = common::cornell_box();
-    let narrow = Gate::Box { start: 3.14, end: 3.19 };
-    common::assert_films_agree(
-        "combined K = 4 box [3.14, 3.19)",
-        &combined(&box_scene, narrow.clone(), 4, 700),
-        &reference(&box_scene, Method::Direct, narrow, 701),
-        8,
-        ALPHA,
-    );
-    let wide = Gate::Box { start: 2.0, end: 3.0 };
-    common::assert_films_agree(
-        "combined box [2.0, 3.0)",
-        &combined(&box_scene, wide.clone(), 1, 710),
-        &reference(&box_scene, Method::Path, wide, 711),
-        8,
-        ALPHA,
-    );
-    let glossy = glossy_cornell_box();
-    let gate = Gate::Box { start: 3.0, end: 3.3 };
-    common::assert_films_agree(
-        "combined glossy box [3.0, 3.3)",
-        &combined(&glossy, gate.clone(), 4, 720),
-        &reference(&glossy, Method::Path, gate, 721),
-        8,
-        ALPHA,
-    );
-    let point = modified_cornell_box(true, false);
-    let gate = Gate::Box { start: 2.6, end: 3.2 };
-    common::assert_films_agree(
-        "combined point + area lights box [2.6, 3.2)",
-        &combined(&point, gate.clone(), 4, 730),
-        &reference(&point, Method::Direct, gate, 731),
-        8,
-        ALPHA,
-    );
-    let transient = Gate::Transient { start: 3.0, width: 0.1, bins: 6 };
-    common::assert_films_agree(
-        "combined transient 3.0 + 6 x 0.1",
-        &combined(&box_scene, transient.clone(), 4, 740),
-        &reference(&box_scene, Method::Direct, transient, 741),
-        8,
-        ALPHA,
-    );
+    let (box_scene, glossy, point) = (common::cornell_box(), glossy_cornell_box(), modified_cornell_box(true, false));
+    let cases = [
+        ("combined K = 4 box [3.14, 3.19)", &box_scene, Gate::Box { start: 3.14, end: 3.19 }, 4, Method::Direct),
+        ("combined box [2.0, 3.0)", &box_scene, Gate::Box { start: 2.0, end: 3.0 }, 1, Method::Path),
+        ("combined glossy box [3.0, 3.3)", &glossy, Gate::Box { start: 3.0, end: 3.3 }, 4, Method::Path),
+        ("combined point + area lights box [2.6, 3.2)", &point, Gate::Box { start: 2.6, end: 3.2 }, 4, Method::Direct),
+        (
+            "combined transient 3.0 + 6 x 0.1",
+            &box_scene,
+            Gate::Transient { start: 3.0, width: 0.1, bins: 6 },
+            4,
+            Method::Direct,
+        ),
+    ];
+    for (i, (label, scene, gate, k, reference)) in cases.into_iter().enumerate() {
+        let seed = 700 + 10 * i as u32;
+        let s = RenderSettings { connections_per_query: k, ..settings(Method::Combined, gate.clone(), seed) };
+        let combined = common::render_films(&ctx, scene, &s, BATCHES, 16);
+        assert!(combined.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: combined renders black");
+        let reference = common::render_films(&ctx, scene, &settings(reference, gate, seed + 1), BATCHES, 32);
+        common::assert_films_agree(label, &combined, &reference, 8, ALPHA);
+    }
 }
 
 /// What `combined` cannot render yet is refused with a clear error: no gate, a directional

@@ -97,23 +97,25 @@ fn is_valid(path: &[Vertex]) -> bool {
 /// p_s of the full path, computed directly: the light side generates x_0..x_{s-1} forwards, the
 /// camera side x_{k-2}..x_s backwards (the pinhole x_{k-1} is not sampled).
 fn strategy_pdf(path: &[Vertex], s: usize) -> f64 {
-    let k = path.len();
     if s == 0 && path[0].is_delta_light() {
         return 0.0;
     }
-    let mut p = 1.0f64;
-    for i in 0..s {
-        p *= if i == 0 {
-            path[0].light_origin_pdf() as f64
-        } else {
-            vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]) as f64
-        };
-    }
-    for i in s..k - 1 {
-        let prev = (i + 2 < k).then(|| &path[i + 2]);
-        p *= vertex_pdf(&path[i + 1], prev, &path[i]) as f64;
-    }
-    p
+    light_side_pdf(path, s) * camera_side_pdf(path, s)
+}
+
+/// The density with which the light side generates x_0..x_{n-1}.
+fn light_side_pdf(path: &[Vertex], n: usize) -> f64 {
+    (0..n)
+        .map(|i| match i {
+            0 => path[0].light_origin_pdf() as f64,
+            _ => vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]) as f64,
+        })
+        .product()
+}
+
+/// The density with which the camera side generates x_{k-2}..x_from backwards.
+fn camera_side_pdf(path: &[Vertex], from: usize) -> f64 {
+    (from..path.len() - 1).map(|i| vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) as f64).product()
 }
 
 #[test]
@@ -218,22 +220,10 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
         let sc: f64 = (1..k).map(|j| c(j) * pdfs[j]).sum();
         let mut se = 0.0f64;
         for m in 1..=k - 2 {
-            let mut p = 1.0f64;
-            for i in 0..m {
-                p *= if i == 0 {
-                    path[0].light_origin_pdf() as f64
-                } else {
-                    vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]) as f64
-                };
-            }
             let v = &path[m];
             let e =
                 spheroid_vertex_density(path[m - 1].position, v.position, v.normal, path[m + 1].position, p_tau, 1e-6);
-            p *= e as f64;
-            for i in m + 1..k - 1 {
-                p *= vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) as f64;
-            }
-            se += p;
+            se += light_side_pdf(&path, m) * e as f64 * camera_side_pdf(&path, m + 1);
         }
         let share = sd / (sd + ratio as f64 * se);
         if !(share.is_finite() && sd2.is_finite() && sd > 0.0 && sc > 0.0) {

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """The applications benchmark: renders each of the paper's application scenes (Pediredla et al.
-2019, section 7; made by tools/make_application_scenes.py) with `path`, `direct`, `ellipsoidal`
-and `auto` for equal time at the gate the scene names in its extras, and writes a table of the
-equal-time MSE gains over `direct` beside the paper's, with a picture of each scene.
+2019, section 7; made by tools/make_application_scenes.py) with `path`, `direct`, `ellipsoidal`,
+`combined` and `auto` for equal time at the gate the scene names in its extras, and writes a table
+of the equal-time MSE gains over `direct` beside the paper's, with the variance and the time of
+one sample of `ellipsoidal` and `combined` relative to `direct`'s, and a picture of each scene.
 
     tools/applications_benchmark.py                  # about 30 minutes on 2 CPU cores
     tools/applications_benchmark.py --seconds 2 --reference-seconds 20 --no-pictures   # a quick look
@@ -38,7 +39,7 @@ APPLICATIONS = [
     ("cw_room", "cw_room.gltf", None, "Fig. 9", "depth-selective, 20 ps window, 1.28 %", [5.49]),
     ("dynamic", "dynamic.gltf", 0.0, "Fig. 6", "200 ps, 1.74 %", []),
 ]
-METHODS = ["path", "direct", "ellipsoidal", "auto"]
+METHODS = ["path", "direct", "ellipsoidal", "combined", "auto"]
 
 
 def run(cmd):
@@ -137,8 +138,9 @@ def main():
     if not chosen:
         sys.exit(f"--only {args.only}: no such application (fence, proximity, cw_room, dynamic)")
 
-    lines = ["| scene | paper | gate | triangles | paper's gain | path gain | ellipsoidal gain | auto gain | "
-             "auto chose | spp (path / direct / ellipsoidal / auto) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | paper | gate | triangles | paper's gain | path gain | ellipsoidal gain | combined gain | "
+             "auto gain | auto chose | variance per sample (ellipsoidal / combined) | cost per sample "
+             "(ellipsoidal / combined) | spp (" + " / ".join(METHODS) + ") |", "|---" * 13 + "|"]
     all_rows = []
     for name, file, anim_time, figure, paper_gate, paper_gains in chosen:
         scene = ROOT / "assets/scenes" / file
@@ -157,9 +159,16 @@ def main():
         paper = ", ".join(f"{g}x" for g in paper_gains) or "(none given)"
         picked = ", ".join(f"{m} x{n}" for m, n in sorted(picks.items()))
         spps = " / ".join(str(sum(spp[m]) // len(spp[m])) for m in METHODS)
+        mean_spp = {m: sum(v) / len(v) for m, v in spp.items()}
+        # Relative to direct's: the variance of one sample (MSE x samples per pixel) and the time
+        # of one sample (direct's samples over the method's, in the same time).
+        variance = lambda m: mean[m] * mean_spp[m] / (mean["direct"] * mean_spp["direct"])
+        cost = lambda m: mean_spp["direct"] / mean_spp[m]
         lines.append(f"| {name}{'' if anim_time is None else f' at {anim_time} s'} | {figure}: {paper_gate} | "
                      f"`{gate}` | {rows[0]['triangles']} | {paper} | {gain('path'):.2f}x | "
-                     f"{gain('ellipsoidal'):.2f}x | {gain('auto'):.2f}x | {picked} | {spps} |")
+                     f"{gain('ellipsoidal'):.2f}x | {gain('combined'):.2f}x | {gain('auto'):.2f}x | {picked} | "
+                     f"{variance('ellipsoidal'):.2f} / {variance('combined'):.2f} | "
+                     f"{cost('ellipsoidal'):.1f} / {cost('combined'):.1f} | {spps} |")
         if not args.no_pictures and not (args.resume and (args.out / f"{name}.png").exists()):
             pictures(args, name, scene, gate, anim_time)
 
