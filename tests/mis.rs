@@ -7,6 +7,8 @@
 //! connection that replaces the spheroid next to the light); and the combined estimator's
 //! weights of both families together.
 
+mod common;
+
 use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
 use gatetrace::scene::bsdf::Bsdf;
 use glam::Vec3;
@@ -252,4 +254,68 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
     // Both families carry weight on these paths: the test sees shares away from 0 and 1.
     let between = shares.iter().filter(|&&s| s > 0.01 && s < 0.99).count();
     assert!(between > checked / 10, "only {between} of {checked} paths share their weight between the families");
+}
+
+/// `combined_weight` of family_mis.wesl (probe_functions 20) against its twin on random paths:
+/// the same densities in, the same weights out, with the target-length density of a box gate's
+/// table (checked against the CPU sampler's).
+#[test]
+fn combined_weights_in_wgsl_match_the_twin() {
+    use gatetrace::film::Gate;
+    use gatetrace::integrator::bidirectional::Family;
+    use gatetrace::integrator::mis::combined_weight;
+    use gatetrace::integrator::{PathTracer, RenderSettings, target_sampler};
+    const RECORDS: usize = 17; // COMBINED_RECORDS: a header and two records per vertex, k <= 8
+    const RATIO: f32 = 4.0;
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let gate = Gate::Box { start: 3.0, end: 3.3 };
+    let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate, ..Default::default() };
+    let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
+    let sampler = target_sampler(&scene, &settings).unwrap();
+    let mut rng = Rng(0xC0FF_EE00_1234_5678);
+    let (mut input, mut cases) = (Vec::new(), Vec::new());
+    for trial in 0..2000 {
+        let k = 3 + trial % 6;
+        let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
+        let path = random_path(&mut rng, k, light);
+        if !is_valid(&path) {
+            continue;
+        }
+        let (length, inv_p) = sampler.sample(rng.next());
+        let (family, own) = if trial % 2 == 0 {
+            let first = if light == Light::Area { 0 } else { 1 };
+            (Family::Direct, first + (rng.next() * (k - first) as f32) as usize)
+        } else {
+            (Family::Ellipsoidal, 1 + (rng.next() * (k - 2) as f32) as usize)
+        };
+        let code = family as u32 + if light == Light::Area { 4 } else { 0 };
+        input.push([k as f32, own as f32, code as f32, length]);
+        for (i, v) in path.iter().enumerate() {
+            let from_light = match i {
+                0 => v.light_origin_pdf(),
+                _ => vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), v),
+            };
+            let from_camera = if i + 1 < k { vertex_pdf(&path[i + 1], path.get(i + 2), v) } else { 1.0 };
+            input.push([v.position.x, v.position.y, v.position.z, from_light]);
+            input.push([v.normal.x, v.normal.y, v.normal.z, from_camera]);
+        }
+        input.resize((cases.len() + 1) * RECORDS, [0.0; 4]);
+        cases.push((path, family, own, 1.0 / inv_p));
+    }
+    assert!(cases.len() > 500, "only {} valid random paths", cases.len());
+    let extra = [("FUNCTION", 20.0), ("FAMILY_RATIO", RATIO as f64)];
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &extra, &input, cases.len());
+    for (i, ((path, family, own, p_tau), o)) in cases.iter().zip(&out).enumerate() {
+        assert!((o[1] - p_tau).abs() <= 1e-4 * p_tau, "path {i}: target density GPU {} CPU {p_tau}", o[1]);
+        let twin = combined_weight(path, *family, *own, o[1], RATIO, 1e-6);
+        assert!(
+            (o[0] - twin).abs() <= 1e-3 * twin.max(1e-3),
+            "path {i} ({} vertices, {family:?} {own}): weight GPU {} CPU {twin}",
+            path.len(),
+            o[0]
+        );
+    }
+    let between = out.iter().filter(|o| o[0] > 0.01 && o[0] < 0.99).count();
+    assert!(between > cases.len() / 4, "only {between} of {} weights lie between 0.01 and 0.99", cases.len());
 }
