@@ -189,6 +189,14 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
     assert!(checked > 1000, "only {checked} valid random paths");
 }
 
+/// The random path of trial `trial` of the combined weights' tests (3 to 8 vertices, area and
+/// point lights: a combined render refuses directional ones), if every strategy can sample it.
+fn combined_trial_path(rng: &mut Rng, trial: usize) -> Option<(Vec<Vertex>, Light)> {
+    let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
+    let path = random_path(rng, 3 + trial % 6, light);
+    is_valid(&path).then_some((path, light))
+}
+
 /// The combined estimator's weights (family_mis.wesl `combined_weight`, CPU twin of the same
 /// name): each direct strategy's weight is the direct family's share times its power-heuristic
 /// weight, each spheroid vertex's the ellipsoidal family's share times the paper's weight, the
@@ -198,19 +206,14 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
 /// the weights of all strategies of both families sum to one.
 #[test]
 fn combined_weights_match_their_definition_and_sum_to_one() {
-    use gatetrace::integrator::bidirectional::Family;
+    use gatetrace::integrator::combined::Family;
     use gatetrace::integrator::mis::{combined_weight, spheroid_vertex_density};
     let mut rng = Rng(0x0DDB_1A5E_5BAD_5EED);
     let mut checked = 0;
     let mut shares = Vec::new();
     for trial in 0..4000 {
-        let k = 3 + trial % 6;
-        // Area and point lights (a combined render refuses directional ones).
-        let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
-        let path = random_path(&mut rng, k, light);
-        if !is_valid(&path) {
-            continue;
-        }
+        let Some((path, light)) = combined_trial_path(&mut rng, trial) else { continue };
+        let k = path.len();
         // Target densities from those of a 1 mm gate (1000 m^-1) to a 10 m one's, 1 to 8
         // ellipsoidal connections per direct one.
         let p_tau = 10f32.powf(3.0 - 4.0 * rng.next());
@@ -262,7 +265,7 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
 #[test]
 fn combined_weights_in_wgsl_match_the_twin() {
     use gatetrace::film::Gate;
-    use gatetrace::integrator::bidirectional::Family;
+    use gatetrace::integrator::combined::Family;
     use gatetrace::integrator::mis::combined_weight;
     use gatetrace::integrator::{PathTracer, RenderSettings, target_sampler};
     const RECORDS: usize = 17; // COMBINED_RECORDS: a header and two records per vertex, k <= 8
@@ -276,12 +279,8 @@ fn combined_weights_in_wgsl_match_the_twin() {
     let mut rng = Rng(0xC0FF_EE00_1234_5678);
     let (mut input, mut cases) = (Vec::new(), Vec::new());
     for trial in 0..2000 {
-        let k = 3 + trial % 6;
-        let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
-        let path = random_path(&mut rng, k, light);
-        if !is_valid(&path) {
-            continue;
-        }
+        let Some((path, light)) = combined_trial_path(&mut rng, trial) else { continue };
+        let k = path.len();
         let (length, inv_p) = sampler.sample(rng.next());
         let (family, own) = if trial % 2 == 0 {
             let first = if light == Light::Area { 0 } else { 1 };

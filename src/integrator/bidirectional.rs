@@ -40,6 +40,7 @@
 
 use anyhow::{Result, ensure};
 
+use super::combined::Family;
 use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
 use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
 use super::{Integrator, Method, RenderSettings, Wavefront};
@@ -110,22 +111,7 @@ pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
 /// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
 pub fn check_settings(settings: &RenderSettings) -> Result<()> {
     if settings.method == Method::Combined {
-        // Both halves must be valid; a combined render has no checkpoint of its own kind, no extra
-        // target visits and no captures yet.
-        ensure!(
-            !matches!(settings.gate, crate::film::Gate::None),
-            "--method combined weighs direct and ellipsoidal connections against each other and needs a gate (box, \
-             gaussian, cw, table or transient); without one use --method path or direct"
-        );
-        ensure!(
-            settings.nlos.is_none(),
-            "--method combined does not render --nlos captures yet: use --method ellipsoidal"
-        );
-        ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
-        for role in [Family::Direct, Family::Ellipsoidal] {
-            check_settings(&role.settings(settings))?;
-        }
-        return Ok(());
+        return super::combined::check_settings(settings);
     }
     if settings.method == Method::Auto {
         // Both candidates must be valid, ellipsoidal only where it applies (it needs a gate).
@@ -196,38 +182,6 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// Which half of a combined render (`--method combined`, combined.rs) a tracer is: its
-/// connection kernels weigh each contribution by their family's share of the path
-/// (shaders/lib/family_mis.wesl).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Family {
-    /// connect_direct's strategies.
-    Direct = 1,
-    /// connect_ellipsoidal's and connect_spherical's.
-    Ellipsoidal = 2,
-}
-
-impl Family {
-    /// The settings of this half of the combined render `settings`: its method, one connection
-    /// per strategy for the direct half, and for the ellipsoidal half a seed of its own, so its
-    /// subpaths are independent of the direct half's.
-    pub fn settings(self, settings: &RenderSettings) -> RenderSettings {
-        match self {
-            Family::Direct => RenderSettings { method: Method::Direct, connections_per_query: 1, ..settings.clone() },
-            Family::Ellipsoidal => RenderSettings {
-                method: Method::Ellipsoidal,
-                seed: ellipsoidal_half_seed(settings.seed),
-                ..settings.clone()
-            },
-        }
-    }
-}
-
-/// The seed of a combined render's ellipsoidal half, given the render's.
-pub fn ellipsoidal_half_seed(seed: u32) -> u32 {
-    seed ^ 0x5bd1_e995
 }
 
 /// Pipelines of the stages.
@@ -447,14 +401,13 @@ impl<'a> BidirectionalTracer<'a> {
             );
             constants.push(("FAMILY", role as u32 as f64));
             constants.push(("FAMILY_RATIO", ratio as f64));
-            if !ellipsoidal {
-                // (The direct half leaves out the spheroids its ellipsoidal half does.)
-                constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
-            }
+        }
+        if ellipsoidal || family.is_some() {
+            // (A combined render's direct half leaves out the spheroids its ellipsoidal half does.)
+            constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
         }
         if ellipsoidal {
             constants.push(("CONNECTIONS_PER_QUERY", k as f64));
-            constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
             constants.push(("LENGTH_GUARD", settings.ellipsoid_guards.length as f64));
             constants.push(("QUERY_SPLIT", settings.query.split as f64));
             constants.push(("QUERY_BOTTOM_NODES", settings.query.bottom_nodes as f64));

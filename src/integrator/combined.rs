@@ -11,13 +11,59 @@
 //! Not yet: checkpoints, shards, NLOS captures and directional lights (refused with a clear
 //! error).
 
-use anyhow::{Result, bail};
+use anyhow::{Result, bail, ensure};
 
-use super::bidirectional::{Family, ellipsoidal_half_seed};
-use super::{BidirectionalTracer, Integrator, RenderSettings, Wavefront, checkpoint};
+use super::{BidirectionalTracer, Integrator, Method, RenderSettings, Wavefront, checkpoint};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
+
+/// Which half of a combined render a tracer is: its connection kernels weigh each contribution
+/// by their family's share of the path (shaders/lib/family_mis.wesl).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// connect_direct's strategies.
+    Direct = 1,
+    /// connect_ellipsoidal's and connect_spherical's.
+    Ellipsoidal = 2,
+}
+
+impl Family {
+    /// The settings of this half of the combined render `settings`: its method, one connection
+    /// per strategy for the direct half, and for the ellipsoidal half a seed of its own, so its
+    /// subpaths are independent of the direct half's.
+    pub fn settings(self, settings: &RenderSettings) -> RenderSettings {
+        match self {
+            Family::Direct => RenderSettings { method: Method::Direct, connections_per_query: 1, ..settings.clone() },
+            Family::Ellipsoidal => RenderSettings {
+                method: Method::Ellipsoidal,
+                seed: ellipsoidal_half_seed(settings.seed),
+                ..settings.clone()
+            },
+        }
+    }
+}
+
+/// The seed of a combined render's ellipsoidal half, given the render's.
+fn ellipsoidal_half_seed(seed: u32) -> u32 {
+    seed ^ 0x5bd1_e995
+}
+
+/// Errors for settings `combined` cannot render (checked before any work): both halves must be
+/// valid, and a combined render has no captures and no debug strategy yet.
+pub fn check_settings(settings: &RenderSettings) -> Result<()> {
+    ensure!(
+        !matches!(settings.gate, crate::film::Gate::None),
+        "--method combined weighs direct and ellipsoidal connections against each other and needs a gate (box, \
+         gaussian, cw, table or transient); without one use --method path or direct"
+    );
+    ensure!(settings.nlos.is_none(), "--method combined does not render --nlos captures yet: use --method ellipsoidal");
+    ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
+    for role in [Family::Direct, Family::Ellipsoidal] {
+        super::bidirectional::check_settings(&role.settings(settings))?;
+    }
+    Ok(())
+}
 
 /// The two halves of a combined render.
 pub struct CombinedTracer<'a> {
@@ -28,7 +74,7 @@ pub struct CombinedTracer<'a> {
 impl<'a> CombinedTracer<'a> {
     /// Builds both halves (`settings.method` is `combined`).
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
-        super::bidirectional::check_settings(settings)?;
+        check_settings(settings)?;
         let k = settings.connections_per_query;
         let half = |family: Family| {
             BidirectionalTracer::with_family(ctx, scene, &family.settings(settings), Some((family, k)))
