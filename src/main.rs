@@ -149,6 +149,12 @@ struct RenderArgs {
     /// bins), though 2.4x on the example scene's letter.
     #[arg(long, value_name = "K", allow_hyphen_values = true)]
     connections_per_query: Option<u32>,
+    /// `combined`: samples per pixel of the ellipsoidal half per sample of the direct half
+    /// (dimensionless, 1/8 to 8). Default: a pilot (like auto's, about 5 % of a --time budget)
+    /// measures both halves' variance and time per sample and picks the split of least error at
+    /// equal time.
+    #[arg(long, value_name = "R")]
+    ellipsoidal_share: Option<f64>,
     /// `ellipsoidal`: BVH nodes whose box diagonal is at most R times the spheroid's semi-major
     /// axis are entered by a stochastic descent (one child at a time, in proportion to an
     /// estimate of the arcs below it), so a query's work grows with the tree's depth rather
@@ -725,7 +731,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
             },
         ),
         band_index: false,
+        ellipsoidal_share: args.ellipsoidal_share,
     };
+    ensure!(
+        args.ellipsoidal_share.is_none() || args.method == Method::Combined,
+        "--ellipsoidal-share applies to --method combined only"
+    );
     ensure!(
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
         "--target-pilot applies to --method ellipsoidal only"
@@ -1382,6 +1393,9 @@ fn render_one(
     )?;
     if let Some(choice) = &output.choice {
         say(bars, format!("auto chose {}: {}", choice.chosen.name(), choice.reason))?;
+    }
+    if let Some(allocation) = &output.allocation {
+        say(bars, format!("combined: {}", allocation.reason))?;
     }
     print_stats(settings, &output);
     Ok(())

@@ -469,6 +469,18 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
             default_scene(&["--target-pilot", "16"]),
             &["--target-pilot", "ellipsoidal"],
         ),
+        case(
+            "--ellipsoidal-share without combined",
+            none,
+            default_scene(&["--method", "direct", "--gate", "box:3.0..3.2", "--ellipsoidal-share", "2"]),
+            &["--ellipsoidal-share", "--method combined only"],
+        ),
+        case(
+            "--ellipsoidal-share out of range",
+            none,
+            default_scene(&["--method", "combined", "--gate", "box:3.0..3.2", "--ellipsoidal-share", "100"]),
+            &["--ellipsoidal-share 100", "1/8 to 8"],
+        ),
         case("a lens without focus", none, default_scene(&["--aperture-radius", "0.1"]), &["give --focus-distance"]),
         case(
             "a negative focus distance",

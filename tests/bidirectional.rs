@@ -336,27 +336,50 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
 /// is the sum of its two halves, whose weights sum to one over both families only if both
 /// kernels weigh every path alike; against `direct` and `path`, independent estimators, at a
 /// narrow box gate with K = 4 (the ratio of the families' samples then 4), a wide one, on the
-/// glossy box, with a point light (no s = 0 strategy) and per bin of a stratified transient gate.
+/// glossy box, with a point light (no s = 0 strategy), per bin of a stratified transient gate,
+/// and with the halves' samples split 1 : 4 and 4 : 1 (the weights then count them so).
 #[test]
 fn combined_matches_direct_and_path() {
     let ctx = common::gpu();
     let (box_scene, glossy, point) = (common::cornell_box(), glossy_cornell_box(), modified_cornell_box(true, false));
+    let narrow = Gate::Box { start: 3.14, end: 3.19 };
     let cases = [
-        ("combined K = 4 box [3.14, 3.19)", &box_scene, Gate::Box { start: 3.14, end: 3.19 }, 4, Method::Direct),
-        ("combined box [2.0, 3.0)", &box_scene, Gate::Box { start: 2.0, end: 3.0 }, 1, Method::Path),
-        ("combined glossy box [3.0, 3.3)", &glossy, Gate::Box { start: 3.0, end: 3.3 }, 4, Method::Path),
-        ("combined point + area lights box [2.6, 3.2)", &point, Gate::Box { start: 2.6, end: 3.2 }, 4, Method::Direct),
+        ("combined K = 4 box [3.14, 3.19)", &box_scene, narrow.clone(), 4, 1.0, Method::Direct),
+        ("combined box [2.0, 3.0)", &box_scene, Gate::Box { start: 2.0, end: 3.0 }, 1, 1.0, Method::Path),
+        ("combined glossy box [3.0, 3.3)", &glossy, Gate::Box { start: 3.0, end: 3.3 }, 4, 1.0, Method::Path),
+        (
+            "combined point + area lights box [2.6, 3.2)",
+            &point,
+            Gate::Box { start: 2.6, end: 3.2 },
+            4,
+            1.0,
+            Method::Direct,
+        ),
         (
             "combined transient 3.0 + 6 x 0.1",
             &box_scene,
             Gate::Transient { start: 3.0, width: 0.1, bins: 6 },
             4,
+            1.0,
             Method::Direct,
         ),
+        ("combined 1 ellipsoidal : 4 direct box [3.14, 3.19)", &box_scene, narrow, 4, 0.25, Method::Direct),
+        (
+            "combined 4 ellipsoidal : 1 direct glossy [3.0, 3.3)",
+            &glossy,
+            Gate::Box { start: 3.0, end: 3.3 },
+            1,
+            4.0,
+            Method::Path,
+        ),
     ];
-    for (i, (label, scene, gate, k, reference)) in cases.into_iter().enumerate() {
+    for (i, (label, scene, gate, k, share, reference)) in cases.into_iter().enumerate() {
         let seed = 700 + 10 * i as u32;
-        let s = RenderSettings { connections_per_query: k, ..settings(Method::Combined, gate.clone(), seed) };
+        let s = RenderSettings {
+            connections_per_query: k,
+            ellipsoidal_share: Some(share),
+            ..settings(Method::Combined, gate.clone(), seed)
+        };
         let combined = common::render_films(&ctx, scene, &s, BATCHES, 16);
         assert!(combined.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: combined renders black");
         let reference = common::render_films(&ctx, scene, &settings(reference, gate, seed + 1), BATCHES, 32);

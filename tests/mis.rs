@@ -259,17 +259,16 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
     assert!(between > checked / 10, "only {between} of {checked} paths share their weight between the families");
 }
 
-/// `combined_weight` of family_mis.wesl (probe_functions 20) against its twin on random paths:
-/// the same densities in, the same weights out, with the target-length density of a box gate's
-/// table (checked against the CPU sampler's).
+/// `combined_weight` of family_mis.wesl (probe_functions 20) against its twin on random paths and
+/// family ratios: the same densities in, the same weights out, with the target-length density
+/// of a box gate's table (checked against the CPU sampler's).
 #[test]
 fn combined_weights_in_wgsl_match_the_twin() {
     use gatetrace::film::Gate;
     use gatetrace::integrator::combined::Family;
     use gatetrace::integrator::mis::combined_weight;
     use gatetrace::integrator::{PathTracer, RenderSettings, target_sampler};
-    const RECORDS: usize = 17; // COMBINED_RECORDS: a header and two records per vertex, k <= 8
-    const RATIO: f32 = 4.0;
+    const RECORDS: usize = 18; // COMBINED_RECORDS: a header, two records per vertex (k <= 8), the ratio
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let gate = Gate::Box { start: 3.0, end: 3.3 };
@@ -299,15 +298,17 @@ fn combined_weights_in_wgsl_match_the_twin() {
             input.push([v.position.x, v.position.y, v.position.z, from_light]);
             input.push([v.normal.x, v.normal.y, v.normal.z, from_camera]);
         }
-        input.resize((cases.len() + 1) * RECORDS, [0.0; 4]);
-        cases.push((path, family, own, 1.0 / inv_p));
+        // The ratio R of a combined render: K (1 to 8) times the ellipsoidal half's share (1/8 to 8).
+        let ratio = (1 + (rng.next() * 8.0) as u32) as f32 * 2f32.powf(6.0 * rng.next() - 3.0);
+        input.resize((cases.len() + 1) * RECORDS - 1, [0.0; 4]);
+        input.push([ratio, 0.0, 0.0, 0.0]);
+        cases.push((path, family, own, 1.0 / inv_p, ratio));
     }
     assert!(cases.len() > 500, "only {} valid random paths", cases.len());
-    let extra = [("FUNCTION", 20.0), ("FAMILY_RATIO", RATIO as f64)];
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &extra, &input, cases.len());
-    for (i, ((path, family, own, p_tau), o)) in cases.iter().zip(&out).enumerate() {
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 20.0)], &input, cases.len());
+    for (i, ((path, family, own, p_tau, ratio), o)) in cases.iter().zip(&out).enumerate() {
         assert!((o[1] - p_tau).abs() <= 1e-4 * p_tau, "path {i}: target density GPU {} CPU {p_tau}", o[1]);
-        let twin = combined_weight(path, *family, *own, o[1], RATIO, 1e-6);
+        let twin = combined_weight(path, *family, *own, o[1], *ratio, 1e-6);
         assert!(
             (o[0] - twin).abs() <= 1e-3 * twin.max(1e-3),
             "path {i} ({} vertices, {family:?} {own}): weight GPU {} CPU {twin}",

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The applications benchmark: renders each of the paper's application scenes (Pediredla et al.
 2019, section 7; made by tools/make_application_scenes.py) with `path`, `direct`, `ellipsoidal`,
-`combined` and `auto` for equal time at the gate the scene names in its extras, and writes a table
+`combined` and `auto` for equal time at the gate the scene names in its extras (the proximity
+sensor at three frames; the CW room also with a window of the paper's absolute 20 ps), and writes a table
 of the equal-time MSE gains over `direct` beside the paper's, with the variance and the time of
 one sample of `ellipsoidal` and `combined` relative to `direct`'s, and a picture of each scene.
 
@@ -30,14 +31,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 BINARY = ROOT / "target/release/gatetrace"
 
-# name, scene file, animation time the comparison poses it at, the paper's figure, the paper's
-# gate as it states it, and the paper's equal-time MSE gains of ellipsoidal over direct
-# connections (Fig. 7 reports three frames; Fig. 6 gives no figure).
+# The rows of the table: a key naming the row's files, the application's name (--only), scene
+# file, the animation time the comparison poses it at, the scene's extras field holding the gate,
+# the paper's figure, the paper's gate as it states it, and the paper's equal-time MSE gains of
+# ellipsoidal over direct connections (Fig. 7 reports one per frame; Fig. 6 gives no figure).
 APPLICATIONS = [
-    ("fence", "fence.gltf", None, "Fig. 8", "1 ns, 2.35 %", [3.37]),
-    ("proximity", "proximity.gltf", 0.65, "Fig. 7", "200 ps, 1.14 %", [9.25, 9.39, 2.73]),
-    ("cw_room", "cw_room.gltf", None, "Fig. 9", "depth-selective, 20 ps window, 1.28 %", [5.49]),
-    ("dynamic", "dynamic.gltf", 0.0, "Fig. 6", "200 ps, 1.74 %", []),
+    ("fence", "fence", "fence.gltf", None, "gate", "Fig. 8", "1 ns, 2.35 %", [3.37]),
+    ("proximity_0.35", "proximity", "proximity.gltf", 0.35, "gate", "Fig. 7, frame 1", "200 ps, 1.14 %", [9.25]),
+    ("proximity_0.65", "proximity", "proximity.gltf", 0.65, "gate", "Fig. 7, frame 2", "200 ps, 1.14 %", [9.39]),
+    ("proximity_0.95", "proximity", "proximity.gltf", 0.95, "gate", "Fig. 7, frame 3", "200 ps, 1.14 %", [2.73]),
+    ("cw_room", "cw_room", "cw_room.gltf", None, "gate", "Fig. 9", "depth-selective, window 1.28 % of the scene",
+     [5.49]),
+    ("cw_room_20ps", "cw_room", "cw_room.gltf", None, "gate_20ps", "Fig. 9", "depth-selective, 20 ps window",
+     [5.49]),
+    ("dynamic", "dynamic", "dynamic.gltf", 0.0, "gate", "Fig. 6", "200 ps, 1.74 %", []),
 ]
 METHODS = ["path", "direct", "ellipsoidal", "combined", "auto"]
 
@@ -134,7 +141,7 @@ def main():
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     run(["cargo", "build", "--release", "--quiet", "--manifest-path", ROOT / "Cargo.toml"])
-    chosen = [a for a in APPLICATIONS if not args.only or a[0] in args.only.split(",")]
+    chosen = [a for a in APPLICATIONS if not args.only or a[1] in args.only.split(",")]
     if not chosen:
         sys.exit(f"--only {args.only}: no such application (fence, proximity, cw_room, dynamic)")
 
@@ -142,11 +149,10 @@ def main():
              "auto gain | auto chose | variance per sample (ellipsoidal / combined) | cost per sample "
              "(ellipsoidal / combined) | spp (" + " / ".join(METHODS) + ") |", "|---" * 13 + "|"]
     all_rows = []
-    for name, file, anim_time, figure, paper_gate, paper_gains in chosen:
+    for key, name, file, anim_time, gate_field, figure, paper_gate, paper_gains in chosen:
         scene = ROOT / "assets/scenes" / file
-        extras = scene_extras(scene)
-        gate = extras["gate"]
-        rows, adapter = equal_time(args, name, scene, gate, anim_time)
+        gate = scene_extras(scene)[gate_field]
+        rows, adapter = equal_time(args, key, scene, gate, anim_time)
         all_rows += rows
         mse, spp, picks = defaultdict(list), defaultdict(list), defaultdict(int)
         for r in rows:
@@ -164,12 +170,16 @@ def main():
         # of one sample (direct's samples over the method's, in the same time).
         variance = lambda m: mean[m] * mean_spp[m] / (mean["direct"] * mean_spp["direct"])
         cost = lambda m: mean_spp["direct"] / mean_spp[m]
-        lines.append(f"| {name}{'' if anim_time is None else f' at {anim_time} s'} | {figure}: {paper_gate} | "
+        label = name + ("" if anim_time is None else f" at {anim_time} s") + ("" if gate_field == "gate" else ", 20 ps")
+        lines.append(f"| {label} | {figure}: {paper_gate} | "
                      f"`{gate}` | {rows[0]['triangles']} | {paper} | {gain('path'):.2f}x | "
                      f"{gain('ellipsoidal'):.2f}x | {gain('combined'):.2f}x | {gain('auto'):.2f}x | {picked} | "
                      f"{variance('ellipsoidal'):.2f} / {variance('combined'):.2f} | "
                      f"{cost('ellipsoidal'):.1f} / {cost('combined'):.1f} | {spps} |")
-        if not args.no_pictures and not (args.resume and (args.out / f"{name}.png").exists()):
+        # One picture per scene: the proximity sensor at its middle frame, the CW room with its
+        # own window.
+        if key in ("fence", "proximity_0.65", "cw_room", "dynamic") and not args.no_pictures \
+                and not (args.resume and (args.out / f"{name}.png").exists()):
             pictures(args, name, scene, gate, anim_time)
 
     with open(args.out / "applications.csv", "w", newline="") as f:

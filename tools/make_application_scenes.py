@@ -3,13 +3,14 @@
 assets/scenes/ (buffers embedded; standard library only). Each scene's `extras` name the gate the
 application renders with (lengths in metres of optical path) and why.
 
-* `fence.gltf` (Fig. 8, imaging through partial occluders): a giraffe-like figure of boxes 6 m
-  from a camera, behind a chain-link fence of thin six-sided wires 3 m from the camera; a
+* `fence.gltf` (Fig. 8, imaging through partial occluders): a giraffe of about 64,000
+  triangles (smooth body, neck, legs and head) 6 m from a camera, behind a chain-link fence of
+  thin six-sided wire links 3 m from the camera; a
   flash (point light) beside the camera; a thin lens (aperture radius 15 cm) focused on the
   figure. A 1 ns gate (0.30 m, 2.35 % of a scene 12.8 m across in the paper) on the figure's
   round trip leaves the fence's light out.
 * `proximity.gltf` (Fig. 7, a proximity sensor on a car): a road, a car-like body of about
-  3,000 triangles (superellipsoid body and cabin, 32-sided wheels) that drives towards the sensor
+  52,000 triangles (superellipsoid body and cabin, 48-sided wheels) that drives towards the sensor
   from 3.5 m to 1.2 m ahead over 1 s of animation clock (`--frames N --anim-time 0..1`), and the
   sensor on the front of the ego car 0.5 m above the road: a pinhole camera and a spot light
   beside it. A 200 ps gate (6 cm, 1.14 % of a scene 5.3 m across in the paper) at a 2 m range.
@@ -17,7 +18,8 @@ application renders with (lengths in metres of optical path) and why.
   deep (5.2 m across) with a table, a cabinet, a figure on a plinth and a lamp; a flash beside
   the camera. A 13.2 MHz depth-selective code of 1,024 chips whose window (flat top of 2 chips, 44
   mm; 222 ps = 1.28 % of the scene across at half height) sits on the figure's round trip;
-  everything else weighs 1/1024.
+  everything else weighs 1/1024. `extras.gate_20ps` holds the same code with the paper's
+  absolute 20 ps window (4,096 chips of 2 mm at 36.6 MHz).
 * `dynamic.gltf` (Fig. 6, transients of a dynamic scene): a corner of a room 3.45 m across with a
   swinging pendulum and a turning fan, lit by a flash beside the camera. A gated transient camera
   images one 200 ps (6 cm, 1.74 % of the scene across) slice per 50 ms while the scene moves:
@@ -76,6 +78,25 @@ class Builder:
                                                                  "material": material}]})
         self.node({"name": name, "mesh": len(self.doc["meshes"]) - 1})
 
+    def indexed_mesh(self, name, mesh, material, node_extra=None):
+        """A node with one indexed mesh (`mesh`: an IndexedMesh), flat-shaded (no normals); returns
+        the node's index."""
+        raw = b"".join(struct.pack("<3f", *p) for p in mesh.points)
+        lo = [min(p[k] for p in mesh.points) for k in range(3)]
+        hi = [max(p[k] for p in mesh.points) for k in range(3)]
+        view = self._view(raw, 34962)
+        self.doc["accessors"].append({"bufferView": view, "componentType": 5126, "count": len(mesh.points),
+                                      "type": "VEC3", "min": lo, "max": hi})
+        positions = len(self.doc["accessors"]) - 1
+        view = self._view(struct.pack(f"<{3 * len(mesh.triangles)}I", *(i for t in mesh.triangles for i in t)), 34963)
+        self.doc["accessors"].append({"bufferView": view, "componentType": 5125, "count": 3 * len(mesh.triangles),
+                                      "type": "SCALAR"})
+        self.doc["meshes"].append({"name": name, "primitives": [{"attributes": {"POSITION": positions},
+                                                                 "indices": len(self.doc["accessors"]) - 1,
+                                                                 "material": material}]})
+        self.node(dict({"name": name, "mesh": len(self.doc["meshes"]) - 1}, **(node_extra or {})))
+        return len(self.doc["nodes"]) - 1
+
     def node(self, node):
         self.doc["nodes"].append(node)
         self.doc["scenes"][0]["nodes"].append(len(self.doc["nodes"]) - 1)
@@ -129,7 +150,7 @@ class Builder:
         if "KHR_lights_punctual" not in self.doc["extensionsUsed"]:
             self.doc["extensionsUsed"].append("KHR_lights_punctual")
 
-    def write(self, name, description, gate, why, frames=None):
+    def write(self, name, description, gate, why, frames=None, alternate=None):
         self.doc["buffers"] = [{"byteLength": len(self.data), "uri": "data:application/octet-stream;base64,"
                                 + base64.b64encode(bytes(self.data)).decode()}]
         if not self.doc["extensionsUsed"]:
@@ -137,10 +158,11 @@ class Builder:
         self.doc["extras"] = {"description": description, "gate": gate, "gate_reason": why}
         if frames:
             self.doc["extras"]["frames"] = frames
+        self.doc["extras"].update(alternate or {})
         path = ROOT / "assets/scenes" / name
         path.write_text(json.dumps(self.doc) + "\n")
-        positions = [p["attributes"]["POSITION"] for m in self.doc["meshes"] for p in m["primitives"]]
-        count = sum(self.doc["accessors"][a]["count"] for a in positions) // 3
+        count = sum(self.doc["accessors"][p.get("indices", p["attributes"]["POSITION"])]["count"]
+                    for m in self.doc["meshes"] for p in m["primitives"]) // 3
         print(f"wrote {path}: {count} triangles")
 
 
@@ -248,6 +270,112 @@ def wheel(centre, radius, width, sides=32):
     return tris
 
 
+class IndexedMesh:
+    """Points and counter-clockwise (seen from outside) index triples, merged part by part."""
+
+    def __init__(self, points=None, triangles=None):
+        self.points = points or []
+        self.triangles = triangles or []
+
+    def add(self, other):
+        base = len(self.points)
+        self.points += other.points
+        self.triangles += [(a + base, b + base, c + base) for a, b, c in other.triangles]
+        return self
+
+
+def smooth_superellipsoid(centre, radii, exponent, nu, nv):
+    """The closed superellipsoid of `superellipsoid` as an indexed mesh of 2 nu (nv - 1)
+    triangles (one vertex per pole)."""
+    def f(w, m):
+        return math.copysign(abs(math.cos(w)) ** m, math.cos(w))
+
+    def g(w, m):
+        return math.copysign(abs(math.sin(w)) ** m, math.sin(w))
+
+    mesh = IndexedMesh()
+    mesh.points.append([centre[0], centre[1] - radii[1], centre[2]])
+    for j in range(1, nv):
+        v = -math.pi / 2 + math.pi * j / nv
+        for i in range(nu):
+            u = 2 * math.pi * i / nu
+            mesh.points.append([centre[0] + radii[0] * f(v, exponent) * f(u, exponent),
+                                centre[1] + radii[1] * g(v, exponent),
+                                centre[2] + radii[2] * f(v, exponent) * g(u, exponent)])
+    mesh.points.append([centre[0], centre[1] + radii[1], centre[2]])
+    top = len(mesh.points) - 1
+    ring = lambda j, i: 1 + (j - 1) * nu + i % nu
+    for i in range(nu):
+        mesh.triangles.append((0, ring(1, i + 1), ring(1, i)))
+        mesh.triangles.append((top, ring(nv - 1, i), ring(nv - 1, i + 1)))
+        for j in range(1, nv - 1):
+            a, b, c, d = ring(j, i), ring(j, i + 1), ring(j + 1, i + 1), ring(j + 1, i)
+            mesh.triangles += [(a, c, b), (a, d, c)]
+    return mesh
+
+
+def catmull_rom(points, samples):
+    """`samples` points along the Catmull-Rom spline through `points` (its ends included)."""
+    ext = [sub(scale(points[0], 2.0), points[1])] + list(points) + [sub(scale(points[-1], 2.0), points[-2])]
+    spans = len(points) - 1
+    out = []
+    for k in range(samples):
+        x = k / (samples - 1) * spans
+        i = min(int(x), spans - 1)
+        t = x - i
+        p0, p1, p2, p3 = ext[i], ext[i + 1], ext[i + 2], ext[i + 3]
+        out.append([0.5 * (2 * p1[d] + (p2[d] - p0[d]) * t + (2 * p0[d] - 5 * p1[d] + 4 * p2[d] - p3[d]) * t * t
+                           + (3 * p1[d] - p0[d] - 3 * p2[d] + p3[d]) * t ** 3) for d in range(3)])
+    return out
+
+
+def tube(centres, radii, sides):
+    """A closed tube swept along the polyline `centres` (ring k of radius radii[k], frames carried
+    along by parallel transport), capped at both ends, faces outward: 2 sides (len - 1) + 2 sides
+    triangles."""
+    n = len(centres)
+    tangents = [norm(sub(centres[min(k + 1, n - 1)], centres[max(k - 1, 0)])) for k in range(n)]
+    t0 = tangents[0]
+    u = norm(cross(t0, [0.0, 0.0, 1.0])) if abs(t0[2]) < 0.9 else norm(cross(t0, [1.0, 0.0, 0.0]))
+    mesh = IndexedMesh()
+    for k in range(n):
+        t = tangents[k]
+        u = norm(sub(u, scale(t, sum(u[d] * t[d] for d in range(3)))))
+        v = cross(t, u)
+        for j in range(sides):
+            a = 2 * math.pi * j / sides
+            mesh.points.append(add(centres[k], add(scale(u, radii[k] * math.cos(a)), scale(v, radii[k] * math.sin(a)))))
+    idx = lambda k, j: k * sides + j % sides
+    for k in range(n - 1):
+        for j in range(sides):
+            mesh.triangles += [(idx(k, j), idx(k, j + 1), idx(k + 1, j + 1)), (idx(k, j), idx(k + 1, j + 1), idx(k + 1, j))]
+    mesh.points += [centres[0], centres[-1]]
+    first, last = len(mesh.points) - 2, len(mesh.points) - 1
+    for j in range(sides):
+        mesh.triangles += [(first, idx(0, j + 1), idx(0, j)), (last, idx(n - 1, j), idx(n - 1, j + 1))]
+    return mesh
+
+
+def giraffe(z):
+    """A giraffe about 3.5 m tall facing +x in the plane z: a superellipsoid body and head, a neck,
+    four jointed legs, a tail and two ossicones swept as smooth tubes (about 64,000 triangles)."""
+    mesh = smooth_superellipsoid([0.0, 1.65, z], [0.85, 0.38, 0.33], 0.9, 160, 80)
+    neck = catmull_rom([[0.6, 1.75, z], [0.85, 2.3, z], [1.0, 2.8, z], [1.12, 3.18, z]], 80)
+    mesh.add(tube(neck, [0.21 - 0.11 * k / 79 for k in range(80)], 64))
+    mesh.add(smooth_superellipsoid([1.3, 3.25, z], [0.27, 0.12, 0.1], 1.0, 64, 32))
+    for dz in (-0.05, 0.05):
+        horn = catmull_rom([[1.15, 3.3, z + dz], [1.14, 3.42, z + dz], [1.12, 3.52, z + dz]], 8)
+        mesh.add(tube(horn, [0.022, 0.02, 0.018, 0.017, 0.018, 0.022, 0.027, 0.03], 24))
+    for x in (-0.6, 0.55):
+        for dz in (-0.18, 0.18):
+            leg = catmull_rom([[x, 1.55, z + dz], [x + 0.05, 0.85, z + dz], [x - 0.02, 0.32, z + dz],
+                               [x, 0.0, z + dz]], 72)
+            mesh.add(tube(leg, [0.11 - 0.05 * min(k / 40, 1.0) + 0.012 * max(k - 66, 0) / 5 for k in range(72)], 40))
+    tail = catmull_rom([[-0.78, 1.85, z], [-0.9, 1.6, z], [-0.95, 1.3, z]], 24)
+    mesh.add(tube(tail, [0.03 - 0.015 * k / 23 for k in range(24)], 16))
+    return mesh
+
+
 def proximity():
     b = Builder()
     road = b.material("asphalt", (0.12, 0.12, 0.12))
@@ -261,15 +389,15 @@ def proximity():
                                                                            [-3.0, 0.3, 1.0]]], verge)
     # The car, modelled about its own origin (front bumper at z = +2.1 relative to its centre),
     # then animated along -z -> +z towards the sensor at z = 0.
-    body = superellipsoid([0.0, 0.55, 0.0], [0.85, 0.35, 2.1], 0.25, 48, 20)
-    cabin = superellipsoid([0.0, 1.0, -0.2], [0.75, 0.3, 1.1], 0.3, 40, 16)
+    body = smooth_superellipsoid([0.0, 0.55, 0.0], [0.85, 0.35, 2.1], 0.25, 200, 100)
+    cabin = smooth_superellipsoid([0.0, 1.0, -0.2], [0.75, 0.3, 1.1], 0.3, 128, 48)
     wheels = []
     for x in (-0.8, 0.8):
         for z in (-1.35, 1.35):
-            wheels += wheel([x, 0.32, z], 0.32, 0.22)
+            wheels += wheel([x, 0.32, z], 0.32, 0.22, sides=48)
     start, end = -3.5 - 2.1, -1.2 - 2.1  # car centre: front bumper from 3.5 m to 1.2 m ahead
-    nodes = [b.mesh_node("car_body", body, paint, {"translation": [0.0, 0.0, start]}),
-             b.mesh_node("car_cabin", cabin, glass, {"translation": [0.0, 0.0, start]}),
+    nodes = [b.indexed_mesh("car_body", body, paint, {"translation": [0.0, 0.0, start]}),
+             b.indexed_mesh("car_cabin", cabin, glass, {"translation": [0.0, 0.0, start]}),
              b.mesh_node("car_wheels", wheels, tyre, {"translation": [0.0, 0.0, start]})]
     times = b.accessor(struct.pack("<2f", 0.0, 1.0), 2, "SCALAR", [0.0], [1.0])
     moves = b.accessor(struct.pack("<6f", 0.0, 0.0, start, 0.0, 0.0, end), 2, "VEC3")
@@ -281,7 +409,7 @@ def proximity():
     b.camera(eye, target, math.radians(50.0))
     b.spot_light("illuminator", [0.1, 0.5, 0.0], [0.1, 0.5, -3.0], 20.0, 0.5, 0.6)
     b.write("proximity.gltf",
-            "A road, a car-like body (superellipsoid body and cabin, 32-sided wheels) driving towards a proximity "
+            "A road, a car-like body (superellipsoid body and cabin, 48-sided wheels; 52,000 triangles) driving towards a proximity "
             "sensor from 3.5 m to 1.2 m ahead over 1 s of animation clock, and the sensor on the ego car 0.5 m "
             "above the road: a pinhole camera (50 deg) and a 20 W/sr spot light (cone 0.6 rad) beside it. "
             "Pediredla et al. 2019, Fig. 7.",
@@ -302,15 +430,11 @@ def fence():
                         [[-half, 0, -6.0], [half, 4.0, -6.0], [-half, 4.0, -6.0]]], backdrop)
     # The giraffe: body, four legs, a neck and a head, about 3 m tall, 6 m from the camera.
     z = -3.0
-    parts = box([-0.8, 1.3, z - 0.3], [0.8, 2.0, z + 0.3])
-    for x in (-0.65, 0.55):
-        for dz in (-0.2, 0.2):
-            parts += box([x - 0.07, 0.0, z + dz - 0.07], [x + 0.07, 1.3, z + dz + 0.07])
-    parts += tilted_box([0.6, 1.9, z], [1.1, 3.2, z], 0.12)
-    parts += box([1.0, 3.1, z - 0.15], [1.5, 3.35, z + 0.15])
-    b.mesh("giraffe", parts, hide)
+    b.indexed_mesh("giraffe", giraffe(z), hide)
     # Chain-link fence at z = 0: diagonal wires 0.2 m apart both ways, radius 1 cm, 0 <= y <= 2.4,
-    # |x| <= 4, and two posts.
+    # |x| <= 4, and two posts. Each wire is made of links from crossing to crossing (0.14 m), as a
+    # modelled chain-link mesh is: tubes spanning the fence in one piece are long slivers whose
+    # boxes overlap everywhere, and cost every method over twice its time per sample.
     spacing, top, width = 0.2, 2.4, 4.0
     wires = []
     n = int((2 * width + top) / spacing) + 1
@@ -342,7 +466,11 @@ def fence():
             seg = clip(xa, ya, xb, yb)
             if seg:
                 (x0, y0), (x1, y1) = seg
-                wires += cylinder([x0, y0, 0.0], [x1, y1, 0.0], 0.01)
+                pieces = max(1, round(math.hypot(x1 - x0, y1 - y0) / (spacing * math.sqrt(0.5))))
+                for k in range(pieces):
+                    a, c2 = k / pieces, (k + 1) / pieces
+                    wires += cylinder([x0 + a * (x1 - x0), y0 + a * (y1 - y0), 0.0],
+                                      [x0 + c2 * (x1 - x0), y0 + c2 * (y1 - y0), 0.0], 0.01)
     for x in (-width, width):
         wires += cylinder([x, 0.0, 0.0], [x, top + 0.1, 0.0], 0.05, sides=8)
     b.mesh("fence", wires, wire)
@@ -351,7 +479,7 @@ def fence():
     b.camera(eye, target, math.radians(40.0), {"aperture_radius": 0.15, "focus_distance": round(focus, 4)})
     b.point_light("flash", [0.3, 1.7, 3.0], 60.0)
     b.write("fence.gltf",
-            "A giraffe-like figure of boxes 6 m from the camera behind a chain-link fence (galvanised GGX wires "
+            "A giraffe (a smooth mesh of 64,000 triangles) 6 m from the camera behind a chain-link fence (galvanised GGX wire links "
             "of radius 1 cm, 0.2 m apart, at z = 0, 3 m from the camera), a grassy ground and a backdrop at "
             "z = -6 m; a 60 W/sr flash beside the camera; a thin lens (aperture radius 15 cm) focused on the "
             "figure. Pediredla et al. 2019, Fig. 8.",
@@ -403,23 +531,35 @@ def cw_room():
     b.camera(eye, target, math.radians(60.0))
     b.point_light("flash", [0.3, 1.4, 0.3], 8.0)
     # The figure's front is about 2.15 m from the flash and the camera: a round trip near 4.3 m.
-    chips, neighbours, centre = 1024, 3, 4.36
-    width = 0.0444 / 2 * (neighbours - 1)  # flat top: (N - 1) chips
-    period = 0.0444 * chips / 2  # one chip is 22.2 mm
-    freq = 299792458.0 / period
-    # C(x), x = f l / c + phase / 360, is 1 on [0, (N - 1) / P]: centre the flat top on `centre`.
-    x_top = (neighbours - 1) / (2 * chips)
-    phase = (360.0 * (x_top - centre / period)) % 360.0
-    gate = f"cw:{freq:.6e},{phase:.4f},depthsel:{chips}:{neighbours}"
+    centre = 4.36
+    gate, freq, period = depth_selective_gate(1024, 3, 0.0222, centre)
+    narrow, narrow_freq, narrow_period = depth_selective_gate(4096, 3, 0.005996 / 3, centre)
     b.write("cw_room.gltf",
             "A room 3 m x 2.4 m x 3.5 m (5.2 m across) with a table and a lamp near the camera, a cabinet against "
             "the back wall and a stone figure on a plinth 2.2 m ahead; an 8 W/sr flash beside a 60 deg pinhole "
             "camera. Pediredla et al. 2019, Fig. 9 (Tadano et al. 2015's depth-selective camera).",
             gate,
-            f"a CW-ToF code of {chips} chips at {freq / 1e6:.2f} MHz (period {period:.2f} m of path, longer than the "
-            f"paths that matter): weight 1 over a flat top of {neighbours - 1} chips ({width * 1000:.0f} mm) about "
-            f"the figure's round trip ({centre} m), falling to 1/{chips} over one chip either side (222 ps, 1.28 % "
-            "of the room across, at half height); the rest of the room weighs 1/1024")
+            f"a CW-ToF code of 1024 chips at {freq / 1e6:.2f} MHz (period {period:.2f} m of path, longer than the "
+            f"paths that matter): weight 1 over a flat top of 2 chips (44 mm) about the figure's round trip "
+            f"({centre} m), falling to 1/1024 over one chip either side (222 ps, 1.28 % of the room across, at half "
+            "height); the rest of the room weighs 1/1024",
+            alternate={"gate_20ps": narrow, "gate_20ps_reason":
+                       f"the same code with the paper's absolute window: 4096 chips of 2.0 mm at {narrow_freq / 1e6:.2f} "
+                       f"MHz, 3 chips (6.0 mm, 20 ps) at half height about the figure's round trip; the period, "
+                       f"{narrow_period:.2f} m of path, is shorter than the longest paths of five bounces, so paths "
+                       f"{narrow_period:.2f} m longer than the window's fall in it again"})
+
+
+def depth_selective_gate(chips, neighbours, chip, centre):
+    """The gate `cw:FREQ,PHASE,depthsel:CHIPS:NEIGHBOURS` whose flat top ((N - 1) chips of `chip`
+    metres of path) is centred on the path length `centre` (m); returns it, the frequency (Hz)
+    and the period (m of path)."""
+    period = chip * chips
+    freq = 299792458.0 / period
+    # C(x), x = f l / c + phase / 360, is 1 on [0, (N - 1) / P]: centre the flat top on `centre`.
+    x_top = (neighbours - 1) / (2 * chips)
+    phase = (360.0 * (x_top - centre / period)) % 360.0
+    return f"cw:{freq:.6e},{phase:.4f},depthsel:{chips}:{neighbours}", freq, period
 
 
 def dynamic():

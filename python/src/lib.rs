@@ -320,9 +320,10 @@ impl Renderer {
             let mut metadata = self.metadata(&settings, gate, &output)?;
             metadata.push(("warning".into(), warning));
             return Ok((film_array(py, &output.film)?, metadata));
-        } else if settings.method == Method::Auto {
-            // auto builds the chosen method's integrator after its pilot, every render (and stops
-            // for Ctrl-C only when it is done).
+        } else if matches!(settings.method, Method::Auto | Method::Combined) {
+            // auto builds the chosen method's integrator after its pilot, and combined its halves
+            // after the pilot that splits their samples, every render (and stops for Ctrl-C only
+            // when it is done).
             let ctx = device()?;
             py.detach(|| gatetrace::integrator::render(ctx, &scene, &settings, budget, |_| {})).map_err(value_error)?
         } else {
@@ -375,6 +376,7 @@ impl Renderer {
                 band_index: tracer.band_index_report(),
                 samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
                 choice: None,
+                allocation: None,
                 stopped_early: false,
                 state: None,
             }

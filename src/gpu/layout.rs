@@ -338,8 +338,10 @@ pub struct RenderParams {
     pub ray_epsilon: f32,
     /// Always 1.0 (an opaque one for the kernels' error-free sums).
     pub one: f32,
-    /// Padding.
-    pub reserved0: u32,
+    /// A combined render's ellipsoidal connections per direct one in its family weights
+    /// (dimensionless: K per spheroid times the ellipsoidal half's samples per direct sample);
+    /// 0 in renders of one method.
+    pub family_ratio: f32,
     /// Padding.
     pub reserved1: u32,
     /// Padding.

@@ -169,6 +169,20 @@ pub fn candidate_methods(settings: &RenderSettings) -> Vec<Method> {
     methods
 }
 
+/// What each of `estimators` pilots (methods, or the halves of a combined render) may spend of
+/// `budget`, the pilot's image having 1 / `pixel_ratio` of the render's pixels: [`PILOT_SHARE`]
+/// of a time budget in all, or batches of N / [`SAMPLE_BUDGET_DIVISOR`] samples of the image
+/// in all for a budget of N samples per pixel.
+pub(super) fn pilot_budget(budget: Budget, pixel_ratio: f64, estimators: usize) -> PilotBudget {
+    match budget {
+        Budget::Time(t) => PilotBudget::Seconds(t.as_secs_f64() * PILOT_SHARE / estimators as f64),
+        Budget::Samples(n) => {
+            let pilot_spp = (n as f64 * pixel_ratio / SAMPLE_BUDGET_DIVISOR as f64) as u64;
+            PilotBudget::Samples((pilot_spp / PILOT_BATCHES as u64).clamp(1, u32::MAX as u64) as u32)
+        }
+    }
+}
+
 /// Runs the pilot of `settings` (method `auto`) on its own image ([`pilot_resolution`]) and
 /// seed ([`pilot_seed`]) and returns the method to render with and why. With a time budget the
 /// pilot spends about [`PILOT_SHARE`] of it (`MethodChoice::pilot_seconds`).
@@ -186,13 +200,7 @@ pub fn choose(
     let methods = candidate_methods(settings);
     let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
-    let per_method = match budget {
-        Budget::Time(t) => PilotBudget::Seconds(t.as_secs_f64() * PILOT_SHARE / methods.len() as f64),
-        Budget::Samples(n) => {
-            let pilot_spp = (n as f64 * pixel_ratio / SAMPLE_BUDGET_DIVISOR as f64) as u64;
-            PilotBudget::Samples((pilot_spp / PILOT_BATCHES as u64).clamp(1, u32::MAX as u64) as u32)
-        }
-    };
+    let per_method = pilot_budget(budget, pixel_ratio, methods.len());
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut tracers = Vec::new();
     for &method in &methods {
@@ -256,7 +264,7 @@ fn compare(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> (Vec<Ca
 
 /// How much pilot each method gets.
 #[derive(Clone, Copy, Debug)]
-enum PilotBudget {
+pub(super) enum PilotBudget {
     /// Seconds of passes (at least [`PILOT_BATCHES`] passes of one sample).
     Seconds(f64),
     /// Samples per pixel of each batch.
@@ -296,15 +304,15 @@ impl Moments {
 
 /// What one method's pilot batches leave.
 #[derive(Default)]
-struct Batches {
+pub(super) struct Batches {
     /// Batches rendered (n).
     count: u32,
     /// Samples per pixel in all (N = sum_j k_j).
-    samples: u64,
+    pub(super) samples: u64,
     /// Seconds of their passes (what the sample rate is measured by).
-    seconds: f64,
+    pub(super) seconds: f64,
     /// Seconds of the whole batches: passes, film clears and readbacks (the pilot's cost).
-    wall_seconds: f64,
+    pub(super) wall_seconds: f64,
     /// Values of an image (pixels x bins x channels).
     values: usize,
     /// The last batch's samples per pixel and image while it waits for its pair.
@@ -342,7 +350,7 @@ impl Batches {
     /// median keeps one firefly (a rare path of huge weight, which a render of a hundred times
     /// the pilot's samples shows at its true rate, not at the one in a few hundred it was drawn
     /// with) from deciding the choice, where the mean of the pairs would follow it.
-    fn variance(&self) -> f64 {
+    pub(super) fn variance(&self) -> f64 {
         let mut v = self.pair_variances.clone();
         v.sort_by(f64::total_cmp);
         match v.len() {
@@ -360,7 +368,7 @@ pub const MISS_FACTOR: f64 = 10.0;
 
 /// Renders the next of a method's [`PILOT_BATCHES`] independent batches on `tracer`, sized to
 /// `budget`, and adds it to `batches`.
-fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, budget: PilotBudget) -> Result<()> {
+pub(super) fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, budget: PilotBudget) -> Result<()> {
     let k = match budget {
         PilotBudget::Samples(k) => k,
         // First one sample, then what spreads the time left over the batches left.

@@ -254,13 +254,14 @@ impl<'a> BidirectionalTracer<'a> {
     }
 
     /// A tracer of `settings.method` (direct or ellipsoidal) that is `family`'s half of a
-    /// combined render with K = `settings.connections_per_query` connections per spheroid, or a
-    /// method on its own (None).
+    /// combined render whose weights count `ratio` ellipsoidal connections per direct one (K
+    /// per spheroid times the ellipsoidal half's samples per direct sample), or a method on its
+    /// own (None).
     pub fn with_family(
         ctx: &'a GpuContext,
         scene: &PreparedScene,
         settings: &RenderSettings,
-        family: Option<(Family, u32)>,
+        family: Option<(Family, f64)>,
     ) -> Result<Self> {
         check_settings(settings)?;
         let b = super::kernel_bounces(settings);
@@ -307,7 +308,10 @@ impl<'a> BidirectionalTracer<'a> {
         let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, TARGET_SLOTS_PER_WAVE)?;
         let slots = slots_per_wave;
 
-        let params = super::render_params(scene, settings);
+        let mut params = super::render_params(scene, settings);
+        if let Some((_, ratio)) = family {
+            params.family_ratio = ratio as f32;
+        }
         let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         if ellipsoidal {
             ensure!(
@@ -393,14 +397,13 @@ impl<'a> BidirectionalTracer<'a> {
         constants.push(("LIGHT_VERTICES_TRACED", light_traced as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
-        if let Some((role, ratio)) = family {
+        if let Some((role, _)) = family {
             ensure!(
                 scene.scene.directional_lights.is_empty(),
                 "--method combined does not weigh connections to directional lights yet: use --method direct or \
                  ellipsoidal for this scene"
             );
             constants.push(("FAMILY", role as u32 as f64));
-            constants.push(("FAMILY_RATIO", ratio as f64));
         }
         if ellipsoidal || family.is_some() {
             // (A combined render's direct half leaves out the spheroids its ellipsoidal half does.)

@@ -1,19 +1,27 @@
-//! `--method combined`: direct and ellipsoidal connections in one estimator. Each pixel sample
-//! takes one sample of each family, a direct one (all (s, t) strategies) and an ellipsoidal
-//! one (a vertex on a spheroid for each pair of subpath vertices, K connections per spheroid),
-//! from two tracers with independent random streams. Each contribution is weighted by its
-//! family's share of its path, a balance heuristic between the families whose approximation
-//! of the ellipsoidal density is in shaders/lib/family_mis.wesl; within its family a
-//! contribution keeps the weight it has there. The weights of every path sum to one over both
-//! families, so the image, the sum of the two tracers' films, is an unbiased estimate (the
+//! `--method combined`: direct and ellipsoidal connections in one estimator. A pixel sample of
+//! each family comes from one of two tracers with independent random streams: a direct one (all
+//! (s, t) strategies) and an ellipsoidal one (a vertex on a spheroid for each pair of subpath
+//! vertices, K connections per spheroid). Each contribution is weighted by its family's share
+//! of its path, a balance heuristic between the families (their densities times their samples
+//! per pixel sample, the ellipsoidal density approximated as shaders/lib/family_mis.wesl says);
+//! within its family a contribution keeps the weight it has there. The weights of every path
+//! sum to one over both families whatever the sample counts they assume, so the image, the sum
+//! of the two tracers' films (each the mean of its own samples), is an unbiased estimate (the
 //! tests compare it with `path` and `direct`).
+//!
+//! The two families' samples cost different times and their shares of the image differ in
+//! noise, so a render splits its samples between them ([`Allocation`]): the ellipsoidal half
+//! traces r samples per pixel for each of the direct half's, r chosen by a pilot (as `auto`'s,
+//! on a smaller image and a seed of its own, its films discarded) to minimise the variance of
+//! the sum at equal time, and the weights count the families' samples in that ratio.
 //!
 //! Not yet: checkpoints, shards, NLOS captures and directional lights (refused with a clear
 //! error).
 
 use anyhow::{Result, bail, ensure};
 
-use super::{BidirectionalTracer, Integrator, Method, RenderSettings, Wavefront, checkpoint};
+use super::auto::{Batches, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed};
+use super::{BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
@@ -59,27 +67,131 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
     );
     ensure!(settings.nlos.is_none(), "--method combined does not render --nlos captures yet: use --method ellipsoidal");
     ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
+    if let Some(share) = settings.ellipsoidal_share {
+        ensure!(
+            (1.0 / MAX_SHARE..=MAX_SHARE).contains(&share),
+            "--ellipsoidal-share {share}: give 1/{MAX_SHARE} to {MAX_SHARE} ellipsoidal samples per direct one"
+        );
+    }
     for role in [Family::Direct, Family::Ellipsoidal] {
         super::bidirectional::check_settings(&role.settings(settings))?;
     }
     Ok(())
 }
 
-/// The two halves of a combined render.
+/// Most samples per pixel one half of a combined render traces per sample of the other
+/// (dimensionless): however far a pilot misjudges a half's variance, that half keeps at least
+/// 1 / MAX_SHARE of the other's samples.
+pub const MAX_SHARE: f64 = 8.0;
+
+/// How a combined render splits its samples between its halves, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Allocation {
+    /// Samples per pixel of the ellipsoidal half per sample of the direct half (dimensionless,
+    /// 1 / MAX_SHARE ..= MAX_SHARE).
+    pub ellipsoidal_share: f64,
+    /// Why, in words (for logs and metadata).
+    pub reason: String,
+    /// Seconds the pilot took: passes, film clears and readbacks (counted in a time budget).
+    pub pilot_seconds: f64,
+}
+
+/// The ellipsoidal half's samples per sample of the direct half that minimise the variance of
+/// the sum of the halves' estimates at equal time, from each half's variance per sample v
+/// (radiance squared) and seconds per sample c: n_h proportional to sqrt(v_h / c_h) (Neyman
+/// allocation), clamped to 1 / MAX_SHARE ..= MAX_SHARE. A half whose pilot saw no variance gets
+/// the fewest samples; with neither, one each.
+pub fn ellipsoidal_share(v_direct: f64, c_direct: f64, v_ellipsoidal: f64, c_ellipsoidal: f64) -> f64 {
+    let (d, e) = (v_direct / c_direct.max(1e-30), v_ellipsoidal / c_ellipsoidal.max(1e-30));
+    let share = match (d > 0.0, e > 0.0) {
+        (true, true) => (e / d).sqrt(),
+        (false, true) => MAX_SHARE,
+        (true, false) => 1.0 / MAX_SHARE,
+        (false, false) => 1.0,
+    };
+    share.clamp(1.0 / MAX_SHARE, MAX_SHARE)
+}
+
+/// The allocation of the combined render `settings`: `settings.ellipsoidal_share` where given;
+/// otherwise a pilot of both halves (one sample each per pixel sample, on the image of
+/// `auto::pilot_resolution` from `auto::pilot_seed`, films discarded) measures each half's
+/// variance and time per sample, and [`ellipsoidal_share`] splits the samples. With a time
+/// budget the pilot spends about `auto::PILOT_SHARE` of it.
+pub fn allocate(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    budget: Budget,
+) -> Result<Allocation> {
+    check_settings(settings)?;
+    if let Some(share) = settings.ellipsoidal_share {
+        return Ok(Allocation {
+            ellipsoidal_share: share,
+            reason: format!("{share} ellipsoidal samples per direct one, as given"),
+            pilot_seconds: 0.0,
+        });
+    }
+    let (width, height, _) = pilot_resolution(settings.width, settings.height);
+    let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
+    let per_half = pilot_budget(budget, pixel_ratio, 2);
+    let pilot = RenderSettings {
+        width,
+        height,
+        seed: pilot_seed(settings.seed),
+        ellipsoidal_share: Some(1.0),
+        ..settings.clone()
+    };
+    let mut tracer = CombinedTracer::new(ctx, scene, &pilot)?;
+    tracer.direct.warm_up()?;
+    tracer.ellipsoidal.warm_up()?;
+    let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
+    for _ in 0..PILOT_BATCHES {
+        pilot_batch(&mut tracer.direct, &mut direct, per_half)?;
+        pilot_batch(&mut tracer.ellipsoidal, &mut ellipsoidal, per_half)?;
+    }
+    let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
+    let share =
+        ellipsoidal_share(direct.variance(), per_sample(&direct), ellipsoidal.variance(), per_sample(&ellipsoidal));
+    let reason = format!(
+        "pilot on {width}x{height}: variance per sample {:.3e} (direct half) and {:.3e} (ellipsoidal half), seconds per \
+         sample {:.3e} and {:.3e}: {share:.3} ellipsoidal samples per direct one",
+        direct.variance(),
+        ellipsoidal.variance(),
+        per_sample(&direct),
+        per_sample(&ellipsoidal)
+    );
+    Ok(Allocation { ellipsoidal_share: share, reason, pilot_seconds: direct.wall_seconds + ellipsoidal.wall_seconds })
+}
+
+/// The two halves of a combined render, and the ellipsoidal half's samples per direct one.
 pub struct CombinedTracer<'a> {
     direct: BidirectionalTracer<'a>,
     ellipsoidal: BidirectionalTracer<'a>,
+    share: f64,
 }
 
 impl<'a> CombinedTracer<'a> {
-    /// Builds both halves (`settings.method` is `combined`).
+    /// Builds both halves (`settings.method` is `combined`) for `settings.ellipsoidal_share`
+    /// ellipsoidal samples per direct one (1 where not given; [`allocate`] chooses it for a
+    /// render): the weights count K connections per spheroid times that share.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
-        let k = settings.connections_per_query;
+        let share = settings.ellipsoidal_share.unwrap_or(1.0);
+        let ratio = settings.connections_per_query as f64 * share;
         let half = |family: Family| {
-            BidirectionalTracer::with_family(ctx, scene, &family.settings(settings), Some((family, k)))
+            BidirectionalTracer::with_family(ctx, scene, &family.settings(settings), Some((family, ratio)))
         };
-        Ok(Self { direct: half(Family::Direct)?, ellipsoidal: half(Family::Ellipsoidal)? })
+        Ok(Self { direct: half(Family::Direct)?, ellipsoidal: half(Family::Ellipsoidal)?, share })
+    }
+
+    /// The half with more samples per pixel (the direct one at equal shares), whose samples a
+    /// pass counts, and the other.
+    fn halves(&mut self) -> (&mut BidirectionalTracer<'a>, &mut BidirectionalTracer<'a>, f64) {
+        if self.share > 1.0 {
+            (&mut self.ellipsoidal, &mut self.direct, 1.0 / self.share)
+        } else {
+            (&mut self.direct, &mut self.ellipsoidal, self.share)
+        }
     }
 
     fn unsupported(what: &str) -> anyhow::Error {
@@ -92,9 +204,22 @@ impl Integrator for CombinedTracer<'_> {
         self.direct.wavefront()
     }
 
+    /// `samples` more of the leading half (see `halves`), then the other up to its share of the
+    /// leading half's samples (at least one).
     fn render_pass(&mut self, samples: u32) -> Result<()> {
-        self.direct.render_pass(samples)?;
-        self.ellipsoidal.render_pass(samples)
+        let (leading, other, share) = self.halves();
+        leading.render_pass(samples)?;
+        let due = ((leading.samples_done() as f64 * share).round() as u64).max(1);
+        while other.samples_done() < due {
+            let next = (due - other.samples_done()).min(other.samples_per_pass() as u64) as u32;
+            other.render_pass(next)?;
+        }
+        Ok(())
+    }
+
+    /// The leading half's samples per pixel.
+    fn samples_done(&self) -> u64 {
+        self.direct.samples_done().max(self.ellipsoidal.samples_done())
     }
 
     fn samples_per_pass(&self) -> u32 {
@@ -117,13 +242,14 @@ impl Integrator for CombinedTracer<'_> {
         Ok(self.direct.set_gate(scene, &direct)? && self.ellipsoidal.set_gate(scene, &ellipsoidal)?)
     }
 
-    /// The sum of the two halves' estimates.
+    /// The sum of the two halves' estimates, its samples per pixel those of the leading half.
     fn film(&self) -> Result<Film> {
         let mut film = self.direct.film()?;
         let other = self.ellipsoidal.film()?;
         for (a, b) in film.data.iter_mut().zip(&other.data) {
             *a += b;
         }
+        film.spp = film.spp.max(other.spp);
         Ok(film)
     }
 
@@ -163,5 +289,25 @@ impl Integrator for CombinedTracer<'_> {
             bail!(Self::unsupported("render a shard (--shard)"));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shares_follow_variance_over_time() {
+        // n_h proportional to sqrt(v_h / c_h).
+        assert_eq!(ellipsoidal_share(1.0, 1.0, 1.0, 1.0), 1.0);
+        assert!((ellipsoidal_share(1.0, 1.0, 4.0, 1.0) - 2.0).abs() < 1e-12);
+        assert!((ellipsoidal_share(1.0, 1.0, 1.0, 4.0) - 0.5).abs() < 1e-12);
+        assert!((ellipsoidal_share(2.0, 3.0, 8.0, 3.0) - 2.0).abs() < 1e-12);
+        // Clamped, and a half that showed no variance keeps the fewest samples.
+        assert_eq!(ellipsoidal_share(1.0, 1.0, 1e6, 1.0), MAX_SHARE);
+        assert_eq!(ellipsoidal_share(1e6, 1.0, 1.0, 1.0), 1.0 / MAX_SHARE);
+        assert_eq!(ellipsoidal_share(0.0, 1.0, 1.0, 1.0), MAX_SHARE);
+        assert_eq!(ellipsoidal_share(1.0, 1.0, 0.0, 1.0), 1.0 / MAX_SHARE);
+        assert_eq!(ellipsoidal_share(0.0, 1.0, 0.0, 1.0), 1.0);
     }
 }

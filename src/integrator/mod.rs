@@ -126,6 +126,10 @@ pub struct RenderSettings {
     /// spot and its sensed point from it, instead of descending the whole BVH
     /// (`render --band-index on`; off by default).
     pub band_index: bool,
+    /// `combined`: samples per pixel of the ellipsoidal half per sample of the direct half
+    /// (dimensionless, 1 / [`combined::MAX_SHARE`] ..= MAX_SHARE); None: a render's pilot
+    /// chooses it (see [`combined::allocate`]), an integrator built directly takes 1.
+    pub ellipsoidal_share: Option<f64>,
 }
 
 /// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
@@ -201,6 +205,7 @@ impl Default for RenderSettings {
             nlos: None,
             target_pilot_spp: 0,
             band_index: false,
+            ellipsoidal_share: None,
         }
     }
 }
@@ -439,6 +444,9 @@ pub struct RenderOutput {
     pub samples_to_visit_every_bin: Option<u64>,
     /// `--method auto`: the method chosen and the pilot's figures (its time is in `rendering`).
     pub choice: Option<auto::MethodChoice>,
+    /// `--method combined`: how its samples were split between its halves (a pilot's time is
+    /// in `rendering`).
+    pub allocation: Option<combined::Allocation>,
     /// The render stopped before its budget was spent (see [`render_resumable`]).
     pub stopped_early: bool,
     /// The render's state after its last pass, when asked for (see [`render_resumable`]).
@@ -470,6 +478,7 @@ impl RenderOutput {
             band_index: None,
             samples_to_visit_every_bin: None,
             choice: None,
+            allocation: None,
             stopped_early: false,
             state: None,
         }
@@ -510,6 +519,10 @@ pub fn render_metadata(
     ];
     if let Some((s, t)) = settings.debug_strategy {
         metadata.push(("debug_strategy".into(), format!("{s},{t}")));
+    }
+    if let Some(allocation) = &output.allocation {
+        metadata.push(("ellipsoidal_share".into(), format!("{}", allocation.ellipsoidal_share)));
+        metadata.push(("combined_allocation".into(), allocation.reason.clone()));
     }
     if let Some(choice) = &output.choice {
         metadata.push(("chosen_method".into(), choice.chosen.name().into()));
@@ -829,9 +842,18 @@ pub fn render_resumable(
     } else {
         None
     };
-    let render_settings = match (&choice, resume) {
-        (Some(c), _) => auto::candidate_settings(settings, c.chosen),
-        (None, Some(state)) if settings.method == Method::Auto => auto::candidate_settings(settings, state.method),
+    // combined: a pilot of both halves (counted against a time budget) splits the samples.
+    let allocation = if settings.method == Method::Combined && resume.is_none() {
+        Some(combined::allocate(ctx, scene, settings, budget)?)
+    } else {
+        None
+    };
+    let render_settings = match (&choice, &allocation, resume) {
+        (Some(c), _, _) => auto::candidate_settings(settings, c.chosen),
+        (None, Some(a), _) => RenderSettings { ellipsoidal_share: Some(a.ellipsoidal_share), ..settings.clone() },
+        (None, None, Some(state)) if settings.method == Method::Auto => {
+            auto::candidate_settings(settings, state.method)
+        }
         _ => settings.clone(),
     };
     let mut tracer = create_integrator(ctx, scene, &render_settings)?;
@@ -852,7 +874,9 @@ pub fn render_resumable(
         // then records the same pilot.)
         tracer.skip_samples(start_at.skip_samples)?;
     }
-    let pilot = before + Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds));
+    let pilot = before
+        + Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds))
+        + Duration::from_secs_f64(allocation.as_ref().map_or(0.0, |a| a.pilot_seconds));
     let budget = match budget {
         Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
         Budget::Samples(n) => Budget::Samples(n.saturating_sub(tracer.samples_done())),
@@ -887,6 +911,7 @@ pub fn render_resumable(
         band_index: tracer.band_index_report(),
         samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
         choice,
+        allocation,
         stopped_early: flow.is_break(),
         state,
     })
