@@ -306,8 +306,8 @@ def smooth_superellipsoid(centre, radii, exponent, nu, nv):
     top = len(mesh.points) - 1
     ring = lambda j, i: 1 + (j - 1) * nu + i % nu
     for i in range(nu):
-        mesh.triangles.append((0, ring(1, i + 1), ring(1, i)))
-        mesh.triangles.append((top, ring(nv - 1, i), ring(nv - 1, i + 1)))
+        mesh.triangles.append((0, ring(1, i), ring(1, i + 1)))
+        mesh.triangles.append((top, ring(nv - 1, i + 1), ring(nv - 1, i)))
         for j in range(1, nv - 1):
             a, b, c, d = ring(j, i), ring(j, i + 1), ring(j + 1, i + 1), ring(j + 1, i)
             mesh.triangles += [(a, c, b), (a, d, c)]
