@@ -83,9 +83,14 @@ def test_a_gate_sweep_on_one_renderer_builds_kernels_once_and_equals_fresh_rende
         fresh = gatetrace.Renderer(scene, res=(32, 32), max_bounces=4).render(
             gatetrace.box(starts[i], starts[i] + 0.05), spp=8, seed=3)[0]
         assert np.array_equal(images[i], fresh), f"gate {i}"
-    # A gate of another kind needs other kernels, built on the same renderer.
+    # A gate of another kind needs other kernels, built on the same renderer, once: renders of
+    # the steady state after it reuse them.
     steady, _ = renderer.render("none", spp=2)
     assert steady.shape == (32, 32, 3) and steady.mean() > 0
+    built = gatetrace.kernels_built()
+    again, _ = renderer.render("none", spp=2, seed=5)
+    assert gatetrace.kernels_built() == built, "a second steady render rebuilt kernels"
+    assert again.mean() > 0 and not np.array_equal(again, steady)
 
 
 def test_bidirectional_methods_agree_with_path_on_the_image_mean():

@@ -39,7 +39,7 @@ impl Resources {
     pub fn storage_init<T: bytemuck::Pod>(&mut self, ctx: &GpuContext, name: &'static str, data: &[T]) -> Result<()> {
         let mut bytes = bytemuck::cast_slice::<T, u8>(data).to_vec();
         check_size(ctx, name, bytes.len() as u64)?;
-        bytes.resize(bytes.len().max(16).max(size_of::<T>()), 0);
+        bytes.resize(storage_init_bytes(data) as usize, 0);
         let buffer = ctx.allocate(name, bytes.len() as u64, || {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(name),
@@ -132,6 +132,12 @@ impl ChunkLayout {
         let size = self.per_chunk;
         (c as u64 * size).min(count)..((c as u64 + 1) * size).min(count)
     }
+}
+
+/// Bytes of the buffer [`Resources::storage_init`] makes of `data`: its bytes, padded to at least
+/// 16 and one element (so a host that rewrites the buffer later compares against this size).
+pub fn storage_init_bytes<T: bytemuck::Pod>(data: &[T]) -> u64 {
+    size_of_val(data).max(16).max(size_of::<T>()) as u64
 }
 
 /// WGSL names of the chunks of array `name` (bindings.wesl): four for most arrays, three for

@@ -133,7 +133,7 @@ impl<'a> Wavefront<'a> {
         let sampler = super::target_sampler(scene, settings);
         let cdf = sampler.as_ref().map_or(vec![0.0, 1.0], |t| t.cdf.clone());
         let cdf_buffer = self.resources.get("target_cdf").unwrap();
-        if (cdf.len() * 4) as u64 != cdf_buffer.size() {
+        if crate::gpu::resources::storage_init_bytes(&cdf) != cdf_buffer.size() {
             return Ok(false);
         }
         let queue = &self.ctx.queue;
