@@ -245,6 +245,9 @@ pub struct BidirectionalTracer<'a> {
     band_masses: Vec<f32>,
     /// Bytes one binding may hold.
     binding_limit: u64,
+    /// `target_visits` holds visit tables of the gate it was built for (a target pilot or a band
+    /// index shares out extra visits); otherwise it is a stand-in of one element.
+    keeps_visit_tables: bool,
 }
 
 impl<'a> BidirectionalTracer<'a> {
@@ -329,7 +332,8 @@ impl<'a> BidirectionalTracer<'a> {
         let target_pilot_spp = if visits_fit { settings.target_pilot_spp } else { 0 };
         // A band index's masses share out the extra visits too (see `prepare`).
         let index_visits = visits_fit && settings.band_index && settings.nlos.is_some();
-        if target_pilot_spp > 0 || index_visits {
+        let keeps_visit_tables = target_pilot_spp > 0 || index_visits;
+        if keeps_visit_tables {
             r.storage_zeroed(ctx, "target_visits", visits_bytes, wgpu::BufferUsages::empty())?;
         }
         let splat_film_bytes = super::film_elements(settings)? * super::FILM_ELEMENT_BYTES;
@@ -507,6 +511,7 @@ impl<'a> BidirectionalTracer<'a> {
             band_index_result,
             band_masses: Vec::new(),
             binding_limit: limit,
+            keeps_visit_tables,
         })
     }
 
@@ -514,6 +519,7 @@ impl<'a> BidirectionalTracer<'a> {
     /// to it; where its entries do not fit a binding the capture goes on with BVH queries.
     fn build_band_index(&mut self) -> Result<()> {
         let Some(index) = self.band_index.take() else { return Ok(()) };
+        let visits_fit = self.visit_tables_fit();
         let wf = &mut self.wf;
         let result = index.build(wf.ctx, &mut wf.resources, &mut wf.params, self.binding_limit)?;
         if let (Ok(_), Some(kernels), Some(groups)) =
@@ -523,7 +529,7 @@ impl<'a> BidirectionalTracer<'a> {
             groups[1] = kernels[1].bind(wf.ctx, &wf.resources);
         }
         if let Ok(summary) = &result
-            && wf.resources.get("target_visits").is_some_and(|b| b.size() > 4)
+            && visits_fit
         {
             let strata = wf.params.target_length.strata;
             let cells = (wf.params.width * wf.params.height) as usize * strata.div_ceil(summary.ratio) as usize;
@@ -579,13 +585,19 @@ impl<'a> BidirectionalTracer<'a> {
         Ok(())
     }
 
-    /// Whether the render has a target pilot and the current gate's visit tables (strata + 1
-    /// counts per pixel) fit the buffer built for them.
+    /// Whether the render has a target pilot and the current gate's visit tables fit the buffer
+    /// built for them.
     fn target_pilot_fits(&self) -> bool {
+        self.target_pilot_spp > 0 && self.visit_tables_fit()
+    }
+
+    /// Whether the render keeps visit tables and the current gate's (strata + 1 counts per
+    /// pixel) fit the buffer built for them.
+    fn visit_tables_fit(&self) -> bool {
         let t = &self.wf.params.target_length;
         let bytes = (self.wf.params.width as u64 * self.wf.params.height as u64) * (t.strata as u64 + 1) * 4;
         let room = self.wf.resources.get("target_visits").map_or(0, |b| b.size());
-        self.target_pilot_spp > 0 && t.strata > 0 && bytes <= room
+        self.keeps_visit_tables && t.strata > 0 && bytes <= room
     }
 
     /// Mean work of one ellipsoid query so far: loop iterations over BVH nodes and triangles,
