@@ -10,6 +10,7 @@ use anyhow::{Context as _, Result, bail, ensure};
 use clap::{Args, Parser, Subcommand};
 use gatetrace::film::Gate;
 use gatetrace::film::output::{OutputFormat, check_writable, write_film};
+use gatetrace::film::preview::{PreviewSettings, write_preview};
 use gatetrace::frames::{FramePlan, frame_path, frame_seed, is_frame_pattern, parse_frame_range, parse_time_range};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::checkpoint::{
@@ -38,7 +39,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render an image (or a transient cube, or a sequence of frames) to EXR or NPY.
+    /// Render an image (or a transient cube, or a sequence of frames) to EXR or NPY, or a PNG
+    /// preview.
     Render(RenderArgs),
     /// Open the interactive viewer: scrub the gate through time and watch light move; click a
     /// pixel for its transient response.
@@ -56,6 +58,19 @@ enum Command {
     /// unsplit render gives, bit for bit; refuses parts of different renders, missing or
     /// repeated shards.
     Merge(MergeArgs),
+    /// Say what an output holds: its layout, the gate (as typed and in metres), the units and
+    /// how it was rendered, from the file and its metadata (.npy with its .json sidecar, .exr,
+    /// or a .png preview).
+    Info(InfoArgs),
+}
+
+#[derive(Args)]
+struct InfoArgs {
+    /// An output of `gatetrace render` or `merge`: .npy, .exr or .png.
+    file: PathBuf,
+    /// Print everything as one JSON object (format, shape, layout, metadata) instead.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -66,6 +81,10 @@ struct MergeArgs {
     /// Output file: .exr or .npy (with a .json sidecar), as `render` writes them.
     #[arg(long, short)]
     out: PathBuf,
+    /// Create the output's directory when it does not exist (without this, a missing directory
+    /// is an error).
+    #[arg(long)]
+    mkdir: bool,
 }
 
 #[derive(Args)]
@@ -93,8 +112,10 @@ struct RenderArgs {
     /// others after half its batches), or the work of 1/16 of --spp per method, and is
     /// discarded, so the image is the chosen method's with the same seed; the metadata records
     /// the choice and the pilot's figures).
-    #[arg(long, value_enum, default_value_t = Method::Path)]
-    method: Method,
+    /// Default: `path`; for --nlos captures with a gate, `ellipsoidal` (see "NLOS captures" in
+    /// the README).
+    #[arg(long, value_enum)]
+    method: Option<Method>,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
     /// `none` (steady state); `box:A..B` (W = 1 on [A, B)); `gaussian:MU,SIGMA`;
     /// `cw:FREQ_HZ,PHASE_DEG` (W = cos(2 pi f l / c + phase), signed);
@@ -282,6 +303,19 @@ struct RenderArgs {
     /// SCENE_NAME_{frame:04}.exr for a sequence, or SCENE_NAME_nlos.npy for --nlos.
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// Create the output's directory when it does not exist (without this, a missing directory
+    /// is an error, so a mistyped path never creates directories).
+    #[arg(long)]
+    mkdir: bool,
+    /// With a .png output: the bin of a transient gate to show (from 0); without it a preview
+    /// of a transient is a contact sheet of up to 64 tiles, each the sum of consecutive bins.
+    #[arg(long, value_name = "BIN")]
+    preview_bin: Option<u32>,
+    /// With a .png output: exposure in EV (values are scaled by 2^EV, then clamped to [0, 1]
+    /// and sRGB-encoded); default: the 99th percentile of the nonzero values maps to 1. The
+    /// preview's metadata records the exposure used.
+    #[arg(long, value_name = "EV", allow_hyphen_values = true)]
+    exposure: Option<f32>,
     /// Non-line-of-sight capture with this laser scan: `single` (one laser spot, --laser-spot),
     /// `confocal` (each sensed point lit by a laser spot on itself, in one render) or
     /// `exhaustive` (every spot of --laser-grid with every sensed point). --res is then the grid
@@ -582,6 +616,13 @@ fn main() {
         Command::EqualTime(args) => run_equal_time(args),
         Command::StressEllipsoid(args) => run_stress(args),
         Command::Merge(args) => run_merge(args),
+        Command::Info(args) => gatetrace::film::info::file_info(&args.file).map(|info| {
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&info.to_json()).expect("JSON values"));
+            } else {
+                print!("{}", info.to_text(&args.file));
+            }
+        }),
         Command::Bench(args) => {
             let settings = gatetrace::bench::BenchSettings {
                 seconds: args.seconds,
@@ -659,6 +700,12 @@ fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &RenderArgs) -> R
 fn run_render(args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
+    // NLOS captures default to the method the README's capture tables measure as the default.
+    let method = args.method.unwrap_or(if args.nlos.is_some() && gate != Gate::None {
+        Method::Ellipsoidal
+    } else {
+        Method::Path
+    });
     let budget = match (args.spp, args.time) {
         (_, Some(t)) => match Duration::try_from_secs_f64(t) {
             Ok(d) if t > 0.0 => Budget::Time(d),
@@ -692,7 +739,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let mut settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
-        method: args.method,
+        method: method,
         gate: gate.clone(),
         max_bounces: args.max_bounces,
         rr_depth: args.rr_depth,
@@ -703,10 +750,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
         debug_strategy: args.debug_strategy,
         binding_limit: None,
         connections_per_query: args.connections_per_query.unwrap_or(
-            if args.nlos.is_some() && args.method == Method::Ellipsoidal {
+            if args.nlos.is_some() && method == Method::Ellipsoidal {
                 gatetrace::integrator::bidirectional::DEFAULT_NLOS_CONNECTIONS_PER_QUERY
             } else {
-                gatetrace::integrator::bidirectional::default_connections_per_query(args.method)
+                gatetrace::integrator::bidirectional::default_connections_per_query(method)
             },
         ),
         query: gatetrace::integrator::QuerySettings {
@@ -724,7 +771,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         },
         nlos: None,
         target_pilot_spp: args.target_pilot.unwrap_or(
-            if args.nlos.is_some() && args.method == Method::Ellipsoidal && matches!(gate, Gate::Transient { .. }) {
+            if args.nlos.is_some() && method == Method::Ellipsoidal && matches!(gate, Gate::Transient { .. }) {
                 gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
             } else {
                 0
@@ -734,7 +781,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         ellipsoidal_share: args.ellipsoidal_share,
     };
     ensure!(
-        args.ellipsoidal_share.is_none() || args.method == Method::Combined,
+        args.ellipsoidal_share.is_none() || method == Method::Combined,
         "--ellipsoidal-share applies to --method combined only"
     );
     ensure!(
@@ -755,7 +802,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             "--shard needs --spp: a shard renders a slice of a known number of samples per pixel"
         );
         ensure!(
-            args.method != Method::Auto,
+            method != Method::Auto,
             "--shard: --method auto chooses from timings, so shards could choose differently; choose path, direct or \
              ellipsoidal"
         );
@@ -775,7 +822,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
              the samples traced so far (single and confocal scans) but keeps no checkpoint"
         );
         ensure!(
-            args.method != Method::Auto,
+            method != Method::Auto,
             "--method auto does not apply to NLOS captures (--nlos): choose path, direct or ellipsoidal"
         );
         ensure!(
@@ -793,7 +840,16 @@ fn run_render(args: RenderArgs) -> Result<()> {
     for frame in plan.frames() {
         let path = if is_frame_pattern(&pattern) { frame_path(&pattern, frame)? } else { out.clone() };
         if args.shard.is_none() {
-            OutputFormat::of(&path)?;
+            let format = OutputFormat::of(&path)?;
+            ensure!(
+                format == OutputFormat::Png || (args.preview_bin.is_none() && args.exposure.is_none()),
+                "--preview-bin and --exposure apply to .png previews, not to {}",
+                path.display()
+            );
+            if let Some(bin) = args.preview_bin {
+                ensure!(bin < gate.bins(), "--preview-bin {bin}: gate {} has {} bin(s)", args.gate, gate.bins());
+            }
+            ensure!(args.exposure.is_none_or(f32::is_finite), "--exposure must be a finite number of EV");
         }
         let settings =
             RenderSettings { gate: plan.gate(&gate, frame)?, seed: frame_seed(args.seed, frame), ..settings.clone() };
@@ -806,7 +862,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             bail!("--connections-per-query applies to --method ellipsoidal and combined only");
         }
         film_elements(&settings)?;
-        check_writable(&path)?;
+        check_writable(&path, args.mkdir)?;
         frames.push((frame, path, settings));
     }
 
@@ -899,6 +955,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 label,
                 frame_info,
                 &checkpoints,
+                PreviewSettings { bin: args.preview_bin, exposure_ev: args.exposure },
                 &bars,
             )?;
         }
@@ -941,7 +998,7 @@ fn run_nlos(
     );
     ensure!(args.laser_grid.is_none() || scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
     film_elements(&base)?;
-    check_writable(&out)?;
+    check_writable(&out, args.mkdir)?;
     let mut loaded = load_gltf_for_capture(scene_path)?;
     let mut base = base;
     let hidden_triangles = loaded.triangles.len() - loaded.node(&args.relay_wall).map_or(0, |n| n.triangles.len());
@@ -1059,16 +1116,18 @@ fn run_nlos(
     if band_index_declined {
         metadata.push((
             "band_index".into(),
-            format!("off (auto): the scene's {hidden_triangles} triangles besides the relay wall are searched whole by every query"),
+            format!("off (auto): the scene's {hidden_triangles} triangles besides the relay wall are searched whole by every query")
+                .into(),
         ));
     }
     if let Some(r) = shells {
         metadata.push((
             "shell_preparation".into(),
-            format!(
-                "{} closed meshes made one-sided, {} triangles cut into pieces, {} triangles in all",
-                r.closed_meshes, r.refined, r.triangles
-            ),
+            serde_json::json!({
+                "closed_meshes_made_one_sided": r.closed_meshes,
+                "triangles_cut_into_pieces": r.refined,
+                "triangles": r.triangles,
+            }),
         ));
     }
     let signal = interrupt::received().filter(|_| output.stopped_early);
@@ -1163,7 +1222,7 @@ fn render_shard(
     }
     let state = output.state.as_ref().expect("the render keeps its state");
     let mut metadata = render_metadata(ctx, scene_path, &args.gate, settings, &output);
-    metadata.push(("camera".into(), scene.scene.camera.describe()));
+    metadata.push(("camera".into(), scene.scene.camera.describe().into()));
     let gate = &settings.gate;
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
     let mut extra = serde_json::Map::new();
@@ -1188,7 +1247,7 @@ fn render_shard(
 /// `gatetrace merge`: adds the shards' sums and writes the unsplit render's image.
 fn run_merge(args: MergeArgs) -> Result<()> {
     OutputFormat::of(&args.out)?;
-    check_writable(&args.out)?;
+    check_writable(&args.out, args.mkdir)?;
     let mut parts = Vec::new();
     for path in &args.parts {
         parts.push((path, read_state_file(path)?));
@@ -1216,19 +1275,20 @@ fn run_merge(args: MergeArgs) -> Result<()> {
     let names: Vec<String> = order.iter().map(|&k| parts[k].0.display().to_string()).collect();
     let merged = merge_states(&states, &names)?;
     let film = gatetrace::integrator::wavefront::film_of_state(&merged)?;
-    let mut metadata: Vec<(String, String)> =
+    let mut metadata: gatetrace::film::output::Metadata =
         serde_json::from_value(first_header["metadata"].clone()).map_err(|_| not_a_shard(first_path))?;
     let bin_ranges: Vec<(f64, f64)> =
         serde_json::from_value(first_header["bin_ranges"].clone()).map_err(|_| not_a_shard(first_path))?;
     for (key, value) in metadata.iter_mut() {
         match key.as_str() {
-            "spp" => *value = merged.samples_in_film.to_string(),
-            "rendering_seconds" => *value = format!("{:.3}", merged.rendering_seconds),
-            "elapsed_seconds" => *value = "(sum over shards: see rendering_seconds)".into(),
+            "spp" => *value = merged.samples_in_film.into(),
+            "rendering_seconds" => *value = gatetrace::integrator::milli(merged.rendering_seconds),
+            // Shards run side by side: their wall clocks do not add up to one.
+            "elapsed_seconds" => *value = serde_json::Value::Null,
             _ => {}
         }
     }
-    metadata.push(("shards".into(), count.to_string()));
+    metadata.push(("shards".into(), count.into()));
     write_film(&args.out, &film, &metadata, &bin_ranges)?;
     let mean = film.mean_rgb();
     println!(
@@ -1268,6 +1328,7 @@ fn render_one(
     label: Option<String>,
     frame: Option<(u32, &FramePlan)>,
     checkpoints: &Checkpoints,
+    preview: PreviewSettings,
     bars: &indicatif::MultiProgress,
 ) -> Result<()> {
     let checkpoint = checkpoint_path(out);
@@ -1313,17 +1374,17 @@ fn render_one(
     let film = &output.film;
     let secs = output.elapsed.as_secs_f64();
     let mut metadata = render_metadata(ctx, scene_path, gate_spec, settings, &output);
-    metadata.push(("camera".into(), scene.scene.camera.describe()));
+    metadata.push(("camera".into(), scene.scene.camera.describe().into()));
     if let Some((index, plan)) = frame {
-        metadata.push(("frame".into(), index.to_string()));
-        metadata.push(("frames".into(), plan.count.to_string()));
-        metadata.push(("gate_shift_m".into(), (plan.gate_step * index as f64).to_string()));
+        metadata.push(("frame".into(), index.into()));
+        metadata.push(("frames".into(), plan.count.into()));
+        metadata.push(("gate_shift_m".into(), (plan.gate_step * index as f64).into()));
         if let Some(t) = plan.anim_time(index) {
-            metadata.push(("anim_time_s".into(), t.to_string()));
+            metadata.push(("anim_time_s".into(), t.into()));
         }
     }
     if let Some(state) = &resumed {
-        metadata.push(("resumed_from_spp".into(), state.samples_in_film.to_string()));
+        metadata.push(("resumed_from_spp".into(), state.samples_in_film.into()));
     }
     let signal = interrupt::received().filter(|_| output.stopped_early);
     if let Some(signal) = signal {
@@ -1331,13 +1392,22 @@ fn render_one(
         metadata.push((
             "requested".into(),
             match budget {
-                Budget::Samples(n) => format!("{n} spp"),
-                Budget::Time(t) => format!("{} s", t.as_secs_f64()),
+                Budget::Samples(n) => serde_json::json!({ "spp": n }),
+                Budget::Time(t) => serde_json::json!({ "seconds": t.as_secs_f64() }),
             },
         ));
     }
+    let black = gatetrace::integrator::black_image_warning(scene, settings, gate_spec, film);
+    if let Some(warning) = &black {
+        metadata.push(("warning".into(), warning.clone().into()));
+        bars.suspend(|| eprintln!("warning: {warning}"));
+    }
     let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
-    write_film(out, film, &metadata, &bin_ranges)?;
+    if OutputFormat::of(out)? == OutputFormat::Png {
+        write_preview(out, film, &metadata, &bin_ranges, preview)?;
+    } else {
+        write_film(out, film, &metadata, &bin_ranges)?;
+    }
     if let Some(signal) = signal {
         say(
             bars,

@@ -473,13 +473,14 @@ impl<'a> Viewer<'a> {
         let (Some(tracer), Some(built)) = (&self.tracer, &self.built) else { bail!("nothing rendered yet") };
         let film = tracer.film()?;
         let metadata: Metadata = vec![
-            ("scene".into(), self.options.scene.display().to_string()),
+            ("scene".into(), self.options.scene.display().to_string().into()),
             ("method".into(), built.method.name().into()),
-            ("gate_description".into(), built.gate.describe()),
-            ("spp".into(), film.spp.to_string()),
-            ("seed".into(), built.seed.to_string()),
-            ("max_bounces".into(), built.max_bounces.to_string()),
-            ("adapter".into(), self.ctx.adapter_description()),
+            ("gate_parameters".into(), built.gate.parameters()),
+            ("gate_description".into(), built.gate.describe().into()),
+            ("spp".into(), film.spp.into()),
+            ("seed".into(), built.seed.into()),
+            ("max_bounces".into(), built.max_bounces.into()),
+            ("adapter".into(), self.ctx.adapter_description().into()),
         ];
         write_film(path, &film, &metadata, &[])
     }

@@ -602,8 +602,28 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
         case(
             "output under a regular file",
             |d| std::fs::write(d.join("file"), b"").unwrap(),
-            plain(&["render", "--res", "8x8", "--out", "{dir}/file/x.npy"]),
+            plain(&["render", "--res", "8x8", "--out", "{dir}/file/x.npy", "--mkdir"]),
             &["file", "cannot create the directory"],
+        ),
+        case(
+            "output in a missing directory",
+            none,
+            plain(&["render", "--res", "8x8", "--out", "{dir}/missing/x.npy"]),
+            &["{dir}/missing: no such directory", "--mkdir"],
+        ),
+        case(
+            "merge into a missing directory",
+            |d| shards(d, &[0, 1, 2, 3], &[]),
+            plain(&[
+                "merge",
+                "{dir}/0.shard",
+                "{dir}/1.shard",
+                "{dir}/2.shard",
+                "{dir}/3.shard",
+                "--out",
+                "{dir}/missing/m.npy",
+            ]),
+            &["{dir}/missing: no such directory"],
         ),
         case(
             "output that is a directory",

@@ -50,9 +50,14 @@ fn npy_output_has_the_documented_layout_and_metadata() {
     for key in ["scene", "method", "gate", "spp", "seed", "elapsed_seconds", "adapter"] {
         assert!(meta.get(key).is_some(), "metadata lacks `{key}`: {meta}");
     }
-    assert_eq!(meta["spp"], "4");
-    assert_eq!(meta["seed"], "5");
+    // Numbers are numbers, the gate is in metres beside its spec.
+    assert_eq!(meta["spp"], 4);
+    assert_eq!(meta["seed"], 5);
     assert_eq!(meta["method"], "path");
+    assert_eq!(meta["resolution"], serde_json::json!([12, 8]));
+    assert!(meta["elapsed_seconds"].is_f64() && meta["rendering_seconds"].is_f64(), "{meta}");
+    assert!(meta["max_bounces"].is_u64() && meta["truncated_traversals"] == 0, "{meta}");
+    assert_eq!(meta["gate_parameters"], serde_json::json!({ "kind": "none" }));
 
     let cube = dir.join("cube.npy");
     let o = gatetrace(&[
@@ -98,7 +103,17 @@ fn exr_output_has_a_layer_per_bin_and_metadata() {
     let gate = attribute("gatetrace.gate").expect("gate attribute");
     assert!(matches!(&gate, AttributeValue::Text(t) if t.to_string() == "transient:6.5ns,200ps,5"), "{gate:?}");
     assert!(attribute("gatetrace.adapter").is_some());
-    assert!(attribute("gatetrace.spp").is_some());
+    assert!(matches!(attribute("gatetrace.spp"), Some(AttributeValue::Text(t)) if t.to_string() == "2"));
+    // Structured values are JSON text: the gate in metres, whatever units it was typed in.
+    let Some(AttributeValue::Text(parameters)) = attribute("gatetrace.gate_parameters") else {
+        panic!("gate_parameters attribute")
+    };
+    let parameters: serde_json::Value = serde_json::from_str(&parameters.to_string()).unwrap();
+    assert_eq!(parameters["kind"], "transient");
+    assert_eq!(parameters["bins"], 5);
+    let c = 0.299792458;
+    assert!((parameters["start_m"].as_f64().unwrap() - 6.5 * c).abs() < 1e-12, "{parameters}");
+    assert!((parameters["bin_width_m"].as_f64().unwrap() - 0.2 * c).abs() < 1e-12, "{parameters}");
     for layer in &image.layer_data {
         assert_eq!(layer.size, Vec2(6, 4));
         assert_eq!(layer.channel_data.list.len(), 3);
@@ -125,7 +140,7 @@ fn time_budget_renders_passes_sized_to_the_budget() {
     assert!(o.status.success(), "{}", stderr(&o));
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("timed.json")).unwrap()).unwrap();
-    let number = |key: &str| -> f64 { meta[key].as_str().unwrap().parse().unwrap() };
+    let number = |key: &str| -> f64 { meta[key].as_f64().unwrap() };
     assert!(number("spp") >= 1.0, "no sample rendered");
     let rendering = number("rendering_seconds");
     assert!(rendering > 0.0, "no rendering time recorded: {meta}");
@@ -210,7 +225,7 @@ fn check_profile(gate: &str, stages: &[&str]) {
     let wall_seconds: f64 = {
         let meta: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("p.json")).unwrap()).unwrap();
-        meta["elapsed_seconds"].as_str().unwrap().parse().unwrap()
+        meta["elapsed_seconds"].as_f64().unwrap()
     };
     let mut total_ms = 0.0;
     for stage in stages {
@@ -230,4 +245,75 @@ fn check_profile(gate: &str, stages: &[&str]) {
         total_ms > 0.0 && total_ms / 1e3 <= wall_seconds + 1.0,
         "{total_ms} ms of stages in a {wall_seconds} s render"
     );
+}
+
+#[test]
+fn a_missing_output_directory_is_an_error_unless_mkdir_asks_for_it() {
+    let dir = common::scratch_dir("cli_mkdir");
+    let missing = dir.join("made/deeper");
+    let _ = std::fs::remove_dir_all(dir.join("made"));
+    let out = missing.join("x.npy");
+    let args = ["render", "--res", "6x4", "--spp", "1", "--max-bounces", "1", "--out", out.to_str().unwrap()];
+    let o = gatetrace(&args);
+    assert!(!o.status.success(), "a missing directory must be an error");
+    let err = stderr(&o);
+    assert!(err.contains(&format!("{}: no such directory", missing.display())) && err.contains("--mkdir"), "{err}");
+    assert!(!dir.join("made").exists(), "the failed render created a directory");
+    let o = gatetrace(&[&args[..], &["--mkdir"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.exists() && missing.join("x.json").exists());
+}
+
+#[test]
+fn a_gate_no_path_reaches_is_said_and_times_typed_as_metres_are_named() {
+    let dir = common::scratch_dir("cli_black");
+    // Nanoseconds without their unit: 10.474 m lies beyond every 3-bounce path of the box.
+    let out = dir.join("late.npy");
+    let o = gatetrace(&[
+        "render",
+        "--gate",
+        "box:10.474..10.641",
+        "--max-bounces",
+        "3",
+        "--res",
+        "8x8",
+        "--spp",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("warning") && err.contains("longest path possible with 3 bounces"), "{err}");
+    assert!(err.contains("`box:10.474ns..10.641ns`"), "the hint names the gate meant: {err}");
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("late.json")).unwrap()).unwrap();
+    assert!(meta["warning"].as_str().unwrap().contains("image is black"), "{meta}");
+
+    // Reachable in principle, but no sample reaches a gaussian this far out: still said.
+    let out = dir.join("far.npy");
+    let o = gatetrace(&[
+        "render",
+        "--gate",
+        "gaussian:10.5,0.05",
+        "--max-bounces",
+        "3",
+        "--res",
+        "8x8",
+        "--spp",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("the image is black: no path of its 2 samples per pixel reached"), "{err}");
+    assert!(err.contains("`gaussian:10.5ns,0.05ns`"), "{err}");
+
+    // A gate with its units, or with light, gets no such warning.
+    for gate in ["box:3.14..3.19", "box:10.474ns..10.641ns"] {
+        let out = dir.join("lit.npy");
+        let o = gatetrace(&["render", "--gate", gate, "--res", "8x8", "--spp", "4", "--out", out.to_str().unwrap()]);
+        assert!(o.status.success() && !stderr(&o).contains("warning"), "{gate}: {}", stderr(&o));
+    }
 }

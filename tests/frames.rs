@@ -55,7 +55,7 @@ fn a_gate_sweep_starts_at_the_single_image_and_ranges_reproduce_frames() {
     assert_ne!(bits(&frames[1]), bits(&frames[2]));
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("f_0002.json")).unwrap()).unwrap();
-    assert_eq!(meta["frame"], "2");
+    assert_eq!(meta["frame"], 2);
     assert!(meta["gate_description"].as_str().unwrap().contains("3.24"), "{meta}");
 
     // Frame 0 is the single image of the same gate and seed.

@@ -284,3 +284,39 @@ fn a_capture_needs_no_camera_or_light() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `render --nlos` without `--method` renders with the capture defaults (`ellipsoidal`, one
+/// connection per query, the pilot), and a capture too short to visit every bin says why that
+/// matters and how many samples it takes.
+#[test]
+fn a_capture_defaults_to_ellipsoidal_and_says_when_it_is_too_short_for_its_bins() {
+    let dir = common::scratch_dir("nlos_defaults");
+    let letter = common::repo_path("assets/scenes/nlos_letter.gltf");
+    let capture = |name: &str, extra: &[&str]| -> (serde_json::Value, String) {
+        let out = dir.join(format!("{name}.npy"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+            .args(["render", letter.to_str().unwrap(), "--nlos", "confocal", "--res", "4x4", "--max-bounces", "3"])
+            .args(["--gate", "transient:3.002ns,16ps,80", "--seed", "3", "-o", out.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{name}: {err}");
+        (serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.json"))).unwrap()).unwrap(), err)
+    };
+    let (meta, err) = capture("short", &["--spp", "8"]);
+    assert_eq!(meta["method"], "ellipsoidal", "{meta}");
+    assert_eq!(meta["connections_per_query"], 1, "{meta}");
+    assert!(meta["target_pilot_spp"].as_u64().unwrap() > 0, "{meta}");
+    let needed = err
+        .split("render at least --spp ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse::<u64>().ok())
+        .unwrap_or_else(|| panic!("the warning names the samples needed: {err}"));
+    assert!(needed > 8 && err.contains("one of the gate's 80 bins in turn"), "{err}");
+    let (_, err) = capture("long", &["--spp", &needed.to_string()]);
+    assert!(!err.contains("warning"), "{needed} spp visit every bin: {err}");
+    let (meta, _) = capture("path", &["--spp", "8", "--method", "path"]);
+    assert_eq!(meta["method"], "path");
+}

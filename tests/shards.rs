@@ -36,7 +36,7 @@ fn check_shards(dir: &Path, label: &str, options: &[&str], count: u32) {
     assert!(data.iter().any(|&v| v > 0.0), "{label}: black image");
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(merged.with_extension("json")).unwrap()).unwrap();
-    assert_eq!(meta["shards"], count.to_string().as_str());
+    assert_eq!(meta["shards"], count);
 }
 
 #[test]

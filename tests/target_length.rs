@@ -33,7 +33,7 @@ fn gates() -> Vec<(&'static str, Gate)> {
 
 #[test]
 fn weighted_target_lengths_integrate_the_gate() {
-    // The Cornell box with 5 bounces: path lengths in [1.94, ~10.4] m.
+    // The Cornell box with 5 bounces: path lengths from 1.94 m to the bound of path_length_bounds.
     let scene = common::cornell_box();
     let g = |l: f64| 1.0 + (3.0 * l).sin() + 0.3 * l;
     for (name, gate) in gates() {
@@ -543,5 +543,44 @@ fn wgsl_stratified_target_lengths_match_cpu_twin() {
                 );
             }
         }
+    }
+}
+
+#[test]
+fn no_path_is_longer_than_the_scenes_path_length_bound() {
+    // Random paths of the Cornell box: the lens centre, `bounces` points on random triangles
+    // (corners weighted 1000x, where the longest paths turn), a point on the light. Every one is
+    // within the bound, and the longest come within a quarter of it (the bound is not loose).
+    let scene = common::cornell_box();
+    let triangles = &scene.scene.triangles;
+    let lights: Vec<_> =
+        triangles.iter().filter(|t| scene.scene.materials[t.material as usize].is_emissive()).collect();
+    let mut rng = gatetrace::rng::Rng::new(7, 0, 0);
+    let point = |t: &gatetrace::scene::SceneTriangle, rng: &mut gatetrace::rng::Rng| {
+        if rng.next_f32() < 0.5 {
+            return t.positions[(rng.next_f32() * 3.0) as usize % 3];
+        }
+        let b = gatetrace::sampling::sample_triangle_barycentrics(rng.next_vec2());
+        t.positions[0] * (1.0 - b.x - b.y) + t.positions[1] * b.x + t.positions[2] * b.y
+    };
+    for bounces in 0..6 {
+        let (shortest, longest) = scene.scene.path_length_bounds(bounces);
+        let mut most = 0f32;
+        for _ in 0..20_000 {
+            let mut at = scene.scene.camera.position;
+            let mut length = 0.0;
+            for _ in 0..bounces {
+                let t = &triangles[(rng.next_f32() * triangles.len() as f32) as usize % triangles.len()];
+                let next = point(t, &mut rng);
+                length += at.distance(next);
+                at = next;
+            }
+            let light = lights[(rng.next_f32() * lights.len() as f32) as usize % lights.len()];
+            length += at.distance(point(light, &mut rng));
+            assert!(length <= longest, "{bounces} bounces: a path of {length} m, bound {longest} m");
+            assert!(bounces > 0 || length >= shortest, "a direct path of {length} m, bound {shortest} m");
+            most = most.max(length);
+        }
+        assert!(most > 0.75 * longest, "{bounces} bounces: longest sampled {most} m, bound {longest} m");
     }
 }

@@ -31,10 +31,14 @@ def main():
     if meta.get("nlos_scan") != "confocal" or meta.get("count_first_and_last"):
         raise SystemExit(f"{args.capture}: back-projection here needs a confocal capture without the first and "
                          "last segments counted")
-    gate = meta["gate"]
-    if not gate.startswith("transient:"):
-        raise SystemExit(f"{args.capture}: gate {gate} is not transient:START,WIDTH,BINS")
-    start, width, bins = (float(v) for v in gate.split(":", 1)[1].split(","))
+    gate = meta.get("gate_parameters")
+    if gate is None:
+        raise SystemExit(f"{args.capture}: the sidecar has no gate_parameters (written by an older gatetrace): "
+                         "render the capture again")
+    if gate["kind"] != "transient":
+        raise SystemExit(f"{args.capture}: gate {meta['gate']} is not transient:START,WIDTH,BINS")
+    # Metres of optical path, whatever units the gate was typed in.
+    start, width, bins = gate["start_m"], gate["bin_width_m"], gate["bins"]
     h = np.load(args.capture).astype(np.float64).sum(axis=-1)  # [gy, gx, T], summed over RGB
     points = np.array(meta["sensor_grid_xyz"], dtype=np.float64)  # [gy, gx, 3]
     normals = np.array(meta["sensor_grid_normals"], dtype=np.float64)

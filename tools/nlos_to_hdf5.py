@@ -38,12 +38,12 @@ H_FORMAT = {"UNKNOWN": 0, "T_Sx_Sy": 1, "T_Lx_Ly_Sx_Sy": 2, "T_Si": 3, "T_Li_Si"
 GRID_FORMAT = {"UNKNOWN": 0, "N_3": 1, "X_Y_3": 2}
 
 
-def parse_transient_gate(gate):
-    """(start, width, bins) of a `transient:START,WIDTH,BINS` gate (m, m, count)."""
-    if not gate.startswith("transient:"):
+def transient_gate(parameters):
+    """(start, width, bins) of a transient gate's `gate_parameters` (m, m, count), whatever units
+    it was typed in; None for another kind."""
+    if parameters.get("kind") != "transient":
         return None
-    start, width, bins = gate[len("transient:"):].split(",")
-    return float(start), float(width), int(bins)
+    return float(parameters["start_m"]), float(parameters["bin_width_m"]), int(parameters["bins"])
 
 
 def grid_xy3(rows):
@@ -76,7 +76,9 @@ def main():
     scan = meta.get("nlos_scan")
     if scan not in ("single", "confocal", "exhaustive"):
         sys.exit(f"{sidecar}: not an NLOS capture (no nlos_scan): render it with gatetrace render --nlos")
-    gate = parse_transient_gate(meta["gate"])
+    if "gate_parameters" not in meta:
+        sys.exit(f"{sidecar}: no gate_parameters (written by an older gatetrace): render the capture again")
+    gate = transient_gate(meta["gate_parameters"])
     if gate is None:
         sys.exit(f"{sidecar}: gate {meta['gate']} is not a transient gate: TAL's H needs time bins")
     start, width, bins = gate

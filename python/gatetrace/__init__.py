@@ -20,6 +20,7 @@ FileNotFoundError, device failures RuntimeError; Ctrl-C stops a render (Keyboard
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from typing import Optional, Tuple, Union
@@ -139,16 +140,6 @@ def _spec(gate: Union[str, Gate]) -> str:
     raise TypeError(f"gate must be a string in the command line's syntax or a gatetrace.Gate, not {type(gate).__name__}")
 
 
-def _typed(value: str):
-    """A metadata value as int or float where it is one, else the string."""
-    for kind in (int, float):
-        try:
-            return kind(value)
-        except ValueError:
-            pass
-    return value
-
-
 class Renderer:
     """Renders one scene with one method, image size and bounce count, again and again.
 
@@ -236,7 +227,7 @@ class Renderer:
         if seed >= 2**32:
             raise ValueError(f"seed={seed}: give a number below 2^32")
         image, pairs = self._native.render(_spec(gate), spp, None if seconds is None else float(seconds), seed)
-        metadata = {key: _typed(value) for key, value in pairs}
+        metadata = {key: json.loads(value) for key, value in pairs}
         if "warning" in metadata:
             import warnings
 

@@ -60,9 +60,10 @@ class Renderer:
     def render(
         self, gate: str, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0
     ) -> Tuple[npt.NDArray[np.float32], List[Tuple[str, str]]]:
-        """(image [H, W, 3] or [H, W, T, 3], metadata as (key, value) strings)."""
+        """(image [H, W, 3] or [H, W, T, 3], metadata as (key, value as JSON text) pairs)."""
     @property
-    def settings(self) -> List[Tuple[str, str]]: ...
+    def settings(self) -> List[Tuple[str, str]]:
+        """The settings every render shares: (key, value as JSON text) pairs."""
 
 def describe_gate(spec: str) -> str:
     """What the renderer understands gate `spec` to be; ValueError when it is not a gate."""

@@ -17,11 +17,12 @@ use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
+use gatetrace::film::output::Metadata;
 use gatetrace::film::{Film, Gate};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{
-    Budget, Integrator, Method, QuerySettings, RenderOutput, RenderSettings, create_integrator, render_metadata,
-    trace_budget, unreachable_gate,
+    Budget, Integrator, Method, QuerySettings, RenderOutput, RenderSettings, black_image_warning, create_integrator,
+    render_metadata, trace_budget, unreachable_gate,
 };
 use gatetrace::scene::{PreparedScene, load_gltf};
 
@@ -278,7 +279,7 @@ impl Renderer {
 
     /// Renders `gate` (the command line's syntax) for `spp` samples per pixel or `seconds` of
     /// rendering from `seed`; returns (film data as float32 numpy array [H, W, 3] or
-    /// [H, W, T, 3], the metadata as (key, value) pairs).
+    /// [H, W, T, 3], the metadata as (key, value as JSON text) pairs).
     #[pyo3(signature = (gate, spp=None, seconds=None, seed=0))]
     fn render<'py>(
         &self,
@@ -288,6 +289,7 @@ impl Renderer {
         seconds: Option<f64>,
         seed: u32,
     ) -> PyResult<(Bound<'py, PyAny>, Vec<(String, String)>)> {
+        let as_text = |metadata: Metadata| metadata.into_iter().map(|(k, v)| (k, v.to_string())).collect();
         let gate_value = Gate::parse(gate).map_err(|e| value_error(e.context(format!("gate `{gate}`"))))?;
         let budget = match (spp, seconds) {
             (Some(_), Some(_)) => return Err(PyValueError::new_err("give spp or seconds, not both")),
@@ -314,12 +316,12 @@ impl Renderer {
         gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
         let scene = self.scene.clone();
         let start = Instant::now();
-        let output = if let Some(reason) = unreachable_gate(&scene, &settings) {
-            let warning = format!("{reason}: the image is black; no samples were traced");
+        let output = if unreachable_gate(&scene, &settings).is_some() {
             let output = RenderOutput::black(&settings, start.elapsed());
             let mut metadata = self.metadata(&settings, gate, &output)?;
-            metadata.push(("warning".into(), warning));
-            return Ok((film_array(py, &output.film)?, metadata));
+            let warning = black_image_warning(&scene, &settings, gate, &output.film).expect("a black film");
+            metadata.push(("warning".into(), warning.into()));
+            return Ok((film_array(py, &output.film)?, as_text(metadata)));
         } else if matches!(settings.method, Method::Auto | Method::Combined) {
             // auto builds the chosen method's integrator after its pilot, and combined its halves
             // after the pilot that splits their samples, every render (and stops for Ctrl-C only
@@ -391,22 +393,25 @@ impl Renderer {
             ));
         }
         warnings.extend(output.unvisited_bins_warning());
+        warnings.extend(black_image_warning(&self.scene, &settings, gate, &output.film));
         if !warnings.is_empty() {
-            metadata.push(("warning".into(), warnings.join("; ")));
+            metadata.push(("warning".into(), warnings.join("; ").into()));
         }
-        Ok((film_array(py, &output.film)?, metadata))
+        Ok((film_array(py, &output.film)?, as_text(metadata)))
     }
 
-    /// The settings every render shares, as the command line names them.
+    /// The settings every render shares, as the command line names them: (key, value as JSON
+    /// text) pairs, valued as in the metadata.
     #[getter]
     fn settings(&self) -> Vec<(String, String)> {
         let s = &self.base;
-        vec![
+        let settings: Metadata = vec![
             ("method".into(), s.method.name().into()),
-            ("max_bounces".into(), s.max_bounces.to_string()),
-            ("resolution".into(), format!("{}x{}", s.width, s.height)),
-            ("connections_per_query".into(), s.connections_per_query.to_string()),
-        ]
+            ("max_bounces".into(), s.max_bounces.into()),
+            ("resolution".into(), vec![s.width, s.height].into()),
+            ("connections_per_query".into(), s.connections_per_query.into()),
+        ];
+        settings.into_iter().map(|(k, v)| (k, v.to_string())).collect()
     }
 
     fn __repr__(&self) -> String {
@@ -424,14 +429,9 @@ impl Renderer {
 
 impl Renderer {
     /// The metadata the command line writes beside its outputs, and the camera.
-    fn metadata(
-        &self,
-        settings: &RenderSettings,
-        gate: &str,
-        output: &RenderOutput,
-    ) -> PyResult<Vec<(String, String)>> {
+    fn metadata(&self, settings: &RenderSettings, gate: &str, output: &RenderOutput) -> PyResult<Metadata> {
         let mut metadata = render_metadata(device()?, &self.path, gate, settings, output);
-        metadata.push(("camera".into(), self.scene.scene.camera.describe()));
+        metadata.push(("camera".into(), self.scene.scene.camera.describe().into()));
         Ok(metadata)
     }
 }

@@ -5,7 +5,9 @@ while rendering. GPU tests: they fail (never skip) without a Vulkan device."""
 
 import json
 import os
+import signal
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -55,9 +57,12 @@ def test_transient_cube_equals_the_command_line_and_has_the_documented_layout(tm
     cli, cli_meta = cli_render(tmp_path, str(BOX), "--gate", str(gate), "--spp", "16", "--res", "32x24",
                                "--max-bounces", "4", "--seed", "7")
     assert np.array_equal(image, cli)
-    for key in ("method", "gate", "spp", "seed", "max_bounces", "resolution"):
-        assert str(meta[key]) == str(cli_meta[key]), key
+    for key in ("method", "gate", "gate_parameters", "spp", "seed", "max_bounces", "resolution"):
+        assert meta[key] == cli_meta[key], key
     assert meta["spp"] == 16 and meta["seed"] == 7 and meta["method"] == "path"
+    assert meta["resolution"] == [32, 24] and meta["max_bounces"] == 4
+    assert meta["gate_parameters"] == {"kind": "transient", "start_m": 1.9, "bin_width_m": 0.1, "bins": 6,
+                                       "end_m": pytest.approx(2.5)}
 
 
 def test_row_zero_is_the_top_of_the_image():
@@ -187,12 +192,51 @@ def test_ctrl_c_stops_a_long_render_and_leaves_the_renderer_usable():
 
     renderer = gatetrace.Renderer(BOX, res=(64, 64))
     renderer.render("none", spp=1)
-    timer = threading.Timer(1.0, _thread.interrupt_main)
-    timer.start()
-    start = time.perf_counter()
-    with pytest.raises(KeyboardInterrupt):
-        renderer.render("none", seconds=60.0)
-    assert time.perf_counter() - start < 20.0
-    timer.join()
+    # A shell starts background jobs (`tools/test.sh &`, batch runners) with SIGINT ignored, and
+    # then Python raises no KeyboardInterrupt: install the handler this test relies on.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        timer = threading.Timer(1.0, _thread.interrupt_main)
+        timer.start()
+        start = time.perf_counter()
+        with pytest.raises(KeyboardInterrupt):
+            renderer.render("none", seconds=60.0)
+        assert time.perf_counter() - start < 20.0
+        timer.join()
+    finally:
+        signal.signal(signal.SIGINT, previous)
     image, meta = renderer.render("none", spp=2, seed=1)
     assert meta["spp"] == 2 and image.mean() > 0
+
+
+def test_nlos_tools_read_a_capture_whose_gate_was_typed_in_ns_and_ps(tmp_path):
+    # The sidecar holds the gate in metres beside the spec as typed, so the tools downstream
+    # accept every unit the command line does.
+    capture = tmp_path / "capture.npy"
+    subprocess.run([str(cli_binary()), "render", str(ROOT / "assets/scenes/nlos_letter.gltf"), "--nlos", "confocal",
+                    "--res", "8x8", "--gate", "transient:3.002ns,13.34ps,400", "--max-bounces", "3", "--spp", "16",
+                    "--out", str(capture)], check=True, capture_output=True)
+    meta = json.loads(capture.with_suffix(".json").read_text())
+    assert meta["gate"] == "transient:3.002ns,13.34ps,400"
+    gate = meta["gate_parameters"]
+    assert gate["kind"] == "transient" and gate["bins"] == 400
+    assert gate["start_m"] == pytest.approx(3.002 * 0.299792458, rel=1e-12)
+    assert gate["bin_width_m"] == pytest.approx(13.34e-3 * 0.299792458, rel=1e-12)
+    assert meta["spp"] == 16 and isinstance(meta["elapsed_seconds"], float)
+
+    picture = tmp_path / "picture.npy"
+    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos_backproject.py"), str(capture), "--voxels", "16",
+                           "-o", str(picture)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    back = np.load(picture)
+    assert back.shape == (16, 16) and np.isfinite(back).all() and back.max() == pytest.approx(1.0)
+
+    import h5py  # a test requirement (pyproject.toml), as tools/nlos_to_hdf5.py needs it
+    hdf5 = tmp_path / "capture.hdf5"
+    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos_to_hdf5.py"), str(capture), "-o", str(hdf5)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    with h5py.File(hdf5) as f:
+        assert f["H"].shape == (400, 8, 8)
+        assert float(f["delta_t"][()]) == pytest.approx(gate["bin_width_m"], rel=1e-6)
+        assert float(f["t_start"][()]) == pytest.approx(gate["start_m"], rel=1e-6)

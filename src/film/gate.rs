@@ -439,6 +439,39 @@ impl Gate {
         }
     }
 
+    /// The gate as numbers, for outputs' metadata (`gate_parameters`): `kind` (`none`, `box`,
+    /// `gaussian`, `cw`, `table`, `transient`) and that kind's fields, lengths in metres of
+    /// optical path (`_m`), frequencies in Hz, phases in degrees. Every kind with a bounded
+    /// support also has `start_m` and `end_m`; a transient gate has `bin_width_m` and `bins`
+    /// (bin i covers [start_m + i bin_width_m, start_m + (i + 1) bin_width_m)). Whatever units
+    /// the spec was typed in (`ns`, `ps`, `mm`), these are metres.
+    pub fn parameters(&self) -> serde_json::Value {
+        use serde_json::json;
+        match self {
+            Gate::None => json!({ "kind": "none" }),
+            Gate::Box { start, end } => {
+                json!({ "kind": "box", "start_m": start, "end_m": end, "width_m": end - start })
+            }
+            Gate::Gaussian { mean, sigma } => json!({ "kind": "gaussian", "mean_m": mean, "sigma_m": sigma }),
+            Gate::Cw { frequency_hz, phase_deg } => json!({
+                "kind": "cw", "frequency_hz": frequency_hz, "phase_deg": phase_deg, "code": "sine",
+                "period_m": SPEED_OF_LIGHT / frequency_hz,
+            }),
+            Gate::CwCode { frequency_hz, phase_deg, code } => json!({
+                "kind": "cw", "frequency_hz": frequency_hz, "phase_deg": phase_deg, "code": code.name(),
+                "period_m": SPEED_OF_LIGHT / frequency_hz,
+            }),
+            Gate::Table { points, source } => json!({
+                "kind": "table", "source": source.display().to_string(), "start_m": points[0].0,
+                "end_m": points[points.len() - 1].0, "points_m_weight": points.iter().map(|&(l, w)| [l, w]).collect::<Vec<_>>(),
+            }),
+            Gate::Transient { start, width, bins } => json!({
+                "kind": "transient", "start_m": start, "bin_width_m": width, "bins": bins,
+                "end_m": start + width * *bins as f64,
+            }),
+        }
+    }
+
     /// A short human-readable description, with times alongside lengths.
     pub fn describe(&self) -> String {
         let ps = crate::units::metres_to_ps;
@@ -473,6 +506,46 @@ impl Gate {
             }
         }
     }
+}
+
+/// Where the lengths of `spec` (a box, transient or gaussian gate) carry no unit, and read as
+/// nanoseconds or picoseconds would land within the scene's path lengths `range` (m), the spec
+/// the user probably meant, said in a sentence; None otherwise. For a gate that caught no light.
+pub fn time_unit_hint(spec: &str, (shortest, longest): (f64, f64)) -> Option<String> {
+    let (kind, args) = spec.split_once(':')?;
+    // The spec with `unit` after each length, and the lengths' extent (m) read that way.
+    let with_unit = |unit: &str| -> Option<(String, f64, f64)> {
+        let fields: Vec<&str> = match kind.trim() {
+            "box" => args.split("..").collect(),
+            "transient" | "gaussian" => args.split(',').collect(),
+            _ => return None,
+        };
+        let lengths = if kind.trim() == "transient" { 2 } else { fields.len() };
+        if fields.len() < lengths || fields[..lengths].iter().any(|f| f.trim().chars().any(char::is_alphabetic)) {
+            return None;
+        }
+        let written: Vec<String> = fields
+            .iter()
+            .enumerate()
+            .map(|(i, f)| if i < lengths { format!("{}{unit}", f.trim()) } else { f.to_string() })
+            .collect();
+        let separator = if kind.trim() == "box" { ".." } else { "," };
+        let candidate = format!("{}:{}", kind.trim(), written.join(separator));
+        let (lo, hi) = match Gate::parse(&candidate).ok()? {
+            Gate::Gaussian { mean, sigma } => (mean - 3.0 * sigma, mean + 3.0 * sigma),
+            gate => (gate.min_length(), gate.max_length()?),
+        };
+        Some((candidate, lo, hi))
+    };
+    ["ns", "ps"].iter().find_map(|unit| {
+        let (candidate, lo, hi) = with_unit(unit)?;
+        (lo < longest && hi > shortest).then(|| {
+            format!(
+                "lengths without a unit are metres of optical path; read as {unit} the gate would be `{candidate}` \
+                 ({lo:.4} to {hi:.4} m), within this scene's path lengths ({shortest:.3} to {longest:.3} m)"
+            )
+        })
+    })
 }
 
 /// CPU twin of the kernels' gate for a given GPU parameter block and kind.
@@ -566,6 +639,20 @@ fn parse_number(s: &str, what: &str) -> Result<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn times_typed_as_metres_are_recognised() {
+        let range = (1.94, 7.4);
+        let hint = time_unit_hint("box:10.474..10.641", range).unwrap();
+        assert!(hint.contains("`box:10.474ns..10.641ns`") && hint.contains("3.1400 to 3.1901 m"), "{hint}");
+        let hint = time_unit_hint("transient:10474,333.6,8", range).unwrap();
+        assert!(hint.contains("`transient:10474ps,333.6ps,8`"), "{hint}");
+        assert!(time_unit_hint("gaussian:10.5,0.05", range).unwrap().contains("`gaussian:10.5ns,0.05ns`"));
+        // Units given, lengths out of the scene's range either way, or kinds without lengths.
+        for spec in ["box:10.474ns..10.641ns", "box:10.4m..10.6", "box:1000..1001", "cw:20e6,90", "none"] {
+            assert_eq!(time_unit_hint(spec, range), None, "{spec}");
+        }
+    }
 
     #[test]
     fn specs_parse_into_gates() {

@@ -3,7 +3,9 @@
 
 pub mod fixed;
 pub mod gate;
+pub mod info;
 pub mod output;
+pub mod preview;
 pub mod target;
 
 pub use gate::{CwCode, Gate, GateKind};

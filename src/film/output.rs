@@ -7,9 +7,12 @@ use anyhow::{Context as _, Result, bail};
 
 use super::Film;
 
-/// What is recorded with every output: (key, value) pairs, e.g. scene, method, gate, spp, seed,
-/// elapsed seconds, adapter.
-pub type Metadata = Vec<(String, String)>;
+/// What is recorded with every output: (key, value) pairs in order, e.g. scene, method, gate,
+/// spp, seed, elapsed seconds, adapter. Values are typed: numbers are JSON numbers (with the
+/// unit in the key or in `units`), flags booleans, absent settings null. An NPY file's JSON
+/// sidecar holds them as they are; an EXR file's attributes are text (strings as they are, other
+/// values as JSON).
+pub type Metadata = Vec<(String, serde_json::Value)>;
 
 /// Output file formats, chosen by the file name's extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -18,24 +21,39 @@ pub enum OutputFormat {
     Exr,
     /// NumPy `.npy` with a `.json` metadata sidecar.
     Npy,
+    /// A tone-mapped 8-bit sRGB preview (`super::preview`), its metadata in text chunks.
+    Png,
 }
 
 impl OutputFormat {
-    /// The format of `path` (`.exr` or `.npy`, any case).
+    /// The format of `path` (`.exr`, `.npy` or `.png`, any case).
     pub fn of(path: &Path) -> Result<Self> {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("exr") => Ok(Self::Exr),
             Some("npy") => Ok(Self::Npy),
-            _ => bail!("{}: unknown output format: the file name must end in .exr or .npy", path.display()),
+            Some("png") => Ok(Self::Png),
+            _ => bail!(
+                "{}: unknown output format: the file name must end in .exr or .npy (data), or .png (a preview)",
+                path.display()
+            ),
         }
     }
 }
 
-/// Checks before a render that `path` can be written: creates its directory and opens the file
-/// (a file that did not exist is removed again).
-pub fn check_writable(path: &Path) -> Result<()> {
+/// Checks before a render that `path` can be written: its directory exists (or is created, with
+/// `create_directory`), and the file opens for writing (a file that did not exist is removed
+/// again). A missing directory is an error naming it: a mistyped path never creates directories.
+pub fn check_writable(path: &Path, create_directory: bool) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+        if create_directory {
+            std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+        } else if !dir.is_dir() {
+            bail!(
+                "{}: no such directory (for the output {}): create it, or pass --mkdir to have it created",
+                dir.display(),
+                path.display()
+            );
+        }
     }
     let existed = path.exists();
     std::fs::OpenOptions::new()
@@ -49,7 +67,8 @@ pub fn check_writable(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Writes `film` to `path`; the format follows the extension (`.exr` or `.npy`).
+/// Writes `film` to `path`; the format follows the extension (`.exr`, `.npy`, or `.png` for a
+/// preview with the default [`super::preview::PreviewSettings`]).
 /// `bin_ranges` are the [start, end) lengths (m) of transient bins, for EXR layer attributes.
 pub fn write_film(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, f64)]) -> Result<()> {
     write_film_with(path, film, metadata, bin_ranges, &serde_json::Map::new())
@@ -67,23 +86,25 @@ pub fn write_film_with(
     if !film.all_finite() {
         bail!("refusing to write {}: the film holds non-finite values", path.display());
     }
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the directory", dir.display()))?;
-    }
     match OutputFormat::of(path)? {
         OutputFormat::Exr => {
             let mut metadata = metadata.clone();
-            metadata.extend(extras.iter().map(|(k, v)| (k.clone(), v.to_string())));
+            metadata.extend(extras.iter().map(|(k, v)| (k.clone(), v.clone())));
             write_exr(path, film, &metadata, bin_ranges)
         }
         OutputFormat::Npy => {
             write_npy(path, film)?;
             write_sidecar(path, metadata, extras)
         }
+        OutputFormat::Png => {
+            let mut metadata = metadata.clone();
+            metadata.extend(extras.iter().map(|(k, v)| (k.clone(), v.clone())));
+            super::preview::write_preview(path, film, &metadata, bin_ranges, Default::default()).map(|_| ())
+        }
     }
 }
 
-/// Writes the JSON sidecar of `npy`: `metadata` as strings and `extras` as they are.
+/// Writes the JSON sidecar of `npy`: one object of `metadata` and `extras`.
 pub fn write_sidecar(
     npy: &Path,
     metadata: &Metadata,
@@ -91,7 +112,7 @@ pub fn write_sidecar(
 ) -> Result<()> {
     let sidecar = sidecar_path(npy);
     let mut map: serde_json::Map<String, serde_json::Value> =
-        metadata.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
+        metadata.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
     map.extend(extras.clone());
     let text = serde_json::to_string_pretty(&map)? + "\n";
     replace_atomically(&sidecar, |tmp| std::fs::write(tmp, &text).map_err(Into::into))
@@ -121,9 +142,13 @@ fn write_exr(path: &Path, film: &Film, metadata: &Metadata, bin_ranges: &[(f64, 
     let (w, h) = (film.width as usize, film.height as usize);
     let mut attributes = ImageAttributes::new(IntegerBounds::from_dimensions((w, h)));
     for (k, v) in metadata {
+        let text = match v {
+            serde_json::Value::String(s) => s.clone(),
+            other => other.to_string(),
+        };
         attributes
             .other
-            .insert(Text::from(format!("gatetrace.{k}").as_str()), AttributeValue::Text(Text::from(v.as_str())));
+            .insert(Text::from(format!("gatetrace.{k}").as_str()), AttributeValue::Text(Text::from(text.as_str())));
     }
     let bins = film.bins as usize;
     let layers: Vec<_> = (0..bins)

@@ -18,6 +18,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 
+use serde_json::json;
+
 use crate::film::output::Metadata;
 use crate::film::target::TargetSampler;
 use crate::film::{Film, Gate};
@@ -459,9 +461,11 @@ impl RenderOutput {
     pub fn unvisited_bins_warning(&self) -> Option<String> {
         let needed = self.samples_to_visit_every_bin.filter(|&n| (self.film.spp as u64) < n)?;
         Some(format!(
-            "{} samples per pixel over {} bins ended before visiting every bin once ({needed} samples per pixel do); \
-             bins it did not visit are estimated from the others (unbiased, but noisier): give it more time",
-            self.film.spp, self.film.bins
+            "each sample of a pixel aims its ellipsoidal connections at one of the gate's {} bins in turn, and \
+             {needed} samples per pixel visit every bin once (with the extra visits a pilot gives bins that hold more \
+             light), but this render stopped at {}, so some bins had no sample of their own and are estimated from \
+             samples aimed at others (unbiased, but noisier): render at least --spp {needed}",
+            self.film.bins, self.film.spp
         ))
     }
 
@@ -485,8 +489,13 @@ impl RenderOutput {
     }
 }
 
+/// Seconds rounded to milliseconds, as metadata records them.
+pub fn milli(seconds: f64) -> serde_json::Value {
+    ((seconds * 1e3).round() / 1e3).into()
+}
+
 /// What every output records about its render (scene, settings, timing, device), as the
-/// command line's outputs and the Python package give it: (key, value) pairs in order.
+/// command line's outputs and the Python package give it: (key, typed value) pairs in order.
 pub fn render_metadata(
     ctx: &GpuContext,
     scene_path: &Path,
@@ -498,63 +507,63 @@ pub fn render_metadata(
     let secs = output.elapsed.as_secs_f64();
     let gate = &settings.gate;
     let mut metadata: Metadata = vec![
-        ("scene".into(), scene_path.display().to_string()),
+        ("scene".into(), scene_path.display().to_string().into()),
         ("method".into(), settings.method.name().into()),
-        ("gate".into(), gate_spec.to_owned()),
-        ("gate_description".into(), gate.describe()),
-        ("spp".into(), film.spp.to_string()),
-        ("seed".into(), settings.seed.to_string()),
-        ("max_bounces".into(), settings.max_bounces.to_string()),
-        ("rr_depth".into(), settings.rr_depth.map_or("off".into(), |d| d.to_string())),
-        ("resolution".into(), format!("{}x{}", settings.width, settings.height)),
-        ("elapsed_seconds".into(), format!("{secs:.3}")),
-        ("rendering_seconds".into(), format!("{:.3}", output.rendering.as_secs_f64())),
-        ("adapter".into(), ctx.adapter_description()),
-        ("truncated_traversals".into(), output.truncated_traversals.to_string()),
+        ("gate".into(), gate_spec.into()),
+        ("gate_parameters".into(), gate.parameters()),
+        ("gate_description".into(), gate.describe().into()),
+        ("spp".into(), film.spp.into()),
+        ("seed".into(), settings.seed.into()),
+        ("max_bounces".into(), settings.max_bounces.into()),
+        ("rr_depth".into(), settings.rr_depth.into()),
+        ("resolution".into(), json!([settings.width, settings.height])),
+        ("elapsed_seconds".into(), milli(secs)),
+        ("rendering_seconds".into(), milli(output.rendering.as_secs_f64())),
+        ("adapter".into(), ctx.adapter_description().into()),
+        ("truncated_traversals".into(), output.truncated_traversals.into()),
         (
             "units".into(),
-            "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres".into(),
+            "bin-integrated radiance W m^-2 sr^-1 weighted by W; lengths are optical path in metres; resolution is \
+             [width, height] in pixels; rr_depth null means Russian roulette is off"
+                .into(),
         ),
         ("gatetrace_version".into(), env!("CARGO_PKG_VERSION").into()),
     ];
     if let Some((s, t)) = settings.debug_strategy {
-        metadata.push(("debug_strategy".into(), format!("{s},{t}")));
+        metadata.push(("debug_strategy".into(), json!([s, t])));
     }
     if let Some(allocation) = &output.allocation {
-        metadata.push(("ellipsoidal_share".into(), format!("{}", allocation.ellipsoidal_share)));
-        metadata.push(("combined_allocation".into(), allocation.reason.clone()));
+        metadata.push(("ellipsoidal_share".into(), allocation.ellipsoidal_share.into()));
+        metadata.push(("combined_allocation".into(), allocation.reason.clone().into()));
     }
     if let Some(choice) = &output.choice {
         metadata.push(("chosen_method".into(), choice.chosen.name().into()));
-        metadata.push(("auto_reason".into(), choice.reason.clone()));
+        metadata.push(("auto_reason".into(), choice.reason.clone().into()));
         for c in &choice.candidates {
             metadata.push((
                 format!("auto_pilot_{}", c.method.name()),
-                format!(
-                    "{} spp of {}x{} in {:.3} s, variance per sample {:.4e}, variance x seconds per sample (of the \
-                     image) {:.4e}",
-                    c.spp,
-                    choice.pilot_resolution.0,
-                    choice.pilot_resolution.1,
-                    c.seconds,
-                    c.variance_per_sample,
-                    c.cost()
-                ),
+                json!({
+                    "spp": c.spp,
+                    "resolution": [choice.pilot_resolution.0, choice.pilot_resolution.1],
+                    "seconds": c.seconds,
+                    "variance_per_sample": c.variance_per_sample,
+                    "variance_seconds_per_sample": c.cost(),
+                }),
             ));
         }
     }
     if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
         let g = settings.ellipsoid_guards;
-        metadata.push(("connections_per_query".into(), settings.connections_per_query.to_string()));
-        metadata.push(("query_split".into(), settings.query.split.to_string()));
+        metadata.push(("connections_per_query".into(), settings.connections_per_query.into()));
+        metadata.push(("query_split".into(), settings.query.split.into()));
         metadata.push((
             "query_weights".into(),
             if settings.query.reflection_weights { "reflection" } else { "arcs" }.into(),
         ));
-        metadata.push(("ellipsoid_guards".into(), format!("needle {:e}, length {:e}", g.needle, g.length)));
-        metadata.push(("target_pilot_spp".into(), output.target_pilot_spp.to_string()));
+        metadata.push(("ellipsoid_guards".into(), json!({ "needle": g.needle, "length": g.length })));
+        metadata.push(("target_pilot_spp".into(), output.target_pilot_spp.into()));
         if let Some(report) = &output.band_index {
-            metadata.push(("band_index".into(), report.clone()));
+            metadata.push(("band_index".into(), report.clone().into()));
         }
     }
     metadata
@@ -617,6 +626,36 @@ pub fn unreachable_gate(scene: &PreparedScene, settings: &RenderSettings) -> Opt
         ));
     }
     None
+}
+
+/// What to tell the user about a film that came out black (every value zero): why no path of
+/// the scene can reach the gate, or that none of the samples did; and, where the gate's numbers
+/// look like times typed as metres, the gate they probably meant. None for a film with light,
+/// and for NLOS captures.
+pub fn black_image_warning(
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    gate_spec: &str,
+    film: &Film,
+) -> Option<String> {
+    if settings.nlos.is_some() || film.data.iter().any(|&v| v != 0.0) {
+        return None;
+    }
+    let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
+    let mut warning = match unreachable_gate(scene, settings) {
+        Some(reason) => format!("{reason}: the image is black; no samples were traced"),
+        None => format!(
+            "the image is black: no path of its {} samples per pixel reached gate {} (paths of this scene with at \
+             most {} bounces are {shortest:.3} to {longest:.3} m long)",
+            film.spp,
+            settings.gate.describe(),
+            settings.max_bounces
+        ),
+    };
+    if let Some(hint) = crate::film::gate::time_unit_hint(gate_spec, (shortest as f64, longest as f64)) {
+        warning += &format!("; {hint}");
+    }
+    Some(warning)
 }
 
 /// The render-wide parameters of `settings` on `scene`, shared by every method's kernels.
@@ -831,8 +870,8 @@ pub fn render_resumable(
 ) -> Result<RenderOutput> {
     film_elements(settings)?;
     let start = Instant::now();
-    if let Some(reason) = unreachable_gate(scene, settings) {
-        eprintln!("warning: {reason}: the image is black; no samples were traced");
+    if unreachable_gate(scene, settings).is_some() {
+        // No samples are traced; black_image_warning says why.
         return Ok(RenderOutput::black(settings, start.elapsed()));
     }
     // auto: a pilot of both methods (counted against a time budget) picks the one to render with.

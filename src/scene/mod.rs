@@ -232,7 +232,9 @@ impl Scene {
 
     /// Shortest and longest optical path length (m) any light path with at most `max_bounces`
     /// scattering vertices can have: at least the distance from the pinhole to the nearest
-    /// light less the lens radius, at most (max_bounces + 1) diagonals of the scene's bounds.
+    /// light less the lens radius; at most the farthest reach from the lens into the triangles'
+    /// bounds, plus a diagonal of those bounds per further bounce, plus the farthest reach from
+    /// them to a light (each segment's longest length between two boxes is between corners).
     pub fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
         let camera = self.camera.position;
         let mut shortest = f32::INFINITY;
@@ -251,8 +253,41 @@ impl Scene {
             shortest = shortest.min((l.direction.dot(camera - centre) + radius).max(0.0));
         }
         let shortest = (shortest - self.camera.lens_radius()).max(0.0);
-        let (lo, hi) = self.bounds();
-        (shortest, (max_bounces as f32 + 1.0) * (hi - lo).length())
+        (shortest, self.longest_path(max_bounces))
+    }
+
+    /// The longest optical path (m) with at most `max_bounces` scattering vertices, all of them
+    /// on triangles (see [`Scene::path_length_bounds`]), enlarged by 1e-4 of itself against
+    /// rounding.
+    fn longest_path(&self, max_bounces: u32) -> f32 {
+        let corners = |(lo, hi): (Vec3, Vec3)| -> [Vec3; 8] {
+            std::array::from_fn(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
+        };
+        // Farthest points of two boxes from each other (m).
+        let reach = |a: &[Vec3], b: &[Vec3]| -> f32 {
+            a.iter().flat_map(|p| b.iter().map(move |q| p.distance(*q))).fold(0.0, f32::max)
+        };
+        let lens = self.camera.lens_radius();
+        let camera = [self.camera.position];
+        let (lo, hi) = self.light_bounds();
+        let lights = if lo.cmple(hi).all() { corners((lo, hi)).to_vec() } else { Vec::new() };
+        // A directional light's path starts on the plane tangent to the bounding sphere.
+        let directional = if self.directional_lights.is_empty() { 0.0 } else { 2.0 * self.bounding_sphere().1 };
+        let longest = if max_bounces == 0 || self.triangles.is_empty() {
+            lens + reach(&camera, &lights).max(directional)
+        } else {
+            let mut lo = Vec3::INFINITY;
+            let mut hi = Vec3::NEG_INFINITY;
+            for p in self.triangles.iter().flat_map(|t| t.positions) {
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+            let surfaces = corners((lo, hi));
+            lens + reach(&camera, &surfaces)
+                + (max_bounces - 1) as f32 * (hi - lo).length()
+                + reach(&surfaces, &lights).max(directional)
+        };
+        longest * (1.0 + 1e-4)
     }
 
     /// Diagonal of the triangles' bounds (m), the camera and point lights left out: the
