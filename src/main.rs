@@ -20,7 +20,7 @@ use gatetrace::integrator::checkpoint::{
 use gatetrace::integrator::{
     Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
 };
-use gatetrace::scene::{PreparedScene, load_gltf, load_gltf_at, load_gltf_for_capture};
+use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 /// The scene rendered when none is given.
 const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
@@ -99,8 +99,16 @@ struct StressArgs {
 
 #[derive(Args)]
 struct RenderArgs {
-    /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
+    /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted. Other formats (OBJ, PLY,
+    /// FBX, USD, Mitsuba XML, ...) are refused with how to convert them.
     scene: Option<PathBuf>,
+    /// Render materials that use a glTF extension letting light through the surface
+    /// (KHR_materials_transmission, KHR_materials_volume, KHR_materials_diffuse_transmission),
+    /// which gatetrace does not implement, as the opaque surfaces their other properties describe,
+    /// with a warning, instead of refusing the scene. Other unimplemented material extensions
+    /// (clearcoat, sheen, specular, ...) are always ignored with a warning.
+    #[arg(long)]
+    allow_unsupported_materials: bool,
     /// Sampling method: `path` (path tracing with next-event estimation and MIS); `direct`
     /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
     /// bounces); `ellipsoidal` (bidirectional path tracing whose subpaths are joined through a
@@ -361,6 +369,13 @@ struct RenderArgs {
 struct ViewArgs {
     /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
     scene: Option<PathBuf>,
+    /// Render materials that use a glTF extension letting light through the surface
+    /// (KHR_materials_transmission, KHR_materials_volume, KHR_materials_diffuse_transmission),
+    /// which gatetrace does not implement, as the opaque surfaces their other properties describe,
+    /// with a warning, instead of refusing the scene. Other unimplemented material extensions
+    /// (clearcoat, sheen, specular, ...) are always ignored with a warning.
+    #[arg(long)]
+    allow_unsupported_materials: bool,
     /// Sampling method at start (path, direct, ellipsoidal); switchable in the window.
     #[arg(long, value_enum, default_value_t = Method::Path)]
     method: Method,
@@ -669,6 +684,7 @@ fn run_view(args: ViewArgs) -> Result<()> {
     ensure!(scrub_step.is_none() || args.screenshot.is_some(), "--scrub-step needs --screenshot");
     run_viewer(ViewOptions {
         scene,
+        allow_unsupported_materials: args.allow_unsupported_materials,
         width: args.res.0,
         height: args.res.1,
         method: args.method,
@@ -685,6 +701,11 @@ fn run_view(args: ViewArgs) -> Result<()> {
         profile_pixel: args.profile_pixel,
         seed: args.seed,
     })
+}
+
+/// How `render` loads its scene: at animation time `time` (s), as its options say.
+fn load_options(args: &RenderArgs, time: Option<f64>) -> LoadOptions {
+    LoadOptions { time, capture: false, allow_unsupported_materials: args.allow_unsupported_materials }
 }
 
 /// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
@@ -868,9 +889,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
-        None => Some(PreparedScene::new(with_lens_options(load_gltf(&scene_path)?, &args)?)?),
+        None => Some(PreparedScene::new(with_lens_options(
+            load_gltf_with(&scene_path, &load_options(&args, None))?,
+            &args,
+        )?)?),
         Some(_) => {
-            with_lens_options(load_gltf_at(&scene_path, plan.anim_time(plan.range.0))?, &args)?;
+            with_lens_options(load_gltf_with(&scene_path, &load_options(&args, plan.anim_time(plan.range.0)))?, &args)?;
             None
         }
     };
@@ -923,7 +947,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 Some(scene) => scene,
                 None => {
                     animated = PreparedScene::new(with_lens_options(
-                        load_gltf_at(&scene_path, plan.anim_time(*frame))?,
+                        load_gltf_with(&scene_path, &load_options(&args, plan.anim_time(*frame)))?,
                         &args,
                     )?)?;
                     &animated
@@ -999,7 +1023,7 @@ fn run_nlos(
     ensure!(args.laser_grid.is_none() || scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
     film_elements(&base)?;
     check_writable(&out, args.mkdir)?;
-    let mut loaded = load_gltf_for_capture(scene_path)?;
+    let mut loaded = load_gltf_with(scene_path, &LoadOptions { capture: true, ..load_options(args, None) })?;
     let mut base = base;
     let hidden_triangles = loaded.triangles.len() - loaded.node(&args.relay_wall).map_or(0, |n| n.triangles.len());
     let band_index_declined = base.band_index

@@ -19,7 +19,7 @@ use crate::film::{Gate, fixed};
 use crate::gpu::layout::{DISPLAY_LINEAR, DISPLAY_LOG, DisplayParams};
 use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::integrator::{Integrator, Method, PassSizer, RenderSettings, create_integrator};
-use crate::scene::{PreparedScene, load_gltf};
+use crate::scene::{LoadOptions, PreparedScene, load_gltf_with};
 use crate::units::metres_to_ps;
 
 /// Gate kinds the viewer offers.
@@ -38,6 +38,8 @@ pub enum GateChoice {
 pub struct ViewOptions {
     /// glTF scene.
     pub scene: PathBuf,
+    /// See [`crate::scene::LoadOptions::allow_unsupported_materials`].
+    pub allow_unsupported_materials: bool,
     /// Image size (pixels).
     pub width: u32,
     /// Image size (pixels).
@@ -74,7 +76,8 @@ pub struct ViewOptions {
 
 /// Opens the window and runs until it is closed (or the screenshot is saved).
 pub fn run_viewer(options: ViewOptions) -> Result<()> {
-    let scene = PreparedScene::new(load_gltf(&options.scene)?)?;
+    let load = LoadOptions { allow_unsupported_materials: options.allow_unsupported_materials, ..Default::default() };
+    let scene = PreparedScene::new(load_gltf_with(&options.scene, &load)?)?;
     let ctx = GpuContext::new()?;
     let (shortest, longest) = scene.scene.path_length_bounds(options.max_bounces.max(1));
     let native = eframe::NativeOptions {

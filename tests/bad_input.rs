@@ -114,6 +114,22 @@ fn box_with(name: &'static str, edit: impl FnOnce(&mut Value) + 'static) -> impl
     }
 }
 
+/// Gives material `material` of `doc` the glTF extension `extension` (with `value`) and lists
+/// it in `extensionsUsed`.
+fn add_material_extension(doc: &mut Value, material: usize, extension: &str, value: Value) {
+    doc["materials"][material]["extensions"][extension] = value;
+    doc["extensionsUsed"].as_array_mut().unwrap().push(json!(extension));
+}
+
+/// A small Wavefront OBJ quad, as Blender writes one.
+const OBJ_QUAD: &str = "# Blender 4.2\nmtllib plane.mtl\no Plane\nv -1 0 1\nv 1 0 1\nv -1 0 -1\nv 1 0 -1\n\
+                        vn 0 1 0\nusemtl Material\ns 0\nf 1//1 2//1 4//1 3//1\n";
+
+/// A small Mitsuba 3 scene.
+const MITSUBA_XML: &str = "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<scene version=\"3.0.0\">\n  \
+                           <integrator type=\"path\"/>\n  <shape type=\"obj\">\n    \
+                           <string name=\"filename\" value=\"plane.obj\"/>\n  </shape>\n</scene>\n";
+
 fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
     // `render SCENE` of a tiny image with `extra` options, writing {out}.
     let render = |scene: &str, extra: &[&str]| -> Vec<String> {
@@ -165,6 +181,69 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
             &["half.glb", "not a valid glTF"],
         ),
         case("missing scene file", none, render("{dir}/nowhere.gltf", &[]), &["nowhere.gltf", "cannot read"]),
+        // --- scenes in other formats: what the file is, what gatetrace reads, how to convert ---
+        case(
+            "OBJ mesh",
+            |d| std::fs::write(d.join("plane.obj"), OBJ_QUAD).unwrap(),
+            render("{dir}/plane.obj", &[]),
+            &["plane.obj", "Wavefront OBJ", "glTF 2.0 scenes only (.gltf or .glb)", "File > Export > glTF 2.0"],
+        ),
+        case(
+            "Mitsuba XML scene",
+            |d| std::fs::write(d.join("scene.xml"), MITSUBA_XML).unwrap(),
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml", "Mitsuba XML", "does not exist yet", "glTF 2.0 scenes only", "File > Export > glTF 2.0"],
+        ),
+        case(
+            "Mitsuba XML named .gltf",
+            |d| std::fs::write(d.join("misnamed.gltf"), MITSUBA_XML).unwrap(),
+            render("{dir}/misnamed.gltf", &[]),
+            &["misnamed.gltf", "Mitsuba XML", "by its content", "does not exist yet"],
+        ),
+        case(
+            "OBJ named .glb",
+            |d| std::fs::write(d.join("misnamed.glb"), OBJ_QUAD).unwrap(),
+            render("{dir}/misnamed.glb", &[]),
+            &["misnamed.glb", "Wavefront OBJ", "by its content"],
+        ),
+        case(
+            "PLY named .gltf",
+            |d| std::fs::write(d.join("mesh.gltf"), "ply\nformat ascii 1.0\nelement vertex 0\nend_header\n").unwrap(),
+            render("{dir}/mesh.gltf", &[]),
+            &["mesh.gltf", "PLY", "Stanford PLY"],
+        ),
+        case(
+            "FBX by its extension",
+            |d| std::fs::write(d.join("rig.fbx"), b"\x00\x01\x02 binary").unwrap(),
+            render("{dir}/rig.fbx", &[]),
+            &["rig.fbx", "FBX", "by its extension", "File > Import > FBX"],
+        ),
+        // --- glTF extensions gatetrace does not implement ---
+        case(
+            "transmissive material",
+            box_with("glass.gltf", |d| {
+                add_material_extension(d, 1, "KHR_materials_transmission", json!({"transmissionFactor": 1.0}))
+            }),
+            render("{dir}/glass.gltf", &[]),
+            &["glass.gltf", "material `red`", "KHR_materials_transmission", "--allow-unsupported-materials"],
+        ),
+        case(
+            "volume material",
+            box_with("volume.gltf", |d| {
+                add_material_extension(d, 0, "KHR_materials_volume", json!({"thicknessFactor": 0.1}))
+            }),
+            render("{dir}/volume.gltf", &[]),
+            &["volume.gltf", "material `white`", "KHR_materials_volume", "not implemented"],
+        ),
+        case(
+            "required extension not implemented",
+            box_with("required.gltf", |d| {
+                add_material_extension(d, 1, "KHR_materials_transmission", json!({"transmissionFactor": 1.0}));
+                d["extensionsRequired"] = json!(["KHR_materials_transmission"]);
+            }),
+            render("{dir}/required.gltf", &["--allow-unsupported-materials"]),
+            &["required.gltf", "KHR_materials_transmission", "extensionsRequired", "does not implement"],
+        ),
         // --- buffers and images ---
         case(
             "missing buffer",
@@ -700,6 +779,77 @@ fn every_bad_input_gets_a_clear_error_and_no_output() {
         }
     }
     assert!(failures.is_empty(), "{} cases failed:\n{}", failures.len(), failures.join("\n"));
+}
+
+/// Renders `scene` (8x8, 1 spp) with `extra` options to `dir/out.npy` and returns whether it
+/// succeeded and its stderr.
+fn render_tiny(dir: &Path, scene: &Path, extra: &[&str]) -> (bool, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+        .arg("render")
+        .arg(scene)
+        .args(["--res", "8x8", "--spp", "1", "--max-bounces", "2", "--out"])
+        .arg(dir.join("out.npy"))
+        .args(extra)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{err}");
+    (o.status.success(), err)
+}
+
+#[test]
+fn unimplemented_extensions_render_with_a_warning_naming_them() {
+    let dir = common::scratch_dir("unimplemented_extensions");
+    let write = |name: &str, edit: &dyn Fn(&mut Value)| {
+        let mut doc = cornell_box_json();
+        edit(&mut doc);
+        write_json(&dir, name, &doc);
+        dir.join(name)
+    };
+
+    // Glass, allowed: rendered as an opaque surface, with a warning naming the material.
+    let glass = write("glass.gltf", &|d| {
+        add_material_extension(d, 1, "KHR_materials_transmission", json!({"transmissionFactor": 1.0}))
+    });
+    let (ok, err) = render_tiny(&dir, &glass, &["--allow-unsupported-materials"]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("warning: ")
+            && err.contains("glass.gltf")
+            && err.contains("material `red`")
+            && err.contains("KHR_materials_transmission")
+            && err.contains("opaque surface"),
+        "{err}"
+    );
+
+    // A material extension that does not let light through: ignored with a warning.
+    let coated = write("coated.gltf", &|d| {
+        add_material_extension(d, 0, "KHR_materials_clearcoat", json!({"clearcoatFactor": 1.0}))
+    });
+    let (ok, err) = render_tiny(&dir, &coated, &[]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("coated.gltf") && err.contains("material `white`") && err.contains("KHR_materials_clearcoat"),
+        "{err}"
+    );
+
+    // An extension listed in extensionsUsed that no material carries.
+    let listed = write("listed.gltf", &|d| {
+        d["extensionsUsed"].as_array_mut().unwrap().push(json!("KHR_materials_transmission"))
+    });
+    let (ok, err) = render_tiny(&dir, &listed, &[]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("warning: ")
+            && err.contains("listed.gltf")
+            && err.contains("KHR_materials_transmission")
+            && err.contains("extensionsUsed"),
+        "{err}"
+    );
+
+    // The scene as shipped uses only what gatetrace implements: no warning.
+    let (ok, err) = render_tiny(&dir, &common::repo_path("assets/scenes/cornell_box.gltf"), &[]);
+    assert!(ok && !err.contains("warning"), "{err}");
 }
 
 mod properties {

@@ -16,9 +16,13 @@ class Scene:
         *,
         aperture_radius: Optional[float] = None,
         focus_distance: Optional[float] = None,
+        allow_unsupported_materials: bool = False,
     ) -> "Scene":
         """Loads a .gltf or .glb file; `aperture_radius` and `focus_distance` (m) make the camera a
-        thin lens. FileNotFoundError when the file does not exist, ValueError when it is unusable."""
+        thin lens; `allow_unsupported_materials` renders materials using KHR_materials_transmission,
+        KHR_materials_volume or KHR_materials_diffuse_transmission as opaque surfaces instead of
+        refusing the scene. FileNotFoundError when the file does not exist, ValueError when it is
+        unusable (a file that is not glTF 2.0 included)."""
     @property
     def path(self) -> "os.PathLike[str]":
         """The file the scene came from (a pathlib.Path)."""

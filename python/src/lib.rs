@@ -24,7 +24,7 @@ use gatetrace::integrator::{
     Budget, Integrator, Method, QuerySettings, RenderOutput, RenderSettings, black_image_warning, create_integrator,
     render_metadata, trace_budget, unreachable_gate,
 };
-use gatetrace::scene::{PreparedScene, load_gltf};
+use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 /// The process's device, opened on first use and shared by every renderer.
 fn device() -> PyResult<&'static GpuContext> {
@@ -62,20 +62,24 @@ struct Scene {
 impl Scene {
     /// Loads a glTF 2.0 scene (.gltf or .glb). `aperture_radius` and `focus_distance` (m) make
     /// the camera a thin lens, overriding the camera node's `extras` (aperture 0: a pinhole).
+    /// `allow_unsupported_materials` renders materials using a glTF extension that lets light
+    /// through the surface (KHR_materials_transmission, KHR_materials_volume, ...) as opaque
+    /// surfaces instead of refusing the scene (`render --allow-unsupported-materials`).
     /// FileNotFoundError when the file does not exist; ValueError when it cannot be used.
     #[staticmethod]
-    #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None))]
+    #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None, allow_unsupported_materials=false))]
     fn load(
         py: Python<'_>,
         path: PathBuf,
         aperture_radius: Option<f32>,
         focus_distance: Option<f32>,
+        allow_unsupported_materials: bool,
     ) -> PyResult<Self> {
         if !path.exists() {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
         }
         let load = || -> anyhow::Result<PreparedScene> {
-            let mut scene = load_gltf(&path)?;
+            let mut scene = load_gltf_with(&path, &LoadOptions { allow_unsupported_materials, ..Default::default() })?;
             scene
                 .camera
                 .override_lens(aperture_radius, focus_distance, "focus_distance=METRES")

@@ -141,6 +141,28 @@ def test_bad_arguments_raise_python_exceptions(call, error, words):
     assert words in str(caught.value), str(caught.value)
 
 
+def test_transmissive_materials_are_refused_unless_allowed(tmp_path):
+    doc = json.loads(BOX.read_text())
+    doc["materials"][1].setdefault("extensions", {})["KHR_materials_transmission"] = {"transmissionFactor": 1.0}
+    doc["extensionsUsed"].append("KHR_materials_transmission")
+    glass = tmp_path / "glass.gltf"
+    glass.write_text(json.dumps(doc))
+    with pytest.raises(ValueError) as caught:
+        gatetrace.Scene.load(glass)
+    for words in ("glass.gltf", "material `red`", "KHR_materials_transmission", "allow_unsupported_materials"):
+        assert words in str(caught.value), str(caught.value)
+    assert gatetrace.Scene.load(glass, allow_unsupported_materials=True).triangles > 0
+
+
+def test_scenes_in_other_formats_say_what_they_are(tmp_path):
+    obj = tmp_path / "plane.obj"
+    obj.write_text("o Plane\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(ValueError) as caught:
+        gatetrace.Scene.load(obj)
+    for words in ("plane.obj", "Wavefront OBJ", ".gltf or .glb", "File > Export > glTF 2.0"):
+        assert words in str(caught.value), str(caught.value)
+
+
 def test_units_and_gate_constructors_speak_the_command_line():
     assert gatetrace.ps(1000) == pytest.approx(0.299792458)
     assert gatetrace.ns(1) == pytest.approx(0.299792458)

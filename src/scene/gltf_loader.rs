@@ -10,48 +10,96 @@ use glam::{Mat3, Mat4, Vec2, Vec3};
 use super::camera::ThinLens;
 use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, TextureData};
 
+/// The glTF extensions gatetrace implements; any other is refused when a file requires it
+/// (`extensionsRequired`) and warned about when a file uses it.
+pub const IMPLEMENTED_EXTENSIONS: [&str; 2] = ["KHR_lights_punctual", "KHR_materials_emissive_strength"];
+
+/// Material extensions that let light pass through a surface or into a medium behind it. Every
+/// surface gatetrace renders is opaque, which no approximation of these comes near (glass would
+/// render as a coloured wall), so a material using one is refused unless
+/// [`LoadOptions::allow_unsupported_materials`] is set; other unimplemented material extensions
+/// (clearcoat, sheen, specular, ...) are ignored with a warning.
+pub const TRANSMISSIVE_EXTENSIONS: [&str; 3] =
+    ["KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_diffuse_transmission"];
+
+/// How a scene file is loaded.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LoadOptions {
+    /// Time (s of the animation clock) at which node animations are sampled and baked in like
+    /// static transforms (see `animation`); `None`: the rest pose.
+    pub time: Option<f64>,
+    /// Loading for an NLOS capture (`crate::nlos`), whose laser and sensor replace the scene's
+    /// lights and camera: both are optional. Without a camera node, a placeholder pinhole at the
+    /// centre of the triangles' bounds stands in (captures never look through it).
+    pub capture: bool,
+    /// Render materials with a [`TRANSMISSIVE_EXTENSIONS`] extension as the opaque surfaces their
+    /// core glTF properties describe, with a warning, instead of refusing the scene.
+    pub allow_unsupported_materials: bool,
+}
+
 /// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
-    load_gltf_at(path, None)
+    load_gltf_with(path, &LoadOptions::default())
 }
 
 /// Loads a `.gltf` or `.glb` file; with `time` (s of the animation clock), its node animations
 /// are sampled at that time and baked in like static transforms (see `animation`).
 pub fn load_gltf_at(path: &Path, time: Option<f64>) -> Result<Scene> {
-    load(path, time, false)
+    load_gltf_with(path, &LoadOptions { time, ..Default::default() })
 }
 
-/// Loads a `.gltf` or `.glb` file for an NLOS capture (`crate::nlos`), whose laser and sensor
-/// replace the scene's lights and camera: both are optional. Without a camera node, a placeholder
-/// pinhole at the centre of the triangles' bounds stands in (captures never look through it).
+/// Loads a `.gltf` or `.glb` file for an NLOS capture (see [`LoadOptions::capture`]).
 pub fn load_gltf_for_capture(path: &Path) -> Result<Scene> {
-    load(path, None, true)
+    load_gltf_with(path, &LoadOptions { capture: true, ..Default::default() })
 }
 
-fn load(path: &Path, time: Option<f64>, capture: bool) -> Result<Scene> {
+/// Loads a `.gltf` or `.glb` file as `options` say. A file in another format (OBJ, PLY, Mitsuba
+/// XML, ...: see `formats`) is refused with what it is and how to convert it.
+pub fn load_gltf_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
-    let gltf = parse_gltf(&bytes).map_err(|e| anyhow!("{name}: not a valid glTF 2.0 file: {e}"))?;
+    if let Some(error) = super::formats::foreign_format_error(&name, path, &bytes) {
+        bail!(error);
+    }
+    let gltf = parse_gltf(&name, path, &bytes)?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = gltf::import_buffers(&gltf.document, Some(base), gltf.blob.clone())
         .map_err(|e| anyhow!("{name}: cannot load a buffer: {e}"))?;
     let images = gltf::import_images(&gltf.document, Some(base), &buffers)
         .map_err(|e| anyhow!("{name}: cannot load an image: {e}"))?;
-    let pose = match time {
+    let pose = match options.time {
         Some(t) => super::animation::sample_animations(&name, &gltf.document, &buffers, t)?,
         None => Default::default(),
     };
-    Loader { name: &name, buffers: &buffers, images: &images, pose, capture }.load(&gltf.document)
+    Loader {
+        name: &name,
+        buffers: &buffers,
+        images: &images,
+        pose,
+        capture: options.capture,
+        allow_unsupported_materials: options.allow_unsupported_materials,
+    }
+    .load(&gltf.document)
 }
 
-/// Parses and validates a glTF or GLB file's bytes, as `gltf::Gltf::from_slice` does, but first
-/// checks what that validation indexes without checking (gltf-json 1.4.1 panics on a
-/// primitive whose POSITION names no accessor), and afterwards the byte ranges the crate's
-/// readers compute unchecked (`check_buffer_ranges`).
-fn parse_gltf(bytes: &[u8]) -> Result<gltf::Gltf, String> {
+/// Parses and validates a glTF or GLB file's bytes (`name`: the file in messages), as
+/// `gltf::Gltf::from_slice` does, but first refuses extensions the file requires that gatetrace
+/// does not implement and checks what that validation indexes without checking (gltf-json 1.4.1
+/// panics on a primitive whose POSITION names no accessor), and afterwards the byte ranges the
+/// crate's readers compute unchecked (`check_buffer_ranges`).
+fn parse_gltf(name: &str, path: &Path, bytes: &[u8]) -> Result<gltf::Gltf> {
     use gltf::json::validation::{Error, Validate};
-    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
+    let invalid =
+        |e: String| anyhow!("{name}: not a valid glTF 2.0 file: {e}{}", super::formats::supported_formats_hint(path));
+    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| invalid(e.to_string()))?;
     let root = gltf.document.as_json();
+    if let Some(extension) = root.extensions_required.iter().find(|e| !IMPLEMENTED_EXTENSIONS.contains(&e.as_str())) {
+        bail!(
+            "{name}: the file requires the glTF extension {extension} (extensionsRequired), which gatetrace does not \
+             implement (it implements {}): export the scene without it",
+            IMPLEMENTED_EXTENSIONS.join(", ")
+        );
+    }
     let mut errors = Vec::new();
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, primitive) in mesh.primitives.iter().enumerate() {
@@ -66,9 +114,9 @@ fn parse_gltf(bytes: &[u8]) -> Result<gltf::Gltf, String> {
         root.validate(root, gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
     }
     if !errors.is_empty() {
-        return Err(gltf::Error::Validation(errors).to_string());
+        return Err(invalid(gltf::Error::Validation(errors).to_string()));
     }
-    check_buffer_ranges(&gltf.document)?;
+    check_buffer_ranges(&gltf.document).map_err(invalid)?;
     Ok(gltf)
 }
 
@@ -153,6 +201,8 @@ struct Loader<'a> {
     pose: std::collections::HashMap<usize, Mat4>,
     /// Loading for an NLOS capture: no camera or light is required.
     capture: bool,
+    /// See [`LoadOptions::allow_unsupported_materials`].
+    allow_unsupported_materials: bool,
 }
 
 /// What the scene-graph walk collects.
@@ -181,6 +231,17 @@ impl Loader<'_> {
         let mut materials = Vec::new();
         for m in doc.materials() {
             materials.push(self.material(&m, &mut textures, &mut texture_of_image)?);
+        }
+        // Extensions declared but found on no material (where `material` reports them): on
+        // textures, meshes or nodes, or nowhere.
+        for extension in &doc.as_json().extensions_used {
+            let on_a_material = doc.materials().any(|m| m.extension_value(extension).is_some());
+            if !IMPLEMENTED_EXTENSIONS.contains(&extension.as_str()) && !on_a_material {
+                eprintln!(
+                    "warning: {name}: the file uses the glTF extension {extension} (extensionsUsed), which gatetrace \
+                     does not implement: ignored"
+                );
+            }
         }
         // Primitives without a material get glTF's default material (white, one-sided).
         let default_material = materials.len() as u32;
@@ -484,7 +545,31 @@ impl Loader<'_> {
         texture_of_image: &mut std::collections::HashMap<(usize, bool, bool), u32>,
     ) -> Result<MaterialDesc> {
         let name = self.name;
-        let label = m.name().map(|n| format!("material `{n}`")).unwrap_or(format!("material {:?}", m.index()));
+        let label = match (m.name(), m.index()) {
+            (Some(n), _) => format!("material `{n}`"),
+            (None, Some(i)) => format!("material {i}"),
+            (None, None) => "the default material".to_owned(),
+        };
+        for extension in m.extensions().into_iter().flat_map(|e| e.keys()) {
+            if !TRANSMISSIVE_EXTENSIONS.contains(&extension.as_str()) {
+                eprintln!(
+                    "warning: {name}: {label}: the glTF extension {extension} is not implemented: ignored (the surface \
+                     is rendered with its base colour, metallic and roughness only)"
+                );
+            } else if self.allow_unsupported_materials {
+                eprintln!(
+                    "warning: {name}: {label}: the glTF extension {extension} is not implemented: the material is \
+                     rendered as an opaque surface (unsupported materials allowed)"
+                );
+            } else {
+                bail!(
+                    "{name}: {label}: the glTF extension {extension} is not implemented: gatetrace renders every \
+                     surface opaque, so light would not pass through this material; remove the extension, or allow \
+                     the opaque stand-in with --allow-unsupported-materials (Python: \
+                     Scene.load(..., allow_unsupported_materials=True))"
+                );
+            }
+        }
         let pbr = m.pbr_metallic_roughness();
         let [r, g, b, _] = pbr.base_color_factor();
         let base_color = Vec3::new(r, g, b);

@@ -1,9 +1,11 @@
-//! Scenes: loading (glTF 2.0, DESIGN.md section 3), the baked world-space description, and the
-//! CPU twins of the kernels' scene functions (camera, lights, surfaces, materials).
+//! Scenes: loading (glTF 2.0, DESIGN.md section 3; files in other formats are refused with how
+//! to convert them), the baked world-space description, and the CPU twins of the kernels' scene
+//! functions (camera, lights, surfaces, materials).
 
 pub mod animation;
 pub mod bsdf;
 pub mod camera;
+pub mod formats;
 pub mod gltf_loader;
 pub mod lights;
 pub mod materials;
@@ -13,7 +15,7 @@ pub mod surface;
 use glam::{Vec2, Vec3};
 
 pub use camera::{CameraDesc, ThinLens};
-pub use gltf_loader::{load_gltf, load_gltf_at, load_gltf_for_capture};
+pub use gltf_loader::{LoadOptions, load_gltf, load_gltf_at, load_gltf_for_capture, load_gltf_with};
 pub use prepared::PreparedScene;
 
 /// A triangle in world space with its shading attributes, in load order.
