@@ -675,8 +675,20 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
         case(
             "unknown output format",
             none,
-            plain(&["render", "--res", "8x8", "--out", "{dir}/image.png"]),
-            &["image.png", ".exr or .npy"],
+            plain(&["render", "--res", "8x8", "--out", "{dir}/image.tiff"]),
+            &["image.tiff", ".exr or .npy", ".png"],
+        ),
+        case(
+            "preview bin beyond the gate's bins",
+            none,
+            plain(&["render", "--res", "8x8", "--gate", "transient:3,0.1,4", "--preview-bin", "4", "--out", "{dir}/p.png"]),
+            &["--preview-bin 4", "4 bin(s)"],
+        ),
+        case(
+            "exposure for a data output",
+            none,
+            plain(&["render", "--res", "8x8", "--exposure", "2", "--out", "{out}"]),
+            &["--exposure", ".png previews"],
         ),
         case(
             "output under a regular file",

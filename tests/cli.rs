@@ -317,3 +317,62 @@ fn a_gate_no_path_reaches_is_said_and_times_typed_as_metres_are_named() {
         assert!(o.status.success() && !stderr(&o).contains("warning"), "{gate}: {}", stderr(&o));
     }
 }
+
+/// Reads an 8-bit RGB PNG: (width, height, bytes).
+fn read_png(path: &std::path::Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut bytes = vec![0; reader.output_buffer_size()];
+    let frame = reader.next_frame(&mut bytes).unwrap();
+    assert_eq!((frame.color_type, frame.bit_depth), (png::ColorType::Rgb, png::BitDepth::Eight));
+    bytes.truncate(frame.buffer_size());
+    (frame.width, frame.height, bytes)
+}
+
+#[test]
+fn png_outputs_are_previews_with_their_exposure_and_info_reads_every_output() {
+    let dir = common::scratch_dir("cli_preview");
+    let render = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let o = gatetrace(&[&["render", "--res", "16x12", "--spp", "8", "--seed", "3"], extra, &["--out", out.to_str().unwrap()]].concat());
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        out
+    };
+    // A steady preview at a stated exposure is the data through the viewer's tone curve.
+    let data = render("steady.npy", &[]);
+    let png = render("steady.png", &["--exposure", "1.5"]);
+    let (w, h, bytes) = read_png(&png);
+    assert_eq!((w, h), (16, 12));
+    let (_, values) = read_npy_f32(&data).unwrap();
+    let expected: Vec<u8> = values.iter().map(|&v| gatetrace::film::preview::tone_srgb(v, 1.5f32.exp2())).collect();
+    assert_eq!(bytes, expected, "the preview is the image's tone-mapped bytes");
+    let info = gatetrace(&["info", png.to_str().unwrap(), "--json"]);
+    assert!(info.status.success(), "{}", stderr(&info));
+    let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    assert_eq!(info["metadata"]["preview"]["exposure_ev"], 1.5, "{info}");
+    assert_eq!(info["metadata"]["spp"], 8, "{info}");
+
+    // A transient: a contact sheet of its bins at one automatic exposure, or one bin.
+    let gate = ["--gate", "transient:6.5ns,200ps,6"];
+    let sheet = render("cube.png", &gate);
+    let (w, h, _) = read_png(&sheet);
+    let gap = gatetrace::film::preview::TILE_GAP;
+    assert_eq!((w, h), (3 * 16 + 2 * gap, 2 * 12 + gap), "6 bins as 3 x 2 tiles");
+    let one = render("bin2.png", &[&gate[..], &["--preview-bin", "2"]].concat());
+    assert_eq!(read_png(&one).0, 16);
+
+    // info: layout, the gate in metres and the units, for every format.
+    let cube = render("cube.npy", &gate);
+    let exr = render("cube.exr", &gate);
+    for (file, layout) in [(&cube, "[H, W, T, 3]"), (&exr, "6 layer(s) of 16x12 pixels"), (&sheet, "preview")] {
+        let o = gatetrace(&["info", file.to_str().unwrap()]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{}", stderr(&o));
+        for needle in [layout, "transient:6.5ns,200ps,6", "bin_width_m 0.0599584916", "bins 6", "units:", "spp 8"] {
+            assert!(text.contains(needle), "info {}: no `{needle}` in\n{text}", file.display());
+        }
+    }
+    assert!(String::from_utf8_lossy(&gatetrace(&["info", sheet.to_str().unwrap()]).stdout).contains("6 tile(s)"));
+    let o = gatetrace(&["info", dir.join("none.npy").to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("none.npy: no such file"), "{}", stderr(&o));
+}
