@@ -307,7 +307,8 @@ struct RenderArgs {
     #[arg(long, value_name = "I/N", value_parser = parse_shard)]
     shard: Option<(u32, u32)>,
     /// Output file: .exr (one layer per transient bin) or .npy (float32 [H, W, 3] or
-    /// [H, W, T, 3], row 0 at the top, with a .json sidecar). Default: SCENE_NAME.exr, or
+    /// [H, W, T, 3], row 0 at the top, with a .json sidecar), or .png (an 8-bit sRGB preview,
+    /// not data: see --exposure and --preview-bin). Default: SCENE_NAME.exr, or
     /// SCENE_NAME_{frame:04}.exr for a sequence, or SCENE_NAME_nlos.npy for --nlos.
     #[arg(long, short)]
     out: Option<PathBuf>,
