@@ -29,7 +29,7 @@ const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/
 ///
 /// Time is optical path length (OPL) in metres, with c = 1: a path's length runs from the point
 /// on the light through every scattering vertex to the camera's pinhole. Wherever a length is
-/// asked for, `ps` and `ns` suffixes give times instead (c = 0.299792458 mm/ps).
+/// asked for, ps and ns suffixes give times instead (c = 0.299792458 mm/ps).
 #[derive(Parser)]
 #[command(version, about, long_about)]
 struct Cli {
@@ -44,6 +44,12 @@ enum Command {
     Render(RenderArgs),
     /// Open the interactive viewer: scrub the gate through time and watch light move; click a
     /// pixel for its transient response.
+    ///
+    /// It takes render's gates, with the same defaults: a box or Gaussian gate is scrubbed by its
+    /// centre tau, a table gate by moving the whole table, a CW gate by its phase; a transient
+    /// gate renders its whole cube and a slider picks the bin shown (--bin at start). Signed
+    /// gates (CW, tables with negative weights) show the luminance on a diverging map: orange
+    /// above zero, blue below, black at zero.
     View(ViewArgs),
     /// Measure samples per second of each method on a scene (tools/throughput.py adds
     /// Mitsuba 3 + mitransient's in the same run).
@@ -54,7 +60,7 @@ enum Command {
     /// Compare the kernels' f32 ellipsoid code with the f64 oracle on many random and
     /// adversarial configurations and print the error distributions per family.
     StressEllipsoid(StressArgs),
-    /// Combine the shards of a render (`render --shard I/N`, one file each) into the image the
+    /// Combine the shards of a render (render --shard I/N, one file each) into the image the
     /// unsplit render gives, bit for bit; refuses parts of different renders, missing or
     /// repeated shards.
     Merge(MergeArgs),
@@ -78,7 +84,7 @@ struct MergeArgs {
     /// The shard files, one per shard index 0 .. N-1 (any order).
     #[arg(required = true)]
     parts: Vec<PathBuf>,
-    /// Output file: .exr or .npy (with a .json sidecar), as `render` writes them.
+    /// Output file: .exr or .npy (with a .json sidecar), as render writes them.
     #[arg(long, short)]
     out: PathBuf,
     /// Create the output's directory when it does not exist (without this, a missing directory
@@ -97,8 +103,11 @@ struct StressArgs {
     seed: u64,
 }
 
+/// What both render and view render: the scene, its camera's lens, the gate, the image and
+/// the paths. One definition of each option, so both commands take the same options with the
+/// same defaults.
 #[derive(Args)]
-struct RenderArgs {
+struct ImageArgs {
     /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted. Other formats (OBJ, PLY,
     /// FBX, USD, Mitsuba XML, ...) are refused with how to convert them.
     scene: Option<PathBuf>,
@@ -109,39 +118,15 @@ struct RenderArgs {
     /// (clearcoat, sheen, specular, ...) are always ignored with a warning.
     #[arg(long)]
     allow_unsupported_materials: bool,
-    /// Sampling method: `path` (path tracing with next-event estimation and MIS); `direct`
-    /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
-    /// bounces); `ellipsoidal` (bidirectional path tracing whose subpaths are joined through a
-    /// vertex on the spheroid of a target length drawn from the gate, so every path has a
-    /// length the gate weighs; needs a gate; at most 24 bounces); `auto` (`path`, `direct` or,
-    /// with a gate, `ellipsoidal`, whichever a pilot of each on this render measures to have the
-    /// lowest variance x time per sample; the pilot renders a smaller image (down to 32x32) from
-    /// a seed of its own, takes 5 % of a --time budget (half where one method is 8x ahead of the
-    /// others after half its batches), or the work of 1/16 of --spp per method, and is
-    /// discarded, so the image is the chosen method's with the same seed; the metadata records
-    /// the choice and the pilot's figures).
-    /// Default: `path`; for --nlos captures with a gate, `ellipsoidal` (see "NLOS captures" in
-    /// the README).
-    #[arg(long, value_enum)]
-    method: Option<Method>,
     /// Pathlength importance W (lengths in metres of optical path, or with a ps/ns/mm suffix):
-    /// `none` (steady state); `box:A..B` (W = 1 on [A, B)); `gaussian:MU,SIGMA`;
-    /// `cw:FREQ_HZ,PHASE_DEG` (W = cos(2 pi f l / c + phase), signed);
-    /// `cw:FREQ_HZ,PHASE_DEG,CODE` (W = C(f l / c + phase / 360), one period C of a CW-ToF code:
-    /// `sine`, `square`, `ham3`, `ham4:1`..`ham4:4`, `mseq[:CHIPS]`, `depthsel[:CHIPS[:N]]`;
-    /// see the README); `table:FILE.csv`
-    /// (rows `length,weight`, linear in between, 0 outside); `transient:START,WIDTH,BINS`
-    /// (a cube of BINS bin-integrated images).
+    /// none (steady state); box:A..B (W = 1 on [A, B)); gaussian:MU,SIGMA;
+    /// cw:FREQ_HZ,PHASE_DEG (W = cos(2 pi f l / c + phase), signed);
+    /// cw:FREQ_HZ,PHASE_DEG,CODE (W = C(f l / c + phase / 360), one period C of a CW-ToF code:
+    /// sine, square, ham3, ham4:1 to ham4:4, mseq or mseq:CHIPS, depthsel, depthsel:CHIPS or
+    /// depthsel:CHIPS:N; see the README); table:FILE.csv (rows length,weight, linear in between,
+    /// 0 outside); transient:START,WIDTH,BINS (a cube of BINS bin-integrated images).
     #[arg(long, default_value = "none", value_name = "SPEC")]
     gate: String,
-    /// Samples per pixel (default 64 unless --time is given).
-    #[arg(long, conflicts_with = "time", allow_hyphen_values = true)]
-    spp: Option<u64>,
-    /// Render for this many seconds instead of --spp (rendering only: scene loading, BVH build
-    /// and kernel builds come first). Passes are sized from the measured rate so the render
-    /// ends before the budget, overrunning it by at most one sample per pixel's time.
-    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true)]
-    time: Option<f64>,
     /// Image size in pixels, WIDTHxHEIGHT.
     #[arg(long, default_value = "256x256", value_parser = parse_resolution, allow_hyphen_values = true)]
     res: (u32, u32),
@@ -151,9 +136,47 @@ struct RenderArgs {
     /// Start Russian roulette after this many scattering vertices (off when not given).
     #[arg(long, allow_hyphen_values = true)]
     rr_depth: Option<u32>,
-    /// Random seed; equal seeds and settings give identical images.
+    /// Random seed; equal seeds and settings give identical images at equal samples per pixel.
     #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     seed: u32,
+    /// Thin-lens camera: radius of the lens in metres (0: a pinhole). Overrides the camera
+    /// node's extras.aperture_radius; needs a focus distance (--focus-distance or
+    /// extras.focus_distance). The lens lies in the plane through the camera node's origin
+    /// normal to its viewing direction.
+    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
+    aperture_radius: Option<f32>,
+    /// Thin-lens camera: distance in metres along the viewing direction from the lens to the
+    /// plane in focus. Overrides the camera node's extras.focus_distance.
+    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
+    focus_distance: Option<f32>,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    #[command(flatten)]
+    image: ImageArgs,
+    /// Sampling method: path (path tracing with next-event estimation and MIS); direct
+    /// (bidirectional path tracing, every (s, t) strategy, power-heuristic MIS; at most 24
+    /// bounces); ellipsoidal (bidirectional path tracing whose subpaths are joined through a
+    /// vertex on the spheroid of a target length drawn from the gate, so every path has a
+    /// length the gate weighs; needs a gate; at most 24 bounces); auto (path, direct or,
+    /// with a gate, ellipsoidal, whichever a pilot of each on this render measures to have the
+    /// lowest variance x time per sample; the pilot renders a smaller image (down to 32x32) from
+    /// a seed of its own, takes 5 % of a --time budget (half where one method is 8x ahead of the
+    /// others after half its batches), or the work of 1/16 of --spp per method, and is
+    /// discarded, so the image is the chosen method's with the same seed; the metadata records
+    /// the choice and the pilot's figures). Default: path; for --nlos captures with a gate,
+    /// ellipsoidal (see "NLOS captures" in the README).
+    #[arg(long, value_enum)]
+    method: Option<Method>,
+    /// Samples per pixel (default 64 unless --time is given).
+    #[arg(long, conflicts_with = "time", allow_hyphen_values = true)]
+    spp: Option<u64>,
+    /// Render for this many seconds instead of --spp (rendering only: scene loading, BVH build
+    /// and kernel builds come first). Passes are sized from the measured rate so the render
+    /// ends before the budget, overrunning it by at most one sample per pixel's time.
+    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true)]
+    time: Option<f64>,
     /// Samples per pixel of one pass, traced together on the GPU when they fit (chosen from the
     /// image size by default). --time renders whole passes.
     #[arg(long, allow_hyphen_values = true)]
@@ -166,11 +189,11 @@ struct RenderArgs {
     #[arg(long)]
     stats: bool,
     /// Write only the MIS-weighted contribution of strategy S,T (S light-subpath vertices, T
-    /// camera-subpath vertices, the pinhole included; `direct` only). The images of all
+    /// camera-subpath vertices, the pinhole included; direct only). The images of all
     /// strategies of a scene sum to the full render.
     #[arg(long, value_name = "S,T", value_parser = parse_strategy)]
     debug_strategy: Option<(u32, u32)>,
-    /// `ellipsoidal`: connections drawn from each ellipsoid query (1 to 8). One BVH traversal
+    /// --method ellipsoidal: connections drawn from each ellipsoid query (1 to 8). One BVH traversal
     /// serves K independent points on the spheroid, each weighted 1/K; every point still costs
     /// its shading and two shadow rays. Default 4: it measured about half the error of 1 at
     /// equal time, from 2.5 mm to 50 cm gates and from 12 to 327,692 triangles. For --nlos
@@ -178,13 +201,13 @@ struct RenderArgs {
     /// bins), though 2.4x on the example scene's letter.
     #[arg(long, value_name = "K", allow_hyphen_values = true)]
     connections_per_query: Option<u32>,
-    /// `combined`: samples per pixel of the ellipsoidal half per sample of the direct half
+    /// --method combined: samples per pixel of the ellipsoidal half per sample of the direct half
     /// (dimensionless, 1/8 to 8). Default: a pilot (like auto's, about 5 % of a --time budget)
     /// measures both halves' variance and time per sample and picks the split of least error at
     /// equal time.
     #[arg(long, value_name = "R")]
     ellipsoidal_share: Option<f64>,
-    /// `ellipsoidal`: BVH nodes whose box diagonal is at most R times the spheroid's semi-major
+    /// --method ellipsoidal: BVH nodes whose box diagonal is at most R times the spheroid's semi-major
     /// axis are entered by a stochastic descent (one child at a time, in proportion to an
     /// estimate of the arcs below it), so a query's work grows with the tree's depth rather
     /// than with the triangles near the spheroid (dimensionless; any R is unbiased, larger is
@@ -192,31 +215,21 @@ struct RenderArgs {
     /// touch.
     #[arg(long, default_value_t = 1.0, value_name = "R")]
     query_split: f32,
-    /// Thin-lens camera: radius of the lens in metres (0: a pinhole). Overrides the camera
-    /// node's `extras.aperture_radius`; needs a focus distance (--focus-distance or
-    /// `extras.focus_distance`). The lens lies in the plane through the camera node's origin
-    /// normal to its viewing direction.
-    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
-    aperture_radius: Option<f32>,
-    /// Thin-lens camera: distance in metres along the viewing direction from the lens to the
-    /// plane in focus. Overrides the camera node's `extras.focus_distance`.
-    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
-    focus_distance: Option<f32>,
-    /// `ellipsoidal`: a stochastic descent visits every node of a subtree once it reaches one
+    /// --method ellipsoidal: a stochastic descent visits every node of a subtree once it reaches one
     /// of at most N BVH nodes (1: descend to single leaves).
     #[arg(long, default_value_t = 31, value_name = "N")]
     query_bottom_nodes: u32,
-    /// `ellipsoidal`: how an ellipsoid query weighs the triangles a spheroid cuts when it picks
-    /// one. `arcs`: by their arcs' angle. `reflection`: by the angle times a bound on the
+    /// --method ellipsoidal: how an ellipsoid query weighs the triangles a spheroid cuts when it picks
+    /// one. arcs: by their arcs' angle. reflection: by the angle times a bound on the
     /// contribution per radian (the material's albedo and the cosines towards both foci), zero
     /// only where the contribution is (foci on opposite sides or in the triangle's plane, the
-    /// back of a one-sided surface, black). Both are unbiased. Default: `reflection` for --nlos
-    /// captures (on the example capture, 4 ps bins, `arcs` measured about 900x its error at
-    /// equal time), `arcs` otherwise (0.57x the error of `reflection` on the Cornell box at a
+    /// back of a one-sided surface, black). Both are unbiased. Default: reflection for --nlos
+    /// captures (on the example capture, 4 ps bins, arcs measured about 900x its error at
+    /// equal time), arcs otherwise (0.57x the error of reflection on the Cornell box at a
     /// 2.5 mm gate, 1.1x at 5 and 50 cm).
     #[arg(long, value_name = "WEIGHTS")]
     query_weights: Option<QueryWeights>,
-    /// --nlos captures with `ellipsoidal` on a transient gate: samples per pixel of a pilot
+    /// --nlos captures with ellipsoidal on a transient gate: samples per pixel of a pilot
     /// render, traced first and then discarded, whose transient decides how the render's target
     /// lengths visit each pixel's bins: every bin once a cycle, and 7 more visits per bin (at
     /// most 65,535 a cycle), half shared out evenly and half in proportion to the light the
@@ -229,7 +242,7 @@ struct RenderArgs {
     /// share out the visits instead (15 more per bin) and no pilot runs.
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     target_pilot: Option<u32>,
-    /// --nlos captures with `ellipsoidal` on a transient gate: `on` builds the band index before
+    /// --nlos captures with ellipsoidal on a transient gate: on: builds the band index before
     /// the first pass (per sensed point and bin, the BVH clusters whose triangles reach into the
     /// bin's shell of three-bounce path lengths, with their masses there; device memory: 8
     /// bytes per entry, up to four bindings) and makes each spot-to-sensed-point connection a
@@ -237,8 +250,8 @@ struct RenderArgs {
     /// the whole bin; its masses also share out each pixel's visits to its bins (with
     /// --max-bounces 3, instead of --target-pilot). The hidden scene is prepared for it: closed
     /// double-sided meshes become one-sided, triangles larger than the bins resolve are cut
-    /// (the metadata's shell_preparation). `off` queries the BVH for every connection (a
-    /// stochastic descent). `auto` (default): on when the scene has more than 64 triangles
+    /// (the metadata's shell_preparation). off: queries the BVH for every connection (a
+    /// stochastic descent). auto (default): on when the scene has more than 64 triangles
     /// besides the relay wall (a smaller one is searched whole by every query, exactly).
     /// Unbiased either way; the build counts in a time budget. A capture goes without it where
     /// it cannot be built completely (the metadata's band_index says why, or gives its size and
@@ -246,11 +259,11 @@ struct RenderArgs {
     /// of the descent's error (README, NLOS captures).
     #[arg(long, value_name = "auto|on|off", default_value = "auto")]
     band_index: OnOff,
-    /// `ellipsoidal`, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
+    /// --method ellipsoidal, for numerical studies: skip spheroids with tau_e <= d (1 + REL), d the
     /// distance between the foci (dimensionless; f32 cannot place points on thinner ones).
     #[arg(long, default_value_t = 1e-6, value_name = "REL")]
     needle_guard: f32,
-    /// `ellipsoidal`, for numerical studies: drop sampled points whose path length misses the
+    /// --method ellipsoidal, for numerical studies: drop sampled points whose path length misses the
     /// target tau_e by more than REL x tau_e (dimensionless).
     #[arg(long, default_value_t = 1e-5, value_name = "REL")]
     length_guard: f32,
@@ -282,7 +295,7 @@ struct RenderArgs {
     force: bool,
     /// Save the render's state to OUT.checkpoint (beside the output) after the first pass that
     /// ends this many seconds after the last save, and once more when the render is done
-    /// (0: after every pass). `--resume` continues from it. Without this option a checkpoint is
+    /// (0: after every pass). --resume continues from it. Without this option a checkpoint is
     /// written only when the render is interrupted (SIGINT or SIGTERM: the pass in flight
     /// finishes, the image of the samples traced so far is written with them in its metadata,
     /// and gatetrace exits with status 128 + the signal's number; a second signal aborts at
@@ -300,7 +313,7 @@ struct RenderArgs {
     resume: bool,
     /// Render only shard I of N (I from 0) of the image: samples floor(I S / N) to
     /// floor((I + 1) S / N) of each pixel's S = --spp, written to --out (default
-    /// SCENE_NAME.shard_I_of_N) as the sums `gatetrace merge` adds into the image of the unsplit
+    /// SCENE_NAME.shard_I_of_N) as the sums gatetrace merge adds into the image of the unsplit
     /// render, bit for bit, with every method. Run the N shards anywhere (a job array), with
     /// identical other options. Needs --spp; not for sequences, NLOS captures or --method auto
     /// (whose choice depends on timings).
@@ -325,9 +338,9 @@ struct RenderArgs {
     /// preview's metadata records the exposure used.
     #[arg(long, value_name = "EV", allow_hyphen_values = true)]
     exposure: Option<f32>,
-    /// Non-line-of-sight capture with this laser scan: `single` (one laser spot, --laser-spot),
-    /// `confocal` (each sensed point lit by a laser spot on itself, in one render) or
-    /// `exhaustive` (every spot of --laser-grid with every sensed point). --res is then the grid
+    /// Non-line-of-sight capture with this laser scan: single (one laser spot, --laser-spot),
+    /// confocal (each sensed point lit by a laser spot on itself, in one render) or
+    /// exhaustive (every spot of --laser-grid with every sensed point). --res is then the grid
     /// of sensed points on the relay wall: cell (i, j) is sensed at the wall's texture
     /// coordinates ((i + 0.5) / W, (j + 0.5) / H), and pixel value is the radiance (W m^-2 sr^-1
     /// per bin) leaving that point towards the sensor origin. Path lengths run from the laser spot
@@ -343,11 +356,11 @@ struct RenderArgs {
     #[arg(long, default_value = gatetrace::nlos::DEFAULT_RELAY_WALL, value_name = "NODE")]
     relay_wall: String,
     /// --nlos: where the sensor looks at the wall from, X,Y,Z in metres (default: the node named
-    /// `sensor_origin`, else the one named `nlos_origin`).
+    /// sensor_origin, else the one named nlos_origin).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
     sensor_origin: Option<glam::Vec3>,
     /// --nlos: where the laser beam starts, X,Y,Z in metres (default: the node named
-    /// `laser_origin`, else the one named `nlos_origin`).
+    /// laser_origin, else the one named nlos_origin).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
     laser_origin: Option<glam::Vec3>,
     /// --nlos single: where the laser is aimed, as texture coordinates U,V of the relay wall.
@@ -366,30 +379,25 @@ struct RenderArgs {
     count_first_last: bool,
 }
 
+/// The render's shared options read as its own fields (args.gate, args.res, ...).
+impl std::ops::Deref for RenderArgs {
+    type Target = ImageArgs;
+
+    fn deref(&self) -> &ImageArgs {
+        &self.image
+    }
+}
+
 #[derive(Args)]
 struct ViewArgs {
-    /// glTF 2.0 scene (.gltf or .glb); the Cornell box when omitted.
-    scene: Option<PathBuf>,
-    /// Render materials that use a glTF extension letting light through the surface
-    /// (KHR_materials_transmission, KHR_materials_volume, KHR_materials_diffuse_transmission),
-    /// which gatetrace does not implement, as the opaque surfaces their other properties describe,
-    /// with a warning, instead of refusing the scene. Other unimplemented material extensions
-    /// (clearcoat, sheen, specular, ...) are always ignored with a warning.
-    #[arg(long)]
-    allow_unsupported_materials: bool,
-    /// Sampling method at start (path, direct, ellipsoidal); switchable in the window.
-    #[arg(long, value_enum, default_value_t = Method::Path)]
+    #[command(flatten)]
+    image: ImageArgs,
+    /// Sampling method at start; switchable in the window.
+    #[arg(long, default_value = "path", value_parser = ViewMethodParser)]
     method: Method,
-    /// Gate at start: `none`, `box:A..B` or `gaussian:MU,SIGMA` (lengths in metres of optical
-    /// path, or with mm/ps/ns suffixes). The window moves its centre tau.
-    #[arg(long, default_value = "box:3.14..3.19", value_name = "SPEC")]
-    gate: String,
-    /// Image size in pixels, WIDTHxHEIGHT.
-    #[arg(long, default_value = "128x128", value_parser = parse_resolution)]
-    res: (u32, u32),
-    /// Maximum number of scattering vertices.
-    #[arg(long, default_value_t = 5)]
-    max_bounces: u32,
+    /// Transient gates: the bin shown at start (0 to BINS - 1); the window's slider moves it.
+    #[arg(long, default_value_t = 0, value_name = "BIN")]
+    bin: u32,
     /// Exposure in stops (the radiance is multiplied by 2^EV before the tone curve); by default
     /// set from the first image (its 99th percentile shows as white).
     #[arg(long, allow_hyphen_values = true, value_name = "EV")]
@@ -401,20 +409,64 @@ struct ViewArgs {
     /// clicked.
     #[arg(long, value_name = "X,Y", value_parser = parse_pixel)]
     profile_pixel: Option<(u32, u32)>,
-    /// Random seed.
-    #[arg(long, default_value_t = 0)]
-    seed: u32,
     /// Save the window's pixels to this PNG after --after-frames frames and exit (with FILE.json
-    /// beside it: the image's rectangle, samples per pixel, timings). For tests and figures.
+    /// beside it: the image's rectangle, samples per pixel, gate, bin shown, display, timings).
+    /// For tests and figures.
     #[arg(long, value_name = "FILE.png")]
     screenshot: Option<PathBuf>,
     /// Frames to render before --screenshot.
     #[arg(long, default_value_t = 30, value_name = "N")]
     after_frames: u32,
-    /// With --screenshot: move the gate centre by D every 10 frames (metres, or mm/ps/ns), and
-    /// record the time from each move to its first image.
+    /// With --screenshot: move the gate by D every 10 frames (metres of optical path, or with a
+    /// mm/ps/ns suffix; a transient gate's shown bin moves by D / WIDTH bins, rounded, a CW
+    /// gate's phase by -360 f D / c degrees), and record the time from each move to its first
+    /// image.
     #[arg(long, value_name = "D", allow_hyphen_values = true)]
     scrub_step: Option<String>,
+}
+
+/// Parses view --method: the methods the viewer renders progressively, listed with their help
+/// from Method; auto and combined, which decide from a pilot per render, are refused with the
+/// reason.
+#[derive(Clone)]
+struct ViewMethodParser;
+
+/// The methods the viewer renders (its window's buttons).
+const VIEW_METHODS: [Method; 3] = [Method::Path, Method::Direct, Method::Ellipsoidal];
+
+impl clap::builder::TypedValueParser for ViewMethodParser {
+    type Value = Method;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<Method, clap::Error> {
+        use clap::ValueEnum as _;
+        let pilot = match Method::from_str(&value.to_string_lossy(), false) {
+            Ok(method) if VIEW_METHODS.contains(&method) => return Ok(method),
+            Ok(Method::Auto) => "auto chooses a method per render from a pilot",
+            Ok(Method::Combined) => "combined shares its samples between its halves after a pilot",
+            // Anything else: clap's own error, with the possible values.
+            _ => {
+                let names = self.possible_values().into_iter().flatten();
+                let name = clap::builder::PossibleValuesParser::new(names).parse_ref(cmd, arg, value)?;
+                return Method::from_str(&name, false)
+                    .map_err(|e| clap::Error::raw(clap::error::ErrorKind::InvalidValue, e).with_cmd(cmd));
+            }
+        };
+        let message = format!(
+            "--method {}: {pilot}; the viewer renders progressively: start it with path, direct or ellipsoidal\n",
+            value.to_string_lossy()
+        );
+        Err(clap::Error::raw(clap::error::ErrorKind::InvalidValue, message).with_cmd(cmd))
+    }
+
+    fn possible_values(&self) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        use clap::ValueEnum as _;
+        Some(Box::new(VIEW_METHODS.iter().filter_map(|m| m.to_possible_value())))
+    }
 }
 
 #[derive(Args)]
@@ -434,10 +486,10 @@ struct BenchArgs {
     /// glTF 2.0 scene (default: the Cornell box).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Gate of `path` and `direct` (see render --gate; metres of optical path).
+    /// Gate of path and direct (see render --gate; metres of optical path).
     #[arg(long, default_value = "none")]
     gate: String,
-    /// Gate of `ellipsoidal`, which needs one with target lengths: by default the 2.5 mm box of
+    /// Gate of ellipsoidal, which needs one with target lengths: by default the 2.5 mm box of
     /// the README's equal-time figures.
     #[arg(long, default_value = "box:3.16..3.1625")]
     ellipsoidal_gate: String,
@@ -474,24 +526,24 @@ struct EqualTimeArgs {
     scenes: Vec<PathBuf>,
     /// Methods to compare, comma-separated: path, direct, ellipsoidal, auto, and ellipsoidal
     /// (or auto, for its ellipsoidal candidate) with options after colons: K (connections per
-    /// query, see render --connections-per-query), `exhaustive` (render --query-split 0),
-    /// `split=R`, `bottom=N` or `reflection` (render --query-weights reflection), e.g.
-    /// ellipsoidal:4:exhaustive. `auto`'s pilot counts in its time; the `chosen` column says
+    /// query, see render --connections-per-query), exhaustive (render --query-split 0),
+    /// split=R, bottom=N or reflection (render --query-weights reflection), e.g.
+    /// ellipsoidal:4:exhaustive. auto's pilot counts in its time; the chosen column says
     /// which method each of its renders took.
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<gatetrace::bench::Variant>,
-    /// Gates to compare at, separated by `;` (same syntax as `render --gate`).
+    /// Gates to compare at, separated by ; (same syntax as render --gate).
     #[arg(long, default_value = "none;box:3.14..3.1425")]
     gates: String,
     /// Animation time (seconds of the scene's clock) at which animated scenes are compared, as
-    /// `render --anim-time` poses them; without it, as the file poses them.
+    /// render --anim-time poses them; without it, as the file poses them.
     #[arg(long, value_name = "SECONDS")]
     anim_time: Option<f64>,
     /// Seconds of rendering per method, gate and repeat (kernel builds excluded).
     #[arg(long, default_value_t = 10.0)]
     seconds: f64,
     /// Renders per method and gate; repeat r of every method renders from the same seed (common
-    /// random numbers: `auto` then shows just what its pilot costs), references from others.
+    /// random numbers: auto then shows just what its pilot costs), references from others.
     /// Every method's repeat r runs before any method's repeat r + 1, so a slower stretch of the
     /// device falls on all methods alike.
     #[arg(long, default_value_t = 3)]
@@ -664,19 +716,16 @@ fn main() {
 }
 
 fn run_view(args: ViewArgs) -> Result<()> {
-    use gatetrace::viewer::{GateChoice, ViewOptions, run_viewer};
-    ensure!(
-        args.method != Method::Auto,
-        "--method auto chooses per render from a pilot; the viewer renders progressively: start it with path, direct \
-         or ellipsoidal"
-    );
-    let scene = args.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
-    let (gate, tau, gate_width) = match Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))? {
-        Gate::None => (GateChoice::None, 3.165, 0.05),
-        Gate::Box { start, end } => (GateChoice::Box, 0.5 * (start + end), end - start),
-        Gate::Gaussian { mean, sigma } => (GateChoice::Gaussian, mean, sigma),
-        other => bail!("--gate {}: the viewer shows none, box or gaussian gates (got {})", args.gate, other.describe()),
-    };
+    use gatetrace::viewer::{ViewOptions, run_viewer};
+    let image = &args.image;
+    let scene = image.scene.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_SCENE));
+    let gate = Gate::parse(&image.gate).with_context(|| format!("--gate {}", image.gate))?;
+    match gate {
+        Gate::Transient { bins, .. } => {
+            ensure!(args.bin < bins, "--bin {}: the transient gate {} has bins 0 to {}", args.bin, image.gate, bins - 1)
+        }
+        _ => ensure!(args.bin == 0, "--bin {} applies to transient gates only (--gate {})", args.bin, image.gate),
+    }
     if args.screenshot.is_some() {
         ensure!(args.after_frames >= 1, "--after-frames must be at least 1");
     }
@@ -685,14 +734,16 @@ fn run_view(args: ViewArgs) -> Result<()> {
     ensure!(scrub_step.is_none() || args.screenshot.is_some(), "--scrub-step needs --screenshot");
     run_viewer(ViewOptions {
         scene,
-        allow_unsupported_materials: args.allow_unsupported_materials,
-        width: args.res.0,
-        height: args.res.1,
+        allow_unsupported_materials: image.allow_unsupported_materials,
+        width: image.res.0,
+        height: image.res.1,
         method: args.method,
         gate,
-        tau,
-        gate_width,
-        max_bounces: args.max_bounces,
+        bin: args.bin,
+        max_bounces: image.max_bounces,
+        rr_depth: image.rr_depth,
+        aperture_radius: image.aperture_radius,
+        focus_distance: image.focus_distance,
         exposure_ev: args.exposure.unwrap_or(0.0),
         auto_exposure: args.exposure.is_none(),
         log_curve: args.log,
@@ -700,7 +751,7 @@ fn run_view(args: ViewArgs) -> Result<()> {
         after_frames: args.after_frames,
         scrub_step,
         profile_pixel: args.profile_pixel,
-        seed: args.seed,
+        seed: image.seed,
     })
 }
 
@@ -711,7 +762,7 @@ fn load_options(args: &RenderArgs, time: Option<f64>) -> LoadOptions {
 
 /// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
 /// (each overrides the glTF camera node's extras; an aperture radius of 0 makes a pinhole).
-fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &RenderArgs) -> Result<gatetrace::scene::Scene> {
+fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &ImageArgs) -> Result<gatetrace::scene::Scene> {
     scene
         .camera
         .override_lens(args.aperture_radius, args.focus_distance, "--focus-distance METRES")

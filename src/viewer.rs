@@ -4,7 +4,9 @@
 //! RGBA8 on the GPU and the result is copied into the texture egui draws (no CPU round trip).
 //! Moving τ within one gate kind rewrites the gate parameters in place (`Integrator::set_gate`)
 //! and restarts accumulation at once; a new method, gate kind or bounce count rebuilds the
-//! integrator. Clicking a pixel shows its transient response (a `path` render with a transient
+//! integrator. A transient gate's cube accumulates as a whole and `resolve_display` shows one
+//! bin, so moving the bin shown costs nothing; signed gates (CW) show the signed luminance on a
+//! diverging map. Clicking a pixel shows its transient response (a `path` render with a transient
 //! gate over the scene's path lengths, accumulated alongside) with the gate drawn on it.
 
 use std::path::{Path, PathBuf};
@@ -15,10 +17,11 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use eframe::egui;
 
 use crate::film::output::{Metadata, write_film};
-use crate::film::{Gate, fixed};
+use crate::film::{CwCode, Gate, fixed};
 use crate::gpu::layout::{DISPLAY_LINEAR, DISPLAY_LOG, DisplayParams};
 use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::integrator::{Integrator, Method, PassSizer, RenderSettings, create_integrator};
+use crate::film::preview::auto_exposure_ev;
 use crate::scene::{LoadOptions, PreparedScene, load_gltf_with};
 use crate::units::metres_to_ps;
 
@@ -31,6 +34,138 @@ pub enum GateChoice {
     Box,
     /// Gaussian of mean τ and standard deviation width.
     Gaussian,
+    /// A cube of bins rendered together; one bin is shown.
+    Transient,
+    /// Continuous-wave gate (cosine, or one period of a code), signed.
+    Cw,
+    /// Tabulated W, moved through time as a whole.
+    Table,
+}
+
+/// The window's gate controls: the parameters of every kind, so that switching kinds and back
+/// keeps each kind's settings.
+#[derive(Clone, Debug)]
+pub struct GateControls {
+    /// The kind rendered.
+    pub kind: GateChoice,
+    /// Box and Gaussian gates: centre τ (m of optical path).
+    pub tau: f64,
+    /// Box gates: width; Gaussian gates: standard deviation (m).
+    pub width: f64,
+    /// Transient gates: start of bin 0 (m).
+    pub transient_start: f64,
+    /// Transient gates: bin width (m).
+    pub bin_width: f64,
+    /// Transient gates: number of bins.
+    pub bins: u32,
+    /// Transient gates: the bin shown (0 to bins - 1).
+    pub bin: u32,
+    /// CW gates: modulation frequency (Hz).
+    pub frequency_hz: f64,
+    /// CW gates: phase (degrees).
+    pub phase_deg: f64,
+    /// CW gates: the code's correlation over one period (None: a cosine).
+    pub code: Option<CwCode>,
+    /// Table gates: the table's (length m, weight) points as read, and its file.
+    pub table: Option<(Vec<(f64, f64)>, PathBuf)>,
+    /// Table gates: how far the table is moved to longer paths (m).
+    pub table_shift: f64,
+}
+
+impl GateControls {
+    /// Controls showing `gate`, with `bin` shown for a transient gate; the other kinds start
+    /// from defaults within `lengths`, the scene's range of path lengths (m).
+    pub fn new(gate: &Gate, bin: u32, lengths: (f64, f64)) -> Self {
+        let (lo, hi) = length_range(lengths);
+        let mut c = GateControls {
+            kind: GateChoice::None,
+            tau: 3.165,
+            width: 0.05,
+            transient_start: lo,
+            bin_width: (hi - lo) / 32.0,
+            bins: 32,
+            bin: 0,
+            frequency_hz: 100e6,
+            phase_deg: 0.0,
+            code: None,
+            table: None,
+            table_shift: 0.0,
+        };
+        match gate.clone() {
+            Gate::None => {}
+            Gate::Box { start, end } => (c.kind, c.tau, c.width) = (GateChoice::Box, 0.5 * (start + end), end - start),
+            Gate::Gaussian { mean, sigma } => (c.kind, c.tau, c.width) = (GateChoice::Gaussian, mean, sigma),
+            Gate::Transient { start, width, bins } => {
+                (c.kind, c.transient_start, c.bin_width, c.bins, c.bin) =
+                    (GateChoice::Transient, start, width, bins, bin.min(bins - 1))
+            }
+            Gate::Cw { frequency_hz, phase_deg } => {
+                (c.kind, c.frequency_hz, c.phase_deg) = (GateChoice::Cw, frequency_hz, phase_deg)
+            }
+            Gate::CwCode { frequency_hz, phase_deg, code } => {
+                (c.kind, c.frequency_hz, c.phase_deg, c.code) = (GateChoice::Cw, frequency_hz, phase_deg, Some(code))
+            }
+            Gate::Table { points, source } => (c.kind, c.table) = (GateChoice::Table, Some((points, source))),
+        }
+        c
+    }
+
+    /// The gate the controls describe.
+    pub fn gate(&self) -> Gate {
+        match self.kind {
+            GateChoice::None => Gate::None,
+            GateChoice::Box => {
+                let start = (self.tau - 0.5 * self.width).max(0.0);
+                Gate::Box { start, end: start + self.width }
+            }
+            GateChoice::Gaussian => Gate::Gaussian { mean: self.tau, sigma: self.width },
+            GateChoice::Transient => {
+                Gate::Transient { start: self.transient_start, width: self.bin_width, bins: self.bins.max(1) }
+            }
+            GateChoice::Cw => match self.code {
+                None => Gate::Cw { frequency_hz: self.frequency_hz, phase_deg: self.phase_deg },
+                Some(code) => Gate::CwCode { frequency_hz: self.frequency_hz, phase_deg: self.phase_deg, code },
+            },
+            GateChoice::Table => match &self.table {
+                Some((points, source)) => Gate::Table {
+                    points: points.iter().map(|&(l, w)| (l + self.table_shift, w)).collect(),
+                    source: source.clone(),
+                },
+                None => Gate::None,
+            },
+        }
+    }
+
+    /// The transient bin shown (0 for other gates).
+    pub fn shown_bin(&self) -> u32 {
+        if self.kind == GateChoice::Transient { self.bin.min(self.bins.max(1) - 1) } else { 0 }
+    }
+
+    /// Moves the gate `d` metres of optical path later (earlier when negative): τ for box and
+    /// Gaussian gates, the table's shift, the CW phase by -360 f d / c degrees, and for a
+    /// transient gate the bin shown by d / bin width bins (rounded, kept within the cube).
+    pub fn step(&mut self, d: f64) {
+        match self.kind {
+            GateChoice::None => {}
+            GateChoice::Box | GateChoice::Gaussian => self.tau += d,
+            GateChoice::Table => self.table_shift += d,
+            GateChoice::Cw => self.phase_deg -= 360.0 * self.frequency_hz * d / crate::units::SPEED_OF_LIGHT,
+            GateChoice::Transient => {
+                let bin = self.bin as f64 + (d / self.bin_width).round();
+                self.bin = bin.clamp(0.0, (self.bins.max(1) - 1) as f64) as u32;
+            }
+        }
+    }
+}
+
+/// Sliders keep values from the command line outside their range (only dragging is bounded):
+/// a gate or bounce count given at start is rendered as given.
+const KEEP: egui::SliderClamping = egui::SliderClamping::Edits;
+
+/// The range of path lengths (m) the sliders span: from just below the shortest path the scene
+/// allows, over at most four times that (long tails carry little light).
+fn length_range(lengths: (f64, f64)) -> (f64, f64) {
+    (lengths.0 * 0.95, lengths.0 + (lengths.1 - lengths.0).min(4.0 * lengths.0.max(0.5)))
 }
 
 /// Settings of `gatetrace view` (initial values of the controls and the screenshot mode).
@@ -46,14 +181,18 @@ pub struct ViewOptions {
     pub height: u32,
     /// Sampling method.
     pub method: Method,
-    /// Gate kind.
-    pub gate: GateChoice,
-    /// Gate centre τ (m of optical path).
-    pub tau: f64,
-    /// Gate width (box) or standard deviation (Gaussian) (m).
-    pub gate_width: f64,
+    /// Gate at start (any kind).
+    pub gate: Gate,
+    /// Transient gates: the bin shown at start.
+    pub bin: u32,
     /// Maximum scattering vertices.
     pub max_bounces: u32,
+    /// Russian roulette after this many scattering vertices (None: off).
+    pub rr_depth: Option<u32>,
+    /// Thin-lens camera: lens radius (m), overriding the scene's camera (0: a pinhole).
+    pub aperture_radius: Option<f32>,
+    /// Thin-lens camera: focus distance (m), overriding the scene's camera.
+    pub focus_distance: Option<f32>,
     /// Exposure (stops: the radiance is multiplied by 2^EV).
     pub exposure_ev: f32,
     /// Set the exposure from the first image (99th percentile to 1), overriding `exposure_ev`.
@@ -65,8 +204,9 @@ pub struct ViewOptions {
     pub screenshot: Option<PathBuf>,
     /// Frames rendered before the screenshot.
     pub after_frames: u32,
-    /// Screenshot mode: move τ by this much (m) every 10 frames and report the time from each
-    /// change to the first image of the new gate.
+    /// Screenshot mode: move the gate by this much (m of optical path, see
+    /// [`GateControls::step`]) every 10 frames and report the time from each change to the
+    /// first image of the new gate.
     pub scrub_step: Option<f64>,
     /// Pixel (x, y) whose time profile is shown from the start (as if clicked).
     pub profile_pixel: Option<(u32, u32)>,
@@ -77,7 +217,14 @@ pub struct ViewOptions {
 /// Opens the window and runs until it is closed (or the screenshot is saved).
 pub fn run_viewer(options: ViewOptions) -> Result<()> {
     let load = LoadOptions { allow_unsupported_materials: options.allow_unsupported_materials, ..Default::default() };
-    let scene = PreparedScene::new(load_gltf_with(&options.scene, &load)?)?;
+    let mut scene = load_gltf_with(&options.scene, &load)?;
+    if options.aperture_radius.is_some() || options.focus_distance.is_some() {
+        scene
+            .camera
+            .override_lens(options.aperture_radius, options.focus_distance, "--focus-distance METRES")
+            .with_context(|| format!("{}: --aperture-radius/--focus-distance", scene.source))?;
+    }
+    let scene = PreparedScene::new(scene)?;
     let ctx = GpuContext::new()?;
     let (shortest, longest) = scene.scene.path_length_bounds(options.max_bounces.max(1));
     let native = eframe::NativeOptions {
@@ -162,6 +309,8 @@ struct Viewer<'a> {
     /// Path lengths the scene allows (m), for the sliders and the profile.
     lengths: (f64, f64),
     options: ViewOptions,
+    /// The gate's controls.
+    gate: GateControls,
     /// Settings of the current integrator.
     built: Option<RenderSettings>,
     tracer: Option<Box<dyn Integrator + 'a>>,
@@ -189,10 +338,12 @@ impl<'a> Viewer<'a> {
         state: &eframe::egui_wgpu::RenderState,
         failure: &'a mut Option<anyhow::Error>,
     ) -> Result<Self> {
+        let gate = GateControls::new(&options.gate, options.bin, lengths);
         let mut viewer = Self {
             ctx,
             scene,
             lengths,
+            gate,
             auto_exposure_pending: options.auto_exposure,
             options,
             built: None,
@@ -222,29 +373,20 @@ impl<'a> Viewer<'a> {
         Ok(viewer)
     }
 
-    /// The gate the controls describe.
-    fn gate(&self) -> Gate {
-        let o = &self.options;
-        match o.gate {
-            GateChoice::None => Gate::None,
-            GateChoice::Box => {
-                let start = (o.tau - 0.5 * o.gate_width).max(0.0);
-                Gate::Box { start, end: start + o.gate_width }
-            }
-            GateChoice::Gaussian => Gate::Gaussian { mean: o.tau, sigma: o.gate_width },
-        }
-    }
-
     fn settings(&self) -> RenderSettings {
         let o = &self.options;
-        let method =
-            if o.gate == GateChoice::None && o.method == Method::Ellipsoidal { Method::Direct } else { o.method };
+        let method = if self.gate.kind == GateChoice::None && o.method == Method::Ellipsoidal {
+            Method::Direct
+        } else {
+            o.method
+        };
         RenderSettings {
             width: o.width,
             height: o.height,
             method,
-            gate: self.gate(),
+            gate: self.gate.gate(),
             max_bounces: o.max_bounces,
+            rr_depth: o.rr_depth,
             seed: o.seed,
             connections_per_query: crate::integrator::bidirectional::default_connections_per_query(method),
             ..Default::default()
@@ -258,6 +400,7 @@ impl<'a> Viewer<'a> {
         if self.built.as_ref() == Some(&wanted) {
             return Ok(());
         }
+        wanted.gate.validate()?;
         self.timing.pending_change = Some(Instant::now());
         if let (Some(built), Some(tracer)) = (&self.built, &mut self.tracer) {
             let same_but_gate = RenderSettings { gate: wanted.gate.clone(), ..built.clone() } == wanted;
@@ -348,7 +491,8 @@ impl<'a> Viewer<'a> {
             inverse_spp: 1.0 / tracer.samples_done().max(1) as f32,
             exposure: 2f32.powf(self.options.exposure_ev),
             curve: if self.options.log_curve { DISPLAY_LOG } else { DISPLAY_LINEAR },
-            bin: 0,
+            bin: self.gate.shown_bin(),
+            signed: self.built.as_ref().is_some_and(|b| b.gate.is_signed()) as u32,
             decades: 4.0,
             stride: display.stride,
             ..Default::default()
@@ -445,6 +589,7 @@ impl<'a> Viewer<'a> {
             method: Method::Path,
             gate,
             max_bounces: self.options.max_bounces,
+            rr_depth: self.options.rr_depth,
             seed: self.options.seed ^ 0x5bd1_e995,
             ..Default::default()
         };
@@ -459,17 +604,19 @@ impl<'a> Viewer<'a> {
         Ok(())
     }
 
-    /// Exposure (EV) that maps the 99th percentile of the image's channel values to 1.
+    /// Exposure (EV) that maps the 99th percentile of the shown image's values (channels, or
+    /// the luminance's magnitude on the signed display; the shown bin of a transient gate) to 1.
     fn auto_exposure(&self) -> Result<Option<f32>> {
-        let Some(tracer) = &self.tracer else { return Ok(None) };
+        let (Some(tracer), Some(built)) = (&self.tracer, &self.built) else { return Ok(None) };
         let film = tracer.film()?;
-        let mut values: Vec<f32> = film.data.iter().map(|v| v.abs()).filter(|v| *v > 0.0).collect();
-        if values.is_empty() {
-            return Ok(None);
-        }
-        values.sort_by(f32::total_cmp);
-        let p99 = values[(values.len() - 1) * 99 / 100];
-        Ok(Some(-p99.log2()))
+        let bin = self.gate.shown_bin().min(film.bins - 1);
+        let pixels = (0..film.height).flat_map(|y| (0..film.width).map(move |x| (x, y)));
+        let shown: Vec<[f32; 3]> = pixels.map(|(x, y)| film.get(x, y, bin)).collect();
+        Ok(if built.gate.is_signed() {
+            auto_exposure_ev(shown.iter().map(|c| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]))
+        } else {
+            auto_exposure_ev(shown.iter().flatten().copied())
+        })
     }
 
     fn save(&mut self, path: &Path) -> Result<()> {
@@ -485,32 +632,124 @@ impl<'a> Viewer<'a> {
             ("max_bounces".into(), built.max_bounces.into()),
             ("adapter".into(), self.ctx.adapter_description().into()),
         ];
-        write_film(path, &film, &metadata, &[])
+        let gate = &built.gate;
+        let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
+        write_film(path, &film, &metadata, &bin_ranges)
+    }
+
+    /// The gate's kind and, per kind, what moves it through time: τ (box, Gaussian), the bin
+    /// shown (transient), the phase (CW), the shift (table).
+    fn gate_controls(&mut self, ui: &mut egui::Ui) {
+        let g = &mut self.gate;
+        ui.heading("Gate");
+        ui.horizontal_wrapped(|ui| {
+            ui.selectable_value(&mut g.kind, GateChoice::None, "none");
+            ui.selectable_value(&mut g.kind, GateChoice::Box, "box");
+            ui.selectable_value(&mut g.kind, GateChoice::Gaussian, "gaussian");
+            ui.selectable_value(&mut g.kind, GateChoice::Transient, "transient");
+            ui.selectable_value(&mut g.kind, GateChoice::Cw, "cw");
+            if g.table.is_some() {
+                ui.selectable_value(&mut g.kind, GateChoice::Table, "table");
+            }
+        });
+        let (lo, hi) = length_range(self.lengths);
+        let length = |ui: &mut egui::Ui, value: &mut f64| {
+            ui.horizontal(|ui| {
+                ui.add(
+                    egui::DragValue::new(value)
+                        .speed(0.0005)
+                        .range(0.0..=1e4)
+                        .clamp_existing_to_range(false)
+                        .suffix(" m"),
+                );
+                ui.label(format!("= {:.1} ps = {:.4} ns", metres_to_ps(*value), metres_to_ps(*value) / 1e3));
+            });
+        };
+        match g.kind {
+            GateChoice::None => {
+                ui.label("steady state");
+            }
+            GateChoice::Box | GateChoice::Gaussian => {
+                ui.label("centre τ (m of optical path)");
+                ui.add(egui::Slider::new(&mut g.tau, lo..=hi).max_decimals(5).clamping(KEEP));
+                length(ui, &mut g.tau);
+                ui.label(if g.kind == GateChoice::Gaussian { "σ (m)" } else { "width (m)" });
+                ui.add(egui::Slider::new(&mut g.width, 1e-4..=1.0).logarithmic(true).max_decimals(5).clamping(KEEP));
+                ui.label(format!("= {:.2} ps", metres_to_ps(g.width)));
+            }
+            GateChoice::Transient => {
+                g.bins = g.bins.max(1);
+                g.bin = g.bin.min(g.bins - 1);
+                ui.label("bin shown");
+                ui.add(egui::Slider::new(&mut g.bin, 0..=g.bins - 1));
+                let (a, b) = (
+                    g.transient_start + g.bin as f64 * g.bin_width,
+                    g.transient_start + (g.bin + 1) as f64 * g.bin_width,
+                );
+                ui.label(format!("[{a:.4} m, {b:.4} m) = [{:.1} ps, {:.1} ps)", metres_to_ps(a), metres_to_ps(b)));
+                ui.label("start of bin 0 (m of optical path)");
+                length(ui, &mut g.transient_start);
+                ui.horizontal(|ui| {
+                    ui.label("bins");
+                    ui.add(egui::DragValue::new(&mut g.bins).range(1..=4096).clamp_existing_to_range(false));
+                    ui.label("of");
+                    ui.add(
+                        egui::DragValue::new(&mut g.bin_width)
+                            .speed(0.0005)
+                            .range(1e-6..=10.0)
+                            .clamp_existing_to_range(false)
+                            .suffix(" m"),
+                    );
+                });
+                ui.label("(the cube accumulates as a whole: moving the bin shown keeps the samples)");
+            }
+            GateChoice::Cw => {
+                ui.label("phase (degrees)");
+                ui.add(egui::Slider::new(&mut g.phase_deg, -180.0..=180.0).max_decimals(2).clamping(KEEP));
+                ui.horizontal(|ui| {
+                    ui.label("frequency");
+                    let mut mhz = g.frequency_hz / 1e6;
+                    if ui
+                        .add(
+                            egui::DragValue::new(&mut mhz)
+                                .speed(1.0)
+                                .range(1e-3..=1e5)
+                                .clamp_existing_to_range(false)
+                                .suffix(" MHz"),
+                        )
+                        .changed()
+                    {
+                        g.frequency_hz = mhz * 1e6;
+                    }
+                });
+                ui.label(match g.code {
+                    Some(code) => format!("code {}", code.name()),
+                    None => "code: cosine".into(),
+                });
+            }
+            GateChoice::Table => {
+                if let Some((points, source)) = &g.table {
+                    ui.label(format!("{} ({} points), moved by (m)", source.display(), points.len()));
+                    // Never below zero length.
+                    let least = -points[0].0;
+                    ui.add(
+                        egui::Slider::new(&mut g.table_shift, least.max(lo - hi)..=hi - lo)
+                            .max_decimals(5)
+                            .clamping(KEEP),
+                    );
+                    ui.add(egui::DragValue::new(&mut g.table_shift).speed(0.0005).range(least..=1e4).suffix(" m"));
+                }
+            }
+        }
+        if g.gate().is_signed() {
+            ui.label("signed gate: the luminance is shown, orange above zero, blue below, black at zero");
+        }
+        ui.separator();
     }
 
     fn controls(&mut self, ui: &mut egui::Ui) {
+        self.gate_controls(ui);
         let o = &mut self.options;
-        ui.heading("Gate");
-        ui.horizontal(|ui| {
-            ui.selectable_value(&mut o.gate, GateChoice::None, "none");
-            ui.selectable_value(&mut o.gate, GateChoice::Box, "box");
-            ui.selectable_value(&mut o.gate, GateChoice::Gaussian, "gaussian");
-        });
-        let (lo, hi) = (
-            self.lengths.0 * 0.95,
-            self.lengths.0 + (self.lengths.1 - self.lengths.0).min(4.0 * self.lengths.0.max(0.5)),
-        );
-        ui.add_enabled_ui(o.gate != GateChoice::None, |ui| {
-            ui.label("centre τ (m of optical path)");
-            ui.add(egui::Slider::new(&mut o.tau, lo..=hi).max_decimals(5));
-            ui.horizontal(|ui| {
-                ui.add(egui::DragValue::new(&mut o.tau).speed(0.0005).range(0.0..=1e4).suffix(" m"));
-                ui.label(format!("= {:.1} ps = {:.4} ns", metres_to_ps(o.tau), metres_to_ps(o.tau) / 1e3));
-            });
-            ui.label(if o.gate == GateChoice::Gaussian { "σ (m)" } else { "width (m)" });
-            ui.add(egui::Slider::new(&mut o.gate_width, 1e-4..=1.0).logarithmic(true).max_decimals(5));
-            ui.label(format!("= {:.2} ps", metres_to_ps(o.gate_width)));
-        });
         ui.separator();
         ui.heading("Method");
         ui.horizontal(|ui| {
@@ -518,14 +757,14 @@ impl<'a> Viewer<'a> {
             ui.selectable_value(&mut o.method, Method::Direct, "direct");
             ui.selectable_value(&mut o.method, Method::Ellipsoidal, "ellipsoidal");
         });
-        if o.method == Method::Ellipsoidal && o.gate == GateChoice::None {
+        if o.method == Method::Ellipsoidal && self.gate.kind == GateChoice::None {
             ui.label("(steady state: ellipsoidal needs a gate; rendering with direct)");
         }
-        ui.add(egui::Slider::new(&mut o.max_bounces, 0..=12).text("max bounces"));
+        ui.add(egui::Slider::new(&mut o.max_bounces, 0..=12).text("max bounces").clamping(KEEP));
         ui.separator();
         ui.heading("Display");
         ui.horizontal(|ui| {
-            ui.add(egui::Slider::new(&mut o.exposure_ev, -20.0..=30.0).text("exposure (EV)"));
+            ui.add(egui::Slider::new(&mut o.exposure_ev, -20.0..=30.0).text("exposure (EV)").clamping(KEEP));
         });
         if ui.button("auto exposure").clicked() {
             self.auto_exposure_pending = true;
@@ -584,7 +823,8 @@ impl<'a> Viewer<'a> {
         let width = (p.range.1 - p.range.0) / p.bins as f64;
         let points: Vec<[f64; 2]> =
             p.values.iter().enumerate().map(|(i, &v)| [p.range.0 + (i as f64 + 0.5) * width, v]).collect();
-        let gate = self.gate();
+        let gate = self.gate.gate();
+        let bin = self.gate.shown_bin();
         Plot::new("time_profile").height(ui.available_height().max(120.0)).x_axis_label("path length (m)").show(
             ui,
             |plot| {
@@ -594,6 +834,14 @@ impl<'a> Viewer<'a> {
                         Span::new("gate", start..=end).fill(egui::Color32::from_rgba_unmultiplied(255, 200, 0, 60)),
                     ),
                     Gate::Gaussian { mean, .. } => plot.vline(VLine::new("gate", mean)),
+                    Gate::Transient { .. } => {
+                        if let Some((a, b)) = gate.bin_range(bin) {
+                            plot.span(
+                                Span::new("bin shown", a..=b)
+                                    .fill(egui::Color32::from_rgba_unmultiplied(255, 200, 0, 60)),
+                            )
+                        }
+                    }
                     _ => {}
                 }
             },
@@ -607,7 +855,9 @@ impl<'a> Viewer<'a> {
             && self.frames % 10 == 0
             && self.frames < self.options.after_frames
         {
-            self.options.tau += step;
+            self.gate.step(step);
+            // A transient gate's new bin needs no new render: its first image is this frame's.
+            self.timing.pending_change = Some(Instant::now());
         }
         if let Some(rx) = &self.screenshot_rx {
             if let Ok(image) = rx.try_recv() {
@@ -728,6 +978,8 @@ fn save_screenshot(
         "spp": viewer.tracer.as_ref().map_or(0, |t| t.samples_done()),
         "method": built.method.name(),
         "gate": built.gate.describe(),
+        "bin": matches!(built.gate, Gate::Transient { .. }).then(|| viewer.gate.shown_bin()),
+        "display": if built.gate.is_signed() { "signed luminance" } else { "rgb" },
         "exposure": 2f32.powf(viewer.options.exposure_ev),
         "curve": if viewer.options.log_curve { "log" } else { "linear" },
         "frames": viewer.frames,

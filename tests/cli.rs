@@ -24,6 +24,130 @@ fn help_explains_units() {
     }
 }
 
+/// The help text `gatetrace ARGS` prints (with --help or -h among ARGS).
+fn help(args: &[&str]) -> String {
+    let o = gatetrace(args);
+    assert!(o.status.success(), "gatetrace {}: {}", args.join(" "), stderr(&o));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The subcommands `gatetrace --help` lists (without `help`).
+fn subcommands() -> Vec<String> {
+    let text = help(&["--help"]);
+    let list = text.split("Commands:").nth(1).expect("a Commands section");
+    let names: Vec<String> = list
+        .lines()
+        .skip(1)
+        .take_while(|l| !l.trim().is_empty())
+        .filter(|l| l.starts_with("  ") && !l.starts_with("   "))
+        .map(|l| l.split_whitespace().next().unwrap().to_owned())
+        .filter(|n| n != "help")
+        .collect();
+    assert!(names.len() >= 6, "subcommands {names:?} in:\n{text}");
+    names
+}
+
+/// The options of a long help text, each with the lines of its description.
+fn options(text: &str) -> Vec<(String, Vec<String>)> {
+    let mut out: Vec<(String, Vec<String>)> = Vec::new();
+    for line in text.lines() {
+        let t = line.trim_start();
+        // Options are indented by 2 to 6 spaces, their descriptions by 10.
+        let indent = line.len() - t.len();
+        let is_option = (2..=6).contains(&indent) && t.starts_with('-') && t.contains("--");
+        if is_option && let Some(name) = t.split("--").nth(1) {
+            let name = name.split([' ', '<', ',']).next().unwrap();
+            out.push((name.to_owned(), Vec::new()));
+        } else if let Some((_, lines)) = out.last_mut() {
+            lines.push(t.to_owned());
+        }
+    }
+    out
+}
+
+/// Option name -> its `[default: ...]`, if any.
+fn defaults(text: &str) -> std::collections::BTreeMap<String, Option<String>> {
+    options(text)
+        .into_iter()
+        .map(|(name, lines)| {
+            let default = lines.iter().find_map(|l| l.strip_prefix("[default: ")?.strip_suffix(']').map(str::to_owned));
+            (name, default)
+        })
+        .collect()
+}
+
+/// Help is plain text: doc comments' markup (backticks, intra-doc links such as [auto] or
+/// [crate::film::Gate]) must not reach it, in any subcommand's short or long help.
+#[test]
+fn help_has_no_rustdoc_markup() {
+    let mut commands: Vec<Vec<String>> = vec![vec![]];
+    commands.extend(subcommands().into_iter().map(|c| vec![c]));
+    for command in commands {
+        for flag in ["--help", "-h"] {
+            let mut args: Vec<&str> = command.iter().map(String::as_str).collect();
+            args.push(flag);
+            let text = help(&args);
+            let name = args.join(" ");
+            assert!(!text.contains('`'), "gatetrace {name} shows backticks:\n{text}");
+            for link in text.split('[').skip(1).filter_map(|rest| rest.split_once(']').map(|(inside, _)| inside)) {
+                // Clap's own brackets: [OPTIONS], [SCENE], [default: ...], [possible values: ...];
+                // the help's intervals and shapes: [A, B), [H, W, 3].
+                let identifier = !link.is_empty()
+                    && link.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == ':')
+                    && link.chars().any(|c| c.is_ascii_lowercase());
+                assert!(!identifier, "gatetrace {name} shows a rustdoc link [{link}]:\n{text}");
+            }
+        }
+    }
+}
+
+/// `view --help` lists just the methods the viewer renders (path, direct, ellipsoidal: the
+/// window's buttons), and the viewer accepts each and refuses the others.
+#[test]
+fn view_help_lists_only_the_methods_the_viewer_renders() {
+    let text = help(&["view", "--help"]);
+    let (_, method) = options(&text).into_iter().find(|(name, _)| name == "method").expect("view --method");
+    let listed: Vec<String> =
+        method.iter().filter_map(|l| l.strip_prefix("- ")?.split(':').next().map(|n| n.trim().to_owned())).collect();
+    assert_eq!(listed, ["path", "direct", "ellipsoidal"], "view --method lists {listed:?}:\n{text}");
+    for name in ["path", "direct", "ellipsoidal"] {
+        // Accepted: the run gets as far as the later check of --bin (no window opens).
+        let o = gatetrace(&["view", "--method", name, "--bin", "1"]);
+        assert!(stderr(&o).contains("--bin 1 applies to transient gates only"), "{name}: {}", stderr(&o));
+    }
+    for name in ["combined", "auto"] {
+        let o = gatetrace(&["view", "--method", name]);
+        assert!(!o.status.success() && stderr(&o).contains("viewer renders progressively"), "{name}: {}", stderr(&o));
+    }
+    let o = gatetrace(&["view", "--method", "bogus"]);
+    assert!(!o.status.success() && stderr(&o).contains("possible values: path, direct, ellipsoidal"), "{}", stderr(&o));
+}
+
+/// `view` and `render` take the options they share with the same defaults.
+#[test]
+fn view_takes_the_defaults_of_render() {
+    let render = defaults(&help(&["render", "--help"]));
+    let view = defaults(&help(&["view", "--help"]));
+    let shared: Vec<&String> = view.keys().filter(|k| render.contains_key(*k)).collect();
+    for option in ["gate", "res", "max-bounces", "rr-depth", "seed", "method", "aperture-radius", "focus-distance"] {
+        assert!(shared.iter().any(|k| *k == option), "view lacks render's --{option} (shared: {shared:?})");
+    }
+    for option in shared {
+        assert_eq!(view[option], render[option], "--{option}: view's default differs from render's");
+    }
+}
+
+/// --bin picks a bin of a transient gate's cube; others are refused before a window opens.
+#[test]
+fn view_refuses_a_bin_outside_the_transient_cube() {
+    let o = gatetrace(&["view", "--gate", "transient:3,0.1,8", "--bin", "8"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--bin 8: the transient gate transient:3,0.1,8 has bins 0 to 7"), "{}", stderr(&o));
+    let o = gatetrace(&["view", "--gate", "box:3.1..3.2", "--bin", "2"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--bin 2 applies to transient gates only"), "{}", stderr(&o));
+}
+
 #[test]
 fn npy_output_has_the_documented_layout_and_metadata() {
     let dir = common::scratch_dir("cli_npy");

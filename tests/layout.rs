@@ -39,7 +39,7 @@ fn wgsl_structs_match_rust_structs() {
         Splat { radiance, path_length, pixel, reserved0, reserved1, reserved2 }
         QueueCounters { rays, next_rays, shadow_rays, truncated_traversals, ellipsoid_queries, unfinished_shadow_rays, invalid_contributions }
         WallPoint { position, length_offset, origin, triangle, power, b1, b2, reserved0, reserved1, reserved2 }
-        DisplayParams { inverse_spp, exposure, curve, bin, decades, stride, reserved1, reserved2 }
+        DisplayParams { inverse_spp, exposure, curve, bin, decades, stride, signed, reserved2 }
     };
     let module = naga::front::wgsl::parse_str(LAYOUT_WGSL).expect("layout.wgsl parses");
     let mut wgsl_structs = Vec::new();

@@ -293,7 +293,9 @@ impl Gate {
         Ok(gate)
     }
 
-    fn validate(&self) -> Result<()> {
+    /// Checks that the kernels can evaluate the gate (positive widths and frequencies, lengths
+    /// that f32 resolves, nothing below zero length).
+    pub fn validate(&self) -> Result<()> {
         // The kernels evaluate W in f32: a gate must stay distinct from its neighbours there.
         let f32_distinct = |a: f64, b: f64| (b as f32) > (a as f32);
         match *self {
@@ -353,6 +355,17 @@ impl Gate {
         };
         gate.validate().with_context(|| format!("{} shifted by {d} m", self.describe()))?;
         Ok(gate)
+    }
+
+    /// Whether W is negative for some path lengths (CW gates whose correlation goes below zero,
+    /// tables with negative weights): such a gate's images are signed.
+    pub fn is_signed(&self) -> bool {
+        match self {
+            Gate::Cw { .. } => true,
+            Gate::CwCode { code, .. } => code.breakpoints().iter().any(|&(_, c)| c < 0.0),
+            Gate::Table { points, .. } => points.iter().any(|&(_, w)| w < 0.0),
+            _ => false,
+        }
     }
 
     /// The kernels' specialisation for this gate.

@@ -571,8 +571,10 @@ pub struct DisplayParams {
     pub decades: f32,
     /// Pixels per row of `display` (rows padded for texture copies).
     pub stride: u32,
-    /// Padding.
-    pub reserved1: u32,
+    /// 1: show the luminance, signed, on a diverging map ([`DISPLAY_POSITIVE`] above zero,
+    /// [`DISPLAY_NEGATIVE`] below, black at zero, brightness through the tone curve); 0: the
+    /// RGB image (negative values show their magnitude).
+    pub signed: u32,
     /// Padding.
     pub reserved2: u32,
 }
@@ -581,3 +583,8 @@ pub struct DisplayParams {
 pub const DISPLAY_LINEAR: u32 = 0;
 /// Tone curve: log10 of the value mapped from [-decades, 0] to [0, 1].
 pub const DISPLAY_LOG: u32 = 1;
+/// Signed display: the colour of positive values at full brightness (sRGB-encoded, each channel
+/// times the tone curve's value of the magnitude).
+pub const DISPLAY_POSITIVE: [f32; 3] = [1.0, 0.5, 0.0];
+/// Signed display: the colour of negative values (see [`DISPLAY_POSITIVE`]).
+pub const DISPLAY_NEGATIVE: [f32; 3] = [0.0, 0.5, 1.0];

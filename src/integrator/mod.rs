@@ -44,10 +44,10 @@ pub enum Method {
     /// Bidirectional path tracing with ellipsoidal connections.
     Ellipsoidal,
     /// Direct and ellipsoidal connections in one estimator: each pixel sample takes one sample
-    /// of each family, weighted by a balance heuristic between the families (see [`combined`]).
+    /// of each family, weighted by a balance heuristic between the families (module combined).
     Combined,
-    /// `path`, `direct` or (with a gate) `ellipsoidal`, whichever a short pilot of each on this
-    /// render measures to have the lowest variance x time per sample (see [`auto`]).
+    /// Path, direct or (with a gate) ellipsoidal, whichever a short pilot of each on this render
+    /// measures to have the lowest variance x time per sample (module auto).
     Auto,
 }
 
