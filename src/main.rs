@@ -72,7 +72,7 @@ enum Command {
 
 #[derive(Args)]
 struct InfoArgs {
-    /// An output of `gatetrace render` or `merge`: .npy, .exr or .png.
+    /// An output of gatetrace render or merge: .npy, .exr or .png.
     file: PathBuf,
     /// Print everything as one JSON object (format, shape, layout, metadata) instead.
     #[arg(long)]
