@@ -17,11 +17,11 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use eframe::egui;
 
 use crate::film::output::{Metadata, write_film};
+use crate::film::preview::auto_exposure_ev;
 use crate::film::{CwCode, Gate, fixed};
 use crate::gpu::layout::{DISPLAY_LINEAR, DISPLAY_LOG, DisplayParams};
 use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::integrator::{Integrator, Method, PassSizer, RenderSettings, create_integrator};
-use crate::film::preview::auto_exposure_ev;
 use crate::scene::{LoadOptions, PreparedScene, load_gltf_with};
 use crate::units::metres_to_ps;
 

@@ -681,7 +681,17 @@ fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
         case(
             "preview bin beyond the gate's bins",
             none,
-            plain(&["render", "--res", "8x8", "--gate", "transient:3,0.1,4", "--preview-bin", "4", "--out", "{dir}/p.png"]),
+            plain(&[
+                "render",
+                "--res",
+                "8x8",
+                "--gate",
+                "transient:3,0.1,4",
+                "--preview-bin",
+                "4",
+                "--out",
+                "{dir}/p.png",
+            ]),
             &["--preview-bin 4", "4 bin(s)"],
         ),
         case(

@@ -467,7 +467,10 @@ fn png_outputs_are_previews_with_their_exposure_and_info_reads_every_output() {
     let dir = common::scratch_dir("cli_preview");
     let render = |name: &str, extra: &[&str]| {
         let out = dir.join(name);
-        let o = gatetrace(&[&["render", "--res", "16x12", "--spp", "8", "--seed", "3"], extra, &["--out", out.to_str().unwrap()]].concat());
+        let o = gatetrace(
+            &[&["render", "--res", "16x12", "--spp", "8", "--seed", "3"], extra, &["--out", out.to_str().unwrap()]]
+                .concat(),
+        );
         assert!(o.status.success(), "{name}: {}", stderr(&o));
         out
     };
