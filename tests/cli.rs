@@ -400,46 +400,23 @@ fn a_missing_output_directory_is_an_error_unless_mkdir_asks_for_it() {
 #[test]
 fn a_gate_no_path_reaches_is_said_and_times_typed_as_metres_are_named() {
     let dir = common::scratch_dir("cli_black");
+    // Renders the box with 3 bounces at `gate` to NAME.npy: (stderr, metadata).
+    let render = |name: &str, gate: &str| -> (String, serde_json::Value) {
+        let out = dir.join(format!("{name}.npy"));
+        let args = ["--max-bounces", "3", "--res", "8x8", "--spp", "2", "--out", out.to_str().unwrap()];
+        let o = gatetrace(&[&["render", "--gate", gate], &args[..]].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let meta = serde_json::from_str(&std::fs::read_to_string(out.with_extension("json")).unwrap()).unwrap();
+        (stderr(&o), meta)
+    };
     // Nanoseconds without their unit: 10.474 m lies beyond every 3-bounce path of the box.
-    let out = dir.join("late.npy");
-    let o = gatetrace(&[
-        "render",
-        "--gate",
-        "box:10.474..10.641",
-        "--max-bounces",
-        "3",
-        "--res",
-        "8x8",
-        "--spp",
-        "2",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let err = stderr(&o);
+    let (err, meta) = render("late", "box:10.474..10.641");
     assert!(err.contains("warning") && err.contains("longest path possible with 3 bounces"), "{err}");
     assert!(err.contains("`box:10.474ns..10.641ns`"), "the hint names the gate meant: {err}");
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("late.json")).unwrap()).unwrap();
     assert!(meta["warning"].as_str().unwrap().contains("image is black"), "{meta}");
 
     // Reachable in principle, but no sample reaches a gaussian this far out: still said.
-    let out = dir.join("far.npy");
-    let o = gatetrace(&[
-        "render",
-        "--gate",
-        "gaussian:10.5,0.05",
-        "--max-bounces",
-        "3",
-        "--res",
-        "8x8",
-        "--spp",
-        "2",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let err = stderr(&o);
+    let (err, _) = render("far", "gaussian:10.5,0.05");
     assert!(err.contains("the image is black: no path of its 2 samples per pixel reached"), "{err}");
     assert!(err.contains("`gaussian:10.5ns,0.05ns`"), "{err}");
 
