@@ -187,9 +187,9 @@ impl FileInfo {
         if let Some(p) = self.get("preview") {
             let _ = writeln!(
                 s,
-                "  preview: exposure {} EV (x{}), {} tile(s), {} per row",
+                "  preview: exposure {} EV (x{:.4}), {} tile(s), {} per row",
                 p["exposure_ev"],
-                p["scale"],
+                p["scale"].as_f64().unwrap_or(f64::NAN),
                 p["tiles"].as_array().map_or(0, Vec::len),
                 p["columns"]
             );
