@@ -231,6 +231,17 @@ def test_ctrl_c_stops_a_long_render_and_leaves_the_renderer_usable():
     assert meta["spp"] == 2 and image.mean() > 0
 
 
+def test_ctrl_c_stops_a_render_in_a_background_job_with_stdin_closed():
+    # A shell starts background jobs (`nohup tools/test.sh &`, batch runners) with SIGINT
+    # ignored; the Ctrl-C test must pass there too.
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", __file__, "-k",
+         "test_ctrl_c_stops_a_long_render_and_leaves_the_renderer_usable"],
+        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=300,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert done.returncode == 0 and "1 passed" in done.stdout, done.stdout[-3000:]
+
+
 def test_nlos_tools_read_a_capture_whose_gate_was_typed_in_ns_and_ps(tmp_path):
     # The sidecar holds the gate in metres beside the spec as typed, so the tools downstream
     # accept every unit the command line does.
