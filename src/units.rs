@@ -1,5 +1,5 @@
 //! Lengths at the user interface. Time is optical path length in metres (c = 1); `ps` and `ns`
-//! are converted with c = 0.299792458 mm/ps (DESIGN.md section 1).
+//! are converted with c = 0.299792458 mm/ps (docs/design.md section 1).
 
 use anyhow::{Result, bail};
 
@@ -34,7 +34,7 @@ mod tests {
         assert_eq!(parse_length("3.14").unwrap(), 3.14);
         assert_eq!(parse_length("3.14m").unwrap(), 3.14);
         assert!((parse_length("2.5mm").unwrap() - 0.0025).abs() < 1e-15);
-        // DESIGN.md: 12.5 ps = 3.747 mm, 200 ps = 59.96 mm, 1 ns = 299.79 mm.
+        // docs/design.md section 1: 12.5 ps = 3.747 mm, 200 ps = 59.96 mm, 1 ns = 299.79 mm.
         assert!((parse_length("12.5ps").unwrap() - 3.747405725e-3).abs() < 1e-12);
         assert!((parse_length("200 ps").unwrap() - 0.0599584916).abs() < 1e-10);
         assert!((parse_length("1ns").unwrap() - 0.299792458).abs() < 1e-12);

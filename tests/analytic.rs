@@ -230,7 +230,8 @@ fn transient_bins_sum_to_the_steady_image_of_the_same_run() {
 fn gates_no_path_can_reach_are_black_without_tracing() {
     use gatetrace::integrator::{Budget, render, unreachable_gate};
     let scene = common::cornell_box();
-    // DESIGN.md: the shortest path of the Cornell box (pinhole to the light's nearest point) is 1.9403 m.
+    // docs/design.md section 3: the shortest path of the Cornell box (pinhole to the light's nearest
+    // point) is 1.9403 m.
     let (shortest, _) = scene.scene.path_length_bounds(5);
     assert!((shortest - 1.9403).abs() < 1e-4, "{shortest}");
     let ctx = common::gpu();

@@ -9,7 +9,7 @@
 //!   L = (rho_w / pi) (rho_h / pi) (rho_w / pi) P  integral over the letter of
 //!       [cos_l cos_h' / |h - x_l|^2] [cos_h cos_s / |h - x_s|^2] [l <= |x_l - h| + |h - x_s| < l + w] dA,
 //!
-//! the laser spot x_l reflecting a beam of power P as a Lambertian point (DESIGN.md, NLOS). The
+//! the laser spot x_l reflecting a beam of power P as a Lambertian point (docs/design.md section 6.6). The
 //! quadrature integrates it exactly along lines across each triangle (the bin edges on a line
 //! are the roots of a quadratic, the line meeting a spheroid with foci x_l and x_s) and by the
 //! midpoint rule across lines, in two directions whose difference bounds the error and enters

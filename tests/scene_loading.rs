@@ -44,7 +44,7 @@ fn cornell_box_loads_with_its_documented_conventions() {
             assert!(n.dot(vn) > 0.99);
         }
     }
-    // The shortest path light -> wall -> camera is 1.9403 m (DESIGN.md section 3): the light
+    // The shortest path light -> wall -> camera is 1.9403 m (docs/design.md section 3): the light
     // is 1 mm below the ceiling, so its nearest wall point is the ceiling edge behind it.
 }
 

@@ -1,4 +1,4 @@
-//! The f64 oracle of ellipsoidal connections (DESIGN.md section 5): the prolate spheroid of
+//! The f64 oracle of ellipsoidal connections (docs/design.md section 5): the prolate spheroid of
 //! points whose distances to two foci add up to a target length, its section by a triangle's
 //! plane, the arcs of that ellipse inside the triangle, points on the arcs, and the Jacobian of
 //! the change of variables (target length, eccentric angle) -> surface point, in closed form and
@@ -40,7 +40,7 @@ pub struct Section {
     pub shape: SectionShape,
 }
 
-/// The scalars of a plane section (DESIGN.md section 5 names).
+/// The scalars of a plane section (docs/design.md section 5.2 names).
 #[derive(Clone, Copy, Debug)]
 pub struct SectionShape {
     /// Semi-major axis of the spheroid, tau_e / 2 (m).
@@ -147,7 +147,7 @@ impl Section {
     }
 
     /// The closed-form Jacobian J (m) of (target length, theta) -> surface point:
-    /// dA = J dtau dtheta (DESIGN.md section 5).
+    /// dA = J dtau dtheta (docs/design.md section 5.4).
     pub fn jacobian(&self, theta: f64) -> f64 {
         let SectionShape { a, b2, c, h, cos_psi, sin_psi, k, g } = self.shape;
         let u0_prime = -a * h * c * c * cos_psi * sin_psi / (k * k);
@@ -218,7 +218,7 @@ impl Arcs {
     }
 }
 
-/// The arcs of `section` inside `triangle` (DESIGN.md section 5, arc clipping): each edge keeps
+/// The arcs of `section` inside `triangle` (docs/design.md section 5.3, arc clipping): each edge keeps
 /// alpha cos + beta sin >= gamma, an interval about phi = atan2(beta, alpha); break points at 0,
 /// 2 pi and the interval ends; the sub-intervals whose midpoints pass all edges are kept.
 pub fn clip_arcs(section: &Section, triangle: &Triangle) -> Arcs {

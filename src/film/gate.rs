@@ -1,4 +1,4 @@
-//! The pathlength importance W (DESIGN.md section 2): parsing `--gate` specs and the CPU twin of
+//! The pathlength importance W (docs/design.md section 2): parsing `--gate` specs and the CPU twin of
 //! `shaders/lib/gate.wesl`.
 
 use std::path::{Path, PathBuf};

@@ -1,4 +1,4 @@
-//! Target path lengths drawn from the gate, for ellipsoidal connections (DESIGN.md section 4.3):
+//! Target path lengths drawn from the gate, for ellipsoidal connections (docs/design.md section 4.3):
 //! every camera sample gets one target length tau with density p(tau) and the weight
 //! W(tau) / p(tau) (signed for CW and table gates). CPU twin of shaders/lib/target_length.wesl.
 //!

@@ -1,6 +1,6 @@
-//! Integrators and the render loop: `path` is the wavefront path tracer (DESIGN.md section
+//! Integrators and the render loop: `path` is the wavefront path tracer (docs/design.md section
 //! 4.1); `bidirectional` serves `direct` and `ellipsoidal` (bidirectional path tracing with
-//! direct or ellipsoidal connections, sections 4.2 and 4.3); `combined` joins the two in one
+//! direct or ellipsoidal connections, sections 4.2 to 4.4); `combined` joins the two in one
 //! estimator; `mis` is the CPU twin of the connections' MIS weights.
 
 pub mod auto;

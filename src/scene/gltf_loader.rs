@@ -1,6 +1,8 @@
-//! glTF 2.0 loading (DESIGN.md section 3): triangles with node transforms baked in, the first
-//! camera, Lambertian albedo from baseColor (x texture), emissive materials as area lights,
-//! KHR_lights_punctual point lights. Every problem is reported with the file's name.
+//! glTF 2.0 loading (docs/design.md section 3): triangles with node transforms baked in, the first
+//! camera (with its thin lens from extras), materials (a Lambertian lobe from baseColor x
+//! texture blended with a GGX conductor by metallic), emissive materials as area lights,
+//! KHR_lights_punctual point, spot and directional lights. Every problem is reported with the
+//! file's name.
 
 use std::path::Path;
 
@@ -749,7 +751,7 @@ fn light_direction(world: Mat4, name: &str, node_name: &str) -> Result<Vec3> {
 }
 
 /// The thin lens described by a camera node's `extras` (`aperture_radius` and `focus_distance`,
-/// both in metres; DESIGN.md section 3), or `None` (a pinhole) when there are none or the
+/// both in metres; docs/design.md section 3), or `None` (a pinhole) when there are none or the
 /// aperture radius is 0.
 pub fn thin_lens(extras: Option<&serde_json::value::RawValue>) -> Result<Option<ThinLens>> {
     let Some(raw) = extras else { return Ok(None) };

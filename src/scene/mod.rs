@@ -1,4 +1,4 @@
-//! Scenes: loading (glTF 2.0, DESIGN.md section 3; files in other formats are refused with how
+//! Scenes: loading (glTF 2.0, docs/design.md section 3; files in other formats are refused with how
 //! to convert them), the baked world-space description, and the CPU twins of the kernels' scene
 //! functions (camera, lights, surfaces, materials).
 
