@@ -6,15 +6,13 @@
 pub fn erfc(x: f64) -> f64 {
     let z = x.abs();
     let t = 1.0 / (1.0 + 0.5 * z);
-    let r = t
-        * (-z * z - 1.26551223
-            + t * (1.00002368
-                + t * (0.37409196
-                    + t * (0.09678418
-                        + t * (-0.18628806
-                            + t * (0.27886807
-                                + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
-            .exp();
+    // The fit's polynomial in t by Horner's rule, innermost term first (nested, the expression
+    // takes rustfmt seconds to lay out).
+    let mut p = 0.17087277;
+    for c in [-0.82215223, 1.48851587, -1.13520398, 0.27886807, -0.18628806, 0.09678418, 0.37409196, 1.00002368] {
+        p = c + t * p;
+    }
+    let r = t * (-z * z - 1.26551223 + t * p).exp();
     if x >= 0.0 { r } else { 2.0 - r }
 }
 
