@@ -113,29 +113,13 @@ fn ensure_exists(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The shape in an .npy file's header.
+/// The shape in an .npy file's header (its first 64 KiB at most).
 fn npy_shape(path: &Path) -> Result<Vec<usize>> {
     use std::io::Read as _;
-    let name = path.display();
-    let mut head = vec![0u8; 4096];
-    let mut file = std::fs::File::open(path).with_context(|| format!("{name}: cannot open"))?;
-    let n = file.read(&mut head).with_context(|| format!("{name}: cannot read"))?;
-    head.truncate(n);
-    if n < 10 || &head[..6] != b"\x93NUMPY" {
-        bail!("{name}: not a .npy file");
-    }
-    let text = String::from_utf8_lossy(&head[10..]);
-    let shape = text
-        .split("'shape':")
-        .nth(1)
-        .and_then(|s| s.split(['(', ')']).nth(1))
-        .with_context(|| format!("{name}: no shape in the .npy header"))?;
-    shape
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>().with_context(|| format!("{name}: bad shape `{shape}`")))
-        .collect()
+    let mut head = Vec::new();
+    let file = std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    file.take(65_536).read_to_end(&mut head).with_context(|| format!("{}: cannot read", path.display()))?;
+    Ok(super::output::read_npy_header(path, &head)?.0)
 }
 
 impl FileInfo {

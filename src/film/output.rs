@@ -212,11 +212,11 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// Reads a little-endian float32 (or float64, converted) C-order `.npy` file: (shape, data).
-pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
+/// The header of a C-order `.npy` file whose first bytes are `bytes`: (shape, dtype descr,
+/// offset of the data). `path` names the file in errors.
+pub fn read_npy_header(path: &Path, bytes: &[u8]) -> Result<(Vec<usize>, String, usize)> {
     let name = path.display();
-    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read"))?;
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+    if bytes.len() < 12 || &bytes[..6] != b"\x93NUMPY" {
         bail!("{name}: not a .npy file");
     }
     let (header_len, start) = match bytes[6] {
@@ -224,17 +224,31 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
         2 | 3 => (u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize, 12),
         v => bail!("{name}: unsupported .npy version {v}"),
     };
-    let header = std::str::from_utf8(&bytes[start..start + header_len]).context("npy header")?;
+    let header = bytes.get(start..start + header_len).with_context(|| format!("{name}: truncated .npy header"))?;
+    let header = std::str::from_utf8(header).with_context(|| format!("{name}: npy header"))?;
     if header.contains("'fortran_order': True") {
         bail!("{name}: Fortran-order arrays are not supported");
     }
     let descr = header.split("'descr':").nth(1).and_then(|s| s.split('\'').nth(1)).context("npy descr")?;
     let shape_text = header.split("'shape':").nth(1).and_then(|s| s.split(['(', ')']).nth(1)).context("npy shape")?;
-    let shape: Vec<usize> =
-        shape_text.split(',').map(str::trim).filter(|s| !s.is_empty()).map(|s| s.parse()).collect::<Result<_, _>>()?;
-    let body = &bytes[start + header_len..];
+    let shape: Vec<usize> = shape_text
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{name}: bad shape `{shape_text}`"))?;
+    Ok((shape, descr.to_owned(), start + header_len))
+}
+
+/// Reads a little-endian float32 (or float64, converted) C-order `.npy` file: (shape, data).
+pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>)> {
+    let name = path.display();
+    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read"))?;
+    let (shape, descr, offset) = read_npy_header(path, &bytes)?;
+    let body = &bytes[offset..];
     let count: usize = shape.iter().product();
-    let data: Vec<f32> = match descr {
+    let data: Vec<f32> = match descr.as_str() {
         "<f4" => body.chunks_exact(4).take(count).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect(),
         "<f8" => body.chunks_exact(8).take(count).map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32).collect(),
         other => bail!("{name}: unsupported dtype {other}"),
