@@ -1,4 +1,4 @@
-//! The paper's application scenes (tools/make_application_scenes.py): each loads, names in its
+//! The paper's application scenes (tools/scenes/make_application_scenes.py): each loads, names in its
 //! extras a gate the renderer parses, and renders light inside that gate (the fence through its
 //! thin lens; the proximity sensor at the animation time its car is in range); the gated figures
 //! are detailed meshes, and the CW room's second code has the paper's 20 ps window.

@@ -136,7 +136,7 @@ fn band_index_agrees_with_exhaustive_queries(scan: &str, aim: LaserAim, occluder
     assert!(energy.2.abs() < 4.0, "{scan}: energies differ (z = {:.2})", energy.2);
     assert!(energy.0 > 0.0);
     // What the index is for, printed (its gain depends on the mesh and the samples per bin, and
-    // is measured by tools/nlos_equal_time.py): the batch variance per sample.
+    // is measured by tools/peer/nlos_equal_time.py): the batch variance per sample.
     let variance = |films: &[Film], spp: u32| -> f64 {
         let totals: Vec<f64> = films.iter().map(|f| f.data.iter().map(|&v| v as f64).sum()).collect();
         let mean = totals.iter().sum::<f64>() / totals.len() as f64;

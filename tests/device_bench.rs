@@ -1,4 +1,4 @@
-//! The device benchmark (tools/device_bench.sh), run on this machine's adapter (lavapipe in CI)
+//! The device benchmark (tools/bench/device_bench.sh), run on this machine's adapter (lavapipe in CI)
 //! in its smoke mode: it must end well and write every measurement it promises, so that a run
 //! on a GPU machine, which builds nothing and cannot be fixed there, works the first time.
 
@@ -11,13 +11,13 @@ fn device_bench_smoke_run_writes_every_measurement() {
     let dir = common::scratch_dir("device_bench");
     let out = dir.join("device_bench.json");
     let run = Command::new("bash")
-        .arg(common::repo_path("tools/device_bench.sh"))
+        .arg(common::repo_path("tools/bench/device_bench.sh"))
         .args(["--smoke", "--seconds", "0.3", "--exe", env!("CARGO_BIN_EXE_gatetrace"), "--out"])
         .arg(&out)
         .output()
         .expect("bash runs");
     let log = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "tools/device_bench.sh --smoke failed:\n{log}");
+    assert!(run.status.success(), "tools/bench/device_bench.sh --smoke failed:\n{log}");
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert!(!report["adapter"].as_str().unwrap().is_empty(), "no adapter name");
     let scenes = report["scenes"].as_array().unwrap();

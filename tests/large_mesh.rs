@@ -1,5 +1,5 @@
 //! A scene of 327,692 triangles (the Cornell box holding a displaced geodesic sphere, as
-//! tools/make_sphere_scene.py --frequency 128 writes it): large enough that exhaustive ellipsoid
+//! tools/scenes/make_sphere_scene.py --frequency 128 writes it): large enough that exhaustive ellipsoid
 //! queries overran lavapipe's loop budget of 65535 iterations per invocation when one
 //! invocation ran all of a sample's queries. The stochastic descent bounds every query; here no
 //! traversal is cut short and `ellipsoidal` agrees with `direct` (image means |z| < 4, 8x8

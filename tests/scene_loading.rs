@@ -288,7 +288,7 @@ fn textured_albedo_renders_like_the_equal_base_color() {
     }
 }
 
-/// The example NLOS scene (tools/make_nlos_scene.py) is set up as its description says: from
+/// The example NLOS scene (tools/scenes/make_nlos_scene.py) is set up as its description says: from
 /// the sensor and laser origin every point of the relay wall is in sight and the hidden letter
 /// is not (the occluder is in the way), and the wall and the letter see each other.
 #[test]

@@ -258,15 +258,15 @@ def test_nlos_tools_read_a_capture_whose_gate_was_typed_in_ns_and_ps(tmp_path):
     assert meta["spp"] == 16 and isinstance(meta["elapsed_seconds"], float)
 
     picture = tmp_path / "picture.npy"
-    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos_backproject.py"), str(capture), "--voxels", "16",
+    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos/nlos_backproject.py"), str(capture), "--voxels", "16",
                            "-o", str(picture)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     back = np.load(picture)
     assert back.shape == (16, 16) and np.isfinite(back).all() and back.max() == pytest.approx(1.0)
 
-    import h5py  # a test requirement (pyproject.toml), as tools/nlos_to_hdf5.py needs it
+    import h5py  # a test requirement (pyproject.toml), as tools/nlos/nlos_to_hdf5.py needs it
     hdf5 = tmp_path / "capture.hdf5"
-    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos_to_hdf5.py"), str(capture), "-o", str(hdf5)],
+    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos/nlos_to_hdf5.py"), str(capture), "-o", str(hdf5)],
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     with h5py.File(hdf5) as f:

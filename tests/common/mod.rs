@@ -264,7 +264,7 @@ pub fn soup_scene_with(n: usize, seed: u32, name: &str, normals: bool) -> gatetr
 
 /// The Cornell box holding a white geodesic sphere (radius 0.25 m, 5 cm above the floor) of
 /// 20 f^2 flat triangles, each vertex pushed along its radius by +-4 % bumps: the scene
-/// tools/make_sphere_scene.py writes, built in memory (f = 128: 327,680 sphere triangles).
+/// tools/scenes/make_sphere_scene.py writes, built in memory (f = 128: 327,680 sphere triangles).
 pub fn sphere_scene(frequency: u32) -> PreparedScene {
     let mut scene = load_gltf(&repo_path("assets/scenes/cornell_box.gltf")).unwrap();
     let white = scene.materials.iter().position(|m| m.name == "white").unwrap() as u32;
@@ -274,7 +274,7 @@ pub fn sphere_scene(frequency: u32) -> PreparedScene {
 
 /// The NLOS example scene (assets/scenes/nlos_letter.gltf) with its hidden letter replaced by a
 /// displaced geodesic sphere of 20 f^2 triangles (radius 0.15 m, centred 0.6 m in front of the
-/// relay wall's centre, the letter's material), as tools/make_sphere_scene.py --nlos writes it;
+/// relay wall's centre, the letter's material), as tools/scenes/make_sphere_scene.py --nlos writes it;
 /// without the occluder unless `occluder`: the relay wall and the sphere alone.
 pub fn nlos_sphere_scene(frequency: u32, occluder: bool) -> PreparedScene {
     PreparedScene::new(nlos_sphere_scene_unprepared(frequency, occluder)).unwrap()

@@ -16,11 +16,11 @@ summed, which is what rendering with the coarser bins gives (box bins on both si
    on (its best NLOS options; --peer-hidden-geometry off turns the latter off), renders
    --repeats captures with the sample count its measured rate fits into --seconds, after a warm
    render (Dr.Jit's compilation excluded); its own render time is measured and reported. It
-   runs as shipped, with Mitsuba's own segment lengths (tools/peer_reference.py's exact lengths
+   runs as shipped, with Mitsuba's own segment lengths (tools/peer/peer_reference.py's exact lengths
    would cost it about 1.5x the time; on the example's confocal scan at 4 ps the difference is
    about 3 % of its MSE at equal time, in its disfavour).
    gatetrace's values are scaled by the peer's laser power equivalent per spot (see
-   tools/peer_reference.py), so both sides are in the peer's units.
+   tools/peer/peer_reference.py), so both sides are in the peer's units.
 
 Prints per bin width: each renderer's MSE (mean over pixels, bins and channels) and its accuracy
 against the peer at equal time, (peer MSE x peer seconds) / (MSE x seconds); above 1: better
@@ -33,7 +33,7 @@ With --per-width, gatetrace renders each width with bins of that width instead (
 target lengths and the band index see the bins they render; the peer's coarser bins are exact
 sums either way).
 
-Usage: tools/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,ellipsoidal:4,path]
+Usage: tools/peer/nlos_equal_time.py [--seconds T] [--repeats R] [--methods ellipsoidal,ellipsoidal:4,path]
            [--reference-seconds S] [--widths-ps 1,2,4,10,20,50,100] [--per-width] [--exe BINARY]
            [--reference-args '--band-index on'] [--reference-cache NPZ]
 Requires: a built gatetrace (cargo build --release), numpy, mitsuba and mitransient.
@@ -51,9 +51,8 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+ROOT = os.path.dirname(os.path.dirname(HERE))
 EXE = os.path.join(ROOT, "target", "release", "gatetrace")
-sys.path.insert(0, HERE)
 
 C_MM_PER_PS = 0.299792458  # optical path per picosecond (mm)
 
@@ -101,11 +100,12 @@ def gatetrace_render(args, method, seconds, seed, out, extra=(), factor=1):
 
 
 class PeerRenderer:
-    """mitransient's transient_nlos_path on the same capture, built by tools/peer_reference.py."""
+    """mitransient's transient_nlos_path on the same capture, built by tools/peer/peer_reference.py."""
 
     def __init__(self, args):
         import drjit as dr
         import mitsuba as mi
+        import gltf_reader
         import peer_reference
         mi.set_variant("llvm_ad_rgb")
         import mitransient  # noqa: F401
@@ -117,7 +117,7 @@ class PeerRenderer:
         if args.peer_hidden_geometry == "on":
             argv.append("--hidden-geometry-sampling")
         pargs = peer_reference.parse_args(argv)
-        scene_data = peer_reference.load_gltf(args.scene)
+        scene_data = gltf_reader.load_gltf(args.scene)
         scene_dict, point_at, _, laser_origin = peer_reference.build_nlos_scene(mi, scene_data, pargs)
         self.integrator_dict = scene_dict["integrator"]
         self.scene = mi.load_dict(scene_dict)

@@ -3,7 +3,7 @@
 kernels kept) against N invocations of `gatetrace render` with the same settings, side by side
 in one run, and whether the images agree (bit for bit for `path`).
 
-    tools/python_sweep_benchmark.py [--gates 10] [--spp 64] [--res 64] [--method path]
+    tools/bench/python_sweep_benchmark.py [--gates 10] [--spp 64] [--res 64] [--method path]
 
 Needs the Python package installed (pip install .) and the command line built
 (cargo build --release, or --binary PATH).
@@ -19,7 +19,7 @@ import numpy as np
 
 import gatetrace
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main():

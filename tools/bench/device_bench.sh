@@ -2,7 +2,7 @@
 # The device benchmark: samples per second of every method, GPU time per stage and a short
 # equal-time comparison on whatever GPU the machine has, in one JSON file.
 #
-#   tools/device_bench.sh [--exe PATH] [--out FILE.json] [--seconds S] [--smoke]
+#   tools/bench/device_bench.sh [--exe PATH] [--out FILE.json] [--seconds S] [--smoke]
 #
 # It builds nothing: it runs a release binary built on another machine (default
 # target/release/gatetrace; copy it over with the repository) and needs only a Vulkan loader and
@@ -10,7 +10,7 @@
 # GPU it ends within 8 minutes.
 #
 # Scenes: the Cornell box, and the displaced spheres of 327,680 and 1,310,720 triangles in the
-# box (tools/make_sphere_scene.py; made in target/scenes when missing). For each scene:
+# box (tools/scenes/make_sphere_scene.py; made in target/scenes when missing). For each scene:
 #   - `gatetrace bench` (path, direct, ellipsoidal at the 2.5 mm gate; 64x64, 5 bounces) for
 #     --seconds each: samples/s, set-up time, the scene's load and BVH build time;
 #   - the same with --profile for a second each: GPU time per stage (ms);
@@ -20,7 +20,7 @@
 # fraction of a second each (the test suite runs it on lavapipe: tests/device_bench.rs).
 set -euo pipefail
 
-ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
 exe="$ROOT/target/release/gatetrace"
 out="device_bench.json"
 seconds=8
@@ -63,7 +63,7 @@ mkdir -p "$scenes_dir"
 for f in "${frequencies[@]}"; do
     mesh="$scenes_dir/sphere_$((20 * f * f)).glb"
     if [ ! -f "$mesh" ]; then
-        python3 "$ROOT/tools/make_sphere_scene.py" --frequency "$f" --out "$mesh" >&2
+        python3 "$ROOT/tools/scenes/make_sphere_scene.py" --frequency "$f" --out "$mesh" >&2
     fi
     scenes+=("$mesh")
 done

@@ -2,7 +2,7 @@
 """Samples per second of gatetrace's methods against Mitsuba 3 + mitransient, in one run.
 
 For each scene (the Cornell box by default; --scaling adds the displaced spheres of
-tools/make_sphere_scene.py, made in target/scenes when missing), measures mitransient's
+tools/scenes/make_sphere_scene.py, made in target/scenes when missing), measures mitransient's
 ``transient_path`` (one time bin covering every path length, i.e. the steady image) at the same
 resolution and bounce count, then ``gatetrace bench`` (path, direct, ellipsoidal), then the
 peer again, and prints each method's samples/s and its ratio to the mean of the two peer
@@ -12,7 +12,7 @@ of every scene (for the README).
 A sample is one path per pixel: samples/s = spp x pixels / seconds, warm-up
 (kernel compilation) excluded on both sides.
 
-Usage: tools/throughput.py [--scene S.glb ...] [--scaling] [--triangles N,N,...] [--seconds S]
+Usage: tools/peer/throughput.py [--scene S.glb ...] [--scaling] [--triangles N,N,...] [--seconds S]
                            [--res N] [--max-bounces B] [--exe PATH]
 Requires: a built gatetrace (cargo build --release) and, for the peer,
 ``pip install mitsuba mitransient`` (+ ``apt-get install libllvm19``).
@@ -27,10 +27,9 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+ROOT = os.path.dirname(os.path.dirname(HERE))
 SCENE = os.path.join(ROOT, "assets", "scenes", "cornell_box.gltf")
 SCALING = "20480,327680,1310720"
-sys.path.insert(0, HERE)
 
 
 def peer_samples_per_second(scene_path, res, max_bounces, seconds, spp=256):
@@ -73,7 +72,7 @@ def sphere_scene(triangles):
     path = os.path.join(ROOT, "target", "scenes", f"sphere_{triangles}.glb")
     if not os.path.exists(path):
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        subprocess.run([sys.executable, os.path.join(HERE, "make_sphere_scene.py"), "--frequency", str(f),
+        subprocess.run([sys.executable, os.path.join(ROOT, "tools", "scenes", "make_sphere_scene.py"), "--frequency", str(f),
                         "--out", path], check=True)
     return path
 

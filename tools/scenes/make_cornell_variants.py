@@ -13,19 +13,17 @@
   the front of its ceiling cut away, lit by a directional light (irradiance 2 W/m^2) shining
   down and backwards through the opening.
 
-    tools/make_cornell_variants.py
+    tools/scenes/make_cornell_variants.py
 """
 import base64
 import json
 import math
 import struct
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_animated_cornell import cube, HALF, FLOOR_Y  # noqa: E402
+from make_animated_cornell import cube, HALF, FLOOR_Y
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SOURCE = ROOT / "assets/scenes/cornell_box.gltf"
 
 
@@ -89,7 +87,7 @@ class Doc:
     def write(self, target, description):
         self.doc["buffers"][0] = {"byteLength": len(self.data), "uri": "data:application/octet-stream;base64,"
                                   + base64.b64encode(bytes(self.data)).decode()}
-        self.doc["asset"]["generator"] = "gatetrace tools/make_cornell_variants.py"
+        self.doc["asset"]["generator"] = "gatetrace tools/scenes/make_cornell_variants.py"
         self.doc["extras"] = {"description": description}
         path = ROOT / "assets/scenes" / target
         path.write_text(json.dumps(self.doc, indent=1) + "\n")

@@ -8,9 +8,9 @@ f = 2^k gives the subdivided icospheres of 5,120 / 20,480 / 81,920 / 327,680 / 1
 triangles), each vertex pushed along its radius by a smooth deterministic bump field of +-4 %,
 so the mesh has curvature at several scales. Flat-shaded (no normals): every triangle's geometric normal. Standard library only.
 
-    tools/make_sphere_scene.py --triangles 1300000 --out target/scenes/sphere_1310720.glb
-    tools/make_sphere_scene.py --frequency 16 --out sphere_5120.glb
-    tools/make_sphere_scene.py --nlos --frequency 128 --out target/scenes/nlos_sphere_327680.glb
+    tools/scenes/make_sphere_scene.py --triangles 1300000 --out target/scenes/sphere_1310720.glb
+    tools/scenes/make_sphere_scene.py --frequency 16 --out sphere_5120.glb
+    tools/scenes/make_sphere_scene.py --nlos --frequency 128 --out target/scenes/nlos_sphere_327680.glb
 
 The scene's name, the triangle count and the frequency are in the asset's `extras`. The time
 convention, camera and light are the Cornell box's (shortest path 1.9403 m).
@@ -24,7 +24,7 @@ import sys
 from array import array
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BOX = ROOT / "assets/scenes/cornell_box.gltf"
 NLOS = ROOT / "assets/scenes/nlos_letter.gltf"
 
@@ -146,7 +146,7 @@ def main():
          "material": white}]})
     description = (f"a displaced geodesic sphere of {triangles} triangles (frequency {f}, radius {radius} m, "
                    f"+-{BUMP:.0%} bumps)")
-    doc["asset"]["generator"] = "gatetrace tools/make_sphere_scene.py"
+    doc["asset"]["generator"] = "gatetrace tools/scenes/make_sphere_scene.py"
     if args.nlos:
         # The letter's node holds the sphere (its buffer data stays, unreferenced).
         node = next(n for n in doc["nodes"] if n["name"] == "hidden_letter")

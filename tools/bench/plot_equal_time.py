@@ -4,7 +4,7 @@ curve per method (log-log), and prints the widths where the best method changes.
 
     gatetrace equal-time --methods direct,ellipsoidal --gates 'box:3.14..3.141;box:3.14..3.15' \
         --csv sweep.csv
-    tools/plot_equal_time.py sweep.csv sweep.png
+    tools/bench/plot_equal_time.py sweep.csv sweep.png
 
 Needs numpy and matplotlib (pip install numpy matplotlib); not a dependency of the renderer.
 """

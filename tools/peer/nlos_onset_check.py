@@ -3,9 +3,9 @@
 quadrature, for gatetrace and for the peer (Mitsuba 3 + mitransient), and tests one explanation
 of a difference: Mitsuba measures each segment from a ray origin offset off the surface.
 
-    tools/nlos_onset_check.py PEER.npz [--method ellipsoidal] [--spp 4096] [--batches 16]
+    tools/peer/nlos_onset_check.py PEER.npz [--method ellipsoidal] [--spp 4096] [--batches 16]
 
-PEER.npz is a capture written by `tools/peer_reference.py --nlos single|confocal` (its sensed
+PEER.npz is a capture written by `tools/peer/peer_reference.py --nlos single|confocal` (its sensed
 points, laser spots, bins and origins are reused). The tool renders gatetrace's capture of the
 same setup in --batches independent batches, then integrates the three-bounce transient
 (laser spot -> hidden point -> sensed point) of the hidden node over its plane by the midpoint
@@ -18,11 +18,11 @@ variance estimate: counted, not tested), twice:
 - with the first hidden segment shortened as Mitsuba's spawned rays shorten it: their origin
   lies (1 + max |x_s|) x 1500 x 2^-24 m off the wall along its normal (Mitsuba's RayEpsilon), so
   the distance to the hit is that much times the cosine at the wall shorter than the segment.
-Peer data made with `tools/peer_reference.py --mitsuba-segment-lengths` fits the second; the
+Peer data made with `tools/peer/peer_reference.py --mitsuba-segment-lengths` fits the second; the
 tool's default (exact segment lengths) should fit the first.
 
 Needs the release build (cargo build --release). Standard library + numpy;
-tools/peer_reference.py's glTF reader, tools/nlos_peer_check.py's renders.
+tools/peer/gltf_reader.py, tools/peer/nlos_peer_check.py's renders.
 """
 import argparse
 import json
@@ -32,10 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tools"))
-import nlos_peer_check  # noqa: E402
-import peer_reference  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
+import nlos_peer_check
+import gltf_reader
 
 MITSUBA_RAY_EPSILON = 1500 * 2.0 ** -24  # Mitsuba 3's math::RayEpsilon<float>
 
@@ -114,7 +113,7 @@ def render_ours(peer_meta, peer, args):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("peer", help="capture from tools/peer_reference.py --nlos (npz)")
+    p.add_argument("peer", help="capture from tools/peer/peer_reference.py --nlos (npz)")
     p.add_argument("--hidden", default="hidden_letter", help="the planar hidden node (default hidden_letter)")
     p.add_argument("--method", default="ellipsoidal", help="gatetrace's method (default ellipsoidal)")
     p.add_argument("--spp", type=int, default=4096, help="samples per pixel of each batch (default 4096)")
@@ -127,7 +126,7 @@ def main():
     peer = np.load(args.peer)
     meta = json.loads(str(peer["meta"]))
     scene_path = ROOT / meta["scene"] if not Path(meta["scene"]).is_absolute() else Path(meta["scene"])
-    scene = peer_reference.load_gltf(str(scene_path))
+    scene = gltf_reader.load_gltf(str(scene_path))
     plane = planar_triangles(scene, args.hidden)
     wall = next(m for m in scene["meshes"] if m["node"] == meta["relay_wall"])
     wall_albedo = float(wall["material"]["albedo"][0])

@@ -1,14 +1,14 @@
 #!/usr/bin/env python3
 """The applications benchmark: renders each of the paper's application scenes (Pediredla et al.
-2019, section 7; made by tools/make_application_scenes.py) with `path`, `direct`, `ellipsoidal`,
+2019, section 7; made by tools/scenes/make_application_scenes.py) with `path`, `direct`, `ellipsoidal`,
 `combined` and `auto` for equal time at the gate the scene names in its extras (the proximity
 sensor at three frames; the CW room also with a window of the paper's absolute 20 ps), and writes a table
 of the equal-time MSE gains over `direct` beside the paper's, with the variance and the time of
 one sample of `ellipsoidal` and `combined` relative to `direct`'s, and a picture of each scene.
 
-    tools/applications_benchmark.py                  # about 30 minutes on 2 CPU cores
-    tools/applications_benchmark.py --seconds 2 --reference-seconds 20 --no-pictures   # a quick look
-    tools/applications_benchmark.py --resume         # go on after an interruption
+    tools/bench/applications_benchmark.py                  # about 30 minutes on 2 CPU cores
+    tools/bench/applications_benchmark.py --seconds 2 --reference-seconds 20 --no-pictures   # a quick look
+    tools/bench/applications_benchmark.py --resume         # go on after an interruption
 
 Writes into --out (target/applications): `applications.md` (the table), `applications.csv`
 (every render, from `gatetrace equal-time --csv`), `SCENE.png` (a steady-state picture beside
@@ -28,7 +28,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BINARY = ROOT / "target/release/gatetrace"
 
 # The rows of the table: a key naming the row's files, the application's name (--only), scene

@@ -20,7 +20,7 @@ MSE times time being constant for an unbiased estimator (above 1: more accurate 
 The reference's noise should stay well below the MSEs compared; a narrow gate wants a long
 reference, or `--reference-method ellipsoidal` (validated against `direct` by the tests).
 
-Usage: tools/equal_time_peer.py [--scene S] [--gate A B] [--seconds T] [--repeats R]
+Usage: tools/peer/equal_time_peer.py [--scene S] [--gate A B] [--seconds T] [--repeats R]
            [--methods path,ellipsoidal] [--reference-method direct] [--reference-seconds S]
            [--res N] [--max-bounces B]
 Requires: a built gatetrace (cargo build --release), numpy, and
@@ -38,9 +38,8 @@ import tempfile
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+ROOT = os.path.dirname(os.path.dirname(HERE))
 EXE = os.path.join(ROOT, "target", "release", "gatetrace")
-sys.path.insert(0, HERE)
 
 
 def gatetrace_render(args, method, seconds, seed, out):

@@ -2,7 +2,7 @@
 """Writes the example non-line-of-sight scene, assets/scenes/nlos_letter.gltf (glTF 2.0, buffer
 embedded). Standard library only.
 
-    tools/make_nlos_scene.py [--out assets/scenes/nlos_letter.gltf]
+    tools/scenes/make_nlos_scene.py [--out assets/scenes/nlos_letter.gltf]
 
 Geometry (metres; +y up):
 - `relay_wall`: the visible relay wall, 1 m x 1 m in the plane z = 0 (x, y in [-0.5, 0.5]),
@@ -32,7 +32,7 @@ import math
 import struct
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 ORIGIN = (-1.2, 0.0, 0.6)  # sensor and laser origin (m)
 WALL_HALF = 0.5  # m
 LETTER_Z = 0.5  # m
@@ -134,7 +134,7 @@ def main():
 
     data = bytearray()
     doc = {
-        "asset": {"version": "2.0", "generator": "gatetrace tools/make_nlos_scene.py"},
+        "asset": {"version": "2.0", "generator": "gatetrace tools/scenes/make_nlos_scene.py"},
         "extensionsUsed": ["KHR_lights_punctual"],
         "scene": 0,
         "scenes": [{"nodes": []}],

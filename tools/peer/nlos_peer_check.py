@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Compare a gatetrace NLOS capture with a peer capture from tools/peer_reference.py --nlos.
+"""Compare a gatetrace NLOS capture with a peer capture from tools/peer/peer_reference.py --nlos.
 
 Renders the capture the peer file describes (scan, grid, bins, bounces, origins) with gatetrace in
 independent batches (different seeds), scales each laser spot by the peer's equivalent beam power
@@ -15,7 +15,7 @@ independent batches (different seeds), scales each laser spot by the peer's equi
     samples). The energy ours puts in the blocks the peer never reached is reported as a share
     of the total instead.
 
-    tools/nlos_peer_check.py PEER.npz [--method path] [--spp 8192] [--batches 8] [--block 1] [--pixels 1]
+    tools/peer/nlos_peer_check.py PEER.npz [--method path] [--spp 8192] [--batches 8] [--block 1] [--pixels 1]
         [--worst N] [--save-ours OURS.npz]
 
 Needs numpy; the gatetrace binary is target/release/gatetrace (built with cargo build --release).
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def render(peer_meta, args, seed, out):
@@ -52,7 +52,7 @@ def render(peer_meta, args, seed, out):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("peer", help=".npz from tools/peer_reference.py --nlos")
+    p.add_argument("peer", help=".npz from tools/peer/peer_reference.py --nlos")
     p.add_argument("--method", default="path")
     p.add_argument("--spp", type=int, default=8192, help="samples per pixel per batch")
     p.add_argument("--batches", type=int, default=8)

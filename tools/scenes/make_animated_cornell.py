@@ -3,7 +3,7 @@
 (0.3 m cube) sliding across the floor from x = -0.25 m to x = +0.25 m while turning 90 degrees
 about the vertical, over 1 s of animation clock (linear keys). Standard library only.
 
-    tools/make_animated_cornell.py
+    tools/scenes/make_animated_cornell.py
 """
 import base64
 import json
@@ -11,7 +11,7 @@ import math
 import struct
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SOURCE = ROOT / "assets/scenes/cornell_box.gltf"
 TARGET = ROOT / "assets/scenes/cornell_box_moving_block.gltf"
 
@@ -88,7 +88,7 @@ def main():
     }]
     doc["buffers"][0] = {"byteLength": len(data),
                          "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(data)).decode()}
-    doc["asset"]["generator"] = "gatetrace tools/make_animated_cornell.py"
+    doc["asset"]["generator"] = "gatetrace tools/scenes/make_animated_cornell.py"
     doc["extras"] = {"description": doc["extras"]["description"] + (
         f" A white {2 * HALF} m block on the floor slides from x = {START_X} m to x = {END_X} m and turns 90 deg"
         " about +y over 1 s of animation clock (linear keys).")}

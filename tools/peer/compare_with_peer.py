@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """Compare gatetrace renders with a peer reference, judging agreement by measured variance.
 
-Usage: tools/compare_with_peer.py PEER.npz KEY RENDER.npy [RENDER.npy ...]
+Usage: tools/peer/compare_with_peer.py PEER.npz KEY RENDER.npy [RENDER.npy ...]
 
 PEER.npz holds KEY_mean and KEY_var (variance of the mean), e.g. the references written by
-tools/peer_reference.py or ../tests/data/cornell_box_peer (keys steady, gate_3_14_3_19,
+tools/peer/peer_reference.py or ../tests/data/cornell_box_peer (keys steady, gate_3_14_3_19,
 transient_1_94_step_0_1). The RENDER files are independent gatetrace renders of the same
 settings with different --seed values (at least 2; 8 or more give a usable variance). Arrays are
 [H, W, 3] or [H, W, T, 3], values bin-integrated radiance, lengths in metres of optical path.

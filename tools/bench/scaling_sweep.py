@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """How ellipsoidal connections scale with the scene's triangle count (the paper's Fig. 4b): the
 Cornell box, then the Cornell box holding a displaced geodesic sphere of 5,120 to 1,310,720
-triangles (tools/make_sphere_scene.py), each rendered with every method for the same wall time
+triangles (tools/scenes/make_sphere_scene.py), each rendered with every method for the same wall time
 at narrow box gates; the mean squared error against a long reference render, and the work of
 one ellipsoid query (loop iterations over BVH nodes and triangles, triangles tested).
 
-    tools/scaling_sweep.py                       # about 40 minutes on 2 CPU cores (lavapipe)
-    tools/scaling_sweep.py --frequencies 16,32 --seconds 4 --reference-seconds 20
+    tools/bench/scaling_sweep.py                       # about 40 minutes on 2 CPU cores (lavapipe)
+    tools/bench/scaling_sweep.py --frequencies 16,32 --seconds 4 --reference-seconds 20
 
 Writes OUT/scaling.csv (one row per render, from `gatetrace equal-time --csv`), OUT/scaling.png
 (MSE ratio of each method over `direct` against triangles, per gate; query work against
@@ -20,7 +20,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main():
@@ -48,7 +48,7 @@ def main():
         for f in (int(x) for x in args.frequencies.split(",") if x.strip()):
             path = args.out / f"sphere_{20 * f * f}.glb"
             if not path.exists():
-                subprocess.run([sys.executable, str(ROOT / "tools/make_sphere_scene.py"), "--frequency", str(f),
+                subprocess.run([sys.executable, str(ROOT / "tools/scenes/make_sphere_scene.py"), "--frequency", str(f),
                                 "--out", str(path)], check=True)
             scenes.append(path)
         subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=ROOT, check=True)

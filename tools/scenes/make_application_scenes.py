@@ -26,19 +26,17 @@ application renders with (lengths in metres of optical path) and why.
   `--frames 24 --gate-step 60mm --anim-time 0..1.15` renders 24 slices, each of the scene at
   its own time.
 
-    tools/make_application_scenes.py
+    tools/scenes/make_application_scenes.py
 """
 import base64
 import json
 import math
 import struct
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_nlos_scene import look_at_rotation  # noqa: E402
+from make_nlos_scene import look_at_rotation
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 class Builder:
@@ -46,7 +44,7 @@ class Builder:
 
     def __init__(self):
         self.data = bytearray()
-        self.doc = {"asset": {"version": "2.0", "generator": "gatetrace tools/make_application_scenes.py"},
+        self.doc = {"asset": {"version": "2.0", "generator": "gatetrace tools/scenes/make_application_scenes.py"},
                     "scene": 0, "scenes": [{"nodes": []}], "nodes": [], "meshes": [], "materials": [],
                     "accessors": [], "bufferViews": [], "extensionsUsed": []}
 

@@ -9,7 +9,7 @@ not be counted). A Laplacian along depth then sharpens the volume (the usual fil
 back-projection), and the image is the maximum over depth, drawn with the wall's u (x) to the right and v (y) up:
 the hidden side as seen through the wall from the sensor's side.
 
-    tools/nlos_backproject.py CAPTURE.npy [--depth 0.2,0.9] [--voxels 64] [-o picture.png]
+    tools/nlos/nlos_backproject.py CAPTURE.npy [--depth 0.2,0.9] [--voxels 64] [-o picture.png]
 
 Lengths in metres. Needs numpy; writes PNG with Pillow when present, else .npy.
 """

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Unpack a peer-reference .npz (as written by tools/peer_reference.py or shipped with the
+"""Unpack a peer-reference .npz (as written by tools/peer/peer_reference.py or shipped with the
 canonical scenes) into one float32 .npy per array, the form the Rust tests read.
 
-Usage: tools/convert_peer_reference.py REFERENCE.npz OUT_DIR
+Usage: tools/peer/convert_peer_reference.py REFERENCE.npz OUT_DIR
 
 Every array keeps its layout: images [H, W, 3] and transient cubes [H, W, T, 3], row 0 at the
 top, values bin-integrated radiance with lengths in metres of optical path. `*_var` arrays are
