@@ -327,7 +327,7 @@ fn the_readme_counts_the_letters_triangles_as_the_scene_has_them() {
     let scene = example_scene();
     let wall = scene.scene.node(gatetrace::nlos::DEFAULT_RELAY_WALL).expect("the relay wall").triangles.len();
     let besides_the_wall = scene.scene.triangles.len() - wall;
-    let readme = std::fs::read_to_string(common::repo_path("README.md")).unwrap();
+    let readme = std::fs::read_to_string(common::repo_path("docs/nlos.md")).unwrap();
     let readme = readme.split_whitespace().collect::<Vec<_>>().join(" ");
     let claims: Vec<&str> = readme
         .match_indices("letter (")
