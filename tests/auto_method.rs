@@ -3,7 +3,7 @@
 //! `path` and `direct` alone in the steady state (where `ellipsoidal` cannot render), and the
 //! render it returns is the chosen method's (all samples after the discarded pilot). Which method
 //! wins at a given width is measured by `gatetrace equal-time --methods
-//! path,direct,ellipsoidal,auto` (README), not here.
+//! path,direct,ellipsoidal,auto` (docs/methods.md), not here.
 
 mod common;
 
@@ -30,7 +30,7 @@ fn pilot_picks_ellipsoidal_for_a_millimetre_gate_and_path_for_a_metre() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     // At 1 mm (0.03 % of the box's path lengths) the pilots measured ratios of hundreds in
-    // ellipsoidal's favour; at 1 m, path's by 5-7x over direct (README: auto).
+    // ellipsoidal's favour; at 1 m, path's by 5-7x over direct (docs/methods.md, `auto`).
     for (gate, expected) in [("box:3.14..3.141", Method::Ellipsoidal), ("box:3.14..4.14", Method::Path)] {
         let output = render(&ctx, &scene, &auto_settings(gate), Budget::Samples(256), |_| {}).unwrap();
         let choice = output.choice.expect("auto reports its choice");

@@ -321,24 +321,24 @@ fn a_capture_defaults_to_ellipsoidal_and_says_when_it_is_too_short_for_its_bins(
     assert_eq!(meta["method"], "path");
 }
 
-/// The README counts the example letter's triangles as the scene file has them.
+/// The NLOS page (docs/nlos.md) counts the example letter's triangles as the scene file has them.
 #[test]
-fn the_readme_counts_the_letters_triangles_as_the_scene_has_them() {
+fn the_docs_count_the_letters_triangles_as_the_scene_has_them() {
     let scene = example_scene();
     let wall = scene.scene.node(gatetrace::nlos::DEFAULT_RELAY_WALL).expect("the relay wall").triangles.len();
     let besides_the_wall = scene.scene.triangles.len() - wall;
-    let readme = std::fs::read_to_string(common::repo_path("docs/nlos.md")).unwrap();
-    let readme = readme.split_whitespace().collect::<Vec<_>>().join(" ");
-    let claims: Vec<&str> = readme
+    let page = std::fs::read_to_string(common::repo_path("docs/nlos.md")).unwrap();
+    let page = page.split_whitespace().collect::<Vec<_>>().join(" ");
+    let claims: Vec<&str> = page
         .match_indices("letter (")
         .filter_map(|(i, m)| {
-            let (count, rest) = readme[i + m.len()..].split_once(' ')?;
+            let (count, rest) = page[i + m.len()..].split_once(' ')?;
             rest.starts_with("triangles besides").then_some(count)
         })
         .collect();
-    assert!(claims.len() >= 2, "the README's counts of the letter's triangles: {claims:?}");
+    assert!(claims.len() >= 2, "docs/nlos.md's counts of the letter's triangles: {claims:?}");
     for count in claims {
-        assert_eq!(count, besides_the_wall.to_string(), "the README says the letter has {count} triangles");
+        assert_eq!(count, besides_the_wall.to_string(), "docs/nlos.md says the letter has {count} triangles");
     }
-    assert!(!readme.contains("-triangle letter"), "a count of the letter's triangles the test does not read");
+    assert!(!page.contains("-triangle letter"), "a count of the letter's triangles the test does not read");
 }

@@ -114,8 +114,8 @@ def gaussian(mean: float, sigma: float) -> Gate:
 
 def cw(frequency_hz: float, phase_deg: float, code: Optional[str] = None) -> Gate:
     """A CW-ToF gate: W = cos(2 pi f l / c + phase), signed, or with `code` (``"square"``,
-    ``"ham3"``, ``"ham4:1"``..``"ham4:4"``, ``"mseq[:CHIPS]"``, ``"depthsel[:CHIPS[:N]]"``, see the
-    README) one period of that code's correlation, repeated."""
+    ``"ham3"``, ``"ham4:1"``..``"ham4:4"``, ``"mseq[:CHIPS]"``, ``"depthsel[:CHIPS[:N]]"``, see
+    docs/gates.md) one period of that code's correlation, repeated."""
     spec = f"cw:{float(frequency_hz)!r},{float(phase_deg)!r}"
     return Gate(spec if code is None else f"{spec},{code}")
 

@@ -7,7 +7,7 @@ tools/scenes/make_sphere_scene.py, made in target/scenes when missing), measures
 resolution and bounce count, then ``gatetrace bench`` (path, direct, ellipsoidal), then the
 peer again, and prints each method's samples/s and its ratio to the mean of the two peer
 measurements (the bracket shows how much the machine drifted). At the end, one markdown table
-of every scene (for the README).
+of every scene (for docs/benchmarks.md).
 
 A sample is one path per pixel: samples/s = spp x pixels / seconds, warm-up
 (kernel compilation) excluded on both sides.
