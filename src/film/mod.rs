@@ -1,5 +1,6 @@
-//! The film: per-pixel, per-bin radiance estimates, and their output as EXR or NPY with the
-//! render's metadata.
+//! The film: per-pixel, per-bin radiance estimates; the metadata every output carries and the
+//! atomic file replacement every writer uses (here, below the writers, so that `output` and
+//! `preview` do not import each other); the outputs themselves (EXR, NPY, PNG previews).
 
 pub mod fixed;
 pub mod gate;
@@ -9,6 +10,10 @@ pub mod preview;
 pub mod target;
 
 pub use gate::{CwCode, Gate, GateKind};
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
 
 /// Pixel estimates of a render: `data[((y * width + x) * bins + bin) * 3 + channel]`, row 0 at
 /// the top (the [H, W, T, 3] layout of mitransient). Values are bin-integrated radiance
@@ -67,4 +72,24 @@ impl Film {
     pub fn all_finite(&self) -> bool {
         self.data.iter().all(|v| v.is_finite())
     }
+}
+
+/// What is recorded with every output: (key, value) pairs in order, e.g. scene, method, gate,
+/// spp, seed, elapsed seconds, adapter. Values are typed: numbers are JSON numbers (with the
+/// unit in the key or in `units`), flags booleans, absent settings null. An NPY file's JSON
+/// sidecar holds them as they are; an EXR file's attributes are text (strings as they are, other
+/// values as JSON).
+pub type Metadata = Vec<(String, serde_json::Value)>;
+
+/// Writes `path` through `write` into a temporary file beside it that is then renamed over it,
+/// so that a reader (or a process killed while writing) never sees a partly written file.
+pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = PathBuf::from(tmp);
+    let result = write(&tmp).and_then(|_| std::fs::rename(&tmp, path).map_err(Into::into));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }

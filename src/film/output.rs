@@ -6,13 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result, bail};
 
 use super::Film;
-
-/// What is recorded with every output: (key, value) pairs in order, e.g. scene, method, gate,
-/// spp, seed, elapsed seconds, adapter. Values are typed: numbers are JSON numbers (with the
-/// unit in the key or in `units`), flags booleans, absent settings null. An NPY file's JSON
-/// sidecar holds them as they are; an EXR file's attributes are text (strings as they are, other
-/// values as JSON).
-pub type Metadata = Vec<(String, serde_json::Value)>;
+pub use super::{Metadata, replace_atomically};
 
 /// Output file formats, chosen by the file name's extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -117,19 +111,6 @@ pub fn write_sidecar(
     let text = serde_json::to_string_pretty(&map)? + "\n";
     replace_atomically(&sidecar, |tmp| std::fs::write(tmp, &text).map_err(Into::into))
         .with_context(|| format!("{}: cannot write the metadata", sidecar.display()))
-}
-
-/// Writes `path` through `write` into a temporary file beside it that is then renamed over it,
-/// so that a reader (or a process killed while writing) never sees a partly written file.
-pub fn replace_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = PathBuf::from(tmp);
-    let result = write(&tmp).and_then(|_| std::fs::rename(&tmp, path).map_err(Into::into));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 /// `x.npy` -> `x.json`.

@@ -13,8 +13,7 @@ use std::path::Path;
 
 use anyhow::{Context as _, Result, ensure};
 
-use super::Film;
-use super::output::{Metadata, replace_atomically};
+use super::{Film, Metadata, replace_atomically};
 
 /// Most tiles of a contact sheet (8 x 8).
 pub const MAX_TILES: u32 = 64;
