@@ -15,6 +15,7 @@ use gatetrace::integrator::checkpoint::{checkpoint_path, fingerprint, read_check
 use gatetrace::integrator::{
     Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
 };
+use gatetrace::nlos;
 use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 use super::args::{ImageArgs, OnOff, QueryWeights, RenderArgs};
@@ -41,12 +42,9 @@ fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &ImageArgs) -> Re
 pub fn run(args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(super::DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
-    // NLOS captures default to the method the README's capture tables measure as the default.
-    let method = args.method.unwrap_or(if args.nlos.is_some() && gate != Gate::None {
-        Method::Ellipsoidal
-    } else {
-        Method::Path
-    });
+    // NLOS captures have defaults of their own (gatetrace::nlos::capture).
+    let capture = args.nlos.is_some();
+    let method = args.method.unwrap_or(if capture { nlos::default_method(&gate) } else { Method::Path });
     let budget = match (args.spp, args.time) {
         (_, Some(t)) => match Duration::try_from_secs_f64(t) {
             Ok(d) if t > 0.0 => Budget::Time(d),
@@ -90,19 +88,17 @@ pub fn run(args: RenderArgs) -> Result<()> {
         stats: args.stats,
         debug_strategy: args.debug_strategy,
         binding_limit: None,
-        connections_per_query: args.connections_per_query.unwrap_or(
-            if args.nlos.is_some() && method == Method::Ellipsoidal {
-                gatetrace::integrator::bidirectional::DEFAULT_NLOS_CONNECTIONS_PER_QUERY
-            } else {
-                gatetrace::integrator::bidirectional::default_connections_per_query(method)
-            },
-        ),
+        connections_per_query: args.connections_per_query.unwrap_or(if capture {
+            nlos::default_connections_per_query(method)
+        } else {
+            gatetrace::integrator::bidirectional::default_connections_per_query(method)
+        }),
         query: gatetrace::integrator::QuerySettings {
             split: args.query_split,
             bottom_nodes: args.query_bottom_nodes,
             reflection_weights: match args.query_weights {
                 Some(weights) => weights == QueryWeights::Reflection,
-                None => args.nlos.is_some(),
+                None => capture && nlos::DEFAULT_REFLECTION_WEIGHTS,
             },
             ..Default::default()
         },
@@ -111,13 +107,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
             length: args.length_guard,
         },
         nlos: None,
-        target_pilot_spp: args.target_pilot.unwrap_or(
-            if args.nlos.is_some() && method == Method::Ellipsoidal && matches!(gate, Gate::Transient { .. }) {
-                gatetrace::integrator::bidirectional::DEFAULT_NLOS_TARGET_PILOT
-            } else {
-                0
-            },
-        ),
+        target_pilot_spp: args.target_pilot.unwrap_or(if capture {
+            nlos::default_target_pilot(method, &gate)
+        } else {
+            0
+        }),
         band_index: false,
         ellipsoidal_share: args.ellipsoidal_share,
     };
@@ -129,11 +123,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
         "--target-pilot applies to --method ellipsoidal only"
     );
-    // `auto` is decided once the scene is loaded (run_nlos).
-    settings.band_index = args.band_index != OnOff::Off
-        && args.nlos.is_some()
-        && settings.method == Method::Ellipsoidal
-        && matches!(gate, Gate::Transient { .. });
+    // `auto` is decided once the scene is loaded (nlos::prepare_capture).
+    settings.band_index = args.band_index != OnOff::Off && capture && nlos::band_index_applies(settings.method, &gate);
     if let Some(every) = args.checkpoint_every {
         ensure!(every.is_finite() && every >= 0.0, "--checkpoint-every {every}: give seconds, 0 or more");
     }
