@@ -8,6 +8,9 @@
 //! bin, so moving the bin shown costs nothing; signed gates (CW) show the signed luminance on a
 //! diverging map. Clicking a pixel shows its transient response (a `path` render with a transient
 //! gate over the scene's path lengths, accumulated alongside) with the gate drawn on it.
+//!
+//! This module holds the window's options, state and start; `gate` the gate's controls, `state`
+//! the rendering behind the window, `panels` the window's controls, plot and screenshots.
 
 mod gate;
 mod panels;
