@@ -5,7 +5,6 @@
 //! gate). The README documents units, conventions and the architecture.
 #![warn(missing_docs)]
 
-pub mod bench;
 pub mod bvh;
 pub mod ellipsoid;
 pub mod film;
@@ -17,4 +16,3 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod units;
-pub mod viewer;

@@ -209,18 +209,7 @@ struct Renderer {
 
 /// A method name as the command line spells it.
 fn parse_method(name: &str) -> PyResult<Method> {
-    Ok(match name {
-        "path" => Method::Path,
-        "direct" => Method::Direct,
-        "ellipsoidal" => Method::Ellipsoidal,
-        "combined" => Method::Combined,
-        "auto" => Method::Auto,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "method `{other}`: choose path, direct, ellipsoidal, combined or auto"
-            )));
-        }
-    })
+    Method::parse(name).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
 #[pymethods]

@@ -62,6 +62,19 @@ impl Method {
             Method::Auto => "auto",
         }
     }
+
+    /// The method of a name as the command line spells it (`name`), for the command line's
+    /// `--method`, the benchmarks' method lists and the Python bindings.
+    pub fn parse(name: &str) -> anyhow::Result<Method> {
+        Ok(match name {
+            "path" => Method::Path,
+            "direct" => Method::Direct,
+            "ellipsoidal" => Method::Ellipsoidal,
+            "combined" => Method::Combined,
+            "auto" => Method::Auto,
+            other => anyhow::bail!("method `{other}`: choose path, direct, ellipsoidal, combined or auto"),
+        })
+    }
 }
 
 /// How paths reach area lights (the LIGHT_STRATEGY override of `extend_paths`).

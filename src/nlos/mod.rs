@@ -1,0 +1,99 @@
+//! Non-line-of-sight (NLOS) capture: a laser lights a spot on a visible relay wall, light goes
+//! around the corner to hidden objects and back, and a time-resolved sensor records the light
+//! leaving a grid of points on the wall (shaders/lib/nlos.wesl).
+//!
+//! Conventions (those of Mitsuba 3 + mitransient's `nlos_capture_meter`, so that outputs compare
+//! bin for bin):
+//! - The relay wall is a mesh node of the scene, named (`relay_wall` by default). Its TEXCOORD_0
+//!   parameterises it: grid cell (i, j) of a W x H grid is sensed at the wall point of texture
+//!   coordinates ((i + 0.5) / W, (j + 0.5) / H). Pixel (i, j) of the image (row j) is that cell,
+//!   so the output's [grid_y, grid_x] is [j, i].
+//! - A pixel's value is the radiance (W m^-2 sr^-1) leaving its sensed point towards the sensor
+//!   origin, binned by path length: the ray from the sensor origin to the point is traced, and
+//!   the first surface it hits is the sensed point.
+//! - The laser is a beam of power P (W) from the laser origin towards a target on the wall; the
+//!   first surface it hits is the spot. The spot reflects the beam with the wall's BSDF, so it
+//!   acts as a point light of radiant intensity P f(to laser, w) cos(w) (W sr^-1).
+//! - Path lengths run from the laser spot to the sensed point. The laser origin -> spot and
+//!   sensed point -> sensor origin segments are added only with `count_first_and_last`
+//!   (mitransient's `account_first_and_last_bounces`, off by default there and here).
+//! - Bounces count every scattering vertex, the laser spot and the sensed point included: the
+//!   classic three-bounce path spot -> hidden point -> sensed point has 3.
+//! - The scene's own lights take no part in a capture.
+//!
+//! Module layout: this module holds the capture's types; `geometry` the relay wall's points (the
+//! sensed points and laser spots) and the capture's record; `shells` the hidden scene's
+//! preparation for the band index's shell connections; `capture` how a capture is rendered (its
+//! defaults, one render per laser spot, its output).
+
+mod capture;
+mod geometry;
+mod shells;
+
+use glam::{Vec2, Vec3};
+
+pub use capture::{
+    Capture, CaptureProgress, CaptureRequest, DEFAULT_REFLECTION_WEIGHTS, PreparedCapture, band_index_applies,
+    default_connections_per_query, default_method, default_target_pilot, prepare_capture, render_capture,
+};
+pub use geometry::{
+    WallTarget, capture_record, cell_uv, check_capture, origin_from_nodes, wall_normal, wall_point_at, wall_points,
+    wall_points_and_warnings, wall_target_at,
+};
+pub use shells::{
+    MAX_REFINE_PIECES, MAX_REFINED_TRIANGLES, REFINE_FINEST_BIN, ShellPreparation, close_surfaces, prepare_for_shells,
+    refine_for_shells,
+};
+
+/// The relay wall's node name when none is given.
+pub const DEFAULT_RELAY_WALL: &str = "relay_wall";
+
+/// How the laser moves during a capture (`--nlos`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Scan {
+    /// One laser spot for the whole grid of sensed points.
+    Single,
+    /// The laser spot follows the sensed point: each pixel is lit at the point it senses.
+    Confocal,
+    /// Every laser spot of a laser grid with every sensed point: one single-scan capture per
+    /// laser spot.
+    Exhaustive,
+}
+
+impl Scan {
+    /// The name on the command line and in metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scan::Single => "single",
+            Scan::Confocal => "confocal",
+            Scan::Exhaustive => "exhaustive",
+        }
+    }
+}
+
+/// Where one render's laser spot lies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LaserAim {
+    /// Aimed at the wall point of texture coordinates (u, v) for every pixel.
+    Spot(Vec2),
+    /// Aimed at each pixel's sensed point (confocal).
+    Confocal,
+}
+
+/// One NLOS render: the wall, the origins, the laser (what [`crate::integrator::RenderSettings`]
+/// carries). The image's width and height are the grid of sensed points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NlosCapture {
+    /// Name of the relay wall's glTF node.
+    pub relay_wall: String,
+    /// Where the sensor looks at the wall from (m).
+    pub sensor_origin: Vec3,
+    /// Where the laser beam starts (m).
+    pub laser_origin: Vec3,
+    /// Where the beam is aimed.
+    pub aim: LaserAim,
+    /// Beam power (W).
+    pub laser_power: f32,
+    /// Count the laser origin -> spot and sensed point -> sensor origin segments in path lengths.
+    pub count_first_and_last: bool,
+}
