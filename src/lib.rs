@@ -2,7 +2,8 @@
 //!
 //! Time is optical path length in metres (c = 1); a pixel measures
 //! I = integral of W(|x|) f(x) over paths x, where W is the sensor's pathlength importance (the
-//! gate). The README documents units, conventions and the architecture.
+//! gate). README.md is the user's guide; docs/gates.md holds the units and conventions, and
+//! docs/design.md the architecture and the mathematics.
 #![warn(missing_docs)]
 
 pub mod bvh;

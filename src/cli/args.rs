@@ -1,5 +1,5 @@
 //! The arguments of `gatetrace render`, and the image options it shares with `gatetrace view`.
-//! Help is one or two lines an option, with units; the README explains the methods, gates and
+//! Help is one or two lines an option, with units; README.md and docs/ explain the methods, gates and
 //! NLOS captures at length. The options shared with view end their help with `{n}`, so that
 //! their defaults show on lines of their own in both commands' help.
 

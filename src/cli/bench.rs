@@ -90,8 +90,8 @@ pub struct BenchSettings {
 /// with the adapter's name. Each measurement builds its tracer, renders one warm-up pass
 /// (lavapipe compiles kernels at their first dispatch), then times whole passes for at least
 /// `seconds` (upload and kernel builds excluded). Rows start with `bench:` for scripts
-/// (tools/throughput.py); with `profile`, each is followed by its GPU time per stage, in rows
-/// that start with `stage:`. With `json`, the same goes to a file (tools/device_bench.sh).
+/// (tools/peer/throughput.py); with `profile`, each is followed by its GPU time per stage, in rows
+/// that start with `stage:`. With `json`, the same goes to a file (tools/bench/device_bench.sh).
 pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     let loading = Instant::now();
     let scene = PreparedScene::new(load_gltf(scene_path)?)?;

@@ -48,7 +48,7 @@ pub enum Command {
     /// gates (CW, tables with negative weights) show the luminance on a diverging map: orange
     /// above zero, blue below, black at zero.
     View(view::ViewArgs),
-    /// Measure samples per second of each method on a scene (tools/throughput.py adds
+    /// Measure samples per second of each method on a scene (tools/peer/throughput.py adds
     /// Mitsuba 3 + mitransient's in the same run).
     Bench(bench::BenchArgs),
     /// Render a scene with several methods for the same wall time each and report their mean

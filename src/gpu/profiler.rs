@@ -1,6 +1,6 @@
 //! GPU time per stage (`render --profile`): a timestamp query before and after every kernel
 //! dispatch, resolved whenever the host waits for the device, summed per pipeline label (the
-//! kernel's name, so profiler rows read like the stage tables in the README). Needs the
+//! kernel's name, so profiler rows read like the stage tables of docs/pipeline.md). Needs the
 //! device features TIMESTAMP_QUERY and TIMESTAMP_QUERY_INSIDE_PASSES (lavapipe has both).
 //! On a GPU that overlaps consecutive dispatches, a stage's interval may include some of its
 //! neighbour's work; lavapipe runs them one after another.

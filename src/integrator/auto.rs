@@ -81,7 +81,7 @@ pub const PILOT_MAX_SHRINK: u32 = 4;
 /// f^2 times smaller, lands f^2 times more often per light path, and the image has f^2 times
 /// fewer light paths per sample), so per-sample variances mostly carry over (not where the
 /// radiance varies within a pixel: on the glossy box `path`'s variance per sample is 17x
-/// `direct`'s at 32x32 and 11x at 64x64, README: auto); times per sample are
+/// `direct`'s at 32x32 and 11x at 64x64, docs/methods.md, `auto`); times per sample are
 /// scaled by the pixel count. That scaling overstates both methods' times a little (a small
 /// pass pays the fixed cost of its dispatches and readbacks over fewer paths): on the fence
 /// scene at 32x32 for 64x64, `direct`'s by 1.75x and `ellipsoidal`'s by 1.5x, which matters

@@ -8,7 +8,8 @@
 //! in the bin, estimating the bin's whole integral, so that the target length is integrated
 //! over the bin rather than drawn. The masses also share out each pixel's visits to its bins
 //! (instead of a pilot render). On a 327,680-triangle hidden sphere (4 ps bins, 10 s) the error
-//! at equal time fell 2,400-fold against the stochastic descent (README, NLOS captures).
+//! at equal time fell 2,400-fold against the stochastic descent (docs/nlos.md, "Shell connections
+//! from the band index").
 //!
 //! Built on the device in two passes over the clusters, batched so that no invocation's loops
 //! run past lavapipe's 65,535 iterations: `count_band_entries` counts each pixel's entries per

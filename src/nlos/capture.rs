@@ -20,7 +20,7 @@ use crate::integrator::{Budget, Method, Progress, RenderOutput, RenderSettings, 
 use crate::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 /// The method a capture renders with when none is asked for: ellipsoidal where a gate gives
-/// target lengths (the default the README's capture tables measure), path without one.
+/// target lengths (the default the capture tables of docs/nlos.md measure), path without one.
 pub fn default_method(gate: &Gate) -> Method {
     if *gate != Gate::None { Method::Ellipsoidal } else { Method::Path }
 }
