@@ -41,8 +41,7 @@
 use anyhow::{Result, ensure};
 
 use super::combined::Family;
-use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
-use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
+use super::wavefront::{DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
@@ -496,6 +495,7 @@ impl<'a> BidirectionalTracer<'a> {
             constants,
             (samples_per_pass, slots_per_wave),
             scene.wide.most_stops(),
+            settings.gate.kind(),
         );
         Ok(Self {
             wf,
@@ -787,7 +787,7 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
-        let moved = self.wf.set_gate(scene, settings)?;
+        let moved = self.wf.set_gate(&settings.gate, super::target_sampler(scene, settings))?;
         if moved {
             // The extra visits were shaped for the old gate (wf.set_gate dropped them).
             // A new pilot shapes them again where the new gate's tables fit the buffer.
