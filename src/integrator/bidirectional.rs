@@ -46,7 +46,7 @@ mod target_visits;
 
 use anyhow::{Result, ensure};
 
-use super::combined::Family;
+pub use super::check_settings;
 use super::wavefront::{DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
@@ -54,8 +54,8 @@ use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 pub use options::{
-    DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, MAX_BOUNCES,
-    MAX_CONNECTIONS_PER_QUERY, check_settings, default_connections_per_query, strategies,
+    DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, MAX_BOUNCES,
+    MAX_CONNECTIONS_PER_QUERY, check_tracer_settings, default_connections_per_query, strategies,
 };
 
 /// Slots a wave aims for: each slot holds two subpaths and all their connections (a few KiB).
@@ -160,7 +160,7 @@ impl<'a> BidirectionalTracer<'a> {
         settings: &RenderSettings,
         family: Option<(Family, f64)>,
     ) -> Result<Self> {
-        check_settings(settings)?;
+        check_tracer_settings(settings)?;
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;

@@ -151,6 +151,23 @@ pub trait Integrator: Send {
     }
 }
 
+/// Errors for settings `direct`, `ellipsoidal`, `combined` or `auto` cannot render (checked
+/// before any work; also reachable as `bidirectional::check_settings`): `auto` needs both its
+/// bidirectional candidates valid, ellipsoidal only where it applies (it needs a gate).
+pub fn check_settings(settings: &RenderSettings) -> Result<()> {
+    match settings.method {
+        Method::Combined => combined::check_settings(settings),
+        Method::Auto => {
+            bidirectional::check_tracer_settings(&auto::candidate_settings(settings, Method::Direct))?;
+            if !matches!(settings.gate, crate::film::Gate::None) {
+                bidirectional::check_tracer_settings(&auto::candidate_settings(settings, Method::Ellipsoidal))?;
+            }
+            Ok(())
+        }
+        _ => bidirectional::check_tracer_settings(settings),
+    }
+}
+
 /// The integrator of `settings.method`, with the scene uploaded and its kernels built.
 pub fn create_integrator<'a>(
     ctx: &'a GpuContext,

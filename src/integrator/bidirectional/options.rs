@@ -1,9 +1,10 @@
-//! The options of the bidirectional methods: their limits and defaults, the (s, t) strategies
-//! of a path length, and the checks of the settings they are given.
+//! The options of the bidirectional methods: their limits and defaults, the family a tracer is
+//! in a combined render, the (s, t) strategies of a path length, and the checks of the
+//! settings they are given.
 
 use anyhow::{Result, ensure};
 
-use crate::integrator::{Method, RenderSettings, auto, combined, kernel_bounces};
+use crate::integrator::{Method, RenderSettings, kernel_bounces};
 
 /// Most scattering vertices `direct` supports: the strategies of a slot grow as B^2 and
 /// lavapipe ends a shader invocation's loops after 65535 iterations in total.
@@ -38,25 +39,27 @@ pub fn default_connections_per_query(method: Method) -> u32 {
     }
 }
 
+/// Which half of a combined render a tracer is: its connection kernels weigh each contribution
+/// by their family's share of the path (shaders/lib/family_mis.wesl). `integrator::combined`
+/// derives each half's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// connect_direct's strategies.
+    Direct = 1,
+    /// connect_ellipsoidal's and connect_spherical's.
+    Ellipsoidal = 2,
+}
+
 /// The (s, t) strategies with at most `max_bounces` scattering vertices and t >= 1, in the
 /// order of `strategy_stats` (depth d = s + t - 2, then s).
 pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
     (0..=max_bounces).flat_map(|d| (0..=d + 1).map(move |s| (s, d + 2 - s))).collect()
 }
 
-/// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
-pub fn check_settings(settings: &RenderSettings) -> Result<()> {
-    if settings.method == Method::Combined {
-        return combined::check_settings(settings);
-    }
-    if settings.method == Method::Auto {
-        // Both candidates must be valid, ellipsoidal only where it applies (it needs a gate).
-        check_settings(&auto::candidate_settings(settings, Method::Direct))?;
-        if !matches!(settings.gate, crate::film::Gate::None) {
-            check_settings(&auto::candidate_settings(settings, Method::Ellipsoidal))?;
-        }
-        return Ok(());
-    }
+/// Errors for settings a [`super::BidirectionalTracer`] (`direct` or `ellipsoidal`) cannot
+/// render (checked before any work); [`crate::integrator::check_settings`] checks those of every
+/// method that uses one.
+pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
     let b = kernel_bounces(settings);
     let method = settings.method.name();
     ensure!(
