@@ -29,10 +29,10 @@ pub use bidirectional::{BidirectionalTracer, StrategyStats};
 pub use metadata::{milli, render_metadata};
 pub use path::PathTracer;
 pub use render_loop::{
-    Budget, PassSizer, Progress, RenderOutput, RenderStart, black_image_warning, render, render_resumable,
-    trace_budget, unreachable_gate,
+    PassSizer, Progress, RenderOutput, RenderStart, black_image_warning, render, render_resumable, trace_budget,
+    unreachable_gate,
 };
-pub use settings::{EllipsoidGuards, LightStrategy, Method, QuerySettings, RenderSettings};
+pub use settings::{Budget, EllipsoidGuards, LightStrategy, Method, QuerySettings, RenderSettings};
 pub use upload::{kernel_bounces, render_params, target_sampler, upload_scene};
 pub use wavefront::{FILM_ELEMENT_BYTES, Wavefront, film_elements};
 

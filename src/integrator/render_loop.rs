@@ -7,19 +7,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 
-use super::{Integrator, Method, RenderSettings, auto, checkpoint, combined, create_integrator, film_elements};
+use super::{Budget, Integrator, Method, RenderSettings, auto, checkpoint, combined, create_integrator, film_elements};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
-
-/// How long to render.
-#[derive(Clone, Copy, Debug)]
-pub enum Budget {
-    /// Exactly this many samples per pixel.
-    Samples(u64),
-    /// Passes sized by a [`PassSizer`] to end within this much rendering time (setup excluded).
-    Time(Duration),
-}
 
 /// Sizes passes to a time budget from the measured time per sample per pixel, so a render, an
 /// equal-time measurement or a viewer frame ends close to its budget instead of up to a whole

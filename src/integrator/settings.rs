@@ -1,7 +1,10 @@
-//! The settings of a render besides the scene and the sample budget: the method, the gate, the
-//! image size, the bounces and each method's options.
+//! The settings of a render besides the scene: the method, the gate, the image size, the
+//! bounces and each method's options ([`RenderSettings`]), and its budget of samples or time
+//! ([`Budget`]).
 
 pub use crate::ellipsoid::query::QuerySettings;
+use std::time::Duration;
+
 use crate::film::Gate;
 
 /// Sampling strategy (`--method`).
@@ -145,4 +148,14 @@ impl Default for RenderSettings {
             ellipsoidal_share: None,
         }
     }
+}
+
+/// How long to render.
+#[derive(Clone, Copy, Debug)]
+pub enum Budget {
+    /// Exactly this many samples per pixel.
+    Samples(u64),
+    /// Passes sized by a [`super::PassSizer`] to end within this much rendering time (setup
+    /// excluded).
+    Time(Duration),
 }
