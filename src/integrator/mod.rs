@@ -2,9 +2,10 @@
 //! 4.1); `bidirectional` serves `direct` and `ellipsoidal` (bidirectional path tracing with
 //! direct or ellipsoidal connections, sections 4.2 to 4.4); `combined` joins the two in one
 //! estimator; `mis` is the CPU twin of the connections' MIS weights. This module holds the
-//! [`Integrator`] trait and [`create_integrator`]; `settings` the render settings, `upload`
-//! what every method puts on the device, `render_loop` the passes of a render and `metadata`
-//! what its outputs record.
+//! [`Integrator`] trait, [`create_integrator`] and [`check_settings`]; `settings` the render
+//! settings and budgets, `upload` what every method puts on the device, `wavefront` the state
+//! and wave plan every method shares, `render_loop` the passes of a render and `metadata` what
+//! its outputs record.
 
 pub mod auto;
 pub mod band_index;

@@ -103,7 +103,9 @@ pub struct Wavefront<'a> {
 }
 
 impl<'a> Wavefront<'a> {
-    /// Bookkeeping for a render whose buffers are `resources`.
+    /// Bookkeeping for a render whose buffers are `resources`, whose kernels were specialised
+    /// for gates of kind `gate_kind`.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &'a GpuContext,
         params: RenderParams,
