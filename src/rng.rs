@@ -1,5 +1,7 @@
 //! Random numbers: counter-based, one stream per path. CPU twin of `shaders/lib/rng.wesl`
-//! (`pcg4d`, `Rng`, `rng_next` there; `pcg4d`, [`Rng`], [`Rng::next_f32`] here).
+//! (`pcg4d`, `Rng`, `rng_next` there; `pcg4d`, [`Rng`], [`Rng::next_f32`] here). And
+//! [`Xorshift64Star`], a small sequential generator for reproducible test inputs and stress
+//! configurations (no render uses it).
 
 /// The 4D PCG hash of Jarzynski and Olano ("Hash Functions for GPU Rendering", JCGT 2020).
 pub fn pcg4d(input: [u32; 4]) -> [u32; 4] {
@@ -54,6 +56,42 @@ impl Rng {
 /// share no input bits.
 pub fn light_stream_seed(seed: u32) -> u32 {
     pcg4d([seed, 0x6c69_6768, 0x9e37_79b9, 1])[0]
+}
+
+/// xorshift64* (Vigna, "An experimental exploration of Marsaglia's xorshift generators,
+/// scrambled", 2016): a sequential generator of reproducible inputs for tests and stress
+/// configurations. The state must not be 0.
+#[derive(Clone, Debug)]
+pub struct Xorshift64Star(pub u64);
+
+impl Xorshift64Star {
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545F4914F6CDD1D)
+    }
+
+    /// Next uniform number in [0, 1) with 53 random bits (the top ones).
+    pub fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Next uniform number in [0, 1) with 24 random bits (the top ones).
+    pub fn next_f32(&mut self) -> f32 {
+        ((self.next_u64() >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    /// A uniform point of the cube [-1, 1]^3 (x, y, z drawn in that order by `next_f64`).
+    pub fn next_dvec3(&mut self) -> glam::DVec3 {
+        glam::DVec3::new(self.next_f64(), self.next_f64(), self.next_f64()) * 2.0 - glam::DVec3::ONE
+    }
+
+    /// A uniform point of the cube [-1, 1]^3 in f32 (x, y, z drawn in that order by `next_f32`).
+    pub fn next_vec3(&mut self) -> glam::Vec3 {
+        glam::Vec3::new(self.next_f32(), self.next_f32(), self.next_f32()) * 2.0 - glam::Vec3::ONE
+    }
 }
 
 #[cfg(test)]

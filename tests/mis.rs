@@ -10,24 +10,9 @@
 mod common;
 
 use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
+use gatetrace::rng::Xorshift64Star;
 use gatetrace::scene::bsdf::Bsdf;
 use glam::Vec3;
-
-/// xorshift64*: a small deterministic generator for test inputs.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f32 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 40) as f32) / (1u64 << 24) as f32
-    }
-
-    fn vec3(&mut self) -> Vec3 {
-        Vec3::new(self.next(), self.next(), self.next()) * 2.0 - Vec3::ONE
-    }
-}
 
 /// The kinds of light a random path starts on.
 #[derive(Clone, Copy, PartialEq)]
@@ -45,39 +30,40 @@ fn light_of_trial(i: usize) -> Light {
 
 /// A random path of `k` vertices: a light, k - 2 surfaces whose normals face both neighbours,
 /// and a pinhole looking roughly at its neighbour.
-fn random_path(rng: &mut Rng, k: usize, light: Light) -> Vec<Vertex> {
-    let positions: Vec<Vec3> = (0..k).map(|_| rng.vec3() * 2.0).collect();
+fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light) -> Vec<Vertex> {
+    let positions: Vec<Vec3> = (0..k).map(|_| rng.next_vec3() * 2.0).collect();
     let mut path = Vec::with_capacity(k);
     for i in 0..k {
         let p = positions[i];
         let toward = |j: usize| (positions[j] - p).normalize();
         let vertex = if i == 0 {
             let (kind, normal) = match light {
-                Light::Point => (VertexKind::PointLight { select_pdf: 0.3 + 0.7 * rng.next() }, toward(1)),
+                Light::Point => (VertexKind::PointLight { select_pdf: 0.3 + 0.7 * rng.next_f32() }, toward(1)),
                 Light::Directional => {
-                    let (select_pdf, beam_area) = (0.3 + 0.7 * rng.next(), 5.0 + 20.0 * rng.next());
+                    let (select_pdf, beam_area) = (0.3 + 0.7 * rng.next_f32(), 5.0 + 20.0 * rng.next_f32());
                     (VertexKind::DirectionalLight { select_pdf, beam_area }, toward(1))
                 }
-                Light::Area => (VertexKind::AreaLight { origin_pdf: 0.5 + 3.0 * rng.next() }, toward(1)),
+                Light::Area => (VertexKind::AreaLight { origin_pdf: 0.5 + 3.0 * rng.next_f32() }, toward(1)),
             };
             // An area light's normal varies about the direction to x_1; a directional light's is
             // its direction of travel, exactly towards x_1.
-            let normal = if light == Light::Directional { normal } else { (normal + 0.5 * rng.vec3()).normalize() };
+            let normal =
+                if light == Light::Directional { normal } else { (normal + 0.5 * rng.next_vec3()).normalize() };
             Vertex { kind, position: p, normal }
         } else if i == k - 1 {
-            let image_area = 0.5 + rng.next();
+            let image_area = 0.5 + rng.next_f32();
             Vertex {
                 kind: VertexKind::Camera { image_area },
                 position: p,
-                normal: (toward(k - 2) + 0.3 * rng.vec3()).normalize(),
+                normal: (toward(k - 2) + 0.3 * rng.next_vec3()).normalize(),
             }
         } else {
             let bsdf = Bsdf {
                 base_color: Vec3::new(0.8, 0.5, 0.2),
-                metallic: if rng.next() < 0.4 { 0.0 } else { rng.next() },
-                alpha: 0.05 + 0.9 * rng.next() * rng.next(),
+                metallic: if rng.next_f32() < 0.4 { 0.0 } else { rng.next_f32() },
+                alpha: 0.05 + 0.9 * rng.next_f32() * rng.next_f32(),
             };
-            let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.vec3()).normalize();
+            let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.next_vec3()).normalize();
             Vertex { kind: VertexKind::Surface(bsdf), position: p, normal: n }
         };
         path.push(vertex);
@@ -122,7 +108,7 @@ fn camera_side_pdf(path: &[Vertex], from: usize) -> f64 {
 
 #[test]
 fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
-    let mut rng = Rng(0x9E3779B97F4A7C15);
+    let mut rng = Xorshift64Star(0x9E3779B97F4A7C15);
     let mut checked = 0;
     for trial in 0..4000 {
         let k = 2 + trial % 6;
@@ -159,7 +145,7 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
 #[test]
 fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
     use gatetrace::integrator::mis::ellipsoidal_mis_weight;
-    let mut rng = Rng(0x1234_5678_9ABC_DEF1);
+    let mut rng = Xorshift64Star(0x1234_5678_9ABC_DEF1);
     let mut checked = 0;
     for trial in 0..4000 {
         let k = 3 + trial % 5;
@@ -191,7 +177,7 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
 
 /// The random path of trial `trial` of the combined weights' tests (3 to 8 vertices, area and
 /// point lights: a combined render refuses directional ones), if every strategy can sample it.
-fn combined_trial_path(rng: &mut Rng, trial: usize) -> Option<(Vec<Vertex>, Light)> {
+fn combined_trial_path(rng: &mut Xorshift64Star, trial: usize) -> Option<(Vec<Vertex>, Light)> {
     let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
     let path = random_path(rng, 3 + trial % 6, light);
     is_valid(&path).then_some((path, light))
@@ -208,7 +194,7 @@ fn combined_trial_path(rng: &mut Rng, trial: usize) -> Option<(Vec<Vertex>, Ligh
 fn combined_weights_match_their_definition_and_sum_to_one() {
     use gatetrace::integrator::combined::Family;
     use gatetrace::integrator::mis::{combined_weight, spheroid_vertex_density};
-    let mut rng = Rng(0x0DDB_1A5E_5BAD_5EED);
+    let mut rng = Xorshift64Star(0x0DDB_1A5E_5BAD_5EED);
     let mut checked = 0;
     let mut shares = Vec::new();
     for trial in 0..4000 {
@@ -216,8 +202,8 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
         let k = path.len();
         // Target densities from those of a 1 mm gate (1000 m^-1) to a 10 m one's, 1 to 8
         // ellipsoidal connections per direct one.
-        let p_tau = 10f32.powf(3.0 - 4.0 * rng.next());
-        let ratio = (1 + (rng.next() * 8.0) as u32) as f32;
+        let p_tau = 10f32.powf(3.0 - 4.0 * rng.next_f32());
+        let ratio = (1 + (rng.next_f32() * 8.0) as u32) as f32;
         let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
         let sd: f64 = pdfs.iter().sum();
         let sd2: f64 = pdfs.iter().map(|p| p * p).sum();
@@ -275,17 +261,17 @@ fn combined_weights_in_wgsl_match_the_twin() {
     let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate, ..Default::default() };
     let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
     let sampler = target_sampler(&scene, &settings).unwrap();
-    let mut rng = Rng(0xC0FF_EE00_1234_5678);
+    let mut rng = Xorshift64Star(0xC0FF_EE00_1234_5678);
     let (mut input, mut cases) = (Vec::new(), Vec::new());
     for trial in 0..2000 {
         let Some((path, light)) = combined_trial_path(&mut rng, trial) else { continue };
         let k = path.len();
-        let (length, inv_p) = sampler.sample(rng.next());
+        let (length, inv_p) = sampler.sample(rng.next_f32());
         let (family, own) = if trial % 2 == 0 {
             let first = if light == Light::Area { 0 } else { 1 };
-            (Family::Direct, first + (rng.next() * (k - first) as f32) as usize)
+            (Family::Direct, first + (rng.next_f32() * (k - first) as f32) as usize)
         } else {
-            (Family::Ellipsoidal, 1 + (rng.next() * (k - 2) as f32) as usize)
+            (Family::Ellipsoidal, 1 + (rng.next_f32() * (k - 2) as f32) as usize)
         };
         let code = family as u32 + if light == Light::Area { 4 } else { 0 };
         input.push([k as f32, own as f32, code as f32, length]);
@@ -299,7 +285,7 @@ fn combined_weights_in_wgsl_match_the_twin() {
             input.push([v.normal.x, v.normal.y, v.normal.z, from_camera]);
         }
         // The ratio R of a combined render: K (1 to 8) times the ellipsoidal half's share (1/8 to 8).
-        let ratio = (1 + (rng.next() * 8.0) as u32) as f32 * 2f32.powf(6.0 * rng.next() - 3.0);
+        let ratio = (1 + (rng.next_f32() * 8.0) as u32) as f32 * 2f32.powf(6.0 * rng.next_f32() - 3.0);
         input.resize((cases.len() + 1) * RECORDS - 1, [0.0; 4]);
         input.push([ratio, 0.0, 0.0, 0.0]);
         cases.push((path, family, own, 1.0 / inv_p, ratio));

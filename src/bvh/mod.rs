@@ -12,7 +12,7 @@ use glam::{DMat3, DVec3, Vec3};
 use obvhs::{BvhBuildParams, triangle::Triangle as ObvhsTriangle};
 
 use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, NodeSurface, Triangle};
-use crate::scene::materials::pack2x16float;
+use crate::gpu::packing::pack2x16float;
 
 /// Scenes of at most this many triangles are not traversed: every ray tests all of them (read
 /// from a uniform buffer once per invocation, see shaders/lib/bvh.wesl `load_small_scene` and the

@@ -9,14 +9,50 @@
 //!
 //! It is an oracle for tests: `reached` lists what one query reaches, with each triangle's
 //! weight q_i / P_i; averaged over keys that must give q_i (`pick_weight`) for every triangle
-//! (the descent is unbiased), which tests check against brute force.
+//! (the descent is unbiased), which tests check against brute force. [`QuerySettings`], the
+//! query's settings, are the device's too (`RenderSettings::query`, re-exported as
+//! `integrator::QuerySettings`).
 
 use glam::{DVec3, DVec4};
 
 use super::{Spheroid, Triangle as OracleTriangle};
 use crate::gpu::layout::{BvhNode, MATERIAL_DOUBLE_SIDED, Material, NONE, NodeSurface, Triangle};
-use crate::integrator::QuerySettings;
 use crate::rng::pcg4d;
+
+/// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
+/// the spheroid may touch near the root, a stochastic descent (one child at a time, in
+/// proportion to an estimate of the arcs below it) into nodes that are small against the
+/// spheroid, and every node of the small subtrees a descent ends in. Any setting is unbiased;
+/// they trade work per query against variance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QuerySettings {
+    /// Nodes whose box diagonal is at most `split` times the spheroid's semi-major axis are
+    /// entered by a descent (dimensionless); 0: the exhaustive query, which visits every node
+    /// the spheroid may touch (cost grows with the triangles near the spheroid).
+    pub split: f32,
+    /// A descent visits whole subtrees of at most this many BVH nodes.
+    pub bottom_nodes: u32,
+    /// Loop iterations (node boxes and triangles) after which a query finishes with one descent
+    /// over the rest of the tree: bounds every query's work, which lavapipe needs (it ends an
+    /// invocation's loops after 65535 iterations in total). Unbiased like the rest.
+    pub allowance: u32,
+    /// Weigh a triangle's pick by its arcs' angle times the reflection factor (an estimate of
+    /// its contribution per radian, zero only where the contribution is; see
+    /// `ellipsoid::query::reflection_factor`); false (the default; `render --nlos` sets it): by
+    /// the arcs' angle alone. Both unbiased.
+    pub reflection_weights: bool,
+}
+
+impl QuerySettings {
+    /// The exhaustive query (every node the spheroid may touch, up to the allowance).
+    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false };
+}
+
+impl Default for QuerySettings {
+    fn default() -> Self {
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false }
+    }
+}
 
 /// The scene as the query sees it: BVH nodes, their triangle areas (total, emitting), the
 /// triangles in BVH order and the materials.
@@ -161,7 +197,7 @@ pub fn node_estimate(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Query, bou
 /// uniformly on a node's triangles: the mean to second order about their centroid, the
 /// deviation to first order (twin of `path_length_moments`).
 pub fn path_length_moments(lo: DVec3, hi: DVec3, surface: &NodeSurface, q: &Query) -> (f64, f64) {
-    use crate::scene::materials::unpack2x16float;
+    use crate::gpu::packing::unpack2x16float;
     let scale = (hi - lo).length_squared();
     let [a, b, c] = surface.spread.map(|w| unpack2x16float(w).as_dvec2() * scale);
     let cov = glam::DMat3::from_cols(DVec3::new(a.x, b.y, c.x), DVec3::new(b.y, a.y, c.y), DVec3::new(c.x, c.y, b.x));

@@ -10,6 +10,7 @@ use glam::{DVec3, Vec3};
 use super::{Spheroid, Triangle, clip_arcs};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel, Resources};
+use crate::rng::Xorshift64Star;
 
 /// A family of configurations.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,24 +71,18 @@ pub struct Config {
     pub u: f32,
 }
 
-/// xorshift64*, for reproducible configurations.
-struct Rng(u64);
+/// The draws of a configuration beyond [`Xorshift64Star`]'s own.
+trait Draws {
+    /// A uniform unit vector (rejection from the cube).
+    fn unit(&mut self) -> DVec3;
+    /// A number whose logarithm is uniform between those of `lo` and `hi`.
+    fn log_uniform(&mut self, lo: f64, hi: f64) -> f64;
+}
 
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn vec3(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next()) * 2.0 - DVec3::ONE
-    }
-
+impl Draws for Xorshift64Star {
     fn unit(&mut self) -> DVec3 {
         loop {
-            let v = self.vec3();
+            let v = self.next_dvec3();
             let l2 = v.length_squared();
             if l2 > 0.01 && l2 <= 1.0 {
                 return v / l2.sqrt();
@@ -96,7 +91,7 @@ impl Rng {
     }
 
     fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        (lo.ln() + (hi.ln() - lo.ln()) * self.next()).exp()
+        (lo.ln() + (hi.ln() - lo.ln()) * self.next_f64()).exp()
     }
 }
 
@@ -117,13 +112,15 @@ fn surface_point(sp: &Spheroid, w: DVec3) -> DVec3 {
 
 /// A triangle in the plane through `x` with unit normal `n`, around x, of size `size`,
 /// counter-clockwise about n.
-fn triangle_in_plane(rng: &mut Rng, x: DVec3, n: DVec3, size: f64, sliver: Option<f64>) -> [DVec3; 3] {
+fn triangle_in_plane(rng: &mut Xorshift64Star, x: DVec3, n: DVec3, size: f64, sliver: Option<f64>) -> [DVec3; 3] {
     let t = n.any_orthonormal_vector();
     let b = n.cross(t);
     let mut corners = [DVec3::ZERO; 3];
     for (k, c) in corners.iter_mut().enumerate() {
-        let angle = std::f64::consts::TAU * (k as f64 + 0.8 * rng.next()) / 3.0;
-        *c = x + size * (0.3 + rng.next()) * (angle.cos() * t + angle.sin() * b) + 0.2 * size * (rng.next() - 0.5) * t;
+        let angle = std::f64::consts::TAU * (k as f64 + 0.8 * rng.next_f64()) / 3.0;
+        *c = x
+            + size * (0.3 + rng.next_f64()) * (angle.cos() * t + angle.sin() * b)
+            + 0.2 * size * (rng.next_f64() - 0.5) * t;
     }
     if let Some(aspect) = sliver {
         // Squash across the first edge: height = aspect x base.
@@ -141,18 +138,18 @@ fn triangle_in_plane(rng: &mut Rng, x: DVec3, n: DVec3, size: f64, sliver: Optio
 
 /// `count` configurations of `family` (reproducible from `seed`).
 pub fn generate(family: Family, count: usize, seed: u64) -> Vec<Config> {
-    let mut rng = Rng(seed.wrapping_mul(0x9E3779B97F4A7C15) | 1);
+    let mut rng = Xorshift64Star(seed.wrapping_mul(0x9E3779B97F4A7C15) | 1);
     let mut out = Vec::with_capacity(count);
     while out.len() < count {
-        let s = rng.vec3();
-        let c = rng.vec3();
+        let s = rng.next_dvec3();
+        let c = rng.next_dvec3();
         let d = s.distance(c);
         if d < 0.05 {
             continue;
         }
         let ratio = match family {
             Family::NearDegenerate(e) => 1.0 + e,
-            _ => 1.01 + 2.0 * rng.next(),
+            _ => 1.01 + 2.0 * rng.next_f64(),
         };
         let sp = Spheroid { focus_s: s, focus_c: c, length: d * ratio };
         let x = surface_point(&sp, rng.unit());
@@ -184,7 +181,7 @@ pub fn generate(family: Family, count: usize, seed: u64) -> Vec<Config> {
             focus_c: c32.as_vec3(),
             tau_e: tau as f32,
             triangle: tri.map(|v| v.as_vec3()),
-            u: rng.next() as f32,
+            u: rng.next_f64() as f32,
         });
     }
     out

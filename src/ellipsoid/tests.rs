@@ -3,25 +3,18 @@
 use std::f64::consts::TAU;
 
 use super::*;
+use crate::rng::Xorshift64Star;
 
-/// xorshift64*: deterministic test inputs.
-struct Rng(u64);
+/// Unit vectors for test inputs from [`Xorshift64Star`].
+trait UnitDraw {
+    /// A uniform unit vector (rejection from the cube).
+    fn unit(&mut self) -> DVec3;
+}
 
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn vec3(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next()) * 2.0 - DVec3::ONE
-    }
-
+impl UnitDraw for Xorshift64Star {
     fn unit(&mut self) -> DVec3 {
         loop {
-            let v = self.vec3();
+            let v = self.next_dvec3();
             if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
                 return v.normalize();
             }
@@ -31,18 +24,18 @@ impl Rng {
 
 /// A random spheroid with foci in [-1, 1]^3 and length d (1 + [0.01, 2)), and a random plane
 /// through a point near its centre (so most planes cut it).
-fn random_case(rng: &mut Rng) -> (Spheroid, DVec3, DVec3) {
-    let (s, c) = (rng.vec3(), rng.vec3());
+fn random_case(rng: &mut Xorshift64Star) -> (Spheroid, DVec3, DVec3) {
+    let (s, c) = (rng.next_dvec3(), rng.next_dvec3());
     let d = s.distance(c);
-    let spheroid = Spheroid { focus_s: s, focus_c: c, length: d * (1.01 + 2.0 * rng.next()) };
+    let spheroid = Spheroid { focus_s: s, focus_c: c, length: d * (1.01 + 2.0 * rng.next_f64()) };
     let n = rng.unit();
-    let point = spheroid.centre() + rng.vec3() * 0.5 * spheroid.length * 0.5;
+    let point = spheroid.centre() + rng.next_dvec3() * 0.5 * spheroid.length * 0.5;
     (spheroid, point, n)
 }
 
 #[test]
 fn section_points_lie_on_the_spheroid_and_the_plane() {
-    let mut rng = Rng(1);
+    let mut rng = Xorshift64Star(1);
     let mut checked = 0;
     for _ in 0..2000 {
         let (sp, point, n) = random_case(&mut rng);
@@ -65,7 +58,7 @@ fn section_points_lie_on_the_spheroid_and_the_plane() {
 
 #[test]
 fn closed_form_jacobian_matches_coarea_form_and_finite_differences() {
-    let mut rng = Rng(2);
+    let mut rng = Xorshift64Star(2);
     let mut checked = 0;
     for _ in 0..2000 {
         let (sp, point, n) = random_case(&mut rng);
@@ -117,15 +110,17 @@ fn jacobian_limits() {
 
 #[test]
 fn clipped_arcs_match_a_dense_scan_of_the_ellipse() {
-    let mut rng = Rng(3);
+    let mut rng = Xorshift64Star(3);
     let mut checked = 0;
     let mut partial = 0;
     for _ in 0..600 {
         let (sp, _, _) = random_case(&mut rng);
         // A triangle around a point near the spheroid's surface, of random size and shape.
         let x0 = sp.centre() + rng.unit() * 0.5 * sp.length * 0.8;
-        let scale = 0.05 + rng.next() * sp.length;
-        let tri = Triangle { vertices: [x0 + scale * rng.vec3(), x0 + scale * rng.vec3(), x0 + scale * rng.vec3()] };
+        let scale = 0.05 + rng.next_f64() * sp.length;
+        let tri = Triangle {
+            vertices: [x0 + scale * rng.next_dvec3(), x0 + scale * rng.next_dvec3(), x0 + scale * rng.next_dvec3()],
+        };
         let area = (tri.vertices[1] - tri.vertices[0]).cross(tri.vertices[2] - tri.vertices[0]).length();
         if area < 1e-4 {
             continue;

@@ -37,53 +37,29 @@
 //! Slot `slot` keeps its camera subpath in queue entry `slot` and its light subpath in entry
 //! `slot_count + slot` of the path, hit and queue buffers; its vertices lie in
 //! `subpath_vertices[slot * stride ..]`, camera vertices first (see shaders/lib/subpath.wesl).
+//!
+//! `options` holds the methods' limits, defaults and checks of settings; `target_visits` how
+//! extra visits of stratified bins are shared out (band index or pilot render).
+
+mod options;
+mod target_visits;
 
 use anyhow::{Result, ensure};
 
-use super::combined::Family;
-use super::path::{MAX_SLOTS_PER_DISPATCH, plan_waves};
-use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
+pub use super::check_settings;
+use super::wavefront::{DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
+pub use options::{
+    DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, MAX_BOUNCES,
+    MAX_CONNECTIONS_PER_QUERY, check_tracer_settings, default_connections_per_query, strategies,
+};
 
 /// Slots a wave aims for: each slot holds two subpaths and all their connections (a few KiB).
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 16;
-/// Most scattering vertices `direct` supports: the strategies of a slot grow as B^2 and
-/// lavapipe ends a shader invocation's loops after 65535 iterations in total.
-pub const MAX_BOUNCES: u32 = 24;
-/// Most connections one ellipsoid query can draw (two reservoirs of four lanes each).
-pub const MAX_CONNECTIONS_PER_QUERY: u32 = 8;
-/// Connections per ellipsoid query when none are asked for (`--connections-per-query`). At
-/// equal time on lavapipe (`gatetrace equal-time`, 64x64, 5 bounces, 3 x 3-4 s per method)
-/// K = 4 had 0.51-0.64x the MSE of K = 1 on the Cornell box behind box gates of 2.5 mm, 5 cm
-/// and 50 cm, and 0.53x on a 327,692-triangle mesh at 2.5 mm; K = 8 was no better (0.49-0.89x).
-pub const DEFAULT_CONNECTIONS_PER_QUERY: u32 = 4;
-
-/// Connections per ellipsoid query that `render --nlos` gives `ellipsoidal` unless told
-/// otherwise. With a pilot render (DEFAULT_NLOS_TARGET_PILOT), at equal time on lavapipe
-/// (confocal 16x16, 4 ps bins, 10 s), K = 1 had 0.41x the MSE of K = 4 on a 327,680-triangle
-/// hidden sphere and 2.4x on the example scene's 12-triangle letter; large hidden meshes are the
-/// case to serve.
-pub const DEFAULT_NLOS_CONNECTIONS_PER_QUERY: u32 = 1;
-
-/// Samples per pixel of the pilot render (`RenderSettings::target_pilot_spp`) that `render
-/// --nlos` gives `ellipsoidal` unless told otherwise (`--target-pilot`).
-pub const DEFAULT_NLOS_TARGET_PILOT: u32 = 256;
-
-/// The connections per ellipsoid query a method uses unless told otherwise:
-/// DEFAULT_CONNECTIONS_PER_QUERY for `ellipsoidal` and for `auto` (whose `ellipsoidal` pilot and
-/// render use it), 1 (the only value they take) for the others.
-pub fn default_connections_per_query(method: Method) -> u32 {
-    if matches!(method, Method::Ellipsoidal | Method::Combined | Method::Auto) {
-        DEFAULT_CONNECTIONS_PER_QUERY
-    } else {
-        1
-    }
-}
-
 /// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
 const QUERY_COUNTERS: usize = 5;
 
@@ -100,88 +76,6 @@ pub struct StrategyStats {
     pub skipped_by_gate: u64,
     /// Shadow rays traced.
     pub shadow_rays: u64,
-}
-
-/// The (s, t) strategies with at most `max_bounces` scattering vertices and t >= 1, in the
-/// order of `strategy_stats` (depth d = s + t - 2, then s).
-pub fn strategies(max_bounces: u32) -> Vec<(u32, u32)> {
-    (0..=max_bounces).flat_map(|d| (0..=d + 1).map(move |s| (s, d + 2 - s))).collect()
-}
-
-/// Errors for settings `direct` or `ellipsoidal` cannot render (checked before any work).
-pub fn check_settings(settings: &RenderSettings) -> Result<()> {
-    if settings.method == Method::Combined {
-        return super::combined::check_settings(settings);
-    }
-    if settings.method == Method::Auto {
-        // Both candidates must be valid, ellipsoidal only where it applies (it needs a gate).
-        check_settings(&super::auto::candidate_settings(settings, Method::Direct))?;
-        if !matches!(settings.gate, crate::film::Gate::None) {
-            check_settings(&super::auto::candidate_settings(settings, Method::Ellipsoidal))?;
-        }
-        return Ok(());
-    }
-    let b = super::kernel_bounces(settings);
-    let method = settings.method.name();
-    ensure!(
-        b <= MAX_BOUNCES,
-        "--method {method} supports at most {MAX_BOUNCES} bounces (got {b}); use --method path for longer paths"
-    );
-    if settings.method == Method::Ellipsoidal {
-        ensure!(
-            !matches!(settings.gate, crate::film::Gate::None),
-            "--method ellipsoidal draws target path lengths from the gate: give a gate (box, gaussian, cw, table or \
-             transient), not `{}`",
-            settings.gate.describe()
-        );
-        ensure!(settings.debug_strategy.is_none(), "--debug-strategy needs --method direct");
-        let k = settings.connections_per_query;
-        ensure!(
-            (1..=MAX_CONNECTIONS_PER_QUERY).contains(&k),
-            "--connections-per-query {k}: give 1 to {MAX_CONNECTIONS_PER_QUERY}"
-        );
-        let q = settings.query;
-        ensure!(
-            q.split >= 0.0 && q.split.is_finite(),
-            "--query-split {}: give a non-negative number (0: exhaustive queries)",
-            q.split
-        );
-        let g = settings.ellipsoid_guards;
-        ensure!(
-            g.needle >= 0.0 && g.needle.is_finite() && g.length > 0.0,
-            "ellipsoid guards (needle {}, length {}) must be non-negative and finite (length positive)",
-            g.needle,
-            g.length
-        );
-        ensure!(
-            settings.target_pilot_spp == 0 || matches!(settings.gate, crate::film::Gate::Transient { .. }),
-            "--target-pilot shapes the target lengths of a transient gate: give --gate transient:... or --target-pilot 0"
-        );
-        // Light-tracing connections (t = 1) land in other pixels, whose bins cannot be divided by
-        // the source pixel's visits: with extra visits only whole cycles would be unbiased.
-        // Captures have none (no connection ends at the sensor origin).
-        ensure!(
-            settings.target_pilot_spp == 0 || settings.nlos.is_some(),
-            "--target-pilot applies to --nlos captures only (a camera's light-tracing connections would be biased \
-             by the extra visits)"
-        );
-    } else {
-        ensure!(
-            settings.connections_per_query == 1,
-            "--connections-per-query applies to --method ellipsoidal and combined only"
-        );
-    }
-    if settings.method != Method::Ellipsoidal {
-        ensure!(settings.target_pilot_spp == 0, "--target-pilot applies to --method ellipsoidal only");
-    }
-    if let Some((s, t)) = settings.debug_strategy {
-        ensure!(
-            t >= 1 && s + t >= 2 && s + t <= b + 2,
-            "--debug-strategy {s},{t} is not a strategy of paths with at most {b} bounces: \
-             need t >= 1 and 2 <= s + t <= max_bounces + 2"
-        );
-    }
-    Ok(())
 }
 
 /// Pipelines of the stages.
@@ -266,7 +160,7 @@ impl<'a> BidirectionalTracer<'a> {
         settings: &RenderSettings,
         family: Option<(Family, f64)>,
     ) -> Result<Self> {
-        check_settings(settings)?;
+        check_tracer_settings(settings)?;
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;
@@ -496,6 +390,7 @@ impl<'a> BidirectionalTracer<'a> {
             constants,
             (samples_per_pass, slots_per_wave),
             scene.wide.most_stops(),
+            settings.gate.kind(),
         );
         Ok(Self {
             wf,
@@ -513,91 +408,6 @@ impl<'a> BidirectionalTracer<'a> {
             binding_limit: limit,
             keeps_visit_tables,
         })
-    }
-
-    /// Builds the band index (when one is still to be built) and binds queue_ellipsoid_queries
-    /// to it; where its entries do not fit a binding the capture goes on with BVH queries.
-    fn build_band_index(&mut self) -> Result<()> {
-        let Some(index) = self.band_index.take() else { return Ok(()) };
-        let visits_fit = self.visit_tables_fit();
-        let wf = &mut self.wf;
-        let result = index.build(wf.ctx, &mut wf.resources, &mut wf.params, self.binding_limit)?;
-        if let (Ok(_), Some(kernels), Some(groups)) =
-            (&result, &self.stages.ellipsoidal, &mut self.bindings.ellipsoidal)
-        {
-            // queue_ellipsoid_queries reads the index.
-            groups[1] = kernels[1].bind(wf.ctx, &wf.resources);
-        }
-        if let Ok(summary) = &result
-            && visits_fit
-        {
-            let strata = wf.params.target_length.strata;
-            let cells = (wf.params.width * wf.params.height) as usize * strata.div_ceil(summary.ratio) as usize;
-            let bins: Vec<f32> = read_buffer(wf.ctx, wf.resources.get("band_sums").unwrap(), cells)?;
-            self.band_masses = super::band_index::strata_masses(&bins, summary.ratio, strata);
-        }
-        self.band_index_result = Some(result);
-        Ok(())
-    }
-
-    /// Shares out the extra visits of each pixel's bins by the band index's masses
-    /// (`film::target::visit_tables_from_masses`) when the index is in use, no allocation is,
-    /// and the capture's paths are the three-bounce ones the masses describe (--max-bounces 3;
-    /// longer paths arrive later, where a pilot render sees them): the masses are exact where a
-    /// pilot's transient is noisy, and cost no samples. Returns whether it did.
-    fn apply_band_allocation(&mut self) -> bool {
-        let t = self.wf.params.target_length;
-        if self.band_masses.is_empty()
-            || t.band_index == 0
-            || t.extra != 0
-            || self.wf.params.max_bounces != 3
-            || self.band_masses.len() != (self.wf.params.width * self.wf.params.height) as usize * t.strata as usize
-        {
-            return false;
-        }
-        let (extra, rows) = crate::film::target::visit_tables_from_masses(&t, &self.band_masses);
-        self.wf.params.target_length.extra = extra;
-        self.wf.params.target_length.extra_stride = crate::film::target::golden_stride(extra);
-        let ctx = self.wf.ctx;
-        ctx.queue.write_buffer(self.wf.resources.get("target_visits").unwrap(), 0, bytemuck::cast_slice(&rows));
-        ctx.queue.write_buffer(self.wf.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.wf.params));
-        self.wf.target_visits = rows;
-        true
-    }
-
-    /// Traces the pilot render (stratified bins, each once a cycle), shares out the extra
-    /// visits of each pixel's bins by its transient (`film::target::visit_tables`) and discards
-    /// the pilot's film: the render's samples are independent of the pilot's, so its estimate
-    /// stays unbiased whatever the allocation.
-    fn run_target_pilot(&mut self) -> Result<()> {
-        self.target_pilot_pending = false;
-        self.render_samples(self.target_pilot_spp as u64)?;
-        let pilot = self.film()?;
-        let t = self.wf.params.target_length;
-        let (extra, rows) = crate::film::target::visit_tables(&t, &pilot.data, pilot.bins as usize);
-        self.wf.params.target_length.extra = extra;
-        self.wf.params.target_length.extra_stride = crate::film::target::golden_stride(extra);
-        self.wf.ctx.queue.write_buffer(self.wf.resources.get("target_visits").unwrap(), 0, bytemuck::cast_slice(&rows));
-        self.wf.target_visits = rows;
-        // Writes the parameters with a new seed and the film's first sample.
-        self.reset_film();
-        self.target_pilot_ran = true;
-        Ok(())
-    }
-
-    /// Whether the render has a target pilot and the current gate's visit tables fit the buffer
-    /// built for them.
-    fn target_pilot_fits(&self) -> bool {
-        self.target_pilot_spp > 0 && self.visit_tables_fit()
-    }
-
-    /// Whether the render keeps visit tables and the current gate's (strata + 1 counts per
-    /// pixel) fit the buffer built for them.
-    fn visit_tables_fit(&self) -> bool {
-        let t = &self.wf.params.target_length;
-        let bytes = (self.wf.params.width as u64 * self.wf.params.height as u64) * (t.strata as u64 + 1) * 4;
-        let room = self.wf.resources.get("target_visits").map_or(0, |b| b.size());
-        self.keeps_visit_tables && t.strata > 0 && bytes <= room
     }
 
     /// Mean work of one ellipsoid query so far: loop iterations over BVH nodes and triangles,
@@ -787,7 +597,7 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
-        let moved = self.wf.set_gate(scene, settings)?;
+        let moved = self.wf.set_gate(&settings.gate, super::target_sampler(scene, settings))?;
         if moved {
             // The extra visits were shaped for the old gate (wf.set_gate dropped them).
             // A new pilot shapes them again where the new gate's tables fit the buffer.

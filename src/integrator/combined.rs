@@ -21,20 +21,11 @@
 use anyhow::{Result, bail, ensure};
 
 use super::auto::{Batches, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed};
+pub use super::bidirectional::Family;
 use super::{BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
-
-/// Which half of a combined render a tracer is: its connection kernels weigh each contribution
-/// by their family's share of the path (shaders/lib/family_mis.wesl).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Family {
-    /// connect_direct's strategies.
-    Direct = 1,
-    /// connect_ellipsoidal's and connect_spherical's.
-    Ellipsoidal = 2,
-}
 
 impl Family {
     /// The settings of this half of the combined render `settings`: its method, one connection
@@ -74,7 +65,7 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
         );
     }
     for role in [Family::Direct, Family::Ellipsoidal] {
-        super::bidirectional::check_settings(&role.settings(settings))?;
+        super::bidirectional::check_tracer_settings(&role.settings(settings))?;
     }
     Ok(())
 }

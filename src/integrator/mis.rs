@@ -296,7 +296,7 @@ pub fn spheroid_vertex_density(prev: Vec3, x: Vec3, normal: Vec3, next: Vec3, p_
 /// ellipsoidal connections per direct one (paths of at least three vertices).
 pub fn combined_weight(
     path: &[Vertex],
-    family: super::combined::Family,
+    family: super::bidirectional::Family,
     own: usize,
     p_tau: f32,
     ratio: f32,
@@ -345,8 +345,8 @@ pub fn combined_weight(
     }
     let share_d = sd / (sd + ratio * se);
     let w = match family {
-        super::combined::Family::Direct => share_d * (r_own * r_own / sd2),
-        super::combined::Family::Ellipsoidal => (1.0 - share_d) * (0.5 * (r_own + r_next) / sc),
+        super::bidirectional::Family::Direct => share_d * (r_own * r_own / sd2),
+        super::bidirectional::Family::Ellipsoidal => (1.0 - share_d) * (0.5 * (r_own + r_next) / sc),
     };
     if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }
 }

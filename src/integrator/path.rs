@@ -39,31 +39,22 @@
 //! for resumable traversals, shadow rays stay a compacted stage of their own: there their long
 //! traversals cost more than the round trip.
 
-use anyhow::{Result, ensure};
+use anyhow::Result;
 
-use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages};
+use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves};
 use super::{Integrator, RenderSettings, Wavefront};
-use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, RenderParams, ShadowRay, Splat, WaveParams};
-use crate::gpu::resources::MAX_CHUNKS;
+use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 
 /// Path slots a wave aims for when the caller does not fix the samples per pass.
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 18;
-/// Most slots one dispatch can cover (64 invocations x 65535 workgroups).
-pub(super) const MAX_SLOTS_PER_DISPATCH: u64 = 64 * 65535;
-/// Most samples per pass: `accumulate` loops over a pixel's samples, and lavapipe (gallivm)
-/// silently ends any loop after 65535 iterations.
-const MAX_SAMPLES_PER_PASS: u32 = 4096;
 /// Vertices extend_paths adds to a path per round when paths sum their own contributions
 /// (SUM_PER_PATH). On lavapipe (Cornell box, 64x64, 5 bounces, median of 3 alternating runs)
 /// 2 vertices per round traced 2.32 M samples/s, 3 traced 2.26 M and 6 (every vertex in one
 /// round) 2.05 M, against 1.90 M for 1: beyond 2 the lanes of ended paths idle more than the
 /// saved round trips of the path state gain.
 const VERTICES_PER_ROUND_SUMMING: u32 = 2;
-/// Rounds encoded per submission; between submissions the host checks whether any path is
-/// still alive, so huge --max-bounces values cost nothing once the paths have ended.
-pub(super) const ROUNDS_PER_SUBMISSION: u32 = 16;
 /// Pipelines and bind groups of the wavefront rounds (`[even, odd]` rounds swap ray_queue and
 /// next_ray_queue).
 struct Rounds {
@@ -193,6 +184,7 @@ impl<'a> PathTracer<'a> {
             constants,
             (samples_per_pass, slots_per_wave),
             scene.wide.most_stops(),
+            settings.gate.kind(),
         );
         Ok(Self { wf, tracing, accumulate, accumulate_binding, sum_per_path })
     }
@@ -306,90 +298,12 @@ impl Integrator for PathTracer<'_> {
     }
 
     fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &RenderSettings) -> Result<bool> {
-        let moved = self.wf.set_gate(scene, settings)?;
+        let moved = self.wf.set_gate(&settings.gate, super::target_sampler(scene, settings))?;
         if moved {
             self.reset_film();
         }
         Ok(moved)
     }
-}
-
-/// Samples per pass and slots per wave of a render: as many slots as `target` (or the requested
-/// samples per pass) asks for, within one dispatch and within `fit` slots (what the device's
-/// bindings hold).
-pub(super) fn plan_waves(settings: &RenderSettings, fit: u64, target: u64) -> Result<(u32, u64)> {
-    let (width, height) = (settings.width, settings.height);
-    ensure!(width > 0 && height > 0, "the resolution must be at least 1x1");
-    let pixels = width as u64 * height as u64;
-    ensure!(pixels <= u32::MAX as u64, "{width}x{height} has more than 2^32 pixels");
-    let fit = fit.clamp(1, MAX_SLOTS_PER_DISPATCH);
-    let samples_per_pass = match settings.samples_per_pass {
-        Some(k) => {
-            ensure!(k <= MAX_SAMPLES_PER_PASS, "at most {MAX_SAMPLES_PER_PASS} samples per pass (got {k})");
-            ensure!(
-                k <= 1 || pixels * k as u64 <= fit,
-                "{k} samples per pass of {width}x{height} need {} path slots, more than the {fit} one wave \
-                 can hold on this device; ask for fewer samples per pass",
-                pixels * k as u64
-            );
-            k.max(1)
-        }
-        None => (target.min(fit) / pixels).clamp(1, MAX_SAMPLES_PER_PASS as u64) as u32,
-    };
-    // One wave per pass when it fits; otherwise a pass of one sample runs as several waves.
-    Ok((samples_per_pass, (pixels * samples_per_pass as u64).min(fit)))
-}
-
-/// The waves of a pass of `samples` samples per pixel starting at sample `next_sample`: each
-/// holds `samples` samples of a block of pixels (all pixels when they fit `slots_per_wave`).
-pub(super) fn waves_of_pass(
-    params: &RenderParams,
-    slots_per_wave: u64,
-    next_sample: u64,
-    samples: u32,
-) -> Result<Vec<WaveParams>> {
-    let sample_base = u32::try_from(next_sample + samples as u64 - 1)
-        .map(|_| next_sample as u32)
-        .map_err(|_| anyhow::anyhow!("more than 2^32 samples per pixel"))?;
-    let pixels = params.width * params.height;
-    let pixels_per_wave = (slots_per_wave / samples as u64).min(pixels as u64) as u32;
-    let mut waves = Vec::new();
-    let mut pixel_base = 0;
-    while pixel_base < pixels {
-        let pixel_count = pixels_per_wave.min(pixels - pixel_base);
-        waves.push(WaveParams {
-            sample_base,
-            samples,
-            pixel_base,
-            pixel_count,
-            slot_count: pixel_count * samples,
-            ..Default::default()
-        });
-        pixel_base += pixel_count;
-    }
-    Ok(waves)
-}
-
-/// Bytes of one film element (pixel, bin, channel): a 128-bit fixed-point sum
-/// (`crate::film::fixed`).
-pub const FILM_ELEMENT_BYTES: u64 = 16;
-
-/// Elements (pixel, bin, channel) of the film of `settings`, checked against what the device can
-/// hold at all: up to four bindings of 2 GiB.
-pub fn film_elements(settings: &RenderSettings) -> Result<u64> {
-    let elements = settings.width as u64 * settings.height as u64 * settings.gate.bins() as u64 * 3;
-    let most = MAX_CHUNKS * (1u64 << 31) / FILM_ELEMENT_BYTES;
-    ensure!(
-        elements <= most,
-        "--res {}x{} with {} bins: the film needs {:.1} GiB of device memory, more than the {} GiB it can be \
-         split over; reduce the resolution or the bins",
-        settings.width,
-        settings.height,
-        settings.gate.bins(),
-        (elements * FILM_ELEMENT_BYTES) as f64 / (1u64 << 30) as f64,
-        most * FILM_ELEMENT_BYTES >> 30
-    );
-    Ok(elements)
 }
 
 #[cfg(test)]

@@ -1,19 +1,30 @@
 //! What every wavefront method keeps between passes: the device, the render's parameters, the
-//! named buffers, the specialisation constants and the bookkeeping of passes, waves and samples.
+//! named buffers, the specialisation constants and the bookkeeping of passes, waves and samples;
+//! and the plan every method's passes follow: samples per pass, waves of slots, rounds per
+//! submission and the film's size.
 
 use anyhow::{Result, ensure};
 
+use super::RenderSettings;
 use super::checkpoint::RenderState;
-use super::path::{ROUNDS_PER_SUBMISSION, waves_of_pass};
-use crate::film::target::{StratumFactors, next_target_seed};
-use crate::film::{Film, fixed};
+use crate::film::target::{StratumFactors, TargetSampler, next_target_seed};
+use crate::film::{Film, Gate, GateKind, fixed};
 use crate::gpu::layout::{QueueCounters, RenderParams, TargetParams, WaveParams};
-use crate::gpu::resources::{ChunkLayout, read_buffer};
+use crate::gpu::resources::{ChunkLayout, MAX_CHUNKS, read_buffer, storage_init_bytes};
 use crate::gpu::{GpuContext, Kernel, Resources};
 
 /// Bytes of the indirect dispatch arguments: ray_queue, shadow_queue, ellipsoid_queries and
 /// the resume pass of shadow rays, three words each (see setup_dispatch.wesl).
 pub const DISPATCH_ARGS_BYTES: u64 = 12 * 4;
+
+/// Most slots one dispatch can cover (64 invocations x 65535 workgroups).
+pub(super) const MAX_SLOTS_PER_DISPATCH: u64 = 64 * 65535;
+/// Most samples per pass: `accumulate` loops over a pixel's samples, and lavapipe (gallivm)
+/// silently ends any loop after 65535 iterations.
+const MAX_SAMPLES_PER_PASS: u32 = 4096;
+/// Rounds encoded per submission; between submissions the host checks whether any path is
+/// still alive, so huge --max-bounces values cost nothing once the paths have ended.
+const ROUNDS_PER_SUBMISSION: u32 = 16;
 
 /// The shadow-ray stages every method shares: `setup_dispatch(shadow_rays)` and
 /// `trace_shadow_rays`, then resume passes `setup_dispatch(shadow_resume)` and
@@ -80,6 +91,8 @@ pub struct Wavefront<'a> {
     pub samples_per_pass: u32,
     /// Most times one ray traversal can stop before it is complete (`WideBvh::most_stops`).
     pub most_traversal_stops: u32,
+    /// The gate kind the kernels are specialised for (their GATE_KIND).
+    pub gate_kind: GateKind,
     /// Samples per pixel accumulated in the film since the last reset.
     pub samples_in_film: u64,
     /// Index of the next sample to trace (never reused, so batches are independent).
@@ -90,7 +103,9 @@ pub struct Wavefront<'a> {
 }
 
 impl<'a> Wavefront<'a> {
-    /// Bookkeeping for a render whose buffers are `resources`.
+    /// Bookkeeping for a render whose buffers are `resources`, whose kernels were specialised
+    /// for gates of kind `gate_kind`.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &'a GpuContext,
         params: RenderParams,
@@ -99,6 +114,7 @@ impl<'a> Wavefront<'a> {
         constants: Vec<(&'static str, f64)>,
         (samples_per_pass, slots_per_wave): (u32, u64),
         most_traversal_stops: u32,
+        gate_kind: GateKind,
     ) -> Self {
         Self {
             ctx,
@@ -109,38 +125,29 @@ impl<'a> Wavefront<'a> {
             slots_per_wave,
             samples_per_pass,
             most_traversal_stops,
+            gate_kind,
             samples_in_film: 0,
             next_sample: 0,
             target_visits: Vec::new(),
         }
     }
 
-    /// Moves the render to `settings.gate` without rebuilding anything when the kernels'
+    /// Moves the render to `gate`, whose target lengths `sampler` draws (see
+    /// `integrator::target_sampler`), without rebuilding anything when the kernels'
     /// specialisation and the buffers' sizes allow it (same gate kind, bins and table length):
-    /// rewrites the params uniform (gate, target-length sampling), the gate table and the
-    /// target-length CDF. Returns false, changing nothing, when the integrator must be rebuilt.
-    /// The film is not cleared (see `Integrator::set_gate`).
-    pub fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &super::RenderSettings) -> Result<bool> {
-        let gate = &settings.gate;
-        let kind = self.constants.iter().find(|(n, _)| *n == "GATE_KIND").map(|c| c.1);
+    /// rewrites the gate's device data ([`upload_gate`]). Returns false, changing nothing, when
+    /// the integrator must be rebuilt. The film is not cleared (see `Integrator::set_gate`).
+    pub fn set_gate(&mut self, gate: &Gate, sampler: Option<TargetSampler>) -> Result<bool> {
         let new = gate.to_gpu();
-        if kind != Some(gate.kind() as u32 as f64)
+        if gate.kind() != self.gate_kind
             || new.bins != self.params.gate.bins
             || new.table_len != self.params.gate.table_len
         {
             return Ok(false);
         }
-        let sampler = super::target_sampler(scene, settings);
-        let cdf = sampler.as_ref().map_or(vec![0.0, 1.0], |t| t.cdf.clone());
-        let cdf_buffer = self.resources.get("target_cdf").unwrap();
-        if crate::gpu::resources::storage_init_bytes(&cdf) != cdf_buffer.size() {
+        let cdf = target_cdf(sampler.as_ref());
+        if storage_init_bytes(&cdf) != self.resources.get("target_cdf").unwrap().size() {
             return Ok(false);
-        }
-        let queue = &self.ctx.queue;
-        queue.write_buffer(cdf_buffer, 0, bytemuck::cast_slice(&cdf));
-        let table = gate.table();
-        if !table.is_empty() {
-            queue.write_buffer(self.resources.get("gate_table").unwrap(), 0, bytemuck::cast_slice(&table));
         }
         self.params.gate = new;
         let (seed, film_first_sample) = (self.params.target_length.seed, self.params.target_length.film_first_sample);
@@ -148,7 +155,7 @@ impl<'a> Wavefront<'a> {
         self.params.target_length =
             TargetParams { seed, film_first_sample, ..sampler.map(|t| t.params).unwrap_or_default() };
         self.target_visits.clear();
-        queue.write_buffer(self.resources.get("params").unwrap(), 0, bytemuck::bytes_of(&self.params));
+        upload_gate(self.ctx, &mut self.resources, &self.params, &gate.table(), &cdf)?;
         Ok(true)
     }
 
@@ -340,6 +347,116 @@ impl<'a> Wavefront<'a> {
         self.ctx.queue.submit([encoder.finish()]);
         self.samples_in_film = 0;
     }
+}
+
+/// Samples per pass and slots per wave of a render: as many slots as `target` (or the requested
+/// samples per pass) asks for, within one dispatch and within `fit` slots (what the device's
+/// bindings hold).
+pub(super) fn plan_waves(settings: &RenderSettings, fit: u64, target: u64) -> Result<(u32, u64)> {
+    let (width, height) = (settings.width, settings.height);
+    ensure!(width > 0 && height > 0, "the resolution must be at least 1x1");
+    let pixels = width as u64 * height as u64;
+    ensure!(pixels <= u32::MAX as u64, "{width}x{height} has more than 2^32 pixels");
+    let fit = fit.clamp(1, MAX_SLOTS_PER_DISPATCH);
+    let samples_per_pass = match settings.samples_per_pass {
+        Some(k) => {
+            ensure!(k <= MAX_SAMPLES_PER_PASS, "at most {MAX_SAMPLES_PER_PASS} samples per pass (got {k})");
+            ensure!(
+                k <= 1 || pixels * k as u64 <= fit,
+                "{k} samples per pass of {width}x{height} need {} path slots, more than the {fit} one wave \
+                 can hold on this device; ask for fewer samples per pass",
+                pixels * k as u64
+            );
+            k.max(1)
+        }
+        None => (target.min(fit) / pixels).clamp(1, MAX_SAMPLES_PER_PASS as u64) as u32,
+    };
+    // One wave per pass when it fits; otherwise a pass of one sample runs as several waves.
+    Ok((samples_per_pass, (pixels * samples_per_pass as u64).min(fit)))
+}
+
+/// The waves of a pass of `samples` samples per pixel starting at sample `next_sample`: each
+/// holds `samples` samples of a block of pixels (all pixels when they fit `slots_per_wave`).
+pub(super) fn waves_of_pass(
+    params: &RenderParams,
+    slots_per_wave: u64,
+    next_sample: u64,
+    samples: u32,
+) -> Result<Vec<WaveParams>> {
+    let sample_base = u32::try_from(next_sample + samples as u64 - 1)
+        .map(|_| next_sample as u32)
+        .map_err(|_| anyhow::anyhow!("more than 2^32 samples per pixel"))?;
+    let pixels = params.width * params.height;
+    let pixels_per_wave = (slots_per_wave / samples as u64).min(pixels as u64) as u32;
+    let mut waves = Vec::new();
+    let mut pixel_base = 0;
+    while pixel_base < pixels {
+        let pixel_count = pixels_per_wave.min(pixels - pixel_base);
+        waves.push(WaveParams {
+            sample_base,
+            samples,
+            pixel_base,
+            pixel_count,
+            slot_count: pixel_count * samples,
+            ..Default::default()
+        });
+        pixel_base += pixel_count;
+    }
+    Ok(waves)
+}
+
+/// Bytes of one film element (pixel, bin, channel): a 128-bit fixed-point sum
+/// (`crate::film::fixed`).
+pub const FILM_ELEMENT_BYTES: u64 = 16;
+
+/// Elements (pixel, bin, channel) of the film of `settings`, checked against what the device can
+/// hold at all: up to four bindings of 2 GiB.
+pub fn film_elements(settings: &RenderSettings) -> Result<u64> {
+    let elements = settings.width as u64 * settings.height as u64 * settings.gate.bins() as u64 * 3;
+    let most = MAX_CHUNKS * (1u64 << 31) / FILM_ELEMENT_BYTES;
+    ensure!(
+        elements <= most,
+        "--res {}x{} with {} bins: the film needs {:.1} GiB of device memory, more than the {} GiB it can be \
+         split over; reduce the resolution or the bins",
+        settings.width,
+        settings.height,
+        settings.gate.bins(),
+        (elements * FILM_ELEMENT_BYTES) as f64 / (1u64 << 30) as f64,
+        most * FILM_ELEMENT_BYTES >> 30
+    );
+    Ok(elements)
+}
+
+/// The target-length CDF the kernels read: `sampler`'s, or a stand-in of two values where the
+/// gate draws no target lengths.
+pub fn target_cdf(sampler: Option<&TargetSampler>) -> Vec<f32> {
+    sampler.map_or(vec![0.0, 1.0], |t| t.cdf.clone())
+}
+
+/// Uploads the gate's device data: the params uniform (which holds the gate and its
+/// target-length sampling), the gate table and the target-length CDF. The first upload (no
+/// `params` in `r` yet) creates the buffers; later ones (a moved gate, see
+/// [`Wavefront::set_gate`]) rewrite them in place, which needs a table and a CDF of the sizes
+/// the buffers were created with (a gate without a table leaves its stand-in as it is).
+pub fn upload_gate(
+    ctx: &GpuContext,
+    r: &mut Resources,
+    params: &RenderParams,
+    table: &[[f32; 2]],
+    cdf: &[f32],
+) -> Result<()> {
+    let Some(params_buffer) = r.get("params") else {
+        r.uniform_init(ctx, "params", params);
+        r.storage_init(ctx, "gate_table", table)?;
+        return r.storage_init(ctx, "target_cdf", cdf);
+    };
+    let queue = &ctx.queue;
+    queue.write_buffer(r.get("target_cdf").unwrap(), 0, bytemuck::cast_slice(cdf));
+    if !table.is_empty() {
+        queue.write_buffer(r.get("gate_table").unwrap(), 0, bytemuck::cast_slice(table));
+    }
+    queue.write_buffer(params_buffer, 0, bytemuck::bytes_of(params));
+    Ok(())
 }
 
 /// The film a render's state holds: each element's sum over the samples per pixel, the

@@ -2,7 +2,9 @@
 //! camera (with its thin lens from extras), materials (a Lambertian lobe from baseColor x
 //! texture blended with a GGX conductor by metallic), emissive materials as area lights,
 //! KHR_lights_punctual point, spot and directional lights. Every problem is reported with the
-//! file's name.
+//! file's name. Materials and their textures are read in `materials`.
+
+mod materials;
 
 use std::path::Path;
 
@@ -10,7 +12,8 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use super::camera::ThinLens;
-use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, TextureData};
+use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone};
+pub use materials::srgb_to_linear;
 
 /// The glTF extensions gatetrace implements; any other is refused when a file requires it
 /// (`extensionsRequired`) and warned about when a file uses it.
@@ -539,101 +542,6 @@ impl Loader<'_> {
         }
         Ok(())
     }
-
-    fn material(
-        &self,
-        m: &gltf::Material,
-        textures: &mut Vec<TextureData>,
-        texture_of_image: &mut std::collections::HashMap<(usize, bool, bool), u32>,
-    ) -> Result<MaterialDesc> {
-        let name = self.name;
-        let label = match (m.name(), m.index()) {
-            (Some(n), _) => format!("material `{n}`"),
-            (None, Some(i)) => format!("material {i}"),
-            (None, None) => "the default material".to_owned(),
-        };
-        for extension in m.extensions().into_iter().flat_map(|e| e.keys()) {
-            if !TRANSMISSIVE_EXTENSIONS.contains(&extension.as_str()) {
-                eprintln!(
-                    "warning: {name}: {label}: the glTF extension {extension} is not implemented: ignored (the surface \
-                     is rendered with its base colour, metallic and roughness only)"
-                );
-            } else if self.allow_unsupported_materials {
-                eprintln!(
-                    "warning: {name}: {label}: the glTF extension {extension} is not implemented: the material is \
-                     rendered as an opaque surface (unsupported materials allowed)"
-                );
-            } else {
-                bail!(
-                    "{name}: {label}: the glTF extension {extension} is not implemented: gatetrace renders every \
-                     surface opaque, so light would not pass through this material; remove the extension, or allow \
-                     the opaque stand-in with --allow-unsupported-materials (Python: \
-                     Scene.load(..., allow_unsupported_materials=True))"
-                );
-            }
-        }
-        let pbr = m.pbr_metallic_roughness();
-        let [r, g, b, _] = pbr.base_color_factor();
-        let base_color = Vec3::new(r, g, b);
-        let emission = Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
-        if !base_color.is_finite() || base_color.min_element() < 0.0 {
-            bail!("{name}: {label}: baseColorFactor {base_color} is not finite and non-negative");
-        }
-        if !emission.is_finite() || emission.min_element() < 0.0 {
-            bail!("{name}: {label}: emission {emission} is not finite and non-negative");
-        }
-        if m.emissive_texture().is_some() {
-            eprintln!("warning: {name}: {label}: emissiveTexture is ignored (uniform emission only)");
-        }
-        let metallic = pbr.metallic_factor();
-        let roughness = pbr.roughness_factor();
-        if !(0.0..=1.0).contains(&metallic) || !(0.0..=1.0).contains(&roughness) {
-            bail!("{name}: {label}: metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]");
-        }
-        if metallic > 0.0 && roughness * roughness < crate::gpu::layout::MIN_ALPHA {
-            eprintln!(
-                "warning: {name}: {label}: roughness {roughness} is rendered as {} (GGX alpha at least {})",
-                crate::gpu::layout::MIN_ALPHA.sqrt(),
-                crate::gpu::layout::MIN_ALPHA
-            );
-        }
-        if pbr.metallic_roughness_texture().is_some() {
-            eprintln!("warning: {name}: {label}: metallicRoughnessTexture is ignored (factors only)");
-        }
-        let base_color_texture = match pbr.base_color_texture() {
-            None => None,
-            Some(info) => {
-                let texture = info.texture();
-                let sampler = texture.sampler();
-                let clamp_u = sampler.wrap_s() == gltf::texture::WrappingMode::ClampToEdge;
-                let clamp_v = sampler.wrap_t() == gltf::texture::WrappingMode::ClampToEdge;
-                let image = texture.source().index();
-                let key = (image, clamp_u, clamp_v);
-                if let Some(&t) = texture_of_image.get(&key) {
-                    Some(t)
-                } else {
-                    let data =
-                        self.images.get(image).ok_or_else(|| anyhow!("{name}: {label}: image {image} is missing"))?;
-                    let mut tex = decode_srgb_image(data).with_context(|| format!("{name}: {label}: image {image}"))?;
-                    tex.clamp_u = clamp_u;
-                    tex.clamp_v = clamp_v;
-                    textures.push(tex);
-                    let t = textures.len() as u32 - 1;
-                    texture_of_image.insert(key, t);
-                    Some(t)
-                }
-            }
-        };
-        Ok(MaterialDesc {
-            name: m.name().unwrap_or("").to_owned(),
-            base_color,
-            base_color_texture,
-            emission,
-            double_sided: m.double_sided(),
-            metallic,
-            roughness,
-        })
-    }
 }
 
 /// Largest magnitude (m) of a vertex coordinate: at 1e9 m neighbouring f32 values are 64 m apart,
@@ -694,50 +602,6 @@ fn check_accessors(prim: &gltf::Primitive) -> Result<()> {
         bail!("indices are {}, but glTF 2.0 requires SCALAR of unsigned byte, short or int", describe(&a));
     }
     Ok(())
-}
-
-/// Decodes an 8- or 16-bit sRGB-encoded (or float, linear) image to linear RGB.
-fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
-    use gltf::image::Format as F;
-    let (channels, bytes_per_channel, float) = match data.format {
-        F::R8 => (1, 1, false),
-        F::R8G8 => (2, 1, false),
-        F::R8G8B8 => (3, 1, false),
-        F::R8G8B8A8 => (4, 1, false),
-        F::R16 => (1, 2, false),
-        F::R16G16 => (2, 2, false),
-        F::R16G16B16 => (3, 2, false),
-        F::R16G16B16A16 => (4, 2, false),
-        F::R32G32B32FLOAT => (3, 4, true),
-        F::R32G32B32A32FLOAT => (4, 4, true),
-    };
-    let texel_count = (data.width * data.height) as usize;
-    if data.pixels.len() < texel_count * channels * bytes_per_channel {
-        bail!("pixel data is shorter than {}x{} texels", data.width, data.height);
-    }
-    let channel = |i: usize| -> f32 {
-        let o = i * bytes_per_channel;
-        match (bytes_per_channel, float) {
-            (1, _) => srgb_to_linear(data.pixels[o] as f32 / 255.0),
-            (2, _) => srgb_to_linear(u16::from_le_bytes([data.pixels[o], data.pixels[o + 1]]) as f32 / 65535.0),
-            _ => f32::from_le_bytes(data.pixels[o..o + 4].try_into().unwrap()),
-        }
-    };
-    let texels = (0..texel_count)
-        .map(|t| {
-            let base = t * channels;
-            match channels {
-                1 | 2 => Vec3::splat(channel(base)),
-                _ => Vec3::new(channel(base), channel(base + 1), channel(base + 2)),
-            }
-        })
-        .collect();
-    Ok(TextureData { width: data.width, height: data.height, texels, clamp_u: false, clamp_v: false })
-}
-
-/// sRGB transfer function, encoded [0, 1] to linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }
 
 /// The unit direction a KHR_lights_punctual spot or directional light points in: its node's -z
