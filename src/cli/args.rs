@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use gatetrace::integrator::Method;
 use gatetrace::nlos::Scan;
+use gatetrace::scene::LoadOptions;
 
 use super::parse::{MethodParser, NamesOnly, parse_point, parse_resolution, parse_shard, parse_strategy, parse_uv};
 
@@ -162,6 +163,13 @@ pub struct RenderArgs {
     /// --nlos: count the laser -> spot and sensed point -> sensor segments in path lengths.
     #[arg(long)]
     pub count_first_last: bool,
+}
+
+impl RenderArgs {
+    /// How `render` loads its scene: at animation time `time` (s), as its options say.
+    pub fn load_options(&self, time: Option<f64>) -> LoadOptions {
+        LoadOptions { time, capture: false, allow_unsupported_materials: self.allow_unsupported_materials }
+    }
 }
 
 /// The render's shared options read as its own fields (args.gate, args.res, ...).

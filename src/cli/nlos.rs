@@ -13,7 +13,6 @@ use gatetrace::nlos::{CaptureProgress, CaptureRequest, Scan, prepare_capture, re
 
 use super::args::{OnOff, RenderArgs};
 use super::interrupt;
-use super::render::load_options;
 use super::report::{print_stats, progress_bar, say};
 
 /// Renders an NLOS capture (`--nlos`) and writes its transients with the sensed points and
@@ -41,7 +40,7 @@ pub fn run(args: &RenderArgs, scan: Scan, scene_path: &Path, base: RenderSetting
     request.check(&base)?;
     film_elements(&base)?;
     check_writable(&out, args.mkdir)?;
-    let prepared = prepare_capture(scene_path, load_options(args, None), &request, base)?;
+    let prepared = prepare_capture(scene_path, args.load_options(None), &request, base)?;
     let mut ctx = GpuContext::new()?;
     if args.profile {
         ctx.enable_profiling()?;

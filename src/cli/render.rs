@@ -16,16 +16,11 @@ use gatetrace::integrator::{
     Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
 };
 use gatetrace::nlos;
-use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
+use gatetrace::scene::{PreparedScene, load_gltf_with};
 
 use super::args::{ImageArgs, OnOff, QueryWeights, RenderArgs};
 use super::interrupt;
 use super::report::{print_stats, progress_bar, say};
-
-/// How `render` loads its scene: at animation time `time` (s), as its options say.
-pub fn load_options(args: &RenderArgs, time: Option<f64>) -> LoadOptions {
-    LoadOptions { time, capture: false, allow_unsupported_materials: args.allow_unsupported_materials }
-}
 
 /// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
 /// (each overrides the glTF camera node's extras; an aperture radius of 0 makes a pinhole).
@@ -200,12 +195,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
 
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
-        None => Some(PreparedScene::new(with_lens_options(
-            load_gltf_with(&scene_path, &load_options(&args, None))?,
-            &args,
-        )?)?),
+        None => {
+            Some(PreparedScene::new(with_lens_options(load_gltf_with(&scene_path, &args.load_options(None))?, &args)?)?)
+        }
         Some(_) => {
-            with_lens_options(load_gltf_with(&scene_path, &load_options(&args, plan.anim_time(plan.range.0)))?, &args)?;
+            with_lens_options(load_gltf_with(&scene_path, &args.load_options(plan.anim_time(plan.range.0)))?, &args)?;
             None
         }
     };
@@ -258,7 +252,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 Some(scene) => scene,
                 None => {
                     animated = PreparedScene::new(with_lens_options(
-                        load_gltf_with(&scene_path, &load_options(&args, plan.anim_time(*frame)))?,
+                        load_gltf_with(&scene_path, &args.load_options(plan.anim_time(*frame)))?,
                         &args,
                     )?)?;
                     &animated
