@@ -874,6 +874,27 @@ fn unimplemented_extensions_render_with_a_warning_naming_them() {
     assert!(ok && !err.contains("warning"), "{err}");
 }
 
+/// The library returns what loading ignored instead of printing it: the loaded scene's
+/// `warnings` name the file, the material and the extension, and the scene loads.
+#[test]
+fn the_library_returns_load_warnings_to_its_caller() {
+    let dir = common::scratch_dir("load_warnings");
+    let mut doc = cornell_box_json();
+    add_material_extension(&mut doc, 0, "KHR_materials_clearcoat", json!({"clearcoatFactor": 1.0}));
+    write_json(&dir, "coated.gltf", &doc);
+    let scene = gatetrace::scene::load_gltf(&dir.join("coated.gltf")).expect("a scene with an ignored extension loads");
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    let warning = &scene.warnings[0];
+    assert!(
+        warning.contains("coated.gltf")
+            && warning.contains("material `white`")
+            && warning.contains("KHR_materials_clearcoat"),
+        "{warning}"
+    );
+    let plain = gatetrace::scene::load_gltf(&common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
+    assert!(plain.warnings.is_empty(), "{:?}", plain.warnings);
+}
+
 mod properties {
     use super::*;
     use gatetrace::film::Gate;

@@ -87,6 +87,12 @@ impl Scene {
             PreparedScene::new(scene)
         };
         let prepared = py.detach(load).map_err(value_error)?;
+        // What loading ignored or changed, as Python warnings (UserWarning) naming the file.
+        let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+        for warning in &prepared.scene.warnings {
+            let message = std::ffi::CString::new(warning.replace('\0', " ")).expect("no NUL left");
+            PyErr::warn(py, category.as_any(), &message, 1)?;
+        }
         Ok(Self { prepared: Arc::new(prepared), path })
     }
 
@@ -378,13 +384,7 @@ impl Renderer {
         };
         let mut metadata = self.metadata(&settings, gate, &output)?;
         let mut warnings = Vec::new();
-        if output.truncated_traversals > 0 {
-            warnings.push(format!(
-                "{} ray traversals were cut short by the device (lavapipe ends a shader's loops after 65535 iterations); \
-                 the image may miss geometry",
-                output.truncated_traversals
-            ));
-        }
+        warnings.extend(output.truncated_traversals_warning());
         warnings.extend(output.unvisited_bins_warning());
         warnings.extend(black_image_warning(&self.scene, &settings, gate, &output.film));
         if !warnings.is_empty() {

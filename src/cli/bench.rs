@@ -94,7 +94,9 @@ pub struct BenchSettings {
 /// that start with `stage:`. With `json`, the same goes to a file (tools/bench/device_bench.sh).
 pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     let loading = Instant::now();
-    let scene = PreparedScene::new(load_gltf(scene_path)?)?;
+    let scene = load_gltf(scene_path)?;
+    super::report::print_warnings(&scene.warnings);
+    let scene = PreparedScene::new(scene)?;
     let load_seconds = loading.elapsed().as_secs_f64();
     let mut ctx = GpuContext::new()?;
     let mut rows = Vec::new();

@@ -117,6 +117,7 @@ fn render_for(
 ) -> Result<(gatetrace::film::Film, f64, Option<Method>)> {
     let budget = gatetrace::integrator::Budget::Time(Duration::from_secs_f64(seconds));
     let output = gatetrace::integrator::render(ctx, scene, settings, budget, |_| {})?;
+    super::report::print_warnings(&output.truncated_traversals_warning());
     Ok((output.film, output.rendering.as_secs_f64(), output.choice.map(|c| c.chosen)))
 }
 
@@ -170,7 +171,9 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
     const REPEAT_SEEDS: u32 = 1000;
     let mut reference_seed = 1_000_000;
     for scene_path in scene_paths {
-        let scene = PreparedScene::new(gatetrace::scene::load_gltf_at(scene_path, s.anim_time)?)?;
+        let scene = gatetrace::scene::load_gltf_at(scene_path, s.anim_time)?;
+        super::report::print_warnings(&scene.warnings);
+        let scene = PreparedScene::new(scene)?;
         let triangles = scene.triangles.len();
         let posed = s.anim_time.map_or(String::new(), |t| format!(", posed at {t} s"));
         println!("\nscene {} ({triangles} triangles{posed})", scene_path.display());

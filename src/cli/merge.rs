@@ -16,7 +16,7 @@ use gatetrace::scene::PreparedScene;
 
 use super::args::RenderArgs;
 use super::interrupt;
-use super::report::{print_stats, progress_bar, say};
+use super::report::{print_stats, print_warnings, progress_bar, say};
 
 #[derive(clap::Args)]
 pub struct MergeArgs {
@@ -61,6 +61,7 @@ pub fn render_shard(
         Ok(if interrupt::received().is_some() { ControlFlow::Break(()) } else { ControlFlow::Continue(()) })
     })?;
     bar.finish_and_clear();
+    print_warnings(&output.truncated_traversals_warning());
     if let Some(signal) = interrupt::received().filter(|_| output.stopped_early) {
         eprintln!(
             "{}: shard {index}/{count} stopped; {} was not written (rerun the shard)",

@@ -13,7 +13,7 @@ use gatetrace::nlos::{CaptureProgress, CaptureRequest, Scan, prepare_capture, re
 
 use super::args::{OnOff, RenderArgs};
 use super::interrupt;
-use super::report::{print_stats, progress_bar, say};
+use super::report::{print_stats, print_warnings, progress_bar, say};
 
 /// Renders an NLOS capture (`--nlos`) and writes its transients with the sensed points and
 /// laser spots.
@@ -41,6 +41,7 @@ pub fn run(args: &RenderArgs, scan: Scan, scene_path: &Path, base: RenderSetting
     film_elements(&base)?;
     check_writable(&out, args.mkdir)?;
     let prepared = prepare_capture(scene_path, args.load_options(None), &request, base)?;
+    print_warnings(&prepared.scene.scene.warnings);
     let mut ctx = GpuContext::new()?;
     if args.profile {
         ctx.enable_profiling()?;
@@ -52,9 +53,7 @@ pub fn run(args: &RenderArgs, scan: Scan, scene_path: &Path, base: RenderSetting
         return Err(interrupt::Interrupted { signal }.into());
     };
     let output = &capture.output;
-    if let Some(warning) = output.unvisited_bins_warning() {
-        eprintln!("warning: {warning}");
-    }
+    print_warnings(&output.unvisited_bins_warning());
     let mut metadata = capture.metadata(&ctx, scene_path, &args.gate, &prepared);
     let signal = interrupt::received().filter(|_| output.stopped_early);
     if let Some(signal) = signal {

@@ -20,7 +20,7 @@ use gatetrace::scene::{PreparedScene, load_gltf_with};
 
 use super::args::{ImageArgs, OnOff, QueryWeights, RenderArgs};
 use super::interrupt;
-use super::report::{print_stats, progress_bar, say};
+use super::report::{print_stats, print_warnings, progress_bar, say};
 
 /// The scene with its camera's lens set by --aperture-radius and --focus-distance, where given
 /// (each overrides the glTF camera node's extras; an aperture radius of 0 makes a pinhole).
@@ -196,10 +196,17 @@ pub fn run(args: RenderArgs) -> Result<()> {
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
         None => {
-            Some(PreparedScene::new(with_lens_options(load_gltf_with(&scene_path, &args.load_options(None))?, &args)?)?)
+            let scene = with_lens_options(load_gltf_with(&scene_path, &args.load_options(None))?, &args)?;
+            print_warnings(&scene.warnings);
+            Some(PreparedScene::new(scene)?)
         }
         Some(_) => {
-            with_lens_options(load_gltf_with(&scene_path, &args.load_options(plan.anim_time(plan.range.0)))?, &args)?;
+            // Every frame's load warns alike: the first frame's says it once.
+            let scene = with_lens_options(
+                load_gltf_with(&scene_path, &args.load_options(plan.anim_time(plan.range.0)))?,
+                &args,
+            )?;
+            print_warnings(&scene.warnings);
             None
         }
     };
@@ -365,6 +372,7 @@ fn render_one(
         Ok(if stop { ControlFlow::Break(()) } else { ControlFlow::Continue(()) })
     })?;
     bar.finish_and_clear();
+    bars.suspend(|| print_warnings(&output.truncated_traversals_warning()));
 
     let gate = &settings.gate;
     let film = &output.film;

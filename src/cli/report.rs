@@ -13,6 +13,14 @@ pub fn print_stats(settings: &RenderSettings, output: &gatetrace::integrator::Re
     }
 }
 
+/// Prints the library's warnings (a scene's load warnings, a render's) as `warning: ...` lines on
+/// stderr.
+pub fn print_warnings<'a>(warnings: impl IntoIterator<Item = &'a String>) {
+    for warning in warnings {
+        eprintln!("warning: {warning}");
+    }
+}
+
 /// Prints a line to stdout, above the progress bars when they are shown.
 pub fn say(bars: &indicatif::MultiProgress, line: String) -> Result<()> {
     if bars.is_hidden() {

@@ -115,6 +115,19 @@ pub struct RenderOutput {
 }
 
 impl RenderOutput {
+    /// A warning for a render some of whose ray traversals the device cut short (see
+    /// [`Integrator::truncated_traversals`]), or None. The library prints nothing: callers show
+    /// this and the other warnings.
+    pub fn truncated_traversals_warning(&self) -> Option<String> {
+        (self.truncated_traversals > 0).then(|| {
+            format!(
+                "{} ray traversals were cut short by the device (lavapipe ends a shader's loops after 65535 \
+                 iterations); the image may miss geometry. Use a GPU for this scene.",
+                self.truncated_traversals
+            )
+        })
+    }
+
     /// A warning for a render that ended before every bin of its stratified target lengths had
     /// a sample (see [`Integrator::samples_to_visit_every_bin`]), or None.
     pub fn unvisited_bins_warning(&self) -> Option<String> {
@@ -336,12 +349,6 @@ pub fn render_resumable(
     let rendering = pilot + rendering.elapsed();
     let film = tracer.film()?;
     let truncated_traversals = tracer.truncated_traversals()?;
-    if truncated_traversals > 0 {
-        eprintln!(
-            "warning: {truncated_traversals} ray traversals were cut short by the device (lavapipe ends a shader's \
-             loops after 65535 iterations); the image may miss geometry. Use a GPU for this scene."
-        );
-    }
     let stats = if settings.stats { tracer.stats_report()? } else { None };
     let target_pilot_spp = tracer.target_pilot_spp();
     let state = match start_at.keep_state {

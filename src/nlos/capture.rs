@@ -174,8 +174,9 @@ pub fn prepare_capture(
 
 /// What a capture's renders report as they go.
 pub trait CaptureProgress {
-    /// A warning about the capture's setup (sensed points hidden from the sensor, a blocked
-    /// laser beam), said before the first render.
+    /// A warning about the capture: about its setup (sensed points hidden from the sensor, a
+    /// blocked laser beam) before the first render, or about a render after it (traversals the
+    /// device cut short). The scene's load warnings are in `PreparedCapture::scene`.
     fn warning(&mut self, warning: &str);
     /// Render `k` of `count` (one per laser spot) starts with `settings`.
     fn render_started(&mut self, k: usize, count: usize, settings: &RenderSettings);
@@ -227,6 +228,9 @@ pub fn render_capture(
         let settings = RenderSettings { nlos: Some(capture), seed, ..base.clone() };
         progress.render_started(k, aims.len(), &settings);
         let output = render_resumable(ctx, scene, &settings, budget, Default::default(), |_, p| Ok(progress.pass(p)))?;
+        if let Some(warning) = output.truncated_traversals_warning() {
+            progress.warning(&warning);
+        }
         if progress.render_ended(k, aims.len()).is_break() {
             return Ok(None);
         }

@@ -83,6 +83,7 @@ pub fn load_gltf_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
         pose,
         capture: options.capture,
         allow_unsupported_materials: options.allow_unsupported_materials,
+        warnings: Default::default(),
     }
     .load(&gltf.document)
 }
@@ -208,6 +209,8 @@ struct Loader<'a> {
     capture: bool,
     /// See [`LoadOptions::allow_unsupported_materials`].
     allow_unsupported_materials: bool,
+    /// What the file holds that is ignored or changed ([`Scene::warnings`]).
+    warnings: std::cell::RefCell<Vec<String>>,
 }
 
 /// What the scene-graph walk collects.
@@ -225,6 +228,11 @@ struct Collected {
 }
 
 impl Loader<'_> {
+    /// Records a warning for [`Scene::warnings`] (`text` names the file).
+    fn warn(&self, text: String) {
+        self.warnings.borrow_mut().push(text);
+    }
+
     fn load(&self, doc: &gltf::Document) -> Result<Scene> {
         let name = self.name;
         let scene = doc
@@ -242,10 +250,10 @@ impl Loader<'_> {
         for extension in &doc.as_json().extensions_used {
             let on_a_material = doc.materials().any(|m| m.extension_value(extension).is_some());
             if !IMPLEMENTED_EXTENSIONS.contains(&extension.as_str()) && !on_a_material {
-                eprintln!(
-                    "warning: {name}: the file uses the glTF extension {extension} (extensionsUsed), which gatetrace \
-                     does not implement: ignored"
-                );
+                self.warn(format!(
+                    "{name}: the file uses the glTF extension {extension} (extensionsUsed), which gatetrace does not \
+                     implement: ignored"
+                ));
             }
         }
         // Primitives without a material get glTF's default material (white, one-sided).
@@ -312,7 +320,7 @@ impl Loader<'_> {
             bail!("{name}: {} triangles exceed the supported {}", c.triangles.len(), crate::gpu::layout::MAX_TRIANGLES);
         }
         if c.dropped_degenerate > 0 {
-            eprintln!("warning: {name}: dropped {} zero-area triangles", c.dropped_degenerate);
+            self.warn(format!("{name}: dropped {} zero-area triangles", c.dropped_degenerate));
         }
         Ok(Scene {
             source: name.to_owned(),
@@ -324,6 +332,7 @@ impl Loader<'_> {
             camera,
             dropped_degenerate: c.dropped_degenerate,
             nodes: c.nodes,
+            warnings: self.warnings.take(),
         })
     }
 

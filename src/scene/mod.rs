@@ -174,6 +174,10 @@ pub struct Scene {
     pub dropped_degenerate: usize,
     /// The scene's named nodes, in the order they were visited.
     pub nodes: Vec<NamedNode>,
+    /// What loading ignored or changed (unimplemented extensions, ignored textures, clamped
+    /// roughness, dropped triangles), one message each, naming the file: the library prints
+    /// nothing, its caller shows them (the command line as `warning: ...` lines on stderr).
+    pub warnings: Vec<String>,
 }
 
 impl Scene {

@@ -80,6 +80,7 @@ pub struct ViewOptions {
 pub fn run_viewer(options: ViewOptions) -> Result<()> {
     let load = LoadOptions { allow_unsupported_materials: options.allow_unsupported_materials, ..Default::default() };
     let mut scene = load_gltf_with(&options.scene, &load)?;
+    crate::cli::report::print_warnings(&scene.warnings);
     if options.aperture_radius.is_some() || options.focus_distance.is_some() {
         scene
             .camera

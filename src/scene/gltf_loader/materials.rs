@@ -22,15 +22,15 @@ impl Loader<'_> {
         };
         for extension in m.extensions().into_iter().flat_map(|e| e.keys()) {
             if !TRANSMISSIVE_EXTENSIONS.contains(&extension.as_str()) {
-                eprintln!(
-                    "warning: {name}: {label}: the glTF extension {extension} is not implemented: ignored (the surface \
-                     is rendered with its base colour, metallic and roughness only)"
-                );
+                self.warn(format!(
+                    "{name}: {label}: the glTF extension {extension} is not implemented: ignored (the surface is \
+                     rendered with its base colour, metallic and roughness only)"
+                ));
             } else if self.allow_unsupported_materials {
-                eprintln!(
-                    "warning: {name}: {label}: the glTF extension {extension} is not implemented: the material is \
-                     rendered as an opaque surface (unsupported materials allowed)"
-                );
+                self.warn(format!(
+                    "{name}: {label}: the glTF extension {extension} is not implemented: the material is rendered as \
+                     an opaque surface (unsupported materials allowed)"
+                ));
             } else {
                 bail!(
                     "{name}: {label}: the glTF extension {extension} is not implemented: gatetrace renders every \
@@ -51,7 +51,7 @@ impl Loader<'_> {
             bail!("{name}: {label}: emission {emission} is not finite and non-negative");
         }
         if m.emissive_texture().is_some() {
-            eprintln!("warning: {name}: {label}: emissiveTexture is ignored (uniform emission only)");
+            self.warn(format!("{name}: {label}: emissiveTexture is ignored (uniform emission only)"));
         }
         let metallic = pbr.metallic_factor();
         let roughness = pbr.roughness_factor();
@@ -59,14 +59,14 @@ impl Loader<'_> {
             bail!("{name}: {label}: metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]");
         }
         if metallic > 0.0 && roughness * roughness < crate::gpu::layout::MIN_ALPHA {
-            eprintln!(
-                "warning: {name}: {label}: roughness {roughness} is rendered as {} (GGX alpha at least {})",
+            self.warn(format!(
+                "{name}: {label}: roughness {roughness} is rendered as {} (GGX alpha at least {})",
                 crate::gpu::layout::MIN_ALPHA.sqrt(),
                 crate::gpu::layout::MIN_ALPHA
-            );
+            ));
         }
         if pbr.metallic_roughness_texture().is_some() {
-            eprintln!("warning: {name}: {label}: metallicRoughnessTexture is ignored (factors only)");
+            self.warn(format!("{name}: {label}: metallicRoughnessTexture is ignored (factors only)"));
         }
         let base_color_texture = match pbr.base_color_texture() {
             None => None,
