@@ -42,7 +42,7 @@ fn write_with_bounds(dir: &Path, name: &str, vertex: [f32; 3]) {
 /// A GLB container holding `doc` as its JSON chunk (buffers keep their data URIs).
 fn glb(doc: &Value) -> Vec<u8> {
     let mut json = serde_json::to_vec(doc).unwrap();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len();
@@ -65,12 +65,7 @@ struct Case {
 }
 
 /// Builds a case whose files are written by `setup` into its directory.
-fn case(
-    name: &'static str,
-    setup: impl FnOnce(&Path) + 'static,
-    args: Vec<String>,
-    needles: &[&str],
-) -> (Case, Box<dyn FnOnce(&Path)>) {
+fn case(name: &'static str, setup: impl FnOnce(&Path) + 'static, args: Vec<String>, needles: &[&str]) -> (Case, Setup) {
     let c = Case { name, args, needles: needles.iter().map(|s| s.to_string()).collect() };
     let setup: Box<dyn FnOnce(&Path)> = Box::new(setup);
     (c, setup)
@@ -130,7 +125,10 @@ const MITSUBA_XML: &str = "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<scene ve
                            <integrator type=\"path\"/>\n  <shape type=\"obj\">\n    \
                            <string name=\"filename\" value=\"plane.obj\"/>\n  </shape>\n</scene>\n";
 
-fn cases() -> Vec<(Case, Box<dyn FnOnce(&Path)>)> {
+/// What a case writes into its directory before the command runs.
+type Setup = Box<dyn FnOnce(&Path)>;
+
+fn cases() -> Vec<(Case, Setup)> {
     // `render SCENE` of a tiny image with `extra` options, writing {out}.
     let render = |scene: &str, extra: &[&str]| -> Vec<String> {
         let tiny = ["--res", "8x8", "--spp", "1", "--max-bounces", "2"];

@@ -234,7 +234,7 @@ fn exr_output_has_a_layer_per_bin_and_metadata() {
         image.attributes.other.get(&key).or_else(|| image.layer_data[0].attributes.other.get(&key)).cloned()
     };
     let gate = attribute("gatetrace.gate").expect("gate attribute");
-    assert!(matches!(&gate, AttributeValue::Text(t) if t.to_string() == "transient:6.5ns,200ps,5"), "{gate:?}");
+    assert!(matches!(&gate, AttributeValue::Text(t) if t == "transient:6.5ns,200ps,5"), "{gate:?}");
     assert!(attribute("gatetrace.adapter").is_some());
     assert!(matches!(attribute("gatetrace.spp"), Some(AttributeValue::Text(t)) if t.to_string() == "2"));
     // Structured values are JSON text: the gate in metres, whatever units it was typed in.

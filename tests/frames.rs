@@ -133,7 +133,7 @@ fn an_animated_scene_moves_with_every_method() {
             let mut sum = 0.0;
             for y in 14..24 {
                 for x in 0..24 {
-                    if (x < 10) == left && (x < 10 || x >= 14) {
+                    if (x < 10) == left && !(10..14).contains(&x) {
                         sum += (0..3).map(|c| img[(y * 24 + x) * 3 + c] as f64).sum::<f64>();
                     }
                 }

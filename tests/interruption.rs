@@ -145,7 +145,7 @@ fn interrupt_and_resume(method: &str, signal_name: &str, status: i32, dir: &Path
     assert_eq!(meta["interrupted_by"], format!("SIG{signal_name}"), "{meta}");
     assert_eq!(meta["requested"], serde_json::json!({ "spp": 100000000 }), "{meta}");
     let taken: u64 = meta["spp"].as_u64().unwrap();
-    assert!(taken >= 4 && taken % 4 == 0, "{taken} spp: whole passes of 4");
+    assert!(taken >= 4 && taken.is_multiple_of(4), "{taken} spp: whole passes of 4");
     assert!(said.contains(&format!("with the {taken} spp traced so far")), "{said}");
 
     let total = (taken + 8).to_string();

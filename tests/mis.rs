@@ -178,7 +178,7 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
 /// The random path of trial `trial` of the combined weights' tests (3 to 8 vertices, area and
 /// point lights: a combined render refuses directional ones), if every strategy can sample it.
 fn combined_trial_path(rng: &mut Xorshift64Star, trial: usize) -> Option<(Vec<Vertex>, Light)> {
-    let light = if trial % 3 == 0 { Light::Point } else { Light::Area };
+    let light = if trial.is_multiple_of(3) { Light::Point } else { Light::Area };
     let path = random_path(rng, 3 + trial % 6, light);
     is_valid(&path).then_some((path, light))
 }

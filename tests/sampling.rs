@@ -116,6 +116,7 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         camera: CameraDesc { position: Vec3::Z, right: Vec3::X, up: Vec3::Y, forward: -Vec3::Z, yfov: 1.0, lens: None },
         dropped_degenerate: 0,
         nodes: Vec::new(),
+        warnings: Vec::new(),
     }
 }
 

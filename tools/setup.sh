@@ -46,12 +46,16 @@ gatetrace_setup() {
     if ! command -v cargo >/dev/null 2>&1; then
         command -v curl >/dev/null 2>&1 || gatetrace_apt_install curl ca-certificates || return 1
         echo "setup: no Rust toolchain; installing one with rustup" >&2
-        curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal -c rustfmt || return 1
+        curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal -c rustfmt -c clippy || return 1
         . "$HOME/.cargo/env"
     fi
-    # The suite checks formatting: a toolchain without rustfmt (rustup's minimal profile) gets it.
+    # The suite checks formatting and lints: a toolchain without rustfmt or clippy (rustup's
+    # minimal profile) gets them.
     if ! cargo fmt --version >/dev/null 2>&1 && command -v rustup >/dev/null 2>&1; then
         rustup component add rustfmt || return 1
+    fi
+    if ! cargo clippy --version >/dev/null 2>&1 && command -v rustup >/dev/null 2>&1; then
+        rustup component add clippy || return 1
     fi
 }
 

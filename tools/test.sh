@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what is missing (tools/setup.sh) and runs the whole test suite: `cargo fmt --check`
-# (the renderer and the Python bindings), `cargo test` (GPU
+# (the renderer and the Python bindings), `cargo clippy` (warnings denied), `cargo test` (GPU
 # tests run on the Vulkan device, lavapipe when there is no GPU; extra arguments go to it, e.g.
 # --release), then the Python package's tests: the package is built and installed with
 # `pip install .` into a virtual environment in target/python-env (under CARGO_TARGET_DIR when
@@ -14,9 +14,12 @@ gatetrace_setup
 gatetrace_setup_display
 gatetrace_setup_python
 gatetrace_setup_slurm
-# Formatting first (two seconds): the renderer and the Python bindings' crate.
+# Formatting first (two seconds): the renderer and the Python bindings' crate; then clippy on
+# every target of the renderer with warnings denied (the lints turned off, and why, are in
+# Cargo.toml's [lints.clippy]).
 cargo fmt --check
 (cd python && cargo fmt --check)
+cargo clippy --all-targets -- -D warnings
 cargo test "$@"
 
 profile=debug

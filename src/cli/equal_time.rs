@@ -208,8 +208,8 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 sum.iter().sum::<f64>() / n / elements
             );
             println!(
-                "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9} {}",
-                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query", "chosen"
+                "{:>24} {:>8} {:>12} {:>12} {:>12} {:>11} {:>9} chosen",
+                "method", "spp", "MSE", "rel. MSE", "MSE / first", "iter/query", "tri/query"
             );
             // Repeat-major: repeat r of every method before repeat r + 1 of any, so that a
             // stretch where the device runs slower (other load, clocks) falls on all methods

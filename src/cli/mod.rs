@@ -34,6 +34,8 @@ pub struct Cli {
     pub command: Command,
 }
 
+// The command is parsed once per process: boxing the large variants would save nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 pub enum Command {
     /// Render an image (or a transient cube, or a sequence of frames) to EXR or NPY, or a PNG

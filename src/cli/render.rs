@@ -73,7 +73,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
-        method: method,
+        method,
         gate: gate.clone(),
         max_bounces: args.max_bounces,
         rr_depth: args.rr_depth,

@@ -88,7 +88,9 @@ pub const PILOT_MAX_SHRINK: u32 = 4;
 /// only where the two are within about 20 %. Returns (width, height, f).
 pub fn pilot_resolution(width: u32, height: u32) -> (u32, u32, u32) {
     let pixels = width as u64 * height as u64;
-    let fits = |f: u32| width % f == 0 && height % f == 0 && pixels / (f as u64 * f as u64) >= PILOT_MIN_PIXELS as u64;
+    let fits = |f: u32| {
+        width.is_multiple_of(f) && height.is_multiple_of(f) && pixels / (f as u64 * f as u64) >= PILOT_MIN_PIXELS as u64
+    };
     let f = (1..=PILOT_MAX_SHRINK).rev().find(|&f| fits(f)).unwrap_or(1);
     (width / f, height / f, f)
 }

@@ -323,7 +323,7 @@ impl BandIndex {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(r.get("band_sums").unwrap(), 0, None);
         ctx.queue.submit([encoder.finish()]);
-        for (c, name) in chunk_names("band_entries").into_iter().enumerate() {
+        for (c, name) in chunk_names("band_entries").iter().enumerate() {
             let entries = total.saturating_sub(c as u64 * per_chunk).min(per_chunk);
             r.storage_zeroed(ctx, name, entries.max(2) * 8, wgpu::BufferUsages::empty())?;
         }

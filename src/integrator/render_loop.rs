@@ -131,7 +131,7 @@ impl RenderOutput {
     /// A warning for a render that ended before every bin of its stratified target lengths had
     /// a sample (see [`Integrator::samples_to_visit_every_bin`]), or None.
     pub fn unvisited_bins_warning(&self) -> Option<String> {
-        let needed = self.samples_to_visit_every_bin.filter(|&n| (self.film.spp as u64) < n)?;
+        let needed = self.samples_to_visit_every_bin.filter(|&n| self.film.spp < n)?;
         Some(format!(
             "each sample of a pixel aims its ellipsoidal connections at one of the gate's {} bins in turn, and \
              {needed} samples per pixel visit every bin once (with the extra visits a pilot gives bins that hold more \

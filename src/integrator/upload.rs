@@ -65,6 +65,10 @@ pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Optio
     TargetSampler::new(&settings.gate, (shortest as f64, longest as f64))
 }
 
+/// What [`upload_scene`] returns: the resources, the specialisation constants (name, value) of
+/// the scene and the gate, and the film's chunk layout.
+pub type Upload = (Resources, Vec<(&'static str, f64)>, ChunkLayout);
+
 /// Uploads what every method's kernels read (params, scene, lights, the gate's data) and creates
 /// the film; returns the resources, the specialisation constants of the scene and the gate, and the
 /// film's chunk layout.
@@ -74,7 +78,7 @@ pub fn upload_scene(
     settings: &RenderSettings,
     params: &RenderParams,
     limit: u64,
-) -> Result<(Resources, Vec<(&'static str, f64)>, ChunkLayout)> {
+) -> Result<Upload> {
     let gate = &settings.gate;
     let mut r = Resources::default();
     r.uniform_init(ctx, "wave", &WaveParams::default());

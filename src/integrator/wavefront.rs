@@ -422,7 +422,7 @@ pub fn film_elements(settings: &RenderSettings) -> Result<u64> {
         settings.height,
         settings.gate.bins(),
         (elements * FILM_ELEMENT_BYTES) as f64 / (1u64 << 30) as f64,
-        most * FILM_ELEMENT_BYTES >> 30
+        (most * FILM_ELEMENT_BYTES) >> 30
     );
     Ok(elements)
 }

@@ -62,7 +62,7 @@ impl CameraDesc {
         let radius = aperture_radius.or(old.map(|l| l.aperture_radius)).unwrap_or(0.0);
         let focus = focus_distance.or(old.map(|l| l.focus_distance));
         self.lens = match (radius, focus) {
-            (r, _) if r == 0.0 => None,
+            (0.0, _) => None,
             (r, Some(f)) => Some(ThinLens::new(r, f)?),
             (_, None) => anyhow::bail!("a thin lens needs a focus distance: give {focus_option} (the camera has none)"),
         };

@@ -516,7 +516,7 @@ impl Loader<'_> {
                 Some(it) => it.into_u32().collect(),
                 None => (0..positions.len() as u32).collect(),
             };
-            if indices.len() % 3 != 0 {
+            if !indices.len().is_multiple_of(3) {
                 bail!("{name}: {what}: {} indices is not a multiple of 3", indices.len());
             }
             if let Some(&i) = indices.iter().find(|&&i| i as usize >= positions.len()) {
@@ -642,7 +642,7 @@ pub fn thin_lens(extras: Option<&serde_json::value::RawValue>) -> Result<Option<
     let focus = number("focus_distance")?;
     match (radius, focus) {
         (None, None) => Ok(None),
-        (Some(r), _) if r == 0.0 => Ok(None),
+        (Some(0.0), _) => Ok(None),
         (Some(r), Some(f)) => ThinLens::new(r, f).map(Some),
         (Some(_), None) => bail!("`aperture_radius` needs `focus_distance` (m) beside it"),
         (None, Some(_)) => bail!("`focus_distance` needs `aperture_radius` (m) beside it"),

@@ -66,7 +66,7 @@ impl Scene {
         let mut accessors = Vec::new();
         let mut push =
             |data: Vec<u8>, count: usize, component: u32, kind: &str, min_max: Option<(Vec<f32>, Vec<f32>)>| {
-                while bin.len() % 4 != 0 {
+                while !bin.len().is_multiple_of(4) {
                     bin.push(0);
                 }
                 views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len()}));

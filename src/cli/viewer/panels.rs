@@ -231,7 +231,7 @@ impl Viewer<'_> {
         let Some(path) = self.options.screenshot.clone() else { return Ok(()) };
         if let Some(step) = self.options.scrub_step
             && self.frames > 0
-            && self.frames % 10 == 0
+            && self.frames.is_multiple_of(10)
             && self.frames < self.options.after_frames
         {
             self.gate.step(step);
