@@ -14,7 +14,8 @@ metres of optical path, and ``ps``, ``ns`` and ``mm`` convert other units to the
 A :class:`Renderer` keeps the device, the uploaded scene and the compiled kernels between renders:
 a sweep over gates of one kind and bin count builds its kernels once. Images are float32 numpy
 arrays ``[H, W, 3]`` (``[H, W, T, 3]`` for T transient bins), row 0 at the top: the layout of
-``gatetrace render --out x.npy``. Bad arguments raise ValueError, a missing scene file
+``gatetrace render --out x.npy``. :func:`capture` renders a non-line-of-sight capture, as
+``gatetrace render --nlos`` does. Bad arguments raise ValueError, a missing scene file
 FileNotFoundError, device failures RuntimeError; Ctrl-C stops a render (KeyboardInterrupt).
 """
 
@@ -42,6 +43,7 @@ __all__ = [
     "Renderer",
     "Gate",
     "render",
+    "capture",
     "none",
     "box",
     "gaussian",
@@ -259,6 +261,142 @@ def render(
     return (image, meta) if metadata else image
 
 
+def capture(
+    scene: Union[Scene, str, os.PathLike],
+    scan: str,
+    gate: Union[str, Gate] = "none",
+    *,
+    spp: Optional[int] = None,
+    seconds: Optional[float] = None,
+    seed: int = 0,
+    res: Tuple[int, int] = (256, 256),
+    max_bounces: int = 8,
+    method: Optional[str] = None,
+    relay_wall: str = "relay_wall",
+    sensor_origin: Optional[Tuple[float, float, float]] = None,
+    laser_origin: Optional[Tuple[float, float, float]] = None,
+    laser_spot: Tuple[float, float] = (0.5, 0.5),
+    laser_grid: Optional[Tuple[int, int]] = None,
+    laser_power: float = 1.0,
+    count_first_last: bool = False,
+    rr_depth: Optional[int] = None,
+    samples_per_pass: Optional[int] = None,
+    connections_per_query: Optional[int] = None,
+    query_split: float = 1.0,
+    query_bottom_nodes: int = 31,
+    query_weights: Optional[str] = None,
+    target_pilot: Optional[int] = None,
+    band_index: str = "auto",
+    needle_guard: float = 1e-6,
+    length_guard: float = 1e-5,
+    allow_unsupported_materials: bool = False,
+) -> Tuple[np.ndarray, dict]:
+    """Renders a non-line-of-sight capture of `scene`: ``gatetrace render SCENE --nlos SCAN`` with
+    the same options (``--relay-wall`` is ``relay_wall=``, ``--time`` is ``seconds=``, ...) and
+    defaults, so equal arguments give the command line's capture bit for bit. docs/nlos.md
+    explains captures at length.
+
+    Args:
+        scene: a glTF 2.0 file (.gltf, .glb) or a :class:`Scene` (its file is loaded again,
+            prepared for the capture).
+        scan: ``"single"`` (one laser spot for every sensed point), ``"confocal"`` (each sensed
+            point lit on itself) or ``"exhaustive"`` (every spot of `laser_grid` with every
+            sensed point).
+        gate: in the command line's syntax or a :class:`Gate`, lengths in metres of optical path
+            from the laser spot to the sensed point, e.g. ``transient(start, width, bins)``.
+        spp, seconds, seed: samples per pixel (64 when neither is given) or seconds of rendering,
+            and the seed (an exhaustive scan renders laser spot k from a seed of its own).
+        res: the grid of sensed points on the relay wall, (width, height).
+        max_bounces: most scattering vertices of a path, the laser spot and the sensed point
+            included (at least 2; 3: spot -> hidden point -> sensed point).
+        method: ``"path"``, ``"direct"``, ``"ellipsoidal"`` or ``"combined"`` (None: ellipsoidal
+            with a gate, path without).
+        relay_wall: the relay wall's glTF node (a mesh with TEXCOORD_0 over [0, 1]^2).
+        sensor_origin, laser_origin: positions (x, y, z) in metres (None: the nodes named
+            ``sensor_origin`` and ``laser_origin``, else ``nlos_origin``).
+        laser_spot: ``single``: where the laser is aimed, texture coordinates (u, v) of the wall.
+        laser_grid: ``exhaustive``: the grid of laser spots, (width, height) (None: `res`).
+        laser_power: the beam's power (W).
+        count_first_last: count the laser -> spot and sensed point -> sensor segments in path
+            lengths.
+        rr_depth, samples_per_pass, connections_per_query, query_split, query_bottom_nodes,
+            query_weights, target_pilot, band_index, needle_guard, length_guard: as ``render
+            --rr-depth`` ... ``--length-guard`` (None: the capture's defaults: 1 connection per
+            query, ``"reflection"`` weights, a 256 spp target pilot for ellipsoidal on a
+            transient gate; `band_index` ``"auto"``, ``"on"`` or ``"off"``).
+        allow_unsupported_materials: render transmissive materials as opaque instead of
+            refusing the scene.
+
+    Returns (data, metadata): a float32 array of bin-integrated radiance (W m^-2 sr^-1) leaving
+    each sensed point towards the sensor origin, in the layout of the command line's .npy:
+    ``[grid_y, grid_x, 3]`` or ``[grid_y, grid_x, T, 3]`` for T bins (``exhaustive``:
+    ``[laser_y, laser_x, grid_y, grid_x, (T,) 3]``); and what the command line's JSON sidecar
+    holds (the render's metadata, the sensed points and laser spots in metres, ...), numbers as
+    numbers. Bad options raise ValueError naming the problem, a missing file FileNotFoundError;
+    Ctrl-C stops the capture (KeyboardInterrupt).
+    """
+    path = scene.path if isinstance(scene, Scene) else scene
+    if spp is not None:
+        _check_count("spp", spp, 1)
+    if seconds is not None and not (isinstance(seconds, (int, float)) and seconds > 0):
+        raise ValueError(f"seconds={seconds!r}: give a positive number of seconds")
+    _check_count("seed", seed, 0)
+    if seed >= 2**32:
+        raise ValueError(f"seed={seed}: give a number below 2^32")
+    _check_count("max_bounces", max_bounces, 0)
+    optional_counts = (("rr_depth", rr_depth, 0), ("samples_per_pass", samples_per_pass, 1),
+                       ("connections_per_query", connections_per_query, 1), ("target_pilot", target_pilot, 0))
+    for name, value, least in optional_counts:
+        if value is not None:
+            _check_count(name, value, least)
+    width, height = _resolution(res)
+    data, pairs = _gatetrace.capture(
+        os.fspath(path),
+        scan,
+        _spec(gate),
+        spp=spp,
+        seconds=None if seconds is None else float(seconds),
+        seed=seed,
+        method=method,
+        max_bounces=max_bounces,
+        res=(width, height),
+        rr_depth=rr_depth,
+        samples_per_pass=samples_per_pass,
+        connections_per_query=connections_per_query,
+        query_split=float(query_split),
+        query_bottom_nodes=query_bottom_nodes,
+        query_weights=query_weights,
+        target_pilot=target_pilot,
+        band_index=band_index,
+        needle_guard=float(needle_guard),
+        length_guard=float(length_guard),
+        relay_wall=relay_wall,
+        sensor_origin=None if sensor_origin is None else _point("sensor_origin", sensor_origin, 3),
+        laser_origin=None if laser_origin is None else _point("laser_origin", laser_origin, 3),
+        laser_spot=_point("laser_spot", laser_spot, 2),
+        laser_grid=None if laser_grid is None else _resolution(laser_grid, "laser_grid"),
+        laser_power=float(laser_power),
+        count_first_last=bool(count_first_last),
+        allow_unsupported_materials=bool(allow_unsupported_materials),
+    )
+    metadata = {key: json.loads(value) for key, value in pairs}
+    if "warning" in metadata:
+        import warnings
+
+        warnings.warn(str(metadata["warning"]), RuntimeWarning, stacklevel=2)
+    return data, metadata
+
+
+def _point(name: str, value, n: int) -> tuple:
+    try:
+        point = tuple(float(x) for x in value)
+    except (TypeError, ValueError):
+        point = ()
+    if len(point) != n:
+        raise ValueError(f"{name}={value!r}: give {n} numbers")
+    return point
+
+
 def _check_count(name: str, value, least: int) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
@@ -266,11 +404,11 @@ def _check_count(name: str, value, least: int) -> None:
         raise ValueError(f"{name}={value}: give at least {least}")
 
 
-def _resolution(res) -> Tuple[int, int]:
+def _resolution(res, name: str = "res") -> Tuple[int, int]:
     try:
         width, height = res
     except (TypeError, ValueError):
-        raise ValueError(f"res={res!r}: give (width, height) in pixels") from None
-    _check_count("res width", width, 1)
-    _check_count("res height", height, 1)
+        raise ValueError(f"{name}={res!r}: give (width, height) in pixels") from None
+    _check_count(f"{name} width", width, 1)
+    _check_count(f"{name} height", height, 1)
     return int(width), int(height)

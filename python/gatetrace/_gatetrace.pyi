@@ -69,6 +69,40 @@ class Renderer:
     def settings(self) -> List[Tuple[str, str]]:
         """The settings every render shares: (key, value as JSON text) pairs."""
 
+def capture(
+    path: Union[str, os.PathLike],
+    scan: str,
+    gate: str = "none",
+    *,
+    spp: Optional[int] = None,
+    seconds: Optional[float] = None,
+    seed: int = 0,
+    method: Optional[str] = None,
+    max_bounces: int = 8,
+    res: Tuple[int, int] = (256, 256),
+    rr_depth: Optional[int] = None,
+    samples_per_pass: Optional[int] = None,
+    connections_per_query: Optional[int] = None,
+    query_split: float = 1.0,
+    query_bottom_nodes: int = 31,
+    query_weights: Optional[str] = None,
+    target_pilot: Optional[int] = None,
+    band_index: str = "auto",
+    needle_guard: float = 1e-6,
+    length_guard: float = 1e-5,
+    relay_wall: str = "relay_wall",
+    sensor_origin: Optional[Tuple[float, float, float]] = None,
+    laser_origin: Optional[Tuple[float, float, float]] = None,
+    laser_spot: Tuple[float, float] = (0.5, 0.5),
+    laser_grid: Optional[Tuple[int, int]] = None,
+    laser_power: float = 1.0,
+    count_first_last: bool = False,
+    allow_unsupported_materials: bool = False,
+) -> Tuple[npt.NDArray[np.float32], List[Tuple[str, str]]]:
+    """An NLOS capture as `gatetrace render PATH --nlos SCAN` renders it (positions in m, laser
+    power in W, seconds of rendering): (data in the command line's .npy layout, metadata and the
+    capture's record as (key, value as JSON text) pairs)."""
+
 def describe_gate(spec: str) -> str:
     """What the renderer understands gate `spec` to be; ValueError when it is not a gate."""
 

@@ -5,9 +5,12 @@
 //! One device serves the whole process (opened on first use). A `Renderer` keeps the scene
 //! uploaded and its kernels built: a render with a gate of the same kind and bins as the last
 //! one only moves the gate (`Integrator::set_gate`) and restarts the sample sequence from the
-//! seed (`Integrator::restart`), so its image equals a fresh render's bit for bit. Renders
-//! release the GIL between passes and check for signals after each, so Ctrl-C stops them.
+//! seed (`Integrator::restart`), so its image equals a fresh render's bit for bit. `capture`
+//! renders an NLOS capture through the library's `gatetrace::nlos` (`prepare_capture`,
+//! `render_capture`), as `render --nlos` does. Renders and captures release the GIL between
+//! passes and check for signals after each, so Ctrl-C stops them.
 
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
@@ -21,9 +24,10 @@ use gatetrace::film::output::Metadata;
 use gatetrace::film::{Film, Gate};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{
-    Budget, Integrator, Method, QuerySettings, RenderOutput, RenderSettings, black_image_warning, create_integrator,
-    render_metadata, trace_budget, unreachable_gate,
+    Budget, EllipsoidGuards, Integrator, Method, Progress, QuerySettings, RenderOutput, RenderSettings,
+    black_image_warning, create_integrator, render_metadata, trace_budget, unreachable_gate,
 };
+use gatetrace::nlos::{CaptureChoices, CaptureProgress, CaptureRequest, Scan, prepare_capture, render_capture};
 use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 /// The process's device, opened on first use and shared by every renderer.
@@ -288,18 +292,8 @@ impl Renderer {
         seconds: Option<f64>,
         seed: u32,
     ) -> PyResult<(Bound<'py, PyAny>, Vec<(String, String)>)> {
-        let as_text = |metadata: Metadata| metadata.into_iter().map(|(k, v)| (k, v.to_string())).collect();
-        let gate_value = Gate::parse(gate).map_err(|e| value_error(e.context(format!("gate `{gate}`"))))?;
-        let budget = match (spp, seconds) {
-            (Some(_), Some(_)) => return Err(PyValueError::new_err("give spp or seconds, not both")),
-            (Some(0), None) => return Err(PyValueError::new_err("spp must be at least 1")),
-            (Some(n), None) => Budget::Samples(n),
-            (None, Some(t)) => match Duration::try_from_secs_f64(t) {
-                Ok(d) if t > 0.0 => Budget::Time(d),
-                _ => return Err(PyValueError::new_err(format!("seconds={t}: give a positive number of seconds"))),
-            },
-            (None, None) => Budget::Samples(64),
-        };
+        let gate_value = parse_gate(gate)?;
+        let budget = parse_budget(spp, seconds)?;
         // Never wait for the lock: a render releases the GIL and takes it back between passes, so
         // a thread waiting here with the GIL would deadlock with it.
         let mut state = match self.state.try_lock() {
@@ -429,6 +423,198 @@ impl Renderer {
     }
 }
 
+/// Metadata as (key, value as JSON text) pairs.
+fn as_text(metadata: Metadata) -> Vec<(String, String)> {
+    metadata.into_iter().map(|(k, v)| (k, v.to_string())).collect()
+}
+
+/// A gate given in the command line's syntax.
+fn parse_gate(spec: &str) -> PyResult<Gate> {
+    Gate::parse(spec).map_err(|e| value_error(e.context(format!("gate `{spec}`"))))
+}
+
+/// How long to render: `spp` samples per pixel or `seconds` of rendering (64 spp when neither is
+/// given), as the command line's --spp and --time.
+fn parse_budget(spp: Option<u64>, seconds: Option<f64>) -> PyResult<Budget> {
+    match (spp, seconds) {
+        (Some(_), Some(_)) => Err(PyValueError::new_err("give spp or seconds, not both")),
+        (Some(0), None) => Err(PyValueError::new_err("spp must be at least 1")),
+        (Some(n), None) => Ok(Budget::Samples(n)),
+        (None, Some(t)) => match Duration::try_from_secs_f64(t) {
+            Ok(d) if t > 0.0 => Ok(Budget::Time(d)),
+            _ => Err(PyValueError::new_err(format!("seconds={t}: give a positive number of seconds"))),
+        },
+        (None, None) => Ok(Budget::Samples(64)),
+    }
+}
+
+/// What a capture's renders report to Python: its setup's warnings, kept for the metadata, and
+/// Ctrl-C, checked after every pass (KeyboardInterrupt stops the capture unwritten).
+#[derive(Default)]
+struct CaptureSignals {
+    warnings: Vec<String>,
+    interrupted: Option<PyErr>,
+}
+
+impl CaptureProgress for CaptureSignals {
+    fn warning(&mut self, warning: &str) {
+        self.warnings.push(warning.to_owned());
+    }
+
+    fn render_started(&mut self, _k: usize, _count: usize, _settings: &RenderSettings) {}
+
+    fn pass(&mut self, _progress: Progress) -> ControlFlow<()> {
+        match Python::attach(|py| py.check_signals()) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                self.interrupted = Some(e);
+                ControlFlow::Break(())
+            }
+        }
+    }
+
+    fn render_ended(&mut self, _k: usize, _count: usize) -> ControlFlow<()> {
+        if self.interrupted.is_some() { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+    }
+}
+
+/// Renders an NLOS capture of the scene at `path`, as `gatetrace render PATH --nlos SCAN` with
+/// the same options and defaults (see gatetrace.capture); returns (the capture as a float32 numpy
+/// array in the layout of the command line's .npy, the metadata and the capture's record as (key,
+/// value as JSON text) pairs).
+#[pyfunction]
+#[pyo3(signature = (path, scan, gate="none", *, spp=None, seconds=None, seed=0, method=None, max_bounces=8,
+    res=(256, 256), rr_depth=None, samples_per_pass=None, connections_per_query=None, query_split=1.0,
+    query_bottom_nodes=31, query_weights=None, target_pilot=None, band_index="auto", needle_guard=1e-6,
+    length_guard=1e-5, relay_wall=gatetrace::nlos::DEFAULT_RELAY_WALL, sensor_origin=None, laser_origin=None,
+    laser_spot=(0.5, 0.5), laser_grid=None, laser_power=1.0, count_first_last=false,
+    allow_unsupported_materials=false))]
+#[allow(clippy::too_many_arguments)]
+fn capture<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    scan: &str,
+    gate: &str,
+    spp: Option<u64>,
+    seconds: Option<f64>,
+    seed: u32,
+    method: Option<&str>,
+    max_bounces: u32,
+    res: (u32, u32),
+    rr_depth: Option<u32>,
+    samples_per_pass: Option<u32>,
+    connections_per_query: Option<u32>,
+    query_split: f32,
+    query_bottom_nodes: u32,
+    query_weights: Option<&str>,
+    target_pilot: Option<u32>,
+    band_index: &str,
+    needle_guard: f32,
+    length_guard: f32,
+    relay_wall: &str,
+    sensor_origin: Option<[f32; 3]>,
+    laser_origin: Option<[f32; 3]>,
+    laser_spot: (f32, f32),
+    laser_grid: Option<(u32, u32)>,
+    laser_power: f32,
+    count_first_last: bool,
+    allow_unsupported_materials: bool,
+) -> PyResult<(Bound<'py, PyAny>, Vec<(String, String)>)> {
+    let scan = [Scan::Single, Scan::Confocal, Scan::Exhaustive]
+        .into_iter()
+        .find(|s| s.name() == scan)
+        .ok_or_else(|| PyValueError::new_err(format!("scan `{scan}`: choose single, confocal or exhaustive")))?;
+    let budget = parse_budget(spp, seconds)?;
+    let (width, height) = res;
+    if width == 0 || height == 0 {
+        return Err(PyValueError::new_err(format!("res {width}x{height}: both sides must be at least 1 pixel")));
+    }
+    if samples_per_pass == Some(0) {
+        return Err(PyValueError::new_err("samples_per_pass must be at least 1"));
+    }
+    if let Some((w, h)) = laser_grid
+        && (w == 0 || h == 0)
+    {
+        return Err(PyValueError::new_err(format!("laser_grid {w}x{h}: both sides must be at least 1 spot")));
+    }
+    let reflection_weights = match query_weights {
+        None => None,
+        Some("arcs") => Some(false),
+        Some("reflection") => Some(true),
+        Some(other) => {
+            return Err(PyValueError::new_err(format!("query_weights `{other}`: choose arcs or reflection")));
+        }
+    };
+    let band_index_choice = match band_index {
+        "auto" => None,
+        "on" => Some(true),
+        "off" => Some(false),
+        other => return Err(PyValueError::new_err(format!("band_index `{other}`: choose auto, on or off"))),
+    };
+    let choices = CaptureChoices {
+        method: method.map(parse_method).transpose()?,
+        connections_per_query,
+        reflection_weights,
+        target_pilot,
+        band_index: band_index_choice,
+    };
+    let mut settings = RenderSettings {
+        width,
+        height,
+        gate: parse_gate(gate)?,
+        max_bounces,
+        rr_depth,
+        seed,
+        samples_per_pass,
+        query: QuerySettings { split: query_split, bottom_nodes: query_bottom_nodes, ..Default::default() },
+        ellipsoid_guards: EllipsoidGuards { needle: needle_guard, length: length_guard },
+        ..Default::default()
+    };
+    choices.apply(&mut settings);
+    if settings.target_pilot_spp != 0 && settings.method != Method::Ellipsoidal {
+        return Err(PyValueError::new_err("target_pilot applies to method ellipsoidal only"));
+    }
+    let request = CaptureRequest {
+        scan,
+        relay_wall: relay_wall.to_owned(),
+        sensor_origin: sensor_origin.map(glam_point),
+        laser_origin: laser_origin.map(glam_point),
+        laser_spot: glam::Vec2::from(laser_spot),
+        laser_grid,
+        laser_power,
+        count_first_and_last: count_first_last,
+        band_index_auto: band_index_choice.is_none(),
+    };
+    request.check(&settings).map_err(value_error)?;
+    gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
+    if !path.exists() {
+        return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
+    }
+    let load = LoadOptions { allow_unsupported_materials, ..Default::default() };
+    let prepared = py.detach(|| prepare_capture(&path, load, &request, settings)).map_err(value_error)?;
+    let ctx = device()?;
+    let mut signals = CaptureSignals::default();
+    let rendered = py.detach(|| render_capture(ctx, &prepared, budget, &mut signals));
+    if let Some(interrupted) = signals.interrupted.take() {
+        return Err(interrupted);
+    }
+    let capture = rendered.map_err(value_error)?.expect("only Ctrl-C stops a capture");
+    let mut metadata = capture.metadata(ctx, &path, gate, &prepared);
+    let mut warnings = signals.warnings;
+    warnings.extend(capture.output.unvisited_bins_warning());
+    if !warnings.is_empty() {
+        metadata.push(("warning".into(), warnings.join("; ").into()));
+    }
+    metadata.extend(capture.record(&prepared));
+    let data = PyArray1::from_slice(py, &capture.data).reshape(capture.shape(&prepared))?.into_any();
+    Ok((data, as_text(metadata)))
+}
+
+/// A point given as [x, y, z].
+fn glam_point(p: [f32; 3]) -> glam::Vec3 {
+    glam::Vec3::from_array(p)
+}
+
 /// A film as a float32 numpy array: [H, W, 3], or [H, W, T, 3] for more than one bin; row 0 is
 /// the top of the image (the command line's .npy layout).
 fn film_array<'py>(py: Python<'py>, film: &Film) -> PyResult<Bound<'py, PyAny>> {
@@ -441,7 +627,7 @@ fn film_array<'py>(py: Python<'py>, film: &Film) -> PyResult<Bound<'py, PyAny>> 
 /// Describes a gate given in the command line's syntax (ValueError when it is not one).
 #[pyfunction]
 fn describe_gate(spec: &str) -> PyResult<String> {
-    Gate::parse(spec).map(|g| g.describe()).map_err(|e| value_error(e.context(format!("gate `{spec}`"))))
+    parse_gate(spec).map(|g| g.describe())
 }
 
 /// Compute pipelines (kernels) built in this process so far.
@@ -466,6 +652,7 @@ fn version() -> &'static str {
 fn _gatetrace(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Scene>()?;
     m.add_class::<Renderer>()?;
+    m.add_function(wrap_pyfunction!(capture, m)?)?;
     m.add_function(wrap_pyfunction!(describe_gate, m)?)?;
     m.add_function(wrap_pyfunction!(kernels_built, m)?)?;
     m.add_function(wrap_pyfunction!(device_name, m)?)?;

@@ -273,3 +273,52 @@ def test_nlos_tools_read_a_capture_whose_gate_was_typed_in_ns_and_ps(tmp_path):
         assert f["H"].shape == (400, 8, 8)
         assert float(f["delta_t"][()]) == pytest.approx(gate["bin_width_m"], rel=1e-6)
         assert float(f["t_start"][()]) == pytest.approx(gate["start_m"], rel=1e-6)
+
+
+LETTER = ROOT / "assets/scenes/nlos_letter.gltf"
+
+
+def test_confocal_capture_equals_the_command_line_bit_for_bit(tmp_path):
+    gate = gatetrace.transient(0.9, 0.1, 8)
+    data, meta = gatetrace.capture(LETTER, "confocal", gate, res=(8, 8), max_bounces=3, spp=64, seed=3)
+    assert data.shape == (8, 8, 8, 3) and data.dtype == np.float32
+    cli, cli_meta = cli_render(tmp_path, str(LETTER), "--nlos", "confocal", "--gate", str(gate), "--res", "8x8",
+                               "--max-bounces", "3", "--spp", "64", "--seed", "3")
+    assert data.sum() > 0
+    assert np.array_equal(data, cli), f"largest difference {np.abs(data - cli).max()}"
+    for key in ("method", "gate_parameters", "spp", "seed", "max_bounces", "resolution", "connections_per_query",
+                "query_weights", "target_pilot_spp", "units", "nlos_scan", "relay_wall", "sensor_origin",
+                "laser_origin", "laser_power_w", "sensor_grid_xyz", "laser_grid_xyz"):
+        assert meta[key] == cli_meta[key], key
+    assert meta["method"] == "ellipsoidal" and meta["nlos_scan"] == "confocal"
+
+
+@pytest.mark.parametrize(
+    "options, error, words",
+    [
+        (dict(relay_wall="no_such_wall"), ValueError, "no node named `no_such_wall`"),
+        (dict(scan="sideways"), ValueError, "scan `sideways`"),
+        (dict(max_bounces=1), ValueError, "max-bounces"),
+        (dict(laser_grid=(2, 2)), ValueError, "laser-grid needs --nlos exhaustive"),
+        (dict(method="auto"), ValueError, "method auto does not apply to NLOS captures"),
+        (dict(laser_power=-1.0), ValueError, "laser power"),
+        (dict(sensor_origin=(0.0, 1.0)), ValueError, "sensor_origin"),
+        (dict(band_index="maybe"), ValueError, "band_index"),
+    ],
+)
+def test_bad_capture_options_raise_python_exceptions_naming_the_problem(options, error, words):
+    arguments = dict(scan="confocal", gate="transient:0.9,0.02,8", res=(4, 4), max_bounces=3, spp=1)
+    arguments.update(options)
+    with pytest.raises(error) as caught:
+        gatetrace.capture(LETTER, **arguments)
+    assert words in str(caught.value), str(caught.value)
+
+
+def test_exhaustive_capture_has_the_command_lines_layout_and_values(tmp_path):
+    data, meta = gatetrace.capture(LETTER, "exhaustive", "transient:0.9,0.1,8", res=(3, 2), laser_grid=(2, 2),
+                                   max_bounces=3, spp=64, seed=5)
+    assert data.shape == (2, 2, 2, 3, 8, 3) and data.dtype == np.float32
+    cli, _ = cli_render(tmp_path, str(LETTER), "--nlos", "exhaustive", "--gate", "transient:0.9,0.1,8", "--res", "3x2",
+                        "--laser-grid", "2x2", "--max-bounces", "3", "--spp", "64", "--seed", "5")
+    assert np.array_equal(data, cli)
+    assert meta["nlos_scan"] == "exhaustive" and np.array(meta["laser_grid_xyz"]).shape == (2, 2, 3)

@@ -39,7 +39,18 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
     // NLOS captures have defaults of their own (gatetrace::nlos::capture).
     let capture = args.nlos.is_some();
-    let method = args.method.unwrap_or(if capture { nlos::default_method(&gate) } else { Method::Path });
+    let choices = nlos::CaptureChoices {
+        method: args.method,
+        connections_per_query: args.connections_per_query,
+        reflection_weights: args.query_weights.map(|weights| weights == QueryWeights::Reflection),
+        target_pilot: args.target_pilot,
+        band_index: match args.band_index {
+            OnOff::Auto => None,
+            OnOff::On => Some(true),
+            OnOff::Off => Some(false),
+        },
+    };
+    let method = if capture { choices.method(&gate) } else { args.method.unwrap_or(Method::Path) };
     let budget = match (args.spp, args.time) {
         (_, Some(t)) => match Duration::try_from_secs_f64(t) {
             Ok(d) if t > 0.0 => Budget::Time(d),
@@ -83,18 +94,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
         stats: args.stats,
         debug_strategy: args.debug_strategy,
         binding_limit: None,
-        connections_per_query: args.connections_per_query.unwrap_or(if capture {
-            nlos::default_connections_per_query(method)
-        } else {
-            gatetrace::integrator::bidirectional::default_connections_per_query(method)
-        }),
+        connections_per_query: args
+            .connections_per_query
+            .unwrap_or(gatetrace::integrator::bidirectional::default_connections_per_query(method)),
         query: gatetrace::integrator::QuerySettings {
             split: args.query_split,
             bottom_nodes: args.query_bottom_nodes,
-            reflection_weights: match args.query_weights {
-                Some(weights) => weights == QueryWeights::Reflection,
-                None => capture && nlos::DEFAULT_REFLECTION_WEIGHTS,
-            },
+            reflection_weights: args.query_weights == Some(QueryWeights::Reflection),
             ..Default::default()
         },
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards {
@@ -102,14 +108,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
             length: args.length_guard,
         },
         nlos: None,
-        target_pilot_spp: args.target_pilot.unwrap_or(if capture {
-            nlos::default_target_pilot(method, &gate)
-        } else {
-            0
-        }),
+        target_pilot_spp: args.target_pilot.unwrap_or(0),
         band_index: false,
         ellipsoidal_share: args.ellipsoidal_share,
     };
+    // A capture's own defaults, and its band index (`auto` is decided once the scene is loaded:
+    // nlos::prepare_capture).
+    if capture {
+        choices.apply(&mut settings);
+    }
     ensure!(
         args.ellipsoidal_share.is_none() || method == Method::Combined,
         "--ellipsoidal-share applies to --method combined only"
@@ -118,8 +125,6 @@ pub fn run(args: RenderArgs) -> Result<()> {
         settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
         "--target-pilot applies to --method ellipsoidal only"
     );
-    // `auto` is decided once the scene is loaded (nlos::prepare_capture).
-    settings.band_index = args.band_index != OnOff::Off && capture && nlos::band_index_applies(settings.method, &gate);
     if let Some(every) = args.checkpoint_every {
         ensure!(every.is_finite() && every >= 0.0, "--checkpoint-every {every}: give seconds, 0 or more");
     }
@@ -148,10 +153,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             "--checkpoint-every and --resume do not apply to NLOS captures (--nlos) yet: an interrupted capture writes \
              the samples traced so far (single and confocal scans) but keeps no checkpoint"
         );
-        ensure!(
-            method != Method::Auto,
-            "--method auto does not apply to NLOS captures (--nlos): choose path, direct or ellipsoidal"
-        );
+        // --method auto is refused by CaptureRequest::check (in nlos::run).
         ensure!(
             args.aperture_radius.is_none() && args.focus_distance.is_none(),
             "--aperture-radius and --focus-distance set the camera's lens: an NLOS capture (--nlos) has no camera"

@@ -1,6 +1,7 @@
-//! How a capture is rendered (`gatetrace render --nlos`): the settings a capture defaults to,
-//! when the band index applies, the scene's preparation for it, one render per laser spot of
-//! the scan, and the capture's output with its sensed points and laser spots.
+//! How a capture is rendered (`gatetrace render --nlos`): the settings a capture defaults to and
+//! the choices that override them, when the band index applies, the scene's preparation for it,
+//! one render per laser spot of the scan, and the capture's output (its data's shape, its
+//! record of the sensed points and laser spots, its files).
 
 use std::ops::ControlFlow;
 use std::path::Path;
@@ -49,6 +50,45 @@ pub fn band_index_applies(method: Method, gate: &Gate) -> bool {
     method == Method::Ellipsoidal && matches!(gate, Gate::Transient { .. })
 }
 
+/// What a capture's renders are asked for where a capture has defaults of its own (`render
+/// --nlos --method, --connections-per-query, --query-weights, --target-pilot, --band-index`):
+/// None takes the capture's default.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CaptureChoices {
+    /// The method (None: [`default_method`]).
+    pub method: Option<Method>,
+    /// Connections per ellipsoid query (None: [`default_connections_per_query`]).
+    pub connections_per_query: Option<u32>,
+    /// Ellipsoid queries weigh their picks by reflection (None: [`DEFAULT_REFLECTION_WEIGHTS`]).
+    pub reflection_weights: Option<bool>,
+    /// Samples per pixel of the target pilot (None: [`default_target_pilot`]).
+    pub target_pilot: Option<u32>,
+    /// The band index: Some(true) on, Some(false) off, None decided by itself (`auto`: on where it
+    /// applies, declined by [`prepare_capture`] for small hidden scenes).
+    pub band_index: Option<bool>,
+}
+
+impl CaptureChoices {
+    /// The method a capture of `gate` renders with.
+    pub fn method(&self, gate: &Gate) -> Method {
+        self.method.unwrap_or_else(|| default_method(gate))
+    }
+
+    /// Sets the method, the connections per query, the query weights, the target pilot and the
+    /// band index of `settings` (whose gate is the capture's) as asked, or to the capture's
+    /// defaults.
+    pub fn apply(&self, settings: &mut RenderSettings) {
+        let gate = &settings.gate;
+        let method = self.method(gate);
+        settings.method = method;
+        settings.connections_per_query =
+            self.connections_per_query.unwrap_or_else(|| default_connections_per_query(method));
+        settings.query.reflection_weights = self.reflection_weights.unwrap_or(DEFAULT_REFLECTION_WEIGHTS);
+        settings.target_pilot_spp = self.target_pilot.unwrap_or_else(|| default_target_pilot(method, gate));
+        settings.band_index = self.band_index != Some(false) && band_index_applies(method, gate);
+    }
+}
+
 /// A capture as asked for: the scan, the relay wall, the laser and the sensor.
 #[derive(Clone, Debug)]
 pub struct CaptureRequest {
@@ -84,6 +124,10 @@ impl CaptureRequest {
             settings.max_bounces
         );
         ensure!(self.laser_grid.is_none() || self.scan == Scan::Exhaustive, "--laser-grid needs --nlos exhaustive");
+        ensure!(
+            settings.method != Method::Auto,
+            "--method auto does not apply to NLOS captures (--nlos): choose path, direct or ellipsoidal"
+        );
         Ok(())
     }
 }
@@ -283,24 +327,39 @@ impl Capture {
         metadata
     }
 
+    /// The shape of the capture's data: an exhaustive scan's [laser_y, laser_x, grid_y, grid_x,
+    /// T, 3], the others' [grid_y, grid_x, T, 3] (the render's film); T only for several bins.
+    pub fn shape(&self, prepared: &PreparedCapture) -> Vec<usize> {
+        let (w, h) = (self.settings.width as usize, self.settings.height as usize);
+        let (laser_w, laser_h) = prepared.laser_grid;
+        let mut shape =
+            if prepared.scan == Scan::Exhaustive { vec![laser_h as usize, laser_w as usize] } else { vec![] };
+        shape.extend([h, w]);
+        let bins = self.output.film.bins as usize;
+        if bins > 1 {
+            shape.push(bins);
+        }
+        shape.push(3);
+        shape
+    }
+
+    /// The capture's record beside its metadata: the scan, the wall, the origins, the laser and
+    /// the sensed points and laser spots with their normals (m).
+    pub fn record(&self, prepared: &PreparedCapture) -> serde_json::Map<String, serde_json::Value> {
+        let (w, laser_w) = (self.settings.width, prepared.laser_grid.0);
+        capture_record(&prepared.scene, &prepared.capture, prepared.scan, &self.sensed, w, &self.spots, laser_w)
+    }
+
     /// Writes the capture to `out` with `metadata` and its sensed points and laser spots in the
     /// sidecar: an exhaustive scan as NPY [laser_y, laser_x, grid_y, grid_x, T, 3] (T only for
     /// several bins), the others as the render's film.
     pub fn write(&self, out: &Path, prepared: &PreparedCapture, metadata: &Metadata) -> Result<()> {
-        let (w, h) = (self.settings.width, self.settings.height);
-        let (laser_w, laser_h) = prepared.laser_grid;
-        let extras =
-            capture_record(&prepared.scene, &prepared.capture, prepared.scan, &self.sensed, w, &self.spots, laser_w);
+        let extras = self.record(prepared);
         let film = &self.output.film;
         let gate = &self.settings.gate;
         let bin_ranges: Vec<(f64, f64)> = (0..gate.bins()).filter_map(|b| gate.bin_range(b)).collect();
         if prepared.scan == Scan::Exhaustive {
-            let bins = film.bins as usize;
-            let mut shape = vec![laser_h as usize, laser_w as usize, h as usize, w as usize];
-            if bins > 1 {
-                shape.push(bins);
-            }
-            shape.push(3);
+            let shape = self.shape(prepared);
             ensure!(
                 self.data.iter().all(|v| v.is_finite()),
                 "refusing to write {}: the capture holds non-finite values",

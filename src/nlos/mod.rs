@@ -33,8 +33,9 @@ mod shells;
 use glam::{Vec2, Vec3};
 
 pub use capture::{
-    Capture, CaptureProgress, CaptureRequest, DEFAULT_REFLECTION_WEIGHTS, PreparedCapture, band_index_applies,
-    default_connections_per_query, default_method, default_target_pilot, prepare_capture, render_capture,
+    Capture, CaptureChoices, CaptureProgress, CaptureRequest, DEFAULT_REFLECTION_WEIGHTS, PreparedCapture,
+    band_index_applies, default_connections_per_query, default_method, default_target_pilot, prepare_capture,
+    render_capture,
 };
 pub use geometry::{
     WallTarget, capture_record, cell_uv, check_capture, origin_from_nodes, wall_normal, wall_point_at, wall_points,
