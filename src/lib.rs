@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod bvh;
+pub mod capture;
 pub mod ellipsoid;
 pub mod film;
 pub mod frames;

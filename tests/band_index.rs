@@ -1,4 +1,4 @@
-//! The band index of NLOS captures (src/integrator/band_index.rs): its clusters partition the
+//! The band index of NLOS captures (src/nlos/band_index.rs): its clusters partition the
 //! BVH's triangles, and `ellipsoidal` captures that draw their three-bounce connections from it
 //! agree with captures that descend the BVH (both unbiased, independent estimators), bin group
 //! by bin group, on a hidden sphere of 5,120 triangles split over many clusters, for confocal and
@@ -9,9 +9,9 @@ mod common;
 use glam::Vec3;
 
 use gatetrace::film::{Film, Gate};
-use gatetrace::integrator::band_index::{CLUSTER_NODES, clusters, interpolation_bound, strip_point, tent_cdf};
 use gatetrace::integrator::{BidirectionalTracer, Integrator, Method};
 use gatetrace::nlos::LaserAim;
+use gatetrace::nlos::band_index::{CLUSTER_NODES, clusters, interpolation_bound, strip_point, tent_cdf};
 
 #[test]
 fn clusters_partition_the_triangles_into_small_subtrees() {

@@ -20,6 +20,7 @@ use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
+use gatetrace::capture::{CaptureChoices, CaptureProgress, CaptureRequest, prepare_capture, render_capture};
 use gatetrace::film::output::Metadata;
 use gatetrace::film::{Film, Gate};
 use gatetrace::gpu::GpuContext;
@@ -27,7 +28,7 @@ use gatetrace::integrator::{
     Budget, EllipsoidGuards, Integrator, Method, Progress, QuerySettings, RenderOutput, RenderSettings,
     black_image_warning, create_integrator, render_metadata, trace_budget, unreachable_gate,
 };
-use gatetrace::nlos::{CaptureChoices, CaptureProgress, CaptureRequest, Scan, prepare_capture, render_capture};
+use gatetrace::nlos::Scan;
 use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 /// The process's device, opened on first use and shared by every renderer.
@@ -91,8 +92,8 @@ impl Scene {
             PreparedScene::new(scene)
         };
         let prepared = py.detach(load).map_err(value_error)?;
-        // What loading ignored or changed, as Python warnings (UserWarning) naming the file.
-        let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+        // What loading ignored or changed, as Python warnings (RuntimeWarning, as a render's warnings) naming the file.
+        let category = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
         for warning in &prepared.scene.warnings {
             let message = std::ffi::CString::new(warning.replace('\0', " ")).expect("no NUL left");
             PyErr::warn(py, category.as_any(), &message, 1)?;

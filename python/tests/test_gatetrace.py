@@ -154,6 +154,18 @@ def test_transmissive_materials_are_refused_unless_allowed(tmp_path):
     assert gatetrace.Scene.load(glass, allow_unsupported_materials=True).triangles > 0
 
 
+def test_what_loading_ignores_comes_as_a_python_warning(tmp_path):
+    doc = json.loads(BOX.read_text())
+    doc["materials"][0].setdefault("extensions", {})["KHR_materials_clearcoat"] = {"clearcoatFactor": 1.0}
+    doc["extensionsUsed"].append("KHR_materials_clearcoat")
+    coated = tmp_path / "coated.gltf"
+    coated.write_text(json.dumps(doc))
+    with pytest.warns(RuntimeWarning, match="KHR_materials_clearcoat") as caught:
+        scene = gatetrace.Scene.load(coated)
+    assert scene.triangles > 0
+    assert any("coated.gltf" in str(w.message) and "material `white`" in str(w.message) for w in caught)
+
+
 def test_scenes_in_other_formats_say_what_they_are(tmp_path):
     obj = tmp_path / "plane.obj"
     obj.write_text("o Plane\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")

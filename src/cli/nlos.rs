@@ -1,15 +1,16 @@
 //! `gatetrace render --nlos`: the options of a capture turned into the library's request
-//! (gatetrace::nlos::capture renders it), the progress bars of its renders, what a signal does
+//! (gatetrace::capture renders it), the progress bars of its renders, what a signal does
 //! to a capture, and the report.
 
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Result, ensure};
+use gatetrace::capture::{CaptureProgress, CaptureRequest, prepare_capture, render_capture};
 use gatetrace::film::output::{OutputFormat, check_writable};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{Budget, Progress, RenderSettings, film_elements};
-use gatetrace::nlos::{CaptureProgress, CaptureRequest, Scan, prepare_capture, render_capture};
+use gatetrace::nlos::Scan;
 
 use super::args::{OnOff, RenderArgs};
 use super::interrupt;

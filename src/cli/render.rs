@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result, bail, ensure};
+use gatetrace::capture;
 use gatetrace::film::Gate;
 use gatetrace::film::output::{OutputFormat, check_writable, write_film};
 use gatetrace::film::preview::{PreviewSettings, write_preview};
@@ -15,7 +16,6 @@ use gatetrace::integrator::checkpoint::{checkpoint_path, fingerprint, read_check
 use gatetrace::integrator::{
     Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
 };
-use gatetrace::nlos;
 use gatetrace::scene::{PreparedScene, load_gltf_with};
 
 use super::args::{ImageArgs, OnOff, QueryWeights, RenderArgs};
@@ -37,9 +37,9 @@ fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &ImageArgs) -> Re
 pub fn run(args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(super::DEFAULT_SCENE));
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
-    // NLOS captures have defaults of their own (gatetrace::nlos::capture).
-    let capture = args.nlos.is_some();
-    let choices = nlos::CaptureChoices {
+    // NLOS captures have defaults of their own (gatetrace::capture).
+    let is_capture = args.nlos.is_some();
+    let choices = capture::CaptureChoices {
         method: args.method,
         connections_per_query: args.connections_per_query,
         reflection_weights: args.query_weights.map(|weights| weights == QueryWeights::Reflection),
@@ -50,7 +50,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             OnOff::Off => Some(false),
         },
     };
-    let method = if capture { choices.method(&gate) } else { args.method.unwrap_or(Method::Path) };
+    let method = if is_capture { choices.method(&gate) } else { args.method.unwrap_or(Method::Path) };
     let budget = match (args.spp, args.time) {
         (_, Some(t)) => match Duration::try_from_secs_f64(t) {
             Ok(d) if t > 0.0 => Budget::Time(d),
@@ -113,8 +113,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ellipsoidal_share: args.ellipsoidal_share,
     };
     // A capture's own defaults, and its band index (`auto` is decided once the scene is loaded:
-    // nlos::prepare_capture).
-    if capture {
+    // capture::prepare_capture).
+    if is_capture {
         choices.apply(&mut settings);
     }
     ensure!(

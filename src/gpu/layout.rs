@@ -295,7 +295,7 @@ pub struct TargetParams {
     pub extra_stride: u32,
     /// Index of the film's first sample (u32, wrapping): a pixel's cycles of visits start there.
     pub film_first_sample: u32,
-    /// 1 once the band index of an NLOS capture is built (`integrator::band_index`): its
+    /// 1 once the band index of an NLOS capture is built (`nlos::band_index`): its
     /// three-bounce ellipsoidal connections are then drawn from it.
     pub band_index: u32,
     /// Padding.

@@ -131,9 +131,9 @@ pub struct BidirectionalTracer<'a> {
     target_pilot_ran: bool,
     /// The band index of an NLOS capture, while it is still to be built (before the pilot and
     /// the first pass).
-    band_index: Option<super::band_index::BandIndex>,
+    band_index: Option<crate::nlos::band_index::BandIndex>,
     /// What became of the band index: built (its figures) or why not; None when not asked for.
-    band_index_result: Option<std::result::Result<super::band_index::BandIndexSummary, String>>,
+    band_index_result: Option<std::result::Result<crate::nlos::band_index::BandIndexSummary, String>>,
     /// The built band index's masses per pixel and stratum (empty without one): they share out
     /// the target lengths' extra visits instead of a pilot render.
     band_masses: Vec<f32>,
@@ -269,13 +269,13 @@ impl<'a> BidirectionalTracer<'a> {
         let mut band_index_result = None;
         let mut band_index_planned = false;
         if ellipsoidal && settings.band_index && settings.nlos.is_some() {
-            match super::band_index::unfit(&params, limit) {
+            match crate::nlos::band_index::unfit(&params, limit) {
                 None => band_index_planned = true,
                 Some(why) => band_index_result = Some(Err(why)),
             }
         }
         if !band_index_planned {
-            super::band_index::placeholders(ctx, &mut r)?;
+            crate::nlos::band_index::placeholders(ctx, &mut r)?;
         }
 
         constants.push(("CAMERA_VERTICES", camera_vertices as f64));
@@ -315,9 +315,9 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("QUERY_ALLOWANCE", settings.query.allowance as f64));
             constants.push(("QUERY_REFLECTION_WEIGHTS", settings.query.reflection_weights as u32 as f64));
         }
-        constants.push(("BAND_ENTRIES_CHUNK_BITS", super::band_index::entries_chunk_bits(limit) as f64));
+        constants.push(("BAND_ENTRIES_CHUNK_BITS", crate::nlos::band_index::entries_chunk_bits(limit) as f64));
         let band_index = match band_index_planned {
-            true => Some(super::band_index::BandIndex::new(ctx, &mut r, scene, &params, &constants, limit)?),
+            true => Some(crate::nlos::band_index::BandIndex::new(ctx, &mut r, scene, &params, &constants, limit)?),
             false => None,
         };
         constants.push(("BAND_INDEX", band_index_planned as u32 as f64));

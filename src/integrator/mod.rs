@@ -8,7 +8,6 @@
 //! its outputs record.
 
 pub mod auto;
-pub mod band_index;
 pub mod bidirectional;
 pub mod checkpoint;
 pub mod combined;

@@ -110,7 +110,7 @@ pub struct RenderSettings {
     /// [`super::bidirectional::DEFAULT_NLOS_TARGET_PILOT`].
     pub target_pilot_spp: u32,
     /// `ellipsoidal` NLOS captures on a transient gate: build the band index (see
-    /// [`super::band_index`]) before the first pass and draw each connection between a pixel's
+    /// [`crate::nlos::band_index`]) before the first pass and draw each connection between a pixel's
     /// laser spot and its sensed point from it, instead of descending the whole BVH (`render
     /// --band-index on`; off by default).
     pub band_index: bool,

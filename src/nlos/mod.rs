@@ -23,20 +23,17 @@
 //!
 //! Module layout: this module holds the capture's types; `geometry` the relay wall's points (the
 //! sensed points and laser spots) and the capture's record; `shells` the hidden scene's
-//! preparation for the band index's shell connections; `capture` how a capture is rendered (its
-//! defaults, one render per laser spot, its output).
+//! preparation for the band index's shell connections; `band_index` the index itself, built on
+//! the device. These are the pieces the integrators render a capture's pixels with, below them;
+//! `crate::capture`, above the integrators, runs a capture (its defaults, one render per laser
+//! spot, its output).
 
-mod capture;
+pub mod band_index;
 mod geometry;
 mod shells;
 
 use glam::{Vec2, Vec3};
 
-pub use capture::{
-    Capture, CaptureChoices, CaptureProgress, CaptureRequest, DEFAULT_REFLECTION_WEIGHTS, PreparedCapture,
-    band_index_applies, default_connections_per_query, default_method, default_target_pilot, prepare_capture,
-    render_capture,
-};
 pub use geometry::{
     WallTarget, capture_record, cell_uv, check_capture, origin_from_nodes, wall_normal, wall_point_at, wall_points,
     wall_points_and_warnings, wall_target_at,

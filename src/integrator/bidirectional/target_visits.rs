@@ -28,7 +28,7 @@ impl BidirectionalTracer<'_> {
             let strata = wf.params.target_length.strata;
             let cells = (wf.params.width * wf.params.height) as usize * strata.div_ceil(summary.ratio) as usize;
             let bins: Vec<f32> = read_buffer(wf.ctx, wf.resources.get("band_sums").unwrap(), cells)?;
-            self.band_masses = crate::integrator::band_index::strata_masses(&bins, summary.ratio, strata);
+            self.band_masses = crate::nlos::band_index::strata_masses(&bins, summary.ratio, strata);
         }
         self.band_index_result = Some(result);
         Ok(())

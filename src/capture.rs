@@ -9,15 +9,15 @@ use std::path::Path;
 use anyhow::{Context as _, Result, ensure};
 use glam::{Vec2, Vec3};
 
-use super::{LaserAim, NlosCapture, Scan, ShellPreparation, capture_record, cell_uv, check_capture};
 use crate::film::Gate;
 use crate::film::output::{Metadata, write_film_with, write_npy_f32, write_sidecar};
 use crate::frames::frame_seed;
 use crate::gpu::GpuContext;
 use crate::gpu::layout::WallPoint;
-use crate::integrator::band_index::AUTO_MIN_TRIANGLES;
 use crate::integrator::bidirectional::{DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT};
 use crate::integrator::{Budget, Method, Progress, RenderOutput, RenderSettings, render_metadata, render_resumable};
+use crate::nlos::band_index::AUTO_MIN_TRIANGLES;
+use crate::nlos::{LaserAim, NlosCapture, Scan, ShellPreparation, capture_record, cell_uv, check_capture};
 use crate::scene::{LoadOptions, PreparedScene, load_gltf_with};
 
 /// The method a capture renders with when none is asked for: ellipsoidal where a gate gives
@@ -172,7 +172,7 @@ pub fn prepare_capture(
         settings.band_index = false;
     }
     let origin = |given: Option<Vec3>, node: &str, flag: &str| -> Result<Vec3> {
-        given.or_else(|| super::origin_from_nodes(&loaded, node)).with_context(|| {
+        given.or_else(|| crate::nlos::origin_from_nodes(&loaded, node)).with_context(|| {
             format!("{}: no node named `{node}` or `nlos_origin`: give {flag} X,Y,Z (m)", scene_path.display())
         })
     };
@@ -184,7 +184,7 @@ pub fn prepare_capture(
     // triangles cut into pieces (prepare_for_shells).
     let shells = match (settings.band_index, &settings.gate) {
         (true, Gate::Transient { width, .. }) if loaded.node(wall).is_some() => Some(
-            super::prepare_for_shells(&mut loaded, wall, *width, &[sensor_origin, laser_origin])
+            crate::nlos::prepare_for_shells(&mut loaded, wall, *width, &[sensor_origin, laser_origin])
                 .with_context(|| scene_path.display().to_string())?,
         ),
         _ => None,
@@ -260,7 +260,7 @@ pub fn render_capture(
     let mut last = None;
     for (k, &aim) in aims.iter().enumerate() {
         let capture = NlosCapture { aim, ..prepared.capture.clone() };
-        let (points, warnings) = super::wall_points_and_warnings(scene, &capture, w, h)?;
+        let (points, warnings) = crate::nlos::wall_points_and_warnings(scene, &capture, w, h)?;
         if k == 0 {
             for warning in warnings {
                 progress.warning(&warning);
