@@ -3,7 +3,7 @@
 to the HDF5 layout of the TAL toolkit (y-tal, `tal.io.read_capture`), which NLOS reconstruction
 code reads.
 
-    tools/nlos_to_hdf5.py CAPTURE.npy [-o CAPTURE.hdf5] [--channels sum|mean|r|g|b]
+    tools/nlos/nlos_to_hdf5.py CAPTURE.npy [-o CAPTURE.hdf5] [--channels sum|mean|r|g|b]
 
 What is written (TAL's names and conventions):
 - H: the transient, float32, (T, Sx, Sy) for single and confocal scans (H_format T_Sx_Sy), or
