@@ -117,14 +117,6 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if is_capture {
         choices.apply(&mut settings);
     }
-    ensure!(
-        args.ellipsoidal_share.is_none() || method == Method::Combined,
-        "--ellipsoidal-share applies to --method combined only"
-    );
-    ensure!(
-        settings.target_pilot_spp == 0 || settings.method == Method::Ellipsoidal,
-        "--target-pilot applies to --method ellipsoidal only"
-    );
     if let Some(every) = args.checkpoint_every {
         ensure!(every.is_finite() && every >= 0.0, "--checkpoint-every {every}: give seconds, 0 or more");
     }
@@ -182,14 +174,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
         let settings =
             RenderSettings { gate: plan.gate(&gate, frame)?, seed: frame_seed(args.seed, frame), ..settings.clone() };
-        if settings.debug_strategy.is_some() && settings.method != Method::Direct {
-            bail!("--debug-strategy needs --method direct");
-        }
-        if settings.method != Method::Path {
-            gatetrace::integrator::bidirectional::check_settings(&settings)?;
-        } else if settings.connections_per_query != 1 {
-            bail!("--connections-per-query applies to --method ellipsoidal and combined only");
-        }
+        settings.check()?;
         film_elements(&settings)?;
         check_writable(&path, args.mkdir)?;
         frames.push((frame, path, settings));

@@ -19,7 +19,7 @@ pub mod settings;
 pub mod upload;
 pub mod wavefront;
 
-use anyhow::Result;
+use anyhow::{Result, ensure};
 
 use crate::film::Film;
 use crate::gpu::GpuContext;
@@ -165,6 +165,34 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
             Ok(())
         }
         _ => bidirectional::check_tracer_settings(settings),
+    }
+}
+
+impl RenderSettings {
+    /// Errors for settings that cannot render as asked, checked before any work: options of
+    /// other methods, and each method's own limits ([`check_settings`]). The command line and
+    /// the viewer call it; its messages name the command line's options.
+    pub fn check(&self) -> Result<()> {
+        ensure!(
+            self.ellipsoidal_share.is_none() || self.method == Method::Combined,
+            "--ellipsoidal-share applies to --method combined only"
+        );
+        ensure!(
+            self.target_pilot_spp == 0 || self.method == Method::Ellipsoidal,
+            "--target-pilot applies to --method ellipsoidal only"
+        );
+        ensure!(
+            self.debug_strategy.is_none() || self.method == Method::Direct,
+            "--debug-strategy needs --method direct"
+        );
+        match self.method {
+            Method::Path => ensure!(
+                self.connections_per_query == 1,
+                "--connections-per-query applies to --method ellipsoidal and combined only"
+            ),
+            _ => check_settings(self)?,
+        }
+        Ok(())
     }
 }
 

@@ -98,9 +98,7 @@ impl<'a> Viewer<'a> {
                 return Ok(());
             }
         }
-        if wanted.method != Method::Path {
-            gatetrace::integrator::bidirectional::check_settings(&wanted)?;
-        }
+        wanted.check()?;
         self.tracer = None;
         let tracer = create_integrator(self.ctx, self.scene, &wanted)?;
         self.display = Some(self.make_display(tracer.as_ref(), wanted.method != Method::Path)?);
