@@ -243,18 +243,8 @@ impl Renderer {
         query_weights: &str,
     ) -> PyResult<Self> {
         let method = parse_method(method)?;
-        let (width, height) = res;
-        if width == 0 || height == 0 {
-            return Err(PyValueError::new_err(format!("res {width}x{height}: both sides must be at least 1 pixel")));
-        }
-        if samples_per_pass == Some(0) {
-            return Err(PyValueError::new_err("samples_per_pass must be at least 1"));
-        }
-        let reflection_weights = match query_weights {
-            "arcs" => false,
-            "reflection" => true,
-            other => return Err(PyValueError::new_err(format!("query_weights `{other}`: choose arcs or reflection"))),
-        };
+        let (width, height) = check_image(res, samples_per_pass)?;
+        let reflection_weights = parse_query_weights(query_weights)?;
         let settings = RenderSettings {
             width,
             height,
@@ -430,6 +420,28 @@ fn as_text(metadata: Metadata) -> Vec<(String, String)> {
 }
 
 /// A gate given in the command line's syntax.
+/// The image size, checked with the samples per pass: (width, height) in pixels.
+fn check_image(res: (u32, u32), samples_per_pass: Option<u32>) -> PyResult<(u32, u32)> {
+    let (width, height) = res;
+    if width == 0 || height == 0 {
+        return Err(PyValueError::new_err(format!("res {width}x{height}: both sides must be at least 1 pixel")));
+    }
+    if samples_per_pass == Some(0) {
+        return Err(PyValueError::new_err("samples_per_pass must be at least 1"));
+    }
+    Ok(res)
+}
+
+/// `query_weights`: "arcs" (false) or "reflection" (true, weights with a bound on the reflected
+/// light).
+fn parse_query_weights(name: &str) -> PyResult<bool> {
+    match name {
+        "arcs" => Ok(false),
+        "reflection" => Ok(true),
+        other => Err(PyValueError::new_err(format!("query_weights `{other}`: choose arcs or reflection"))),
+    }
+}
+
 fn parse_gate(spec: &str) -> PyResult<Gate> {
     Gate::parse(spec).map_err(|e| value_error(e.context(format!("gate `{spec}`"))))
 }
@@ -526,26 +538,13 @@ fn capture<'py>(
         .find(|s| s.name() == scan)
         .ok_or_else(|| PyValueError::new_err(format!("scan `{scan}`: choose single, confocal or exhaustive")))?;
     let budget = parse_budget(spp, seconds)?;
-    let (width, height) = res;
-    if width == 0 || height == 0 {
-        return Err(PyValueError::new_err(format!("res {width}x{height}: both sides must be at least 1 pixel")));
-    }
-    if samples_per_pass == Some(0) {
-        return Err(PyValueError::new_err("samples_per_pass must be at least 1"));
-    }
+    let (width, height) = check_image(res, samples_per_pass)?;
     if let Some((w, h)) = laser_grid
         && (w == 0 || h == 0)
     {
         return Err(PyValueError::new_err(format!("laser_grid {w}x{h}: both sides must be at least 1 spot")));
     }
-    let reflection_weights = match query_weights {
-        None => None,
-        Some("arcs") => Some(false),
-        Some("reflection") => Some(true),
-        Some(other) => {
-            return Err(PyValueError::new_err(format!("query_weights `{other}`: choose arcs or reflection")));
-        }
-    };
+    let reflection_weights = query_weights.map(parse_query_weights).transpose()?;
     let band_index_choice = match band_index {
         "auto" => None,
         "on" => Some(true),
