@@ -12,7 +12,17 @@ fn device_bench_smoke_run_writes_every_measurement() {
     let out = dir.join("device_bench.json");
     let run = Command::new("bash")
         .arg(common::repo_path("tools/bench/device_bench.sh"))
-        .args(["--smoke", "--seconds", "0.3", "--exe", env!("CARGO_BIN_EXE_gatetrace"), "--out"])
+        // The peer's CPU variant: measured where Mitsuba is installed, skipped with a reason elsewhere.
+        .args([
+            "--smoke",
+            "--seconds",
+            "0.3",
+            "--peer-variant",
+            "llvm_ad_rgb",
+            "--exe",
+            env!("CARGO_BIN_EXE_gatetrace"),
+        ])
+        .arg("--out")
         .arg(&out)
         .output()
         .expect("bash runs");
@@ -38,5 +48,20 @@ fn device_bench_smoke_run_writes_every_measurement() {
         let rows = scene["equal_time"].as_array().unwrap();
         let compared: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
         assert_eq!(compared, ["direct", "ellipsoidal"], "{name}: equal-time rows");
+    }
+    // The peer is measured where its Python packages load, and otherwise the report says why.
+    let peer = &report["peer"];
+    match peer["skipped"].as_str() {
+        Some(why) => assert!(!why.is_empty(), "the peer was skipped without a reason"),
+        None => {
+            let measured = peer["scenes"].as_array().expect("peer: scenes or skipped");
+            assert_eq!(measured.len(), scenes.len(), "the peer on every scene");
+            for scene in measured {
+                assert_eq!(scene["peer_samples_per_second"].as_array().unwrap().len(), 2, "peer before and after");
+                for m in scene["measurements"].as_array().unwrap() {
+                    assert!(m["per_peer"].as_f64().unwrap() > 0.0, "{scene}: no ratio to the peer");
+                }
+            }
+        }
     }
 }

@@ -47,7 +47,9 @@ mod target_visits;
 use anyhow::{Result, ensure};
 
 pub use super::check_settings;
-use super::wavefront::{DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves};
+use super::wavefront::{
+    DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves, target_slots_per_wave,
+};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
@@ -58,7 +60,8 @@ pub use options::{
     MAX_CONNECTIONS_PER_QUERY, check_tracer_settings, default_connections_per_query, strategies,
 };
 
-/// Slots a wave aims for: each slot holds two subpaths and all their connections (a few KiB).
+/// Slots a wave aims for on a CPU device (target_slots_per_wave: more on a GPU): each slot
+/// holds two subpaths and all their connections (a few KiB).
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 16;
 /// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
 const QUERY_COUNTERS: usize = 5;
@@ -202,7 +205,8 @@ impl<'a> BidirectionalTracer<'a> {
             .unwrap()
             .min(MAX_SLOTS_PER_DISPATCH / 2)
             .min(MAX_SLOTS_PER_DISPATCH / queries_per_slot);
-        let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, TARGET_SLOTS_PER_WAVE)?;
+        let target = target_slots_per_wave(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, per_slot.iter().sum());
+        let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, target)?;
         let slots = slots_per_wave;
 
         let mut params = super::render_params(scene, settings);

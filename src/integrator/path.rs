@@ -41,13 +41,14 @@
 
 use anyhow::Result;
 
-use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves};
+use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves, target_slots_per_wave};
 use super::{Integrator, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 
-/// Path slots a wave aims for when the caller does not fix the samples per pass.
+/// Path slots a wave aims for on a CPU device when the caller does not fix the samples per pass
+/// (target_slots_per_wave: more on a GPU).
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 18;
 /// Vertices extend_paths adds to a path per round when paths sum their own contributions
 /// (SUM_PER_PATH). On lavapipe (Cornell box, 64x64, 5 bounces, median of 3 alternating runs)
@@ -119,7 +120,13 @@ impl<'a> PathTracer<'a> {
         // Slots per wave: within the largest per-slot buffer's binding.
         let largest_per_slot =
             if whole_paths { 3 * 4 } else { size_of::<PathState>().max(size_of::<ShadowRay>()) as u64 };
-        let (samples_per_pass, slots_per_wave) = plan_waves(settings, limit / largest_per_slot, TARGET_SLOTS_PER_WAVE)?;
+        // Per-slot state: a path state, a hit, two queue entries, a shadow ray, two
+        // contributions and the path's radiance.
+        let bytes_per_slot = (size_of::<PathState>() + size_of::<Hit>() + 8 + size_of::<ShadowRay>()) as u64
+            + 2 * size_of::<Contribution>() as u64
+            + 12;
+        let target = target_slots_per_wave(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, bytes_per_slot);
+        let (samples_per_pass, slots_per_wave) = plan_waves(settings, limit / largest_per_slot, target)?;
         // Whole paths keep their state in registers: the rounds' per-slot buffers get one element.
         let slots = if whole_paths { 1 } else { slots_per_wave };
 

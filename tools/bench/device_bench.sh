@@ -3,6 +3,7 @@
 # equal-time comparison on whatever GPU the machine has, in one JSON file.
 #
 #   tools/bench/device_bench.sh [--exe PATH] [--out FILE.json] [--seconds S] [--smoke]
+#                               [--peer-variant V] [--peer-seconds S]
 #
 # It builds nothing: it runs a release binary built on another machine (default
 # target/release/gatetrace; copy it over with the repository) and needs only a Vulkan loader and
@@ -16,6 +17,10 @@
 #   - the same with --profile for a second each: GPU time per stage (ms);
 #   - `gatetrace equal-time` of direct and ellipsoidal at the 2.5 mm gate: MSE at equal time
 #     against a reference render.
+# Where Python can import mitsuba and mitransient with Mitsuba's variant --peer-variant (default
+# cuda_ad_rgb), tools/peer/throughput.py then measures the peer and every method side by side on
+# the same scenes (--peer-seconds each, default 4, 0.3 with --smoke); the JSON's "peer" holds
+# that, or why not.
 # --smoke runs the same on the Cornell box and a sphere of 1,280 triangles at 16x16 for a
 # fraction of a second each (the test suite runs it on lavapipe: tests/device_bench.rs).
 set -euo pipefail
@@ -25,13 +30,17 @@ exe="$ROOT/target/release/gatetrace"
 out="device_bench.json"
 seconds=8
 smoke=0
+peer_variant=cuda_ad_rgb
+peer_seconds=
 while [ $# -gt 0 ]; do
     case "$1" in
         --exe) exe="$2"; shift 2 ;;
         --out) out="$2"; shift 2 ;;
         --seconds) seconds="$2"; shift 2 ;;
         --smoke) smoke=1; shift ;;
-        -h|--help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        --peer-variant) peer_variant="$2"; shift 2 ;;
+        --peer-seconds) peer_seconds="$2"; shift 2 ;;
+        -h|--help) sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "device_bench.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
@@ -49,6 +58,7 @@ if [ "$smoke" = 1 ]; then
     profile_seconds=0.2
     equal_seconds=0.3
     reference_seconds=1
+    peer_seconds="${peer_seconds:-0.3}"
     frequencies=(8)
     scenes_dir="$work"
 else
@@ -56,6 +66,7 @@ else
     profile_seconds=1
     equal_seconds=4
     reference_seconds=24
+    peer_seconds="${peer_seconds:-4}"
     frequencies=(128 256)
 fi
 scenes=("$ROOT/assets/scenes/cornell_box.gltf")
@@ -78,6 +89,18 @@ for scene in "${scenes[@]}"; do
         --reference-method ellipsoidal --reference-seconds "$reference_seconds" --res "$res" --csv "$work/equal_$i.csv" >&2
     i=$((i + 1))
 done
+
+# The peer, side by side with every method, where its Python packages and variant load.
+if why=$(python3 -c "import mitsuba as mi; mi.set_variant('$peer_variant'); import mitransient" 2>&1); then
+    echo "device_bench: the peer ($peer_variant) on every scene" >&2
+    scene_args=()
+    for scene in "${scenes[@]}"; do scene_args+=(--scene "$scene"); done
+    python3 "$ROOT/tools/peer/throughput.py" "${scene_args[@]}" --seconds "$peer_seconds" --res "${res%%x*}" \
+        --peer-variant "$peer_variant" --exe "$exe" --json "$work/peer.json" >&2
+else
+    echo "device_bench: the peer is not measured: mitsuba, mitransient or variant $peer_variant does not load" >&2
+    printf '%s\n' "$why" | tail -1 | python3 -c 'import json, sys; json.dump({"skipped": sys.stdin.read().strip()}, open(sys.argv[1], "w"))' "$work/peer.json"
+fi
 
 python3 - "$work" "$i" "$out" "$seconds" "$smoke" <<'EOF'
 import csv, json, sys
@@ -109,6 +132,7 @@ report = {
     "seconds_per_measurement": seconds,
     "max_bounces": first["max_bounces"],
     "scenes": scenes,
+    "peer": json.load(open(f"{work}/peer.json")),
 }
 with open(out, "w") as f:
     json.dump(report, f, indent=2)
@@ -117,4 +141,7 @@ print(f"device_bench: {report['adapter']} ({report['device_type']}): wrote {out}
 for s in scenes:
     rates = ", ".join(f"{m['method']} {m['samples_per_second'] / 1e6:.3f}" for m in s["measurements"])
     print(f"  {s['scene'].split('/')[-1]} ({s['triangles']} triangles): M samples/s {rates}", file=sys.stderr)
+for s in report["peer"].get("scenes", []):
+    ratios = ", ".join(f"{m['method']} {m['per_peer']:.2f}x" for m in s["measurements"] if m["per_peer"])
+    print(f"  {s['scene']}: against the peer {ratios}", file=sys.stderr)
 EOF

@@ -439,14 +439,15 @@ class _RunningMoments:
 
 
 class OneBinRenderer:
-    """transient_path (llvm_ad_rgb) on a glTF scene with one time bin [start, start + width)
-    metres of optical path: the peer of tools/peer/throughput.py and tools/peer/equal_time_peer.py."""
+    """transient_path on a glTF scene with one time bin [start, start + width) metres of optical
+    path: the peer of tools/peer/throughput.py and tools/peer/equal_time_peer.py. `variant` is
+    Mitsuba's (llvm_ad_rgb on a CPU, cuda_ad_rgb on an NVIDIA GPU)."""
 
-    def __init__(self, scene_path, res, max_bounces, start, width):
+    def __init__(self, scene_path, res, max_bounces, start, width, variant="llvm_ad_rgb"):
         import types
 
         import mitsuba as mi
-        mi.set_variant("llvm_ad_rgb")
+        mi.set_variant(variant)
         import mitransient  # noqa: F401  (registers transient_path)
 
         settings = types.SimpleNamespace(res=(res, res), spp=1, bins=1, start=start, bin_width=width)

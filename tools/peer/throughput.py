@@ -13,12 +13,13 @@ A sample is one path per pixel: samples/s = spp x pixels / seconds, warm-up
 (kernel compilation) excluded on both sides.
 
 Usage: tools/peer/throughput.py [--scene S.glb ...] [--scaling] [--triangles N,N,...] [--seconds S]
-                           [--res N] [--max-bounces B] [--exe PATH]
+                           [--res N] [--max-bounces B] [--peer-variant V] [--exe PATH] [--json FILE]
 Requires: a built gatetrace (cargo build --release) and, for the peer,
 ``pip install mitsuba mitransient`` (+ ``apt-get install libllvm19``).
 """
 
 import argparse
+import json
 import math
 import os
 import re
@@ -32,12 +33,12 @@ SCENE = os.path.join(ROOT, "assets", "scenes", "cornell_box.gltf")
 SCALING = "20480,327680,1310720"
 
 
-def peer_samples_per_second(scene_path, res, max_bounces, seconds, spp=256):
-    """Renders passes of `spp` with transient_path (one bin over all path lengths) for at least
-    `seconds` after one warm-up."""
+def peer_samples_per_second(scene_path, res, max_bounces, seconds, variant, spp=256):
+    """Renders passes of `spp` with transient_path (one bin over all path lengths) in Mitsuba's
+    `variant` for at least `seconds` after one warm-up."""
     import peer_reference as peer
 
-    renderer = peer.OneBinRenderer(scene_path, res, max_bounces, 0.0, 1000.0)
+    renderer = peer.OneBinRenderer(scene_path, res, max_bounces, 0.0, 1000.0, variant)
     renderer.render(spp, 0)
     start, passes = time.perf_counter(), 0
     while time.perf_counter() - start < seconds:
@@ -87,8 +88,11 @@ def main():
     p.add_argument("--res", type=int, default=64, help="square image size in pixels (default 64)")
     p.add_argument("--max-bounces", type=int, default=5, help="scattering vertices (default 5)")
     p.add_argument("--methods", default="path,direct,ellipsoidal", help="gatetrace bench --methods")
+    p.add_argument("--peer-variant", default="llvm_ad_rgb",
+                   help="Mitsuba variant of the peer (default llvm_ad_rgb, the CPU; cuda_ad_rgb on an NVIDIA GPU)")
     p.add_argument("--exe", default=os.path.join(ROOT, "target", "release", "gatetrace"),
                    help="gatetrace binary (default target/release/gatetrace)")
+    p.add_argument("--json", help="also write every measurement to this JSON file (samples/s)")
     args = p.parse_args()
     scenes = list(args.scene or [SCENE])
     if args.scaling:
@@ -97,19 +101,20 @@ def main():
     table = []
     for scene in scenes:
         try:
-            before = peer_samples_per_second(scene, args.res, args.max_bounces, args.seconds)
+            before = peer_samples_per_second(scene, args.res, args.max_bounces, args.seconds, args.peer_variant)
         except ImportError as e:
             before = None
             print(f"peer not measured ({e}); pip install mitsuba mitransient", file=sys.stderr)
         adapter, triangles, rows = gatetrace_bench(args.exe, scene, args.res, args.max_bounces, args.seconds,
                                                    args.methods)
-        after = peer_samples_per_second(scene, args.res, args.max_bounces, args.seconds) if before else None
+        after = (peer_samples_per_second(scene, args.res, args.max_bounces, args.seconds, args.peer_variant)
+                 if before else None)
 
         print(f"{os.path.basename(scene)} ({triangles} triangles), {args.res}x{args.res}, {args.max_bounces} "
               f"bounces, {args.seconds:g} s per measurement")
         print(f"gatetrace on {adapter}")
         if before:
-            print(f"peer: Mitsuba 3 + mitransient transient_path (llvm_ad_rgb), one bin: "
+            print(f"peer: Mitsuba 3 + mitransient transient_path ({args.peer_variant}), one bin: "
                   f"{before / 1e6:.3f} M samples/s before, {after / 1e6:.3f} after")
         print(f"{'method':<14} {'gate':<20} {'Msamples/s':>11} {'/ peer':>8}")
         peer = (before + after) / 2 if before else None
@@ -118,6 +123,26 @@ def main():
             print(f"{name:<14} {gate:<20} {rate / 1e6:11.3f} {ratio}")
         print(flush=True)
         table.append((os.path.basename(scene), triangles, before, after, rows))
+
+    if args.json:
+        report = {
+            "adapter": adapter,
+            "peer": f"Mitsuba 3 + mitransient transient_path ({args.peer_variant}), one bin",
+            "res": args.res,
+            "max_bounces": args.max_bounces,
+            "seconds_per_measurement": args.seconds,
+            "scenes": [{
+                "scene": name,
+                "triangles": triangles,
+                "peer_samples_per_second": [before, after] if before else None,
+                "measurements": [{"method": m, "gate": gate, "samples_per_second": rate,
+                                  "per_peer": rate / ((before + after) / 2) if before else None}
+                                 for m, gate, rate in rows],
+            } for name, triangles, before, after, rows in table],
+        }
+        with open(args.json, "w") as f:
+            json.dump(report, f, indent=2)
+            f.write("\n")
 
     methods = [name for name, _, _ in table[0][4]]
     print("| scene | triangles | peer M samples/s (before, after) | "
