@@ -49,6 +49,16 @@ fn device_bench_smoke_run_writes_every_measurement() {
         let compared: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
         assert_eq!(compared, ["direct", "ellipsoidal"], "{name}: equal-time rows");
     }
+    // The largest mesh at larger images (one in the smoke run).
+    let larger = report["larger_images"].as_array().unwrap();
+    assert_eq!(larger.len(), 1, "one larger image in the smoke run");
+    for bench in larger {
+        assert_eq!(bench["triangles"], scenes[1]["triangles"], "the larger images render the largest mesh");
+        for m in bench["measurements"].as_array().unwrap() {
+            assert_eq!(m["width"].as_u64(), Some(32), "the smoke run's larger image is 32x32");
+            assert!(m["samples_per_second"].as_f64().unwrap() > 0.0, "larger image {}: no samples", m["method"]);
+        }
+    }
     // The peer is measured where its Python packages load, and otherwise the report says why.
     let peer = &report["peer"];
     match peer["skipped"].as_str() {

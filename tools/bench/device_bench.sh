@@ -17,12 +17,15 @@
 #   - the same with --profile for a second each: GPU time per stage (ms);
 #   - `gatetrace equal-time` of direct and ellipsoidal at the 2.5 mm gate: MSE at equal time
 #     against a reference render.
+# Then `gatetrace bench` on the largest mesh at larger images (256x256 and 1024x1024, 2 s
+# each): a GPU keeps more paths in flight than a 64x64 image gives it.
 # Where Python can import mitsuba and mitransient with Mitsuba's variant --peer-variant (default
 # cuda_ad_rgb), tools/peer/throughput.py then measures the peer and every method side by side on
 # the same scenes (--peer-seconds each, default 4, 0.3 with --smoke); the JSON's "peer" holds
 # that, or why not.
-# --smoke runs the same on the Cornell box and a sphere of 1,280 triangles at 16x16 for a
-# fraction of a second each (the test suite runs it on lavapipe: tests/device_bench.rs).
+# --smoke runs the same on the Cornell box and a sphere of 1,280 triangles at 16x16 (one larger
+# image of 32x32) for a fraction of a second each (the test suite runs it on lavapipe:
+# tests/device_bench.rs).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
@@ -40,7 +43,7 @@ while [ $# -gt 0 ]; do
         --smoke) smoke=1; shift ;;
         --peer-variant) peer_variant="$2"; shift 2 ;;
         --peer-seconds) peer_seconds="$2"; shift 2 ;;
-        -h|--help) sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "device_bench.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
@@ -59,6 +62,8 @@ if [ "$smoke" = 1 ]; then
     equal_seconds=0.3
     reference_seconds=1
     peer_seconds="${peer_seconds:-0.3}"
+    large_resolutions=(32x32)
+    large_seconds=0.2
     frequencies=(8)
     scenes_dir="$work"
 else
@@ -67,6 +72,8 @@ else
     equal_seconds=4
     reference_seconds=24
     peer_seconds="${peer_seconds:-4}"
+    large_resolutions=(256x256 1024x1024)
+    large_seconds=2
     frequencies=(128 256)
 fi
 scenes=("$ROOT/assets/scenes/cornell_box.gltf")
@@ -90,6 +97,13 @@ for scene in "${scenes[@]}"; do
     i=$((i + 1))
 done
 
+j=0
+for r in "${large_resolutions[@]}"; do
+    echo "device_bench: $(basename "${scenes[-1]}") at $r" >&2
+    "$exe" bench --scene "${scenes[-1]}" --seconds "$large_seconds" --res "$r" --json "$work/large_$j.json" >&2
+    j=$((j + 1))
+done
+
 # The peer, side by side with every method, where its Python packages and variant load.
 if why=$(python3 -c "import mitsuba as mi; mi.set_variant('$peer_variant'); import mitransient" 2>&1); then
     echo "device_bench: the peer ($peer_variant) on every scene" >&2
@@ -102,9 +116,10 @@ else
     printf '%s\n' "$why" | tail -1 | python3 -c 'import json, sys; json.dump({"skipped": sys.stdin.read().strip()}, open(sys.argv[1], "w"))' "$work/peer.json"
 fi
 
-python3 - "$work" "$i" "$out" "$seconds" "$smoke" <<'EOF'
+python3 - "$work" "$i" "$out" "$seconds" "$smoke" "$j" <<'EOF'
 import csv, json, sys
 work, count, out, seconds, smoke = sys.argv[1], int(sys.argv[2]), sys.argv[3], float(sys.argv[4]), sys.argv[5] == "1"
+large_count = int(sys.argv[6])
 scenes = []
 for i in range(count):
     bench = json.load(open(f"{work}/bench_{i}.json"))
@@ -132,6 +147,7 @@ report = {
     "seconds_per_measurement": seconds,
     "max_bounces": first["max_bounces"],
     "scenes": scenes,
+    "larger_images": [json.load(open(f"{work}/large_{j}.json")) for j in range(large_count)],
     "peer": json.load(open(f"{work}/peer.json")),
 }
 with open(out, "w") as f:
@@ -141,6 +157,10 @@ print(f"device_bench: {report['adapter']} ({report['device_type']}): wrote {out}
 for s in scenes:
     rates = ", ".join(f"{m['method']} {m['samples_per_second'] / 1e6:.3f}" for m in s["measurements"])
     print(f"  {s['scene'].split('/')[-1]} ({s['triangles']} triangles): M samples/s {rates}", file=sys.stderr)
+for b in report["larger_images"]:
+    rates = ", ".join(f"{m['method']} {m['samples_per_second'] / 1e6:.3f}" for m in b["measurements"])
+    size = f"{b['measurements'][0]['width']}x{b['measurements'][0]['height']}"
+    print(f"  {b['scene'].split('/')[-1]} at {size}: M samples/s {rates}", file=sys.stderr)
 for s in report["peer"].get("scenes", []):
     ratios = ", ".join(f"{m['method']} {m['per_peer']:.2f}x" for m in s["measurements"] if m["per_peer"])
     print(f"  {s['scene']}: against the peer {ratios}", file=sys.stderr)
