@@ -70,6 +70,28 @@ fn bvh_layout_is_a_valid_stackless_tree() {
 }
 
 #[test]
+fn bvh_is_the_same_on_any_number_of_threads() {
+    // The build runs on every core; the tree (which the ellipsoid queries' random descent walks)
+    // must not depend on how many there are, or shards rendered on different machines would not
+    // merge into the bits of the unsplit render.
+    let soup = common::random_soup(20_000, 11);
+    let build = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| Bvh::build(&soup))
+    };
+    let one = build(1);
+    let bytes = |b: &Bvh| (bytemuck::cast_slice::<_, u8>(&b.nodes).to_vec(), b.order.clone());
+    for threads in [2, 3, 8] {
+        for _ in 0..2 {
+            assert!(
+                bytes(&build(threads)) == bytes(&one),
+                "the BVH built on {threads} threads differs from one thread's"
+            );
+        }
+    }
+}
+
+#[test]
 fn cpu_traversal_matches_brute_force() {
     let soup = common::random_soup(2000, 11);
     let bvh = Bvh::build(&soup);
