@@ -1,9 +1,9 @@
 //! The BVHs: a binary one built on the host with obvhs (PLOC with reinsertion and an SAH leaf
-//! collapse, on every core; the same tree on any number of them), flattened into the stackless layout the ellipsoid queries walk (docs/design.md section
-//! 6.1): nodes in depth-first order, an inner node's first child right after it, and a `skip` link
-//! from every node to the first node after its subtree. Triangles are reordered so each leaf
-//! addresses a contiguous range. Rays traverse the four-wide BVH collapsed from it (`wide`),
-//! which keeps its leaves.
+//! collapse, on every core; the same tree on any number of them), flattened into the stackless
+//! layout the ellipsoid queries walk (docs/design.md section 6.1): nodes in depth-first order,
+//! an inner node's first child right after it, and a `skip` link from every node to the first
+//! node after its subtree. Triangles are reordered so each leaf addresses a contiguous range.
+//! Rays traverse the four-wide BVH collapsed from it (`wide`), which keeps its leaves.
 
 pub mod traverse;
 pub mod wide;
