@@ -131,9 +131,21 @@ fn wide_bvh_is_a_conservative_collapse() {
             } else {
                 assert_eq!(node.parent, NONE);
             }
+            // The subtree count: this node and its inner children's subtrees (depth-first, so
+            // they end where the next sibling of this node would start).
+            let inner: Vec<u32> =
+                node.children.iter().copied().filter(|&c| c < gatetrace::gpu::layout::WIDE_LEAF).collect();
+            let below: u32 = inner.iter().map(|&c| wide.nodes[c as usize].subtree).sum();
+            assert_eq!(node.subtree, 1 + below, "{name}: node {i}'s subtree count");
             for (slot, &child) in node.children.iter().enumerate() {
+                // Each slot knows the binary node it was collapsed from (its leaf word, if a leaf).
+                let source = wide.sources[i][slot];
+                assert_eq!(source == NONE, child == NONE, "{name}: node {i} slot {slot}'s source");
                 if child == NONE {
                     continue;
+                }
+                if child >= gatetrace::gpu::layout::WIDE_LEAF {
+                    assert_eq!(bvh.nodes[source as usize].leaf, child, "{name}: node {i} slot {slot}'s source leaf");
                 }
                 let (lo, hi) = wide::child_box(node, slot);
                 // Every triangle below the slot lies inside its decoded box, exactly.
@@ -344,6 +356,18 @@ fn split_buffers_render_identically() {
     let lit = a.data.iter().filter(|&&v| v > 0.0).count();
     assert!(lit > 20, "the ellipsoidal test image is nearly black ({lit} of 48 values lit)");
     assert_eq!(a.data, b.data, "ellipsoidal, limit {limit} B: split node surfaces changed the image");
+    // Queries over the wide BVH read one surface per wide node and slot from the same bindings.
+    let children = scene.child_surfaces.len() as u64;
+    let limit = (splat_image..1 << 20)
+        .find(|&l| fits(l) && ChunkLayout::new("bvh_node_surfaces", children, 32, l).is_ok_and(|c| c.chunks >= 2))
+        .expect("a binding limit that holds the light-tracing image splits the wide children's surfaces");
+    let query = gatetrace::integrator::QuerySettings { wide: true, ..Default::default() };
+    let base = RenderSettings { query, ..base };
+    let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
+    let a = common::render_films(&ctx, &scene, &base, 1, 64).remove(0);
+    let b = common::render_films(&ctx, &scene, &split, 1, 64).remove(0);
+    assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the wide ellipsoidal test image is nearly black");
+    assert_eq!(a.data, b.data, "wide ellipsoidal, limit {limit} B: split child surfaces changed the image");
 }
 
 #[test]

@@ -37,7 +37,7 @@ fn device_bench_smoke_run_writes_every_measurement() {
         let name = scene["scene"].as_str().unwrap();
         let methods: Vec<&str> =
             scene["measurements"].as_array().unwrap().iter().map(|m| m["method"].as_str().unwrap()).collect();
-        assert_eq!(methods, ["path", "direct", "ellipsoidal"], "{name}");
+        assert_eq!(methods, ["path", "direct", "ellipsoidal", "ellipsoidal:wide"], "{name}");
         for m in scene["measurements"].as_array().unwrap() {
             let method = m["method"].as_str().unwrap();
             assert!(m["samples_per_second"].as_f64().unwrap() > 0.0, "{name} {method}: no samples");
@@ -47,7 +47,7 @@ fn device_bench_smoke_run_writes_every_measurement() {
         }
         let rows = scene["equal_time"].as_array().unwrap();
         let compared: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
-        assert_eq!(compared, ["direct", "ellipsoidal"], "{name}: equal-time rows");
+        assert_eq!(compared, ["direct", "ellipsoidal", "ellipsoidal:wide"], "{name}: equal-time rows");
     }
     // The largest mesh at larger images (one in the smoke run).
     let larger = report["larger_images"].as_array().unwrap();

@@ -19,7 +19,7 @@ const ALPHA: f64 = 0.01;
 /// The default query with reflection weights (as NLOS captures use), which the checks below
 /// test; with arcs alone the weights are the factor-free special case (tests/ellipsoid.rs).
 const REFLECTION: QuerySettings =
-    QuerySettings { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true };
+    QuerySettings { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true, wide: false };
 /// Triangles are compared in groups of consecutive BVH positions.
 const GROUPS: usize = 12;
 
@@ -214,6 +214,19 @@ fn the_descent_twin_is_unbiased_past_the_allowance() {
     check_twin(&settings, 40, 3000);
 }
 
+#[test]
+fn the_wide_descent_twin_is_unbiased() {
+    check_twin(&QuerySettings { wide: true, ..REFLECTION }, QuerySettings::default().allowance, 3000);
+    // Bottom subtrees of one wide node and of the most the stack allows.
+    check_twin(&QuerySettings { wide: true, bottom_nodes: 1, ..REFLECTION }, 4096, 1000);
+    check_twin(&QuerySettings { wide: true, bottom_nodes: 1000, ..REFLECTION }, 4096, 1000);
+}
+
+#[test]
+fn the_wide_descent_twin_is_unbiased_past_the_allowance() {
+    check_twin(&QuerySettings { split: 0.2, wide: true, ..REFLECTION }, 40, 3000);
+}
+
 /// Runs the device's query `keys` times on each spheroid of a 20,480-triangle sphere scene
 /// (probe_ellipsoid_query with `constants`) and checks E[weight x (pick in group)] against the
 /// oracle's arcs per group; returns the mean loop iterations per query.
@@ -221,7 +234,12 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let scene = common::sphere_scene(32);
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    // Queries over the wide BVH read the wide children's surfaces, which the tracer uploads
+    // for settings that ask for them.
+    let wide = constants.contains(&("QUERY_WIDE", 1.0));
+    let query = QuerySettings { wide, ..Default::default() };
+    let settings = RenderSettings { width: 4, height: 4, query, ..Default::default() };
+    let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
     let spheroids = spheroids(&scene);
     let limit =
         common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
@@ -286,6 +304,28 @@ fn device_queries_are_unbiased() {
 }
 
 #[test]
+fn wide_device_queries_are_unbiased() {
+    let wide = QuerySettings { wide: true, ..Default::default() };
+    let bottom = ("QUERY_BOTTOM_NODES", wide.device_bottom_nodes() as f64);
+    let descent = check_device(&[("QUERY_WIDE", 1.0), bottom, ("QUERY_REFLECTION_WEIGHTS", 1.0)], 20_000);
+    let past_allowance = check_device(
+        &[
+            ("QUERY_WIDE", 1.0),
+            bottom,
+            ("QUERY_SPLIT", 0.2),
+            ("QUERY_ALLOWANCE", 20.0),
+            ("QUERY_REFLECTION_WEIGHTS", 1.0),
+        ],
+        20_000,
+    );
+    println!("loop iterations per query: {descent:.1}; {past_allowance:.1} with an allowance of 20");
+    assert!(
+        past_allowance > 20.0,
+        "the allowance of 20 was hardly ever reached ({past_allowance:.1} iterations per query)"
+    );
+}
+
+#[test]
 fn device_queries_are_unbiased_past_the_allowance() {
     let iterations =
         check_device(&[("QUERY_SPLIT", 0.2), ("QUERY_ALLOWANCE", 40.0), ("QUERY_REFLECTION_WEIGHTS", 1.0)], 20_000);
@@ -294,14 +334,17 @@ fn device_queries_are_unbiased_past_the_allowance() {
     assert!(iterations > 40.0, "the allowance of 40 was hardly ever reached ({iterations:.1} iterations per query)");
 }
 
-#[test]
-fn the_twin_and_the_device_pick_alike() {
+/// Runs the device's and the twin's queries with `settings` on the same keys and checks that they
+/// pick the same triangles.
+fn check_twin_against_device(settings: QuerySettings) {
     // Same keys, same decisions (up to f32 near-ties): the twin follows the device.
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let scene = common::sphere_scene(32);
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
-    let settings = QuerySettings::default();
+    let render = RenderSettings { width: 4, height: 4, query: settings, ..Default::default() };
+    let tracer = PathTracer::new(&ctx, &scene, &render).unwrap();
+    let constants =
+        [("QUERY_WIDE", settings.wide as u32 as f64), ("QUERY_BOTTOM_NODES", settings.device_bottom_nodes() as f64)];
     let (fs, fc, tau_e) = spheroids(&scene)[2];
     let keys = 2000u32;
     let mut input = Vec::new();
@@ -311,7 +354,7 @@ fn the_twin_and_the_device_pick_alike() {
         input.push([b.x, b.y, b.z, 0.5]);
         input.push([f32::from_bits(k), f32::from_bits(7), f32::from_bits(9), 0.0]);
     }
-    let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", &[], &input, 2 * keys as usize);
+    let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", &constants, &input, 2 * keys as usize);
     let query = Query {
         focus_s: fs.as_vec3().as_dvec3(),
         focus_c: fc.as_vec3().as_dvec3(),
@@ -329,6 +372,16 @@ fn the_twin_and_the_device_pick_alike() {
     println!("{same} of {keys} picks agree");
     // f32 and f64 may decide differently only at near-ties of the descent's estimates.
     assert!(same as f64 > 0.99 * keys as f64, "the twin and the device agree on only {same} of {keys} picks");
+}
+
+#[test]
+fn the_twin_and_the_device_pick_alike() {
+    check_twin_against_device(QuerySettings::default());
+}
+
+#[test]
+fn the_wide_twin_and_the_device_pick_alike() {
+    check_twin_against_device(QuerySettings { wide: true, ..Default::default() });
 }
 
 /// Points at the centroids of a triangle's 4^levels congruent sub-triangles (each standing for
@@ -443,4 +496,40 @@ fn node_surfaces_and_their_path_length_moments_match_a_quadrature() {
     }
     println!("{checked} node and focus pairs checked");
     assert!(checked >= 50, "only {checked} node and focus pairs were small enough to check");
+}
+
+/// Queries over the wide BVH weigh each wide child by the surface of the binary node it was
+/// collapsed from: the same area and centroid, and the same covariance once each is scaled
+/// back by its own box's squared diagonal (the child's decoded box, the node's exact one), to
+/// f16 rounding.
+#[test]
+fn wide_children_carry_their_binary_nodes_surfaces() {
+    use gatetrace::scene::materials::unpack2x16float;
+    let scene = common::sphere_scene(16);
+    let mut checked = 0;
+    for (n, (node, sources)) in scene.wide.nodes.iter().zip(&scene.wide.sources).enumerate() {
+        for (slot, &k) in sources.iter().enumerate() {
+            let child = scene.child_surfaces[4 * n + slot];
+            if k == NONE {
+                assert_eq!(child, Default::default(), "node {n} slot {slot}: an empty slot has no surface");
+                continue;
+            }
+            let (k, binary) = (k as usize, scene.node_surfaces[k as usize]);
+            assert_eq!(
+                (child.area, child.light_area, child.centroid),
+                (binary.area, binary.light_area, binary.centroid)
+            );
+            let (lo, hi) = gatetrace::bvh::wide::child_box(node, slot);
+            let child_scale = (hi - lo).as_dvec3().length_squared();
+            let binary_scale = (scene.bvh.nodes[k].max - scene.bvh.nodes[k].min).as_dvec3().length_squared();
+            assert!(child_scale >= binary_scale, "node {n} slot {slot}: the decoded box holds the node's");
+            for (c, b) in child.spread.iter().zip(&binary.spread) {
+                let (c, b) =
+                    (unpack2x16float(*c).as_dvec2() * child_scale, unpack2x16float(*b).as_dvec2() * binary_scale);
+                assert!((c - b).abs().max_element() <= 2e-3 * (c.abs() + b.abs()).max_element() + 1e-7 * child_scale);
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 1000, "only {checked} wide children");
 }

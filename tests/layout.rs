@@ -18,7 +18,7 @@ fn wgsl_structs_match_rust_structs() {
         Triangle { v0, material, e1, light, e2, source }
         TriangleShading { n0, u0, n1, v0, n2, u1, v1, u2, v2, flags }
         BvhNode { min, skip, max, leaf }
-        WideNode { origin, exponents, planes_xy, planes_z, parent, reserved, children }
+        WideNode { origin, exponents, planes_xy, planes_z, parent, subtree, children }
         NodeSurface { centroid, area, light_area, spread }
         Material { base_color, base_color_texture, emission, flags, metallic, alpha, reserved0, reserved1 }
         TextureInfo { offset, width, height, wrap }

@@ -3,7 +3,8 @@
 //! layout the ellipsoid queries walk (docs/design.md section 6.1): nodes in depth-first order,
 //! an inner node's first child right after it, and a `skip` link from every node to the first
 //! node after its subtree. Triangles are reordered so each leaf addresses a contiguous range.
-//! Rays traverse the four-wide BVH collapsed from it (`wide`), which keeps its leaves.
+//! Rays traverse the four-wide BVH collapsed from it (`wide`), which keeps its leaves; so can
+//! the ellipsoid queries (`QuerySettings::wide`).
 
 pub mod traverse;
 pub mod wide;
@@ -70,26 +71,22 @@ impl Bvh {
     }
 
     /// Per node, the area of the triangles below it, of the emitting ones among them, and the
-    /// centroid and covariance of a point drawn uniformly on them (`NodeSurface`), for
-    /// `triangles` in BVH order: what the ellipsoid queries' stochastic descent weighs children
-    /// by (shaders/lib/ellipsoid_query.wesl `node_estimate`). Summed in f64.
-    pub fn node_surfaces(&self, triangles: &[Triangle]) -> Vec<NodeSurface> {
-        /// Area, emitting area, area-weighted first and second moments of the position.
-        #[derive(Clone, Copy)]
-        struct Sums {
-            area: f64,
-            light_area: f64,
-            first: DVec3,
-            second: DMat3,
-        }
-        // (Not derived: glam's default matrix is the identity.)
-        const ZERO: Sums = Sums { area: 0.0, light_area: 0.0, first: DVec3::ZERO, second: DMat3::ZERO };
-        let mut sums = vec![ZERO; self.nodes.len()];
+    /// centroid and covariance of a point drawn uniformly on them (`NodeSurface`), from the
+    /// nodes' [`Bvh::surface_sums`]: what the ellipsoid queries' stochastic descent weighs
+    /// children by (shaders/lib/ellipsoid_query.wesl `node_estimate`).
+    pub fn node_surfaces(&self, sums: &[SurfaceSums]) -> Vec<NodeSurface> {
+        sums.iter().zip(&self.nodes).map(|(s, node)| s.surface(node.min.as_dvec3(), node.max.as_dvec3())).collect()
+    }
+
+    /// Per node, the area of the triangles below it, of the emitting ones among them, and their
+    /// area-weighted first and second moments of position, for `triangles` in BVH order, summed
+    /// in f64: what [`Bvh::node_surfaces`] and `WideBvh::child_surfaces` are made from.
+    pub fn surface_sums(&self, triangles: &[Triangle]) -> Vec<SurfaceSums> {
+        let mut sums = vec![SurfaceSums::ZERO; self.nodes.len()];
         // Children follow their parent in depth-first order: fill from the back.
-        let outer = |v: DVec3| DMat3::from_cols(v * v.x, v * v.y, v * v.z);
         for i in (0..self.nodes.len()).rev() {
             sums[i] = match self.nodes[i].leaf_range() {
-                Some(range) => range.fold(ZERO, |s, k| {
+                Some(range) => range.fold(SurfaceSums::ZERO, |s, k| {
                     let t = &triangles[k as usize];
                     let a = t.v0.as_dvec3();
                     let (b, c) = (a + t.e1.as_dvec3(), a + t.e2.as_dvec3());
@@ -97,7 +94,7 @@ impl Bvh {
                     // A uniform point of triangle abc: E[x] = (a + b + c) / 3 and
                     // E[x x^T] = (a a^T + b b^T + c c^T + (a + b + c)(a + b + c)^T) / 12.
                     let sum = a + b + c;
-                    Sums {
+                    SurfaceSums {
                         area: s.area + area,
                         light_area: s.light_area + if t.light == NONE { 0.0 } else { area },
                         first: s.first + area / 3.0 * sum,
@@ -106,7 +103,7 @@ impl Bvh {
                 }),
                 None => {
                     let (a, b) = (sums[i + 1], sums[self.nodes[i + 1].skip as usize]);
-                    Sums {
+                    SurfaceSums {
                         area: a.area + b.area,
                         light_area: a.light_area + b.light_area,
                         first: a.first + b.first,
@@ -115,29 +112,7 @@ impl Bvh {
                 }
             };
         }
-        sums.iter()
-            .zip(&self.nodes)
-            .map(|(s, node)| {
-                let (lo, hi) = (node.min.as_dvec3(), node.max.as_dvec3());
-                if s.area <= 0.0 {
-                    return NodeSurface {
-                        centroid: (0.5 * (lo + hi)).as_vec3(),
-                        light_area: s.light_area as f32,
-                        ..Default::default()
-                    };
-                }
-                let mean = s.first / s.area;
-                let m = s.second * (1.0 / s.area) - outer(mean);
-                let scale = 1.0 / (hi - lo).length_squared().max(f64::MIN_POSITIVE);
-                let w = |a: f64, b: f64| pack2x16float((a * scale) as f32, (b * scale) as f32);
-                NodeSurface {
-                    centroid: mean.as_vec3(),
-                    area: s.area as f32,
-                    light_area: s.light_area as f32,
-                    spread: [w(m.x_axis.x, m.y_axis.y), w(m.z_axis.z, m.y_axis.x), w(m.z_axis.x, m.z_axis.y)],
-                }
-            })
-            .collect()
+        sums
     }
 
     /// `position[i]` = BVH position of input triangle `i` (inverse of `order`).
@@ -147,5 +122,50 @@ impl Bvh {
             position[i as usize] = p as u32;
         }
         position
+    }
+}
+
+fn outer(v: DVec3) -> DMat3 {
+    DMat3::from_cols(v * v.x, v * v.y, v * v.z)
+}
+
+/// The area, emitting area and area-weighted first and second moments of position of the
+/// triangles below a node (m^2, m^2, m^3, m^4), summed in f64 (`Bvh::surface_sums`).
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceSums {
+    /// Total area (m^2).
+    pub area: f64,
+    /// Total area of the emitting triangles (m^2).
+    pub light_area: f64,
+    /// Sum of area times the mean position (m^3).
+    pub first: DVec3,
+    /// Sum of area times the mean of x x^T (m^4).
+    pub second: DMat3,
+}
+
+impl SurfaceSums {
+    // (Not derived: glam's default matrix is the identity.)
+    const ZERO: Self = Self { area: 0.0, light_area: 0.0, first: DVec3::ZERO, second: DMat3::ZERO };
+
+    /// The `NodeSurface` of these triangles in a box [lo, hi] (m) that holds them: the
+    /// covariance is stored over the box's squared diagonal.
+    pub fn surface(&self, lo: DVec3, hi: DVec3) -> NodeSurface {
+        if self.area <= 0.0 {
+            return NodeSurface {
+                centroid: (0.5 * (lo + hi)).as_vec3(),
+                light_area: self.light_area as f32,
+                ..Default::default()
+            };
+        }
+        let mean = self.first / self.area;
+        let m = self.second * (1.0 / self.area) - outer(mean);
+        let scale = 1.0 / (hi - lo).length_squared().max(f64::MIN_POSITIVE);
+        let w = |a: f64, b: f64| pack2x16float((a * scale) as f32, (b * scale) as f32);
+        NodeSurface {
+            centroid: mean.as_vec3(),
+            area: self.area as f32,
+            light_area: self.light_area as f32,
+            spread: [w(m.x_axis.x, m.y_axis.y), w(m.z_axis.z, m.y_axis.x), w(m.z_axis.x, m.z_axis.y)],
+        }
     }
 }

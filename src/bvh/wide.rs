@@ -1,7 +1,8 @@
-//! The wide BVH that rays traverse (closest hits and shadow rays): four children per node, their
-//! boxes inline and quantised to 8 bits per plane, so a node is one 64-byte cache line
-//! (`WideNode`). It is collapsed from the binary BVH (`Bvh`), whose leaves it keeps: the
-//! triangles stay in BVH order and a leaf is the same `(count << 28) | first` in both trees.
+//! The wide BVH that rays traverse (closest hits and shadow rays; and ellipsoid queries with
+//! `QuerySettings::wide`): four children per node, their boxes inline and quantised to 8 bits
+//! per plane, so a node is one 64-byte cache line (`WideNode`). It is collapsed from the binary
+//! BVH (`Bvh`), whose leaves it keeps: the triangles stay in BVH order and a leaf is the same
+//! `(count << 28) | first` in both trees.
 //!
 //! Why: on CPU Vulkan every storage read is a loop over the SIMD group's lanes, and on large
 //! meshes every node visit waits for memory. Four children per node make a ray's path through
@@ -15,7 +16,7 @@ use glam::Vec3;
 
 use super::Bvh;
 use super::traverse::safe_inverse;
-use crate::gpu::layout::{Hit, NONE, Triangle, WIDE_LEAF, WideNode};
+use crate::gpu::layout::{Hit, NONE, NodeSurface, Triangle, WIDE_LEAF, WideNode};
 
 /// Children per node.
 pub const WIDTH: usize = 4;
@@ -45,6 +46,8 @@ pub struct WideBvh {
     pub leaves: usize,
     /// Inner nodes on the longest path from the root to a leaf, the root included.
     pub depth: usize,
+    /// Per node and slot, the binary node the child was collapsed from (`NONE`: empty slot).
+    pub sources: Vec<[u32; WIDTH]>,
 }
 
 /// Surface area of a box (m^2), the collapse's priority.
@@ -85,6 +88,7 @@ impl WideBvh {
         let me = self.nodes.len() as u32;
         let boxes: Vec<(Vec3, Vec3)> = kids.iter().map(|&k| (nodes[k].min, nodes[k].max)).collect();
         self.nodes.push(quantise(&boxes, parent));
+        self.sources.push(std::array::from_fn(|slot| kids.get(slot).map_or(NONE, |&k| k as u32)));
         for (slot, &k) in kids.iter().enumerate() {
             self.nodes[me as usize].children[slot] = if nodes[k].leaf != 0 {
                 assert!(nodes[k].leaf >> 28 <= WIDTH as u32, "wide BVH leaf of {} triangles", nodes[k].leaf >> 28);
@@ -96,7 +100,26 @@ impl WideBvh {
                 child
             };
         }
+        self.nodes[me as usize].subtree = self.nodes.len() as u32 - me;
         me
+    }
+
+    /// Per node and slot (`4 node + slot`), what the ellipsoid queries' descent knows of the
+    /// child's triangles, from the binary nodes' `sums` (`Bvh::surface_sums`): their covariance
+    /// is stored over the squared diagonal of the child's box as the kernels decode it.
+    pub fn child_surfaces(&self, sums: &[super::SurfaceSums]) -> Vec<NodeSurface> {
+        let mut out = Vec::with_capacity(WIDTH * self.nodes.len());
+        for (node, sources) in self.nodes.iter().zip(&self.sources) {
+            for (slot, &k) in sources.iter().enumerate() {
+                out.push(if k == NONE {
+                    NodeSurface::default()
+                } else {
+                    let (lo, hi) = child_box(node, slot);
+                    sums[k as usize].surface(lo.as_dvec3(), hi.as_dvec3())
+                });
+            }
+        }
+        out
     }
 
     /// Whether a traversal of this BVH can stop before it is complete (the RESUMABLE override):

@@ -79,8 +79,13 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 1.0, value_name = "R")]
     pub query_split: f32,
     /// Ellipsoid queries: the stochastic descent visits whole subtrees of at most N BVH nodes
+    /// (binary nodes; the wide tree's subtrees hold about as many leaves)
     #[arg(long, default_value_t = 31, value_name = "N")]
     pub query_bottom_nodes: u32,
+    /// Ellipsoid queries walk the binary BVH, or the four-wide one the rays traverse (slower on
+    /// CPU Vulkan)
+    #[arg(long, value_name = "TREE", value_enum, default_value = "binary")]
+    pub query_tree: QueryTree,
     /// Ellipsoid queries pick triangles by arc angle, or times a bound on the reflected light
     /// (default: reflection for --nlos, else arcs).
     #[arg(long, value_name = "WEIGHTS", value_enum)]
@@ -187,6 +192,13 @@ impl std::ops::Deref for RenderArgs {
 pub enum QueryWeights {
     Arcs,
     Reflection,
+}
+
+/// Which BVH the ellipsoid queries walk (render --query-tree).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum QueryTree {
+    Binary,
+    Wide,
 }
 
 /// A switch that may decide by itself (render --band-index).

@@ -197,7 +197,7 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
 /// default `DEFAULT_CONNECTIONS_PER_QUERY`),
 /// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
 /// descent's settings, see `QuerySettings`), `reflection` (picks weighed by arcs times the
-/// reflection factor), e.g. `ellipsoidal:4:exhaustive`.
+/// reflection factor), `wide` (queries over the wide BVH), e.g. `ellipsoidal:4:exhaustive`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Variant {
     /// Sampling method.
@@ -222,12 +222,14 @@ impl Variant {
             anyhow::ensure!(
                 matches!(method, Method::Ellipsoidal | Method::Auto),
                 "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
-                 split=R, bottom=N, reflection)"
+                 split=R, bottom=N, reflection, wide)"
             );
             if option == "exhaustive" {
                 variant.query.split = 0.0;
             } else if option == "reflection" {
                 variant.query.reflection_weights = true;
+            } else if option == "wide" {
+                variant.query.wide = true;
             } else if let Some(r) = option.strip_prefix("split=") {
                 variant.query.split =
                     r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
@@ -236,7 +238,7 @@ impl Variant {
                     n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
             } else {
                 variant.connections_per_query = option.parse().map_err(|_| {
-                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, reflection)")
+                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, reflection, wide)")
                 })?;
             }
         }
@@ -263,6 +265,9 @@ impl Variant {
             }
             if self.query.reflection_weights {
                 name += ":reflection";
+            }
+            if self.query.wide {
+                name += ":wide";
             }
         }
         name

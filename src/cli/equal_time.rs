@@ -20,8 +20,9 @@ pub struct EqualTimeArgs {
     scenes: Vec<PathBuf>,
     /// Methods to compare, comma-separated: path, direct, ellipsoidal, auto, and ellipsoidal
     /// (or auto, for its ellipsoidal candidate) with options after colons: K (render
-    /// --connections-per-query), exhaustive (render --query-split 0), split=R, bottom=N or
-    /// reflection (render --query-weights reflection), e.g. ellipsoidal:4:exhaustive.
+    /// --connections-per-query), exhaustive (render --query-split 0), split=R, bottom=N,
+    /// reflection (render --query-weights reflection) or wide (render --query-tree wide), e.g.
+    /// ellipsoidal:4:exhaustive.
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<Variant>,
     /// Gates to compare at, separated by ; (same syntax as render --gate).

@@ -18,7 +18,7 @@ use gatetrace::integrator::{
 };
 use gatetrace::scene::{PreparedScene, load_gltf_with};
 
-use super::args::{ImageArgs, OnOff, QueryWeights, RenderArgs};
+use super::args::{ImageArgs, OnOff, QueryTree, QueryWeights, RenderArgs};
 use super::interrupt;
 use super::report::{print_stats, print_warnings, progress_bar, say};
 
@@ -101,6 +101,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             split: args.query_split,
             bottom_nodes: args.query_bottom_nodes,
             reflection_weights: args.query_weights == Some(QueryWeights::Reflection),
+            wide: args.query_tree == QueryTree::Wide,
             ..Default::default()
         },
         ellipsoid_guards: gatetrace::integrator::EllipsoidGuards {

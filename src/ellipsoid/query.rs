@@ -1,7 +1,7 @@
 //! CPU twin of `shaders/lib/ellipsoid_query.wesl`: the ellipsoid query's traversal of the
-//! stackless BVH (every child near the root, stochastic descents into nodes that are small
-//! against the spheroid, whole small subtrees at the bottom, one final descent over what is
-//! left past the allowance), the node estimate that weighs a descent's children, and the
+//! stackless BVH, or of the wide one with `QuerySettings::wide` (every child near the root,
+//! stochastic descents into nodes that are small against the spheroid, whole small subtrees at
+//! the bottom, one final descent over what is left past the allowance), the node estimate that weighs a descent's children, and the
 //! triangles' reservoir weights (arcs from circular intervals, times `reflection_factor` in
 //! queries for reflecting vertices). The same random numbers (pcg4d of the
 //! query's key) drive the same decisions; the arithmetic is f64 on the f64 oracle's sections
@@ -16,7 +16,8 @@
 use glam::{DVec3, DVec4};
 
 use super::{Spheroid, Triangle as OracleTriangle};
-use crate::gpu::layout::{BvhNode, MATERIAL_DOUBLE_SIDED, Material, NONE, NodeSurface, Triangle};
+use crate::bvh::wide::{WIDTH, child_box};
+use crate::gpu::layout::{BvhNode, MATERIAL_DOUBLE_SIDED, Material, NONE, NodeSurface, Triangle, WIDE_LEAF, WideNode};
 use crate::rng::pcg4d;
 
 /// How an ellipsoid query traverses the BVH (shaders/lib/ellipsoid_query.wesl): every child
@@ -30,7 +31,8 @@ pub struct QuerySettings {
     /// entered by a descent (dimensionless); 0: the exhaustive query, which visits every node
     /// the spheroid may touch (cost grows with the triangles near the spheroid).
     pub split: f32,
-    /// A descent visits whole subtrees of at most this many BVH nodes.
+    /// A descent visits whole subtrees of at most this many binary BVH nodes (with `wide`, of
+    /// about as many leaves: [`QuerySettings::device_bottom_nodes`] wide nodes).
     pub bottom_nodes: u32,
     /// Loop iterations (node boxes and triangles) after which a query finishes with one descent
     /// over the rest of the tree: bounds every query's work, which lavapipe needs (it ends an
@@ -41,27 +43,44 @@ pub struct QuerySettings {
     /// `ellipsoid::query::reflection_factor`); false (the default; `render --nlos` sets it): by
     /// the arcs' angle alone. Both unbiased.
     pub reflection_weights: bool,
+    /// Walk the wide BVH (four children per node, a stack of subtrees; `render --query-tree
+    /// wide`) instead of the binary one (false, the default). Unbiased like the rest; on
+    /// lavapipe 20-30% slower per sample (docs/benchmarks.md).
+    pub wide: bool,
 }
 
 impl QuerySettings {
     /// The exhaustive query (every node the spheroid may touch, up to the allowance).
-    pub const EXHAUSTIVE: Self = Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false };
+    pub const EXHAUSTIVE: Self =
+        Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false, wide: false };
+
+    /// The device's QUERY_BOTTOM_NODES: `bottom_nodes` for the binary BVH; for the wide one,
+    /// subtrees of about as many leaves, (bottom_nodes - 1) / 6 wide nodes (a binary subtree
+    /// of L leaves has 2 L - 1 nodes, a wide one about (L - 1) / 3), at least 1 and at most
+    /// [`MAX_BOTTOM_NODES`].
+    pub fn device_bottom_nodes(&self) -> u32 {
+        if self.wide { (self.bottom_nodes.saturating_sub(1) / 6).clamp(1, MAX_BOTTOM_NODES) } else { self.bottom_nodes }
+    }
 }
 
 impl Default for QuerySettings {
     fn default() -> Self {
-        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false }
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false, wide: false }
     }
 }
 
-/// The scene as the query sees it: BVH nodes, their triangle areas (total, emitting), the
-/// triangles in BVH order and the materials.
+/// The scene as the query sees it: BVH nodes (binary and wide), their triangle areas (total,
+/// emitting), the triangles in BVH order and the materials.
 #[derive(Clone, Copy)]
 pub struct QueryScene<'a> {
     /// Stackless BVH nodes (depth-first, skip links).
     pub nodes: &'a [BvhNode],
     /// Per node: the area and spread of its triangles.
     pub node_surfaces: &'a [NodeSurface],
+    /// Wide BVH nodes (queries with `QuerySettings::wide`).
+    pub wide: &'a [WideNode],
+    /// Per wide node and slot (`4 node + slot`): the area and spread of the child's triangles.
+    pub child_surfaces: &'a [NodeSurface],
     /// Triangles in BVH order.
     pub triangles: &'a [Triangle],
     /// The materials the triangles index (albedo and sides weigh reflecting queries' picks).
@@ -74,6 +93,8 @@ impl<'a> QueryScene<'a> {
         Self {
             nodes: &scene.bvh.nodes,
             node_surfaces: &scene.node_surfaces,
+            wide: &scene.wide.nodes,
+            child_surfaces: &scene.child_surfaces,
             triangles: &scene.triangles,
             materials: &scene.materials,
         }
@@ -316,14 +337,71 @@ fn oracle_triangle(t: &Triangle) -> OracleTriangle {
     OracleTriangle { vertices: [v0, v0 + t.e1.as_dvec3(), v0 + t.e2.as_dvec3()] }
 }
 
+/// The uniform number of a query's descent step at node `i` (its own stream of the key).
+fn step_number(key: [u32; 3], i: usize) -> f64 {
+    unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0])
+}
+
+/// The uniform number with which the final descent weighs the subtree at node `i`.
+fn rest_number(key: [u32; 3], i: usize) -> f64 {
+    unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0])
+}
+
+/// Tests the triangles of the batched `leaves` (leaf word, 1 / P), in order, and adds those the
+/// spheroid cuts to `out` with their weights q / P (twin of the batch loop and
+/// `offer_triangle`).
+fn test_leaves(
+    scene: QueryScene<'_>,
+    q: &Query,
+    settings: &QuerySettings,
+    leaves: &mut Vec<(u32, f64)>,
+    out: &mut Reached,
+) {
+    for (leaf, inv_p) in leaves.drain(..) {
+        let first = leaf & 0x0fff_ffff;
+        for t in first..first + (leaf >> 28) {
+            out.iterations += 1;
+            let tri = &scene.triangles[t as usize];
+            if q.ignore.contains(&t) || (q.lights_only && tri.light == NONE) {
+                continue;
+            }
+            let o = oracle_triangle(tri);
+            let lo = o.vertices[0].min(o.vertices[1]).min(o.vertices[2]);
+            let hi = o.vertices[0].max(o.vertices[1]).max(o.vertices[2]);
+            if box_behind(lo, hi, q.reach[0]) || box_behind(lo, hi, q.reach[1]) {
+                continue;
+            }
+            let weight = pick_weight(q, &o, &scene.materials[tri.material as usize], settings);
+            if weight > 0.0 {
+                out.triangles.push((t, weight * inv_p));
+            }
+        }
+    }
+}
+
 fn is_bottom(i: usize, node: &BvhNode, settings: &QuerySettings) -> bool {
     node.leaf != 0 || (node.skip as usize - i) as u32 <= settings.bottom_nodes
 }
 
 /// Everything one query reaches (twin of `query_ellipsoid`), in the device's order: the
-/// traversal with `settings` and at most `allowance` traversal iterations before the final
-/// descent, with the random numbers of `key`.
+/// traversal with `settings` (over the binary BVH, or the wide one with `settings.wide`) and at
+/// most `allowance` loop iterations before the final descent, with the random numbers of `key`.
 pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allowance: u32, key: [u32; 3]) -> Reached {
+    if settings.wide {
+        reached_wide(scene, q, settings, allowance, key)
+    } else {
+        reached_binary(scene, q, settings, allowance, key)
+    }
+}
+
+/// [`reached`] over the binary BVH (twin of `query_binary`).
+fn reached_binary(
+    scene: QueryScene<'_>,
+    q: &Query,
+    settings: &QuerySettings,
+    allowance: u32,
+    key: [u32; 3],
+) -> Reached {
     let mut out = Reached::default();
     if q.tau_e <= q.focus_s.distance(q.focus_c) {
         return out;
@@ -333,32 +411,10 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
     let count = nodes.len();
     let estimate =
         |i: usize| node_estimate(nodes[i].min.as_dvec3(), nodes[i].max.as_dvec3(), &scene.node_surfaces[i], q, bounds);
-    let step_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0x85eb_ca6b, i as u32])[0]);
-    let rest_key = |i: usize| unit_float(pcg4d([key[0], key[1], key[2] ^ 0xc2b2_ae35, i as u32])[0]);
+    let (step_key, rest_key) = (|i: usize| step_number(key, i), |i: usize| rest_number(key, i));
     let split_size = settings.split as f64 * 0.5 * q.tau_e;
     let mut leaves: Vec<(u32, f64)> = Vec::new();
-    let flush = |leaves: &mut Vec<(u32, f64)>, out: &mut Reached| {
-        for (leaf, inv_p) in leaves.drain(..) {
-            let first = leaf & 0x0fff_ffff;
-            for t in first..first + (leaf >> 28) {
-                out.iterations += 1;
-                let tri = &scene.triangles[t as usize];
-                if q.ignore.contains(&t) || (q.lights_only && tri.light == NONE) {
-                    continue;
-                }
-                let o = oracle_triangle(tri);
-                let lo = o.vertices[0].min(o.vertices[1]).min(o.vertices[2]);
-                let hi = o.vertices[0].max(o.vertices[1]).max(o.vertices[2]);
-                if box_behind(lo, hi, q.reach[0]) || box_behind(lo, hi, q.reach[1]) {
-                    continue;
-                }
-                let weight = pick_weight(q, &o, &scene.materials[tri.material as usize], settings);
-                if weight > 0.0 {
-                    out.triangles.push((t, weight * inv_p));
-                }
-            }
-        }
-    };
+    let flush = |leaves: &mut Vec<(u32, f64)>, out: &mut Reached| test_leaves(scene, q, settings, leaves, out);
     // Descends from node i (inner, not bottom) with 1 / P = inv_p; returns the bottom subtree
     // reached (its root and 1 / P) or None when the descent dies.
     let descend = |mut i: usize, mut inv_p: f64, iterations: &mut u32| -> Option<(usize, f64)> {
@@ -452,6 +508,150 @@ pub fn reached(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allow
 /// Traversal iterations of a query so far (the device's allowance counts both loops).
 fn iterations_so_far(out: &Reached, iterations: u32) -> u32 {
     out.iterations + iterations
+}
+
+/// Entries of a query's stack (ellipsoid_query.wesl QUERY_STACK).
+pub const QUERY_STACK: usize = 32;
+/// The largest `bottom_nodes` that takes effect (ellipsoid_query.wesl MAX_BOTTOM_NODES): a
+/// subtree visited whole pushes at most that many entries, which the stack must hold.
+pub const MAX_BOTTOM_NODES: u32 = 16;
+
+/// What a query's stack entry asks for (ellipsoid_query.wesl TOP, START, BELOW).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Entry {
+    /// Visit every child the spheroid may touch (the node's estimate, for the final descent).
+    Top(f64),
+    /// A descent (or, for a small subtree, a whole visit) starts here (the node's estimate).
+    Start(f64),
+    /// Within a descent or a whole visit, reached with probability 1 / the value.
+    Below(f64),
+}
+
+/// [`reached`] over the wide BVH (twin of `query_wide`).
+fn reached_wide(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allowance: u32, key: [u32; 3]) -> Reached {
+    let mut out = Reached::default();
+    if q.tau_e <= q.focus_s.distance(q.focus_c) {
+        return out;
+    }
+    let bounds = spheroid_bounds(q);
+    let nodes = scene.wide;
+    let bottom_nodes = settings.device_bottom_nodes() as usize;
+    // Whole visits need the estimates' zeros only, and weigh by the counted area (as the
+    // device's `surface_estimate` with `modelled` false).
+    let estimates = |n: usize, modelled: bool| -> [f64; WIDTH] {
+        std::array::from_fn(|slot| {
+            if nodes[n].children[slot] == NONE {
+                return 0.0;
+            }
+            let (lo, hi) = child_box(&nodes[n], slot);
+            let surface = &scene.child_surfaces[WIDTH * n + slot];
+            let estimate = node_estimate(lo.as_dvec3(), hi.as_dvec3(), surface, q, bounds);
+            match modelled {
+                true => estimate,
+                false if estimate > 0.0 => (if q.lights_only { surface.light_area } else { surface.area }) as f64,
+                false => 0.0,
+            }
+        })
+    };
+    let (step_key, rest_key) = (|n: usize| step_number(key, n), |n: usize| rest_number(key, n));
+    let split_size = settings.split as f64 * 0.5 * q.tau_e;
+    let flush = |leaves: &mut Vec<(u32, f64)>, out: &mut Reached| test_leaves(scene, q, settings, leaves, out);
+    let mut stack: Vec<(usize, Entry)> = vec![(0, Entry::Top(1.0))];
+    let mut leaves: Vec<(u32, f64)> = Vec::new();
+    let mut iterations = 0u32;
+    while let Some((n, mut entry)) = stack.pop() {
+        if leaves.len() > LEAF_BATCH - WIDTH {
+            flush(&mut leaves, &mut out);
+        }
+        iterations += 1;
+        if !matches!(entry, Entry::Below(_)) && out.iterations + iterations > allowance {
+            // Over the allowance: the subtrees left (this one and the stack's, all at the top
+            // level) partition what is left to visit; one is chosen in proportion to its
+            // estimate, then descended into.
+            let (mut total, mut chosen) = (0.0, None);
+            for &(m, e) in std::iter::once(&(n, entry)).chain(stack.iter().rev()) {
+                let (Entry::Top(w) | Entry::Start(w)) = e else { unreachable!("below entries are on top") };
+                if m != n {
+                    iterations += 1;
+                }
+                total += w;
+                // (The first entry is kept whenever its estimate is positive, as u < 1.)
+                if w > 0.0 && (m == n || rest_key(m) * total < w) {
+                    chosen = Some((m, w));
+                }
+            }
+            stack.clear();
+            if let Some((m, w)) = chosen {
+                stack.push((m, Entry::Below(total / w)));
+            }
+            continue;
+        }
+        let node = &nodes[n];
+        let top_fits = stack.len() + WIDTH + bottom_nodes <= QUERY_STACK;
+        if matches!(entry, Entry::Top(_)) && !top_fits {
+            entry = Entry::Start(0.0);
+        }
+        let whole = matches!(entry, Entry::Top(_)) || node.subtree as usize <= bottom_nodes;
+        let e = estimates(n, !whole);
+        let inv_p = match entry {
+            Entry::Top(_) => {
+                for slot in (0..WIDTH).rev() {
+                    let child = node.children[slot];
+                    if e[slot] <= 0.0 {
+                        continue;
+                    }
+                    if child >= WIDE_LEAF {
+                        leaves.push((child, 1.0));
+                    } else {
+                        let (lo, hi) = child_box(node, slot);
+                        let small = ((hi - lo).length() as f64) <= split_size;
+                        stack.push((child as usize, if small { Entry::Start(e[slot]) } else { Entry::Top(e[slot]) }));
+                    }
+                }
+                continue;
+            }
+            Entry::Start(_) => 1.0,
+            Entry::Below(inv_p) => inv_p,
+        };
+        if node.subtree as usize <= bottom_nodes {
+            // A small subtree: every child, at the probability it was reached with.
+            for slot in (0..WIDTH).rev() {
+                let child = node.children[slot];
+                if e[slot] <= 0.0 {
+                    continue;
+                }
+                if child >= WIDE_LEAF {
+                    leaves.push((child, inv_p));
+                } else {
+                    stack.push((child as usize, Entry::Below(inv_p)));
+                }
+            }
+            continue;
+        }
+        // A descent step: one child, in proportion to its estimate.
+        let total: f64 = e.iter().sum();
+        if total <= 0.0 {
+            continue;
+        }
+        let u = step_key(n) * total;
+        let mut cumulative = 0.0;
+        let slot = (0..WIDTH)
+            .find(|&s| {
+                cumulative += e[s];
+                u < cumulative
+            })
+            .unwrap_or_else(|| (0..WIDTH).rev().find(|&s| e[s] > 0.0).unwrap());
+        let inv_p = inv_p * total / e[slot];
+        let child = node.children[slot];
+        if child >= WIDE_LEAF {
+            leaves.push((child, inv_p));
+        } else {
+            stack.push((child as usize, Entry::Below(inv_p)));
+        }
+    }
+    out.iterations += iterations;
+    flush(&mut leaves, &mut out);
+    out
 }
 
 /// The triangle reservoir lane `lane` (0..8) of the device keeps for this query (twin of the

@@ -122,8 +122,9 @@ pub struct WideNode {
     /// `(parent << 2) | slot`: the parent node and this node's slot in it ([`NONE`] at the
     /// root); resumed traversals climb with it.
     pub parent: u32,
-    /// Padding.
-    pub reserved: u32,
+    /// Wide nodes in the subtree rooted here, itself included: wide ellipsoid queries visit
+    /// subtrees of at most QUERY_BOTTOM_NODES nodes whole (shaders/lib/ellipsoid_query.wesl).
+    pub subtree: u32,
     /// Per slot: a child node's index (below [`WIDE_LEAF`]), a leaf `(count << 28) | first`
     /// (count 1 to 4, BVH positions as in [`BvhNode::leaf`]), or [`NONE`] for an empty slot.
     pub children: [u32; 4],
@@ -132,10 +133,11 @@ pub struct WideNode {
 /// [`WideNode::children`] at or above this value are leaves (or [`NONE`]).
 pub const WIDE_LEAF: u32 = 1 << 28;
 
-/// What the ellipsoid queries' stochastic descent knows of the surface below a BVH node (one
-/// per node, in node order): the area of its triangles and the first two moments of a point
-/// drawn uniformly on them, from which `node_estimate` (shaders/lib/ellipsoid_query.wesl)
-/// predicts the density of path length over the node.
+/// What the ellipsoid queries' stochastic descent knows of the surface below a node: the area
+/// of its triangles and the first two moments of a point drawn uniformly on them, from which
+/// `node_estimate` (shaders/lib/ellipsoid_query.wesl) predicts the density of path length over
+/// the node. One per binary BVH node in node order, or (for queries over the wide BVH) one per
+/// wide node and slot, `4 node + slot`, zero for an empty slot.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct NodeSurface {
@@ -147,8 +149,8 @@ pub struct NodeSurface {
     /// Total area of its emitting triangles (m^2).
     pub light_area: f32,
     /// Covariance of a point drawn uniformly on the triangles (m^2) divided by the squared
-    /// diagonal of the node's box (so in [-1, 1]), as three pack2x16float words: (xx, yy),
-    /// (zz, xy), (xz, yz).
+    /// diagonal of the node's box (a wide child's as the kernels decode it; so in [-1, 1]), as
+    /// three pack2x16float words: (xx, yy), (zz, xy), (xz, yz).
     pub spread: [u32; 3],
 }
 

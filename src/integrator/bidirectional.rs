@@ -315,7 +315,8 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("CONNECTIONS_PER_QUERY", k as f64));
             constants.push(("LENGTH_GUARD", settings.ellipsoid_guards.length as f64));
             constants.push(("QUERY_SPLIT", settings.query.split as f64));
-            constants.push(("QUERY_BOTTOM_NODES", settings.query.bottom_nodes as f64));
+            constants.push(("QUERY_BOTTOM_NODES", settings.query.device_bottom_nodes() as f64));
+            constants.push(("QUERY_WIDE", settings.query.wide as u32 as f64));
             constants.push(("QUERY_ALLOWANCE", settings.query.allowance as f64));
             constants.push(("QUERY_REFLECTION_WEIGHTS", settings.query.reflection_weights as u32 as f64));
         }

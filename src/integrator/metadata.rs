@@ -76,6 +76,7 @@ pub fn render_metadata(
         let g = settings.ellipsoid_guards;
         metadata.push(("connections_per_query".into(), settings.connections_per_query.into()));
         metadata.push(("query_split".into(), settings.query.split.into()));
+        metadata.push(("query_tree".into(), if settings.query.wide { "wide" } else { "binary" }.into()));
         metadata.push((
             "query_weights".into(),
             if settings.query.reflection_weights { "reflection" } else { "arcs" }.into(),

@@ -91,7 +91,9 @@ pub fn upload_scene(
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
     r.storage_init(ctx, "wide_nodes", &scene.wide.nodes)?;
-    let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", &scene.node_surfaces, limit)?;
+    // Queries over the wide BVH read one surface per wide node and slot in the same binding.
+    let surfaces = if settings.query.wide { &scene.child_surfaces } else { &scene.node_surfaces };
+    let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", surfaces, limit)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
     let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();

@@ -23,6 +23,9 @@ pub struct PreparedScene {
     pub triangles: Vec<Triangle>,
     /// Per BVH node: the area and spread of its triangles, see `Bvh::node_surfaces`.
     pub node_surfaces: Vec<NodeSurface>,
+    /// Per wide BVH node and slot (`4 node + slot`): the same of the child's triangles, see
+    /// `WideBvh::child_surfaces` (queries over the wide BVH, `QuerySettings::wide`).
+    pub child_surfaces: Vec<NodeSurface>,
     /// Per triangle (BVH order): unit normal from an f64 cross product, octahedral
     /// (`surface::triangle_normal`).
     pub normals: Vec<[f32; 2]>,
@@ -90,8 +93,11 @@ impl PreparedScene {
         }
         let (texture_infos, texels) = gpu_textures(&scene);
         let ray_epsilon = 1e-6 * scene.triangle_extent();
-        let node_surfaces = bvh.node_surfaces(&triangles);
         let wide = WideBvh::build(&bvh);
+        let sums = bvh.surface_sums(&triangles);
+        let node_surfaces = bvh.node_surfaces(&sums);
+        let child_surfaces = wide.child_surfaces(&sums);
+        drop(sums);
         Ok(Self {
             materials: gpu_materials(&scene),
             scene,
@@ -99,6 +105,7 @@ impl PreparedScene {
             wide,
             triangles,
             node_surfaces,
+            child_surfaces,
             normals,
             shading,
             texture_infos,

@@ -12,11 +12,12 @@
 #
 # Scenes: the Cornell box, and the displaced spheres of 327,680 and 1,310,720 triangles in the
 # box (tools/scenes/make_sphere_scene.py; made in target/scenes when missing). For each scene:
-#   - `gatetrace bench` (path, direct, ellipsoidal at the 2.5 mm gate; 64x64, 5 bounces) for
-#     --seconds each: samples/s, set-up time, the scene's load and BVH build time;
+#   - `gatetrace bench` (path, direct, ellipsoidal at the 2.5 mm gate, and ellipsoidal:wide, its
+#     queries over the wide BVH; 64x64, 5 bounces) for --seconds each: samples/s, set-up time,
+#     the scene's load and BVH build time;
 #   - the same with --profile for a second each: GPU time per stage (ms);
-#   - `gatetrace equal-time` of direct and ellipsoidal at the 2.5 mm gate: MSE at equal time
-#     against a reference render.
+#   - `gatetrace equal-time` of direct, ellipsoidal and ellipsoidal:wide at the 2.5 mm gate: MSE
+#     at equal time against a reference render.
 # Then `gatetrace bench` on the largest mesh at larger images (256x256 and 1024x1024, 2 s
 # each): a GPU keeps more paths in flight than a 64x64 image gives it.
 # Where Python can import mitsuba and mitransient with Mitsuba's variant --peer-variant (default
@@ -87,12 +88,14 @@ for f in "${frequencies[@]}"; do
 done
 
 gate='box:3.16..3.1625'
+methods=path,direct,ellipsoidal,ellipsoidal:wide
 i=0
 for scene in "${scenes[@]}"; do
     echo "device_bench: $(basename "$scene")" >&2
-    "$exe" bench --scene "$scene" --seconds "$seconds" --res "$res" --json "$work/bench_$i.json" >&2
-    "$exe" bench --scene "$scene" --seconds "$profile_seconds" --res "$res" --profile --json "$work/profile_$i.json" >&2
-    "$exe" equal-time "$scene" --methods direct,ellipsoidal --gates "$gate" --seconds "$equal_seconds" --repeats 1 \
+    "$exe" bench --scene "$scene" --methods "$methods" --seconds "$seconds" --res "$res" --json "$work/bench_$i.json" >&2
+    "$exe" bench --scene "$scene" --methods "$methods" --seconds "$profile_seconds" --res "$res" --profile \
+        --json "$work/profile_$i.json" >&2
+    "$exe" equal-time "$scene" --methods direct,ellipsoidal,ellipsoidal:wide --gates "$gate" --seconds "$equal_seconds" --repeats 1 \
         --reference-method ellipsoidal --reference-seconds "$reference_seconds" --res "$res" --csv "$work/equal_$i.csv" >&2
     i=$((i + 1))
 done
@@ -100,7 +103,8 @@ done
 j=0
 for r in "${large_resolutions[@]}"; do
     echo "device_bench: $(basename "${scenes[-1]}") at $r" >&2
-    "$exe" bench --scene "${scenes[-1]}" --seconds "$large_seconds" --res "$r" --json "$work/large_$j.json" >&2
+    "$exe" bench --scene "${scenes[-1]}" --methods "$methods" --seconds "$large_seconds" --res "$r" \
+        --json "$work/large_$j.json" >&2
     j=$((j + 1))
 done
 
