@@ -163,8 +163,9 @@ class Renderer:
         samples_per_pass: samples per pixel traced together (None: chosen from the image size).
         connections_per_query: ``ellipsoidal`` and ``combined``: points drawn from each
             ellipsoid query (1-8; None: 4).
-        query_split, query_bottom_nodes, query_weights: ``ellipsoidal``'s ellipsoid queries, as
-            ``render --query-split``, ``--query-bottom-nodes`` and ``--query-weights``.
+        query_split, query_bottom_nodes, query_weights, query_tree: ``ellipsoidal``'s ellipsoid
+            queries, as ``render --query-split``, ``--query-bottom-nodes``, ``--query-weights``
+            and ``--query-tree`` (``"binary"`` or ``"wide"``).
     """
 
     def __init__(
@@ -180,6 +181,7 @@ class Renderer:
         query_split: float = 1.0,
         query_bottom_nodes: int = 31,
         query_weights: str = "arcs",
+        query_tree: str = "binary",
     ):
         if not isinstance(scene, Scene):
             scene = Scene.load(scene)
@@ -203,6 +205,7 @@ class Renderer:
             query_split=float(query_split),
             query_bottom_nodes=query_bottom_nodes,
             query_weights=query_weights,
+            query_tree=query_tree,
         )
 
     def render(
@@ -285,6 +288,7 @@ def capture(
     query_split: float = 1.0,
     query_bottom_nodes: int = 31,
     query_weights: Optional[str] = None,
+    query_tree: str = "binary",
     target_pilot: Optional[int] = None,
     band_index: str = "auto",
     needle_guard: float = 1e-6,
@@ -320,8 +324,8 @@ def capture(
         count_first_last: count the laser -> spot and sensed point -> sensor segments in path
             lengths.
         rr_depth, samples_per_pass, connections_per_query, query_split, query_bottom_nodes,
-            query_weights, target_pilot, band_index, needle_guard, length_guard: as ``render
-            --rr-depth`` ... ``--length-guard`` (None: the capture's defaults: 1 connection per
+            query_weights, query_tree, target_pilot, band_index, needle_guard, length_guard: as
+            ``render --rr-depth`` ... ``--length-guard`` (None: the capture's defaults: 1 connection per
             query, ``"reflection"`` weights, a 256 spp target pilot for ellipsoidal on a
             transient gate; `band_index` ``"auto"``, ``"on"`` or ``"off"``).
         allow_unsupported_materials: render transmissive materials as opaque instead of
@@ -366,6 +370,7 @@ def capture(
         query_split=float(query_split),
         query_bottom_nodes=query_bottom_nodes,
         query_weights=query_weights,
+        query_tree=query_tree,
         target_pilot=target_pilot,
         band_index=band_index,
         needle_guard=float(needle_guard),

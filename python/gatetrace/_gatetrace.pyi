@@ -60,6 +60,7 @@ class Renderer:
         query_split: float = 1.0,
         query_bottom_nodes: int = 31,
         query_weights: str = "arcs",
+        query_tree: str = "binary",
     ) -> None: ...
     def render(
         self, gate: str, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0
@@ -86,6 +87,7 @@ def capture(
     query_split: float = 1.0,
     query_bottom_nodes: int = 31,
     query_weights: Optional[str] = None,
+    query_tree: str = "binary",
     target_pilot: Optional[int] = None,
     band_index: str = "auto",
     needle_guard: float = 1e-6,

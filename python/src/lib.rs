@@ -228,7 +228,8 @@ impl Renderer {
     /// A renderer of `scene` with the command line's defaults (see gatetrace.Renderer).
     #[new]
     #[pyo3(signature = (scene, *, method="path", max_bounces=8, res=(256, 256), rr_depth=None, samples_per_pass=None,
-        connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="arcs"))]
+        connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="arcs",
+        query_tree="binary"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: PyRef<'_, Scene>,
@@ -241,10 +242,12 @@ impl Renderer {
         query_split: f32,
         query_bottom_nodes: u32,
         query_weights: &str,
+        query_tree: &str,
     ) -> PyResult<Self> {
         let method = parse_method(method)?;
         let (width, height) = check_image(res, samples_per_pass)?;
         let reflection_weights = parse_query_weights(query_weights)?;
+        let wide = parse_query_tree(query_tree)?;
         let settings = RenderSettings {
             width,
             height,
@@ -258,6 +261,7 @@ impl Renderer {
                 split: query_split,
                 bottom_nodes: query_bottom_nodes,
                 reflection_weights,
+                wide,
                 ..Default::default()
             },
             ..Default::default()
@@ -442,6 +446,15 @@ fn parse_query_weights(name: &str) -> PyResult<bool> {
     }
 }
 
+/// `query_tree`: "binary" (false) or "wide" (true, queries over the four-wide BVH).
+fn parse_query_tree(name: &str) -> PyResult<bool> {
+    match name {
+        "binary" => Ok(false),
+        "wide" => Ok(true),
+        other => Err(PyValueError::new_err(format!("query_tree `{other}`: choose binary or wide"))),
+    }
+}
+
 fn parse_gate(spec: &str) -> PyResult<Gate> {
     Gate::parse(spec).map_err(|e| value_error(e.context(format!("gate `{spec}`"))))
 }
@@ -498,7 +511,7 @@ impl CaptureProgress for CaptureSignals {
 #[pyfunction]
 #[pyo3(signature = (path, scan, gate="none", *, spp=None, seconds=None, seed=0, method=None, max_bounces=8,
     res=(256, 256), rr_depth=None, samples_per_pass=None, connections_per_query=None, query_split=1.0,
-    query_bottom_nodes=31, query_weights=None, target_pilot=None, band_index="auto", needle_guard=1e-6,
+    query_bottom_nodes=31, query_weights=None, query_tree="binary", target_pilot=None, band_index="auto", needle_guard=1e-6,
     length_guard=1e-5, relay_wall=gatetrace::nlos::DEFAULT_RELAY_WALL, sensor_origin=None, laser_origin=None,
     laser_spot=(0.5, 0.5), laser_grid=None, laser_power=1.0, count_first_last=false,
     allow_unsupported_materials=false))]
@@ -520,6 +533,7 @@ fn capture<'py>(
     query_split: f32,
     query_bottom_nodes: u32,
     query_weights: Option<&str>,
+    query_tree: &str,
     target_pilot: Option<u32>,
     band_index: &str,
     needle_guard: f32,
@@ -566,7 +580,12 @@ fn capture<'py>(
         rr_depth,
         seed,
         samples_per_pass,
-        query: QuerySettings { split: query_split, bottom_nodes: query_bottom_nodes, ..Default::default() },
+        query: QuerySettings {
+            split: query_split,
+            bottom_nodes: query_bottom_nodes,
+            wide: parse_query_tree(query_tree)?,
+            ..Default::default()
+        },
         ellipsoid_guards: EllipsoidGuards { needle: needle_guard, length: length_guard },
         ..Default::default()
     };

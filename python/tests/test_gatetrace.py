@@ -65,6 +65,17 @@ def test_transient_cube_equals_the_command_line_and_has_the_documented_layout(tm
                                        "end_m": pytest.approx(2.5)}
 
 
+def test_queries_over_the_wide_bvh_equal_the_command_line_bit_for_bit(tmp_path):
+    args = dict(gate="box:3.14..3.19", spp=16, res=(16, 16), max_bounces=3, seed=2, method="ellipsoidal")
+    image, meta = gatetrace.render(str(BOX), query_tree="wide", metadata=True, **args)
+    cli, cli_meta = cli_render(tmp_path, str(BOX), "--gate", "box:3.14..3.19", "--spp", "16", "--res", "16x16",
+                               "--max-bounces", "3", "--seed", "2", "--method", "ellipsoidal", "--query-tree", "wide")
+    assert image.mean() > 0 and meta["query_tree"] == cli_meta["query_tree"] == "wide"
+    assert np.array_equal(image, cli), f"largest difference {np.abs(image - cli).max()}"
+    # The default tree is the binary one.
+    assert gatetrace.render(str(BOX), metadata=True, **args)[1]["query_tree"] == "binary"
+
+
 def test_row_zero_is_the_top_of_the_image():
     # The Cornell box's light is in the ceiling: the brightest row lies in the upper half.
     image = gatetrace.render(BOX, spp=16, res=(32, 32), max_bounces=0)
@@ -123,6 +134,7 @@ def test_bidirectional_methods_agree_with_path_on_the_image_mean():
         (lambda: gatetrace.Renderer(BOX, res=64), ValueError, "res"),
         (lambda: gatetrace.Renderer(BOX, max_bounces=-1), ValueError, "max_bounces"),
         (lambda: gatetrace.Renderer(BOX, query_weights="angles"), ValueError, "query_weights"),
+        (lambda: gatetrace.Renderer(BOX, query_tree="octree"), ValueError, "query_tree"),
         (lambda: gatetrace.render(BOX, gate="box:3.2..3.1", spp=1, res=(8, 8)), ValueError, "gate"),
         (lambda: gatetrace.render(BOX, gate="boxcar:1..2", spp=1, res=(8, 8)), ValueError, "boxcar"),
         (lambda: gatetrace.render(BOX, gate=3.14, spp=1, res=(8, 8)), TypeError, "gate"),
