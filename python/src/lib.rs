@@ -223,6 +223,10 @@ fn parse_method(name: &str) -> PyResult<Method> {
     Method::parse(name).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
+/// What a render or capture returns to Python: the image or capture as a float32 numpy array,
+/// and the metadata as (key, value as JSON text) pairs.
+type Rendered<'py> = (Bound<'py, PyAny>, Vec<(String, String)>);
+
 #[pymethods]
 impl Renderer {
     /// A renderer of `scene` with the command line's defaults (see gatetrace.Renderer).
@@ -286,7 +290,7 @@ impl Renderer {
         spp: Option<u64>,
         seconds: Option<f64>,
         seed: u32,
-    ) -> PyResult<(Bound<'py, PyAny>, Vec<(String, String)>)> {
+    ) -> PyResult<Rendered<'py>> {
         let gate_value = parse_gate(gate)?;
         let budget = parse_budget(spp, seconds)?;
         // Never wait for the lock: a render releases the GIL and takes it back between passes, so
@@ -546,7 +550,7 @@ fn capture<'py>(
     laser_power: f32,
     count_first_last: bool,
     allow_unsupported_materials: bool,
-) -> PyResult<(Bound<'py, PyAny>, Vec<(String, String)>)> {
+) -> PyResult<Rendered<'py>> {
     let scan = [Scan::Single, Scan::Confocal, Scan::Exhaustive]
         .into_iter()
         .find(|s| s.name() == scan)
