@@ -18,7 +18,7 @@ use crate::integrator::bidirectional::{DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAU
 use crate::integrator::{Budget, Method, Progress, RenderOutput, RenderSettings, render_metadata, render_resumable};
 use crate::nlos::band_index::AUTO_MIN_TRIANGLES;
 use crate::nlos::{LaserAim, NlosCapture, Scan, ShellPreparation, capture_record, cell_uv, check_capture};
-use crate::scene::{LoadOptions, PreparedScene, load_gltf_with};
+use crate::scene::{LoadOptions, PreparedScene, load_scene_with};
 
 /// The method a capture renders with when none is asked for: ellipsoidal where a gate gives
 /// target lengths (the default the capture tables of docs/nlos.md measure), path without one.
@@ -161,7 +161,7 @@ pub fn prepare_capture(
     request: &CaptureRequest,
     base: RenderSettings,
 ) -> Result<PreparedCapture> {
-    let mut loaded = load_gltf_with(scene_path, &LoadOptions { capture: true, ..load })?;
+    let mut loaded = load_scene_with(scene_path, &LoadOptions { capture: true, ..load })?;
     let mut settings = base;
     let wall = &request.relay_wall;
     let hidden_triangles = loaded.triangles.len() - loaded.node(wall).map_or(0, |n| n.triangles.len());

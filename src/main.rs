@@ -3,7 +3,6 @@
 mod cli;
 
 use anyhow::Context as _;
-use clap::Parser as _;
 use cli::{Cli, Command, interrupt};
 
 fn main() {
@@ -13,7 +12,7 @@ fn main() {
         // SAFETY: nothing else runs yet: main has not started any thread.
         unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
     }
-    let result = match Cli::parse().command {
+    let result = match Cli::parse_recording().command {
         Command::Render(args) => {
             interrupt::install().context("cannot watch for SIGINT and SIGTERM").and_then(|_| cli::render::run(args))
         }

@@ -120,13 +120,45 @@ fn add_material_extension(doc: &mut Value, material: usize, extension: &str, val
 const OBJ_QUAD: &str = "# Blender 4.2\nmtllib plane.mtl\no Plane\nv -1 0 1\nv 1 0 1\nv -1 0 -1\nv 1 0 -1\n\
                         vn 0 1 0\nusemtl Material\ns 0\nf 1//1 2//1 4//1 3//1\n";
 
-/// A small Mitsuba 3 scene.
+/// A small Mitsuba 3 scene whose mesh file is missing.
 const MITSUBA_XML: &str = "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<scene version=\"3.0.0\">\n  \
                            <integrator type=\"path\"/>\n  <shape type=\"obj\">\n    \
                            <string name=\"filename\" value=\"plane.obj\"/>\n  </shape>\n</scene>\n";
 
 /// What a case writes into its directory before the command runs.
 type Setup = Box<dyn FnOnce(&Path)>;
+
+/// A Mitsuba 3 scene with a camera and a lit rectangle (lines 1 to 4), then `body` from line 5.
+fn xml_with(body: &str) -> String {
+    format!(
+        "<?xml version=\"1.0\"?>\n<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><float name=\"fov\" \
+         value=\"40\"/><transform name=\"to_world\"><lookat origin=\"0, 0, 2\" target=\"0, 0, 0\" up=\"0, 1, 0\"/>\
+         </transform></sensor>\n<shape type=\"rectangle\"><emitter type=\"area\"><rgb name=\"radiance\" \
+         value=\"1\"/></emitter></shape>\n{body}\n</scene>\n"
+    )
+}
+
+/// A case rendering `xml_with(body)` as scene.xml (with `files`: name and content of each
+/// file written beside it).
+fn xml_case(
+    name: &'static str,
+    body: &'static str,
+    files: &'static [(&str, &[u8])],
+    needles: &[&str],
+) -> (Case, Setup) {
+    let args = ["render", "{dir}/scene.xml", "--res", "8x8", "--spp", "1", "--out", "{out}"];
+    case(
+        name,
+        move |d| {
+            std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            for (file, content) in files {
+                std::fs::write(d.join(file), content).unwrap();
+            }
+        },
+        args.iter().map(|s| s.to_string()).collect(),
+        needles,
+    )
+}
 
 fn cases() -> Vec<(Case, Setup)> {
     // `render SCENE` of a tiny image with `extra` options, writing {out}.
@@ -184,19 +216,201 @@ fn cases() -> Vec<(Case, Setup)> {
             "OBJ mesh",
             |d| std::fs::write(d.join("plane.obj"), OBJ_QUAD).unwrap(),
             render("{dir}/plane.obj", &[]),
-            &["plane.obj", "Wavefront OBJ", "glTF 2.0 scenes only (.gltf or .glb)", "File > Export > glTF 2.0"],
+            &[
+                "plane.obj",
+                "Wavefront OBJ",
+                "glTF 2.0 scenes (.gltf or .glb) and Mitsuba 3 XML scenes",
+                "File > Export > glTF 2.0",
+                "<shape type=\"obj\">",
+            ],
         ),
         case(
-            "Mitsuba XML scene",
+            "Mitsuba XML scene whose mesh is missing",
             |d| std::fs::write(d.join("scene.xml"), MITSUBA_XML).unwrap(),
             render("{dir}/scene.xml", &[]),
-            &["scene.xml", "Mitsuba XML", "does not exist yet", "glTF 2.0 scenes only", "File > Export > glTF 2.0"],
+            &["scene.xml:4: <shape type=\"obj\">", "plane.obj: cannot read the mesh"],
         ),
         case(
             "Mitsuba XML named .gltf",
             |d| std::fs::write(d.join("misnamed.gltf"), MITSUBA_XML).unwrap(),
             render("{dir}/misnamed.gltf", &[]),
-            &["misnamed.gltf", "Mitsuba XML", "by its content", "does not exist yet"],
+            &["misnamed.gltf:4", "plane.obj"],
+        ),
+        // --- Mitsuba XML: malformed, or outside the subset gatetrace renders (file:line: <element>) ---
+        xml_case("XML not well-formed", "<shape type=\"cube\">", &[], &["scene.xml", "not well-formed XML"]),
+        case(
+            "XML whose root is not <scene>",
+            |d| std::fs::write(d.join("scene.xml"), "<root>\n<scene/>\n</root>\n").unwrap(),
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:1: <root>", "not <scene>"],
+        ),
+        xml_case(
+            "XML parameter without a default",
+            "<shape type=\"sphere\"><float name=\"radius\" value=\"$r\"/></shape>",
+            &[],
+            &["scene.xml:5: <float name=\"radius\">", "$r", "<default name=\"r\""],
+        ),
+        xml_case("XML unknown shape", "<shape type=\"teapot\"/>", &[], &["scene.xml:5", "the shape `teapot`"]),
+        xml_case(
+            "XML dielectric",
+            "<shape type=\"cube\"><bsdf type=\"dielectric\"/></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"dielectric\">", "not rendered yet"],
+        ),
+        xml_case(
+            "XML rough plastic",
+            "<bsdf type=\"roughplastic\" id=\"p\"/><shape type=\"cube\"><ref id=\"p\"/></shape>",
+            &[],
+            &["<bsdf type=\"roughplastic\" id=\"p\">", "`roughplastic` BSDF is not rendered yet"],
+        ),
+        xml_case(
+            "XML property gatetrace does not read",
+            "<shape type=\"cube\"><bsdf type=\"diffuse\"><float name=\"sheen\" value=\"1\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <float name=\"sheen\">", "not read by gatetrace's <bsdf type=\"diffuse\">"],
+        ),
+        xml_case(
+            "XML reference to a missing id",
+            "<shape type=\"cube\"><ref id=\"nowhere\"/></shape>",
+            &[],
+            &["scene.xml:5: <ref id=\"nowhere\">", "no object has the id `nowhere`"],
+        ),
+        xml_case(
+            "XML reference to an object of another kind",
+            "<shape type=\"cube\" id=\"c\"/><shape type=\"cube\"><ref id=\"c\"/></shape>",
+            &[],
+            &["`c` is a <shape>, where a <bsdf> is needed"],
+        ),
+        xml_case(
+            "XML id given twice",
+            "<bsdf type=\"diffuse\" id=\"a\"/>\n<bsdf type=\"diffuse\" id=\"a\"/>",
+            &[],
+            &["scene.xml:6", "the id `a` is given twice (first at line 5)"],
+        ),
+        xml_case(
+            "XML OBJ face naming a missing vertex",
+            "<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>",
+            &[("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")],
+            &["scene.xml:5: <shape type=\"obj\">", "bad.obj"],
+        ),
+        xml_case(
+            "XML PLY without faces",
+            "<shape type=\"ply\"><string name=\"filename\" value=\"points.ply\"/></shape>",
+            &[("points.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n")],
+            &["scene.xml:5", "points.ply: the PLY file has no `face` element"],
+        ),
+        xml_case(
+            "XML PLY that is not PLY",
+            "<shape type=\"ply\"><string name=\"filename\" value=\"junk.ply\"/></shape>",
+            &[("junk.ply", b"\x00\x01 not a mesh")],
+            &["scene.xml:5", "junk.ply: not a readable PLY mesh"],
+        ),
+        xml_case(
+            "XML PLY face out of range",
+            "<shape type=\"ply\"><string name=\"filename\" value=\"tri.ply\"/></shape>",
+            &[("tri.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")],
+            &["tri.ply: face 0 names vertex 7, out of range (3 vertices)"],
+        ),
+        xml_case("XML include of a missing file", "<include filename=\"gone.xml\"/>", &[], &["scene.xml:5: <include>", "gone.xml: cannot read"]),
+        xml_case("XML include of itself", "<include filename=\"scene.xml\"/>", &[], &["includes nest deeper than 16 files"]),
+        xml_case(
+            "XML unknown transform operation",
+            "<shape type=\"cube\"><transform name=\"to_world\"><shear value=\"1\"/></transform></shape>",
+            &[],
+            &["scene.xml:5: <shear>", "not a transform operation"],
+        ),
+        xml_case(
+            "XML rotation about a zero axis",
+            "<shape type=\"cube\"><transform name=\"to_world\"><rotate angle=\"30\"/></transform></shape>",
+            &[],
+            &["<rotate>", "the rotation axis is zero"],
+        ),
+        xml_case(
+            "XML colour of two numbers",
+            "<shape type=\"cube\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.1, 0.2\"/></bsdf></shape>",
+            &[],
+            &["<rgb name=\"reflectance\">", "needs 3 numbers"],
+        ),
+        xml_case(
+            "XML sampled spectrum",
+            "<shape type=\"cube\"><bsdf type=\"diffuse\"><spectrum name=\"reflectance\" value=\"400:0.1, 700:0.5\"/></bsdf></shape>",
+            &[],
+            &["<spectrum name=\"reflectance\">", "spectra sampled at wavelengths are not read"],
+        ),
+        xml_case(
+            "XML number that is not one",
+            "<shape type=\"sphere\"><float name=\"radius\" value=\"big\"/></shape>",
+            &[],
+            &["scene.xml:5: <float name=\"radius\">", "`big` is not a finite number"],
+        ),
+        xml_case(
+            "XML reflectance above one",
+            "<shape type=\"cube\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"2\"/></bsdf></shape>",
+            &[],
+            &["<bsdf type=\"diffuse\">", "outside [0, 1]"],
+        ),
+        case(
+            "XML without a sensor",
+            |d| std::fs::write(d.join("scene.xml"), "<scene version=\"3.0.0\"><shape type=\"cube\"/></scene>").unwrap(),
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml: no <sensor>"],
+        ),
+        xml_case("XML spot light", "<emitter type=\"spot\"/>", &[], &["scene.xml:5: <emitter type=\"spot\">", "spot light"]),
+        xml_case("XML area emitter outside a shape", "<emitter type=\"area\"/>", &[], &["belongs inside a <shape>"]),
+        xml_case(
+            "XML NLOS integrator",
+            "<integrator type=\"transient_nlos_path\"/>",
+            &[],
+            &["scene.xml:5: <integrator type=\"transient_nlos_path\">", "not read yet"],
+        ),
+        xml_case("XML volumetric integrator", "<integrator type=\"volpath\"/>", &[], &["`volpath` renders media"]),
+        xml_case(
+            "XML camera unwarp",
+            "<integrator type=\"transient_path\"><boolean name=\"camera_unwarp\" value=\"true\"/></integrator>",
+            &[],
+            &["`camera_unwarp` true is not rendered"],
+        ),
+        xml_case(
+            "XML texture of an unknown kind",
+            "<shape type=\"cube\"><bsdf type=\"diffuse\"><texture type=\"gradient\" name=\"reflectance\"/></bsdf></shape>",
+            &[],
+            &["<texture type=\"gradient\" name=\"reflectance\">", "the texture `gradient` is not read"],
+        ),
+        xml_case(
+            "XML bitmap that is not an image",
+            "<shape type=\"cube\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">\
+             <string name=\"filename\" value=\"wood.png\"/></texture></bsdf></shape>",
+            &[("wood.png", b"not a png")],
+            &["scene.xml:5: <texture type=\"bitmap\" name=\"reflectance\">", "wood.png: cannot decode the image"],
+        ),
+        xml_case(
+            "XML emitter on a two-sided shape",
+            "<shape type=\"cube\"><bsdf type=\"twosided\"><bsdf type=\"diffuse\"/></bsdf><emitter type=\"area\"/></shape>",
+            &[],
+            &["<emitter type=\"area\">", "twosided BSDF"],
+        ),
+        xml_case(
+            "XML conductor preset",
+            "<shape type=\"cube\"><bsdf type=\"conductor\"><string name=\"material\" value=\"Au\"/></bsdf></shape>",
+            &[],
+            &["the conductor preset `Au` is not built in"],
+        ),
+        xml_case("XML medium", "<medium type=\"homogeneous\"/>", &[], &["<medium type=\"homogeneous\">", "participating media"]),
+        case(
+            "XML field of view of zero",
+            |d| {
+                let xml = "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><float name=\"fov\" value=\"0\"/></sensor>\
+                           </scene>";
+                std::fs::write(d.join("scene.xml"), xml).unwrap()
+            },
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:2: <sensor type=\"perspective\">", "fov 0 is not in (0, 180) degrees"],
+        ),
+        case(
+            "XML scene with an animation time",
+            |d| std::fs::write(d.join("scene.xml"), xml_with("")).unwrap(),
+            plain(&["render", "{dir}/scene.xml", "--res", "8x8", "--frames", "2", "--anim-time", "0..1", "--out", "{dir}/f_{frame}.npy"]),
+            &["scene.xml", "a Mitsuba XML scene is static"],
         ),
         case(
             "OBJ named .glb",

@@ -117,6 +117,7 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         dropped_degenerate: 0,
         nodes: Vec::new(),
         warnings: Vec::new(),
+        settings: Default::default(),
     }
 }
 

@@ -234,25 +234,47 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
             assert_eq!(uv, glam::Vec2::new(0.5 * (p.x + 1.0), 0.5 * (p.y + 1.0)));
         }
     }
-    // WGSL texture lookups against the CPU twin.
-    let prepared = PreparedScene::new(scene).unwrap();
+    // WGSL texture lookups against the CPU twin, filtered and (as a Mitsuba checkerboard's)
+    // nearest.
     let ctx = common::gpu();
-    let tracer = gatetrace::integrator::PathTracer::new(
-        &ctx,
-        &prepared,
-        &RenderSettings { width: 4, height: 4, ..Default::default() },
-    )
-    .unwrap();
-    let mut rng = gatetrace::rng::Rng::new(5, 5, 5);
-    let input: Vec<[f32; 4]> =
-        (0..2048).map(|_| [f32::from_bits(0), 3.0 * rng.next_f32() - 1.0, 3.0 * rng.next_f32() - 1.0, 0.0]).collect();
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 7.0)], &input, input.len());
-    for (x, g) in input.iter().zip(out) {
-        let c = texture_bilinear(&prepared.texture_infos, &prepared.texels, 0, glam::Vec2::new(x[1], x[2]));
-        for k in 0..3 {
-            assert!((g[k] - c[k]).abs() < 1e-5, "texture at {:?}: GPU {} vs CPU {}", (x[1], x[2]), g[k], c[k]);
+    let mut prepared = None;
+    for nearest in [false, true] {
+        let mut scene = scene.clone();
+        scene.textures[0].nearest = nearest;
+        let scene = PreparedScene::new(scene).unwrap();
+        let tracer = gatetrace::integrator::PathTracer::new(
+            &ctx,
+            &scene,
+            &RenderSettings { width: 4, height: 4, ..Default::default() },
+        )
+        .unwrap();
+        let mut rng = gatetrace::rng::Rng::new(5, 5, 5);
+        let input: Vec<[f32; 4]> = (0..2048)
+            .map(|_| [f32::from_bits(0), 3.0 * rng.next_f32() - 1.0, 3.0 * rng.next_f32() - 1.0, 0.0])
+            .collect();
+        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 7.0)], &input, input.len());
+        for (x, g) in input.iter().zip(out) {
+            let uv = glam::Vec2::new(x[1], x[2]);
+            let c = texture_bilinear(&scene.texture_infos, &scene.texels, 0, uv);
+            for k in 0..3 {
+                assert!(
+                    (g[k] - c[k]).abs() < 1e-5,
+                    "texture at {uv} (nearest {nearest}): GPU {} vs CPU {}",
+                    g[k],
+                    c[k]
+                );
+            }
+            if nearest {
+                // The texel holding uv: u repeats, v clamps (the sampler above).
+                let column = (2.0 * uv.x).floor().rem_euclid(2.0) as usize;
+                let row = (2.0 * uv.y).floor().clamp(0.0, 1.0) as usize;
+                let expected = scene.scene.textures[0].texels[row * 2 + column];
+                assert!((c - expected).abs().max_element() <= expected.max_element() / 2048.0, "nearest at {uv}");
+            }
         }
+        prepared = Some(scene);
     }
+    let prepared = prepared.unwrap();
     // The texel storage is half precision: the red texel's green channel is exactly 0 and the
     // grey texel is within half-float rounding (2^-11 relative).
     let t = texture_bilinear(&prepared.texture_infos, &prepared.texels, 0, glam::Vec2::new(0.75, 0.75));

@@ -151,14 +151,18 @@ class Renderer:
     seed, so it equals the command line's ``gatetrace render`` with the same arguments.
 
     Args:
-        scene: a :class:`Scene`, or the path of a glTF 2.0 file (.gltf, .glb).
+        scene: a :class:`Scene`, or the path of a glTF 2.0 file (.gltf, .glb) or a Mitsuba 3 XML
+            scene. A Mitsuba scene's film, sampler and integrator (``Scene.settings``) give the
+            defaults of `max_bounces` and `res` here, and of the gate, samples and seed of
+            :meth:`render`.
         method: ``"path"`` (path tracing with next-event estimation), ``"direct"`` (bidirectional,
             direct connections), ``"ellipsoidal"`` (bidirectional, ellipsoidal connections: needs a
             gate), ``"combined"`` (both connection families in one estimator: needs a gate) or
             ``"auto"`` (path, direct or, with a gate, ellipsoidal after a pilot of each; builds its
             kernels for every render).
-        max_bounces: most scattering vertices of a path (0: lights seen directly).
-        res: image size (width, height) in pixels.
+        max_bounces: most scattering vertices of a path (0: lights seen directly; None: the
+            scene's, else 8).
+        res: image size (width, height) in pixels (None: the scene's, else (256, 256)).
         rr_depth: Russian roulette from this many scattering vertices on (None: never).
         samples_per_pass: samples per pixel traced together (None: chosen from the image size).
         connections_per_query: ``ellipsoidal`` and ``combined``: points drawn from each
@@ -173,8 +177,8 @@ class Renderer:
         scene: Union[Scene, str, os.PathLike],
         *,
         method: str = "path",
-        max_bounces: int = 8,
-        res: Tuple[int, int] = (256, 256),
+        max_bounces: Optional[int] = None,
+        res: Optional[Tuple[int, int]] = None,
         rr_depth: Optional[int] = None,
         samples_per_pass: Optional[int] = None,
         connections_per_query: Optional[int] = None,
@@ -185,6 +189,11 @@ class Renderer:
     ):
         if not isinstance(scene, Scene):
             scene = Scene.load(scene)
+        settings = scene.settings
+        if max_bounces is None:
+            max_bounces = 8 if settings["max_bounces"] is None else settings["max_bounces"]
+        if res is None:
+            res = (256, 256) if settings["res"] is None else settings["res"]
         _check_count("max_bounces", max_bounces, 0)
         if rr_depth is not None:
             _check_count("rr_depth", rr_depth, 0)
@@ -210,20 +219,28 @@ class Renderer:
 
     def render(
         self,
-        gate: Union[str, Gate] = "none",
+        gate: Union[str, Gate, None] = None,
         *,
         spp: Optional[int] = None,
         seconds: Optional[float] = None,
-        seed: int = 0,
+        seed: Optional[int] = None,
     ) -> Tuple[np.ndarray, dict]:
-        """Renders `gate` for `spp` samples per pixel (64 when neither is given) or for `seconds`
-        of rendering, from `seed` (equal seeds and settings give identical images).
+        """Renders `gate` (None: the scene's, else ``"none"``) for `spp` samples per pixel (when
+        neither is given: the scene's, else 64) or for `seconds` of rendering, from `seed` (None:
+        the scene's, else 0; equal seeds and settings give identical images).
 
         Returns (image, metadata): a float32 array [H, W, 3] or [H, W, T, 3] of bin-integrated
         radiance (W m^-2 sr^-1) weighted by the gate, row 0 at the top; and the metadata the
         command line writes beside its outputs (scene, method, gate, spp, seed, timing, adapter,
         ...), numbers as numbers. The GIL is released while the device works.
         """
+        settings = self.scene.settings
+        if gate is None:
+            gate = settings["gate"] or "none"
+        if spp is None and seconds is None:
+            spp = settings["spp"]
+        if seed is None:
+            seed = settings["seed"] or 0
         if spp is not None:
             _check_count("spp", spp, 1)
         if seconds is not None and not (isinstance(seconds, (int, float)) and seconds > 0):
@@ -245,14 +262,14 @@ class Renderer:
 
 def render(
     scene: Union[Scene, str, os.PathLike],
-    gate: Union[str, Gate] = "none",
+    gate: Union[str, Gate, None] = None,
     *,
     spp: Optional[int] = None,
     seconds: Optional[float] = None,
-    seed: int = 0,
+    seed: Optional[int] = None,
     method: str = "path",
-    max_bounces: int = 8,
-    res: Tuple[int, int] = (256, 256),
+    max_bounces: Optional[int] = None,
+    res: Optional[Tuple[int, int]] = None,
     metadata: bool = False,
     **options,
 ):

@@ -8,7 +8,7 @@ import numpy as np
 import numpy.typing as npt
 
 class Scene:
-    """A loaded glTF 2.0 scene, baked to world space with its BVH built."""
+    """A loaded glTF 2.0 or Mitsuba 3 XML scene, baked to world space with its BVH built."""
 
     @staticmethod
     def load(
@@ -18,17 +18,21 @@ class Scene:
         focus_distance: Optional[float] = None,
         allow_unsupported_materials: bool = False,
     ) -> "Scene":
-        """Loads a .gltf or .glb file; `aperture_radius` and `focus_distance` (m) make the camera a
+        """Loads a .gltf, .glb or Mitsuba 3 XML file; `aperture_radius` and `focus_distance` (m) make the camera a
         thin lens; `allow_unsupported_materials` renders materials using KHR_materials_transmission,
         KHR_materials_volume or KHR_materials_diffuse_transmission as opaque surfaces instead of
         refusing the scene. FileNotFoundError when the file does not exist, ValueError when it is
-        unusable (a file that is not glTF 2.0 included)."""
+        unusable (a file in another format included)."""
     @property
     def path(self) -> "os.PathLike[str]":
         """The file the scene came from (a pathlib.Path)."""
     @property
     def triangles(self) -> int:
         """Number of triangles."""
+    @property
+    def settings(self) -> Dict[str, Any]:
+        """Render settings the file carries (a Mitsuba scene's film, sampler and integrator), each
+        None where absent: res (width, height), spp, max_bounces, gate (lengths in metres), seed."""
     @property
     def camera(self) -> Dict[str, Any]:
         """position, forward, up, right ([x, y, z], m and unit vectors), yfov (rad),

@@ -29,7 +29,7 @@ use gatetrace::integrator::{
     black_image_warning, create_integrator, render_metadata, trace_budget, unreachable_gate,
 };
 use gatetrace::nlos::Scan;
-use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
+use gatetrace::scene::{LoadOptions, PreparedScene, load_scene_with};
 
 /// The process's device, opened on first use and shared by every renderer.
 fn device() -> PyResult<&'static GpuContext> {
@@ -65,7 +65,7 @@ struct Scene {
 
 #[pymethods]
 impl Scene {
-    /// Loads a glTF 2.0 scene (.gltf or .glb). `aperture_radius` and `focus_distance` (m) make
+    /// Loads a glTF 2.0 scene (.gltf or .glb) or a Mitsuba 3 XML scene. `aperture_radius` and `focus_distance` (m) make
     /// the camera a thin lens, overriding the camera node's `extras` (aperture 0: a pinhole).
     /// `allow_unsupported_materials` renders materials using a glTF extension that lets light
     /// through the surface (KHR_materials_transmission, KHR_materials_volume, ...) as opaque
@@ -84,7 +84,7 @@ impl Scene {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
         }
         let load = || -> anyhow::Result<PreparedScene> {
-            let mut scene = load_gltf_with(&path, &LoadOptions { allow_unsupported_materials, ..Default::default() })?;
+            let mut scene = load_scene_with(&path, &LoadOptions { allow_unsupported_materials, ..Default::default() })?;
             scene
                 .camera
                 .override_lens(aperture_radius, focus_distance, "focus_distance=METRES")
@@ -111,6 +111,21 @@ impl Scene {
     #[getter]
     fn triangles(&self) -> usize {
         self.prepared.scene.triangles.len()
+    }
+
+    /// The render settings the file carries (a Mitsuba scene's film, sampler and integrator),
+    /// each None where it has none: res (width, height), spp, max_bounces, gate (the command
+    /// line's syntax, lengths in metres), seed.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = &self.prepared.scene.settings;
+        let d = PyDict::new(py);
+        d.set_item("res", s.resolution)?;
+        d.set_item("spp", s.spp)?;
+        d.set_item("max_bounces", s.max_bounces)?;
+        d.set_item("gate", s.gate.as_deref())?;
+        d.set_item("seed", s.seed)?;
+        Ok(d)
     }
 
     /// The camera: position, forward, up and right (unit vectors, world space, metres), yfov

@@ -347,3 +347,20 @@ def test_exhaustive_capture_has_the_command_lines_layout_and_values(tmp_path):
                         "--laser-grid", "2x2", "--max-bounces", "3", "--spp", "64", "--seed", "5")
     assert np.array_equal(data, cli)
     assert meta["nlos_scan"] == "exhaustive" and np.array(meta["laser_grid_xyz"]).shape == (2, 2, 3)
+
+
+def test_a_mitsuba_scene_renders_with_its_own_settings_as_the_command_line_does(tmp_path):
+    xml = ROOT / "assets/scenes/mitsuba_box/scene.xml"
+    scene = gatetrace.Scene.load(xml)
+    assert scene.settings == {"res": (32, 32), "spp": 64, "max_bounces": 5, "gate": "transient:1.94,0.1,20",
+                              "seed": None}
+    assert gatetrace.Scene.load(BOX).settings == {"res": None, "spp": None, "max_bounces": None, "gate": None,
+                                                  "seed": None}
+    image, meta = gatetrace.render(scene, metadata=True)
+    assert image.shape == (32, 32, 20, 3) and meta["spp"] == 64 and meta["max_bounces"] == 5
+    cli, cli_meta = cli_render(tmp_path, str(xml))
+    assert cli_meta["gate"] == meta["gate"] == "transient:1.94,0.1,20"
+    assert image.mean() > 0 and np.array_equal(image, cli), f"largest difference {np.abs(image - cli).max()}"
+    # Arguments override the file's settings.
+    small = gatetrace.render(scene, gate="none", spp=2, res=(8, 4), max_bounces=1)
+    assert small.shape == (4, 8, 3)

@@ -16,7 +16,8 @@ use super::parse::{MethodParser, NamesOnly, parse_point, parse_resolution, parse
 /// same defaults.
 #[derive(clap::Args)]
 pub struct ImageArgs {
-    /// glTF 2.0 scene, .gltf or .glb (default: the Cornell box; other formats are refused).
+    /// glTF 2.0 scene (.gltf, .glb) or Mitsuba 3 XML scene, whose film, sampler and integrator
+    /// set the defaults of --res, --spp, --max-bounces, --gate and --seed (default: the Cornell box)
     pub scene: Option<PathBuf>,
     /// Render transmissive glTF materials as opaque, with a warning, instead of refusing them.
     #[arg(long)]
@@ -44,6 +45,44 @@ pub struct ImageArgs {
     /// Thin-lens camera: distance to the plane in focus in metres (overrides the camera's extras).
     #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
     pub focus_distance: Option<f32>,
+    /// The options the command line gave; the others may take the scene file's settings.
+    #[arg(skip)]
+    pub given: Vec<String>,
+}
+
+impl ImageArgs {
+    /// Records which options the command line gave (`matches`: the subcommand's).
+    pub fn record_given(&mut self, matches: &clap::ArgMatches) {
+        self.given = matches
+            .ids()
+            .filter(|id| matches.value_source(id.as_str()) == Some(clap::parser::ValueSource::CommandLine))
+            .map(|id| id.as_str().to_owned())
+            .collect();
+    }
+
+    /// True when the command line gave the option with id `id` (the field's name).
+    pub fn was_given(&self, id: &str) -> bool {
+        self.given.iter().any(|g| g == id)
+    }
+
+    /// Takes the scene file's render settings (a Mitsuba scene's film, sampler and integrator)
+    /// for the options the command line did not give; returns the samples per pixel it sets.
+    pub fn take_scene_settings(&mut self, scene: &std::path::Path) -> anyhow::Result<Option<u64>> {
+        let settings = gatetrace::scene::scene_settings(scene)?;
+        if let Some(gate) = settings.gate.filter(|_| !self.was_given("gate")) {
+            self.gate = gate;
+        }
+        if let Some(res) = settings.resolution.filter(|_| !self.was_given("res")) {
+            self.res = res;
+        }
+        if let Some(bounces) = settings.max_bounces.filter(|_| !self.was_given("max_bounces")) {
+            self.max_bounces = bounces;
+        }
+        if let Some(seed) = settings.seed.filter(|_| !self.was_given("seed")) {
+            self.seed = seed;
+        }
+        Ok(settings.spp)
+    }
 }
 
 #[derive(clap::Args)]

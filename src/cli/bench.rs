@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use gatetrace::film::Gate;
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{Method, RenderSettings, create_integrator};
-use gatetrace::scene::{PreparedScene, load_gltf};
+use gatetrace::scene::{PreparedScene, load_scene_with};
 
 use super::parse::parse_resolution;
 
@@ -94,7 +94,7 @@ pub struct BenchSettings {
 /// that start with `stage:`. With `json`, the same goes to a file (tools/bench/device_bench.sh).
 pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     let loading = Instant::now();
-    let scene = load_gltf(scene_path)?;
+    let scene = load_scene_with(scene_path, &Default::default())?;
     super::report::print_warnings(&scene.warnings);
     let scene = PreparedScene::new(scene)?;
     let load_seconds = loading.elapsed().as_secs_f64();

@@ -172,7 +172,10 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
     const REPEAT_SEEDS: u32 = 1000;
     let mut reference_seed = 1_000_000;
     for scene_path in scene_paths {
-        let scene = gatetrace::scene::load_gltf_at(scene_path, s.anim_time)?;
+        let scene = gatetrace::scene::load_scene_with(
+            scene_path,
+            &gatetrace::scene::LoadOptions { time: s.anim_time, ..Default::default() },
+        )?;
         super::report::print_warnings(&scene.warnings);
         let scene = PreparedScene::new(scene)?;
         let triangles = scene.triangles.len();

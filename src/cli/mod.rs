@@ -17,7 +17,7 @@ pub mod stress;
 pub mod view;
 pub mod viewer;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory as _, FromArgMatches as _, Parser, Subcommand};
 
 /// The scene rendered when none is given.
 pub const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes/cornell_box.gltf");
@@ -32,6 +32,21 @@ pub const DEFAULT_SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/sce
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+}
+
+impl Cli {
+    /// The command line, with each image command's record of the options it gave (so a scene
+    /// file's settings can fill the others).
+    pub fn parse_recording() -> Cli {
+        let matches = Cli::command().get_matches();
+        let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+        match (&mut cli.command, matches.subcommand()) {
+            (Command::Render(args), Some((_, m))) => args.image.record_given(m),
+            (Command::View(args), Some((_, m))) => args.image.record_given(m),
+            _ => {}
+        }
+        cli
+    }
 }
 
 // The command is parsed once per process: boxing the large variants would save nothing.

@@ -16,7 +16,7 @@ use gatetrace::integrator::checkpoint::{checkpoint_path, fingerprint, read_check
 use gatetrace::integrator::{
     Budget, LightStrategy, Method, RenderSettings, film_elements, render_metadata, render_resumable,
 };
-use gatetrace::scene::{PreparedScene, load_gltf_with};
+use gatetrace::scene::{PreparedScene, load_scene_with};
 
 use super::args::{ImageArgs, OnOff, QueryTree, QueryWeights, RenderArgs};
 use super::interrupt;
@@ -34,8 +34,12 @@ fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &ImageArgs) -> Re
 
 /// `gatetrace render`: checks every option and frame before any work, then renders the image,
 /// the frames of a sequence, a shard, or (module nlos) an NLOS capture.
-pub fn run(args: RenderArgs) -> Result<()> {
+pub fn run(mut args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(super::DEFAULT_SCENE));
+    let scene_spp = args.image.take_scene_settings(&scene_path)?;
+    if args.spp.is_none() && args.time.is_none() {
+        args.spp = scene_spp;
+    }
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
     // NLOS captures have defaults of their own (gatetrace::capture).
     let is_capture = args.nlos.is_some();
@@ -184,14 +188,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
     // A static scene is loaded once; an animated one at every frame's time (checked first).
     let static_scene = match plan.anim_time {
         None => {
-            let scene = with_lens_options(load_gltf_with(&scene_path, &args.load_options(None))?, &args)?;
+            let scene = with_lens_options(load_scene_with(&scene_path, &args.load_options(None))?, &args)?;
             print_warnings(&scene.warnings);
             Some(PreparedScene::new(scene)?)
         }
         Some(_) => {
             // Every frame's load warns alike: the first frame's says it once.
             let scene = with_lens_options(
-                load_gltf_with(&scene_path, &args.load_options(plan.anim_time(plan.range.0)))?,
+                load_scene_with(&scene_path, &args.load_options(plan.anim_time(plan.range.0)))?,
                 &args,
             )?;
             print_warnings(&scene.warnings);
@@ -247,7 +251,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 Some(scene) => scene,
                 None => {
                     animated = PreparedScene::new(with_lens_options(
-                        load_gltf_with(&scene_path, &args.load_options(plan.anim_time(*frame)))?,
+                        load_scene_with(&scene_path, &args.load_options(plan.anim_time(*frame)))?,
                         &args,
                     )?)?;
                     &animated

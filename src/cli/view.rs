@@ -13,7 +13,7 @@ use super::viewer::{ViewOptions, run_viewer};
 #[derive(clap::Args)]
 pub struct ViewArgs {
     #[command(flatten)]
-    image: ImageArgs,
+    pub image: ImageArgs,
     /// Sampling method at start; switchable in the window.
     #[arg(long, default_value = "path", value_parser = MethodParser::VIEW)]
     method: Method,
@@ -48,9 +48,11 @@ pub struct ViewArgs {
 }
 
 /// `gatetrace view`: checks the options, then opens the window.
-pub fn run(args: ViewArgs) -> Result<()> {
+pub fn run(mut args: ViewArgs) -> Result<()> {
+    let scene = args.image.scene.clone().unwrap_or_else(|| PathBuf::from(super::DEFAULT_SCENE));
+    // The viewer renders progressively: a scene's sample count does not apply.
+    args.image.take_scene_settings(&scene)?;
     let image = &args.image;
-    let scene = image.scene.clone().unwrap_or_else(|| PathBuf::from(super::DEFAULT_SCENE));
     let gate = Gate::parse(&image.gate).with_context(|| format!("--gate {}", image.gate))?;
     match gate {
         Gate::Transient { bins, .. } => {

@@ -17,6 +17,8 @@ pub const MATERIAL_DOUBLE_SIDED: u32 = 1;
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_V: u32 = 2;
+/// [`TextureInfo::wrap`]: lookups take the nearest texel instead of filtering bilinearly.
+pub const TEXTURE_NEAREST: u32 = 4;
 /// [`Light::kind`]: an emissive triangle.
 pub const LIGHT_AREA: u32 = 0;
 /// [`Light::kind`]: a point or spot light.
@@ -186,7 +188,7 @@ pub struct TextureInfo {
     pub width: u32,
     /// Height in texels.
     pub height: u32,
-    /// [`TEXTURE_CLAMP_U`] | [`TEXTURE_CLAMP_V`].
+    /// [`TEXTURE_CLAMP_U`] | [`TEXTURE_CLAMP_V`] | [`TEXTURE_NEAREST`].
     pub wrap: u32,
 }
 

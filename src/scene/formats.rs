@@ -1,11 +1,16 @@
 //! Scene files that are not glTF 2.0: recognised by their content (XML, OBJ, PLY, STL, FBX,
 //! Blender and USD signatures) or, when the content says nothing, by their extension, so that
-//! the error says what the file is and how to turn it into a glTF 2.0 scene.
+//! a Mitsuba 3 XML scene goes to its own loader and for any other file the error says what it is
+//! and how to turn it into a scene gatetrace reads.
 
 use std::path::Path;
 
 /// What every message about a foreign scene file says about the formats gatetrace reads.
-const SUPPORTED: &str = "gatetrace reads glTF 2.0 scenes only (.gltf or .glb)";
+const SUPPORTED: &str = "gatetrace reads glTF 2.0 scenes (.gltf or .glb) and Mitsuba 3 XML scenes";
+
+/// How to render a bare mesh: reference it from a Mitsuba scene beside a sensor and an emitter.
+const MESH_IN_XML: &str = "or reference it from a Mitsuba 3 XML scene (<shape type=\"obj\"> or <shape type=\"ply\"> \
+                           beside a <sensor> and an <emitter>; docs/scenes.md)";
 
 /// How to get a glTF 2.0 file out of Blender, where most formats can be imported.
 const BLENDER_EXPORT: &str =
@@ -53,8 +58,14 @@ impl Foreign {
             )
         };
         match self {
-            Foreign::Obj => import("Wavefront (.obj)", ", add a camera and a light (OBJ has neither)"),
-            Foreign::Ply => import("Stanford PLY (.ply)", ", add a camera, materials and a light (PLY has none)"),
+            Foreign::Obj => {
+                import("Wavefront (.obj)", ", add a camera and a light (OBJ has neither)") + "; " + MESH_IN_XML
+            }
+            Foreign::Ply => {
+                import("Stanford PLY (.ply)", ", add a camera, materials and a light (PLY has none)")
+                    + "; "
+                    + MESH_IN_XML
+            }
             Foreign::Stl => import("STL (.stl)", ", add a camera, materials and a light (STL has none)"),
             Foreign::Fbx => import("FBX (.fbx)", ""),
             Foreign::Collada => import("Collada (.dae), in Blender 4.x", ""),
@@ -64,13 +75,14 @@ impl Foreign {
                 "open it in Blender and {BLENDER_EXPORT}; gatetrace needs a camera and an emissive material or a \
                  KHR_lights_punctual light"
             ),
-            Foreign::MitsubaXml => format!(
-                "a Mitsuba XML loader does not exist yet: {BLENDER_EXPORT} from Blender instead (the Mitsuba \
-                 add-on's File > Import > Mitsuba (.xml) brings a scene that exists only as XML into Blender)"
-            ),
+            Foreign::MitsubaXml => {
+                "load it as a scene (gatetrace render and the Python package read Mitsuba XML; in the library, \
+                 gatetrace::scene::load_scene_with)"
+                    .into()
+            }
             Foreign::Xml => format!(
-                "XML scene descriptions are not read (a Mitsuba XML loader does not exist yet): {BLENDER_EXPORT} \
-                 from Blender instead"
+                "XML files other than Mitsuba 3 scenes (a <scene> root) are not read: {BLENDER_EXPORT} from Blender \
+                 instead"
             ),
         }
     }
@@ -143,6 +155,16 @@ impl Foreign {
             _ => None,
         }
     }
+}
+
+/// True when the file at `path` reads as a Mitsuba XML scene (XML whose first 4 KiB hold a
+/// `<scene` element); false for anything else, or a file that cannot be read (whose loader then
+/// says why).
+pub fn is_mitsuba_xml(path: &Path) -> bool {
+    use std::io::Read as _;
+    let mut head = Vec::new();
+    let read = std::fs::File::open(path).and_then(|f| f.take(4096).read_to_end(&mut head));
+    read.is_ok() && Foreign::from_content(&head) == Some(Foreign::MitsubaXml)
 }
 
 /// The error for a scene file whose content or extension shows a format other than glTF 2.0

@@ -333,6 +333,7 @@ impl Loader<'_> {
             dropped_degenerate: c.dropped_degenerate,
             nodes: c.nodes,
             warnings: self.warnings.take(),
+            settings: Default::default(),
         })
     }
 

@@ -4,7 +4,7 @@ use glam::{Vec2, Vec3};
 
 use super::Scene;
 use crate::gpu::layout::{
-    MATERIAL_DOUBLE_SIDED, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TextureInfo,
+    MATERIAL_DOUBLE_SIDED, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
 };
 pub use crate::gpu::packing::{pack2x16float, unpack2x16float};
 
@@ -35,20 +35,25 @@ pub fn gpu_textures(scene: &Scene) -> (Vec<TextureInfo>, Vec<[u32; 2]>) {
             offset: texels.len() as u32,
             width: t.width,
             height: t.height,
-            wrap: if t.clamp_u { TEXTURE_CLAMP_U } else { 0 } | if t.clamp_v { TEXTURE_CLAMP_V } else { 0 },
+            wrap: if t.clamp_u { TEXTURE_CLAMP_U } else { 0 }
+                | if t.clamp_v { TEXTURE_CLAMP_V } else { 0 }
+                | if t.nearest { TEXTURE_NEAREST } else { 0 },
         });
         texels.extend(t.texels.iter().map(|c| [pack2x16float(c.x, c.y), pack2x16float(c.z, 1.0)]));
     }
     (infos, texels)
 }
 
-/// Bilinear texture lookup (twin of `texture_bilinear`).
+/// Bilinear texture lookup, or the nearest texel's with [`TEXTURE_NEAREST`] (twin of
+/// `texture_bilinear`).
 pub fn texture_bilinear(infos: &[TextureInfo], texels: &[[u32; 2]], index: u32, uv: Vec2) -> Vec3 {
     let info = infos[index as usize];
-    let x = uv.x * info.width as f32 - 0.5;
-    let y = uv.y * info.height as f32 - 0.5;
+    let nearest = info.wrap & TEXTURE_NEAREST != 0;
+    let centre = if nearest { 0.0 } else { 0.5 };
+    let x = uv.x * info.width as f32 - centre;
+    let y = uv.y * info.height as f32 - centre;
     let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
+    let (fx, fy) = if nearest { (0.0, 0.0) } else { (x - x0, y - y0) };
     let wrap = |i: i32, n: u32, clamp: bool| -> u32 {
         if clamp { i.clamp(0, n as i32 - 1) as u32 } else { i.rem_euclid(n as i32) as u32 }
     };

@@ -1,6 +1,6 @@
-//! Scenes: loading (glTF 2.0, docs/design.md section 3; files in other formats are refused with how
-//! to convert them), the baked world-space description, and the CPU twins of the kernels' scene
-//! functions (camera, lights, surfaces, materials).
+//! Scenes: loading (glTF 2.0, docs/design.md section 3, and Mitsuba 3 XML, module `mitsuba`; files
+//! in other formats are refused with how to convert them), the baked world-space description, and
+//! the CPU twins of the kernels' scene functions (camera, lights, surfaces, materials).
 
 pub mod animation;
 pub mod bsdf;
@@ -9,6 +9,7 @@ pub mod formats;
 pub mod gltf_loader;
 pub mod lights;
 pub mod materials;
+pub mod mitsuba;
 pub mod prepared;
 pub mod surface;
 
@@ -17,6 +18,35 @@ use glam::{Vec2, Vec3};
 pub use camera::{CameraDesc, ThinLens};
 pub use gltf_loader::{LoadOptions, load_gltf, load_gltf_at, load_gltf_for_capture, load_gltf_with};
 pub use prepared::PreparedScene;
+
+/// Loads a scene file as `options` say: a Mitsuba 3 XML scene (recognised by its content) with
+/// the `mitsuba` loader, anything else as glTF 2.0 (which refuses other formats with what they
+/// are and how to convert them).
+pub fn load_scene_with(path: &std::path::Path, options: &LoadOptions) -> anyhow::Result<Scene> {
+    if formats::is_mitsuba_xml(path) { mitsuba::load_mitsuba(path, options) } else { load_gltf_with(path, options) }
+}
+
+/// The render settings the scene file at `path` carries ([`SceneSettings`]; none for glTF),
+/// read without loading its geometry.
+pub fn scene_settings(path: &std::path::Path) -> anyhow::Result<SceneSettings> {
+    if formats::is_mitsuba_xml(path) { mitsuba::read_settings(path) } else { Ok(SceneSettings::default()) }
+}
+
+/// Render settings a scene file carries (a Mitsuba scene's film, sampler and integrator): the
+/// defaults of a render of it, each overridden by the command line's option. glTF files carry none.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneSettings {
+    /// Image size in pixels (width, height): `--res`.
+    pub resolution: Option<(u32, u32)>,
+    /// Samples per pixel: `--spp`.
+    pub spp: Option<u64>,
+    /// Scattering vertices of the longest path: `--max-bounces`.
+    pub max_bounces: Option<u32>,
+    /// A gate as `--gate` takes it (lengths in metres), e.g. a transient film's time bins.
+    pub gate: Option<String>,
+    /// Random seed: `--seed`.
+    pub seed: Option<u32>,
+}
 
 /// A triangle in world space with its shading attributes, in load order.
 #[derive(Clone, Debug)]
@@ -78,6 +108,8 @@ pub struct TextureData {
     pub clamp_u: bool,
     /// v clamps to the edge instead of repeating.
     pub clamp_v: bool,
+    /// Lookups take the nearest texel instead of filtering bilinearly.
+    pub nearest: bool,
 }
 
 /// A point or spot light (KHR_lights_punctual).
@@ -178,6 +210,8 @@ pub struct Scene {
     /// roughness, dropped triangles), one message each, naming the file: the library prints
     /// nothing, its caller shows them (the command line as `warning: ...` lines on stderr).
     pub warnings: Vec<String>,
+    /// Render settings the file carries (defaults of a render).
+    pub settings: SceneSettings,
 }
 
 impl Scene {

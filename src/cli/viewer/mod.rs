@@ -26,7 +26,7 @@ use eframe::egui;
 use gatetrace::film::Gate;
 use gatetrace::gpu::{GpuContext, Kernel};
 use gatetrace::integrator::{Integrator, Method, PassSizer, RenderSettings};
-use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf_with};
+use gatetrace::scene::{LoadOptions, PreparedScene, load_scene_with};
 
 use gate::GateControls;
 
@@ -79,7 +79,7 @@ pub struct ViewOptions {
 /// Opens the window and runs until it is closed (or the screenshot is saved).
 pub fn run_viewer(options: ViewOptions) -> Result<()> {
     let load = LoadOptions { allow_unsupported_materials: options.allow_unsupported_materials, ..Default::default() };
-    let mut scene = load_gltf_with(&options.scene, &load)?;
+    let mut scene = load_scene_with(&options.scene, &load)?;
     crate::cli::report::print_warnings(&scene.warnings);
     if options.aperture_radius.is_some() || options.focus_distance.is_some() {
         scene

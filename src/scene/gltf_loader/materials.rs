@@ -140,7 +140,7 @@ fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
             }
         })
         .collect();
-    Ok(TextureData { width: data.width, height: data.height, texels, clamp_u: false, clamp_v: false })
+    Ok(TextureData { width: data.width, height: data.height, texels, clamp_u: false, clamp_v: false, nearest: false })
 }
 
 /// sRGB transfer function, encoded [0, 1] to linear.

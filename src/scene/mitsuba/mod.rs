@@ -1,0 +1,875 @@
+//! Mitsuba 3 XML scenes (docs/scenes.md, "Mitsuba 3 XML scenes"): the subset that maps exactly
+//! onto what gatetrace renders, read into the same [`Scene`] as a glTF file. Everything outside
+//! it is an error naming the file, line and element; nothing is substituted silently.
+//!
+//! - Structure: `<default>` and `$name` parameters, `<include>`, `id` and `<ref>`, nested objects.
+//! - Transforms: `translate`, `rotate`, `scale`, `matrix`, `lookat` (module `xml`).
+//! - Shapes: `obj`, `ply`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (module `shapes`),
+//!   with `to_world`, `flip_normals`, `face_normals`.
+//! - BSDFs: `diffuse`, `conductor` and `roughconductor` (GGX; a smooth conductor is GGX at
+//!   gatetrace's smallest roughness), `twosided`.
+//! - Textures of a diffuse reflectance: `bitmap` (PNG, JPEG, EXR) and `checkerboard`, with
+//!   `to_uv` (baked into the texture coordinates of the shapes that use them).
+//! - Emitters: `area` (on a shape), `point`, `directional`.
+//! - Sensors: `perspective` and `thinlens`, with `hdrfilm` or mitransient's
+//!   `transient_hdr_film` and a sampler; the integrator `path` or `transient_path`. Their
+//!   resolution, samples, depth and time bins become the render's defaults ([`SceneSettings`]).
+//!
+//! Lengths are the file's own units, read as metres: a gate or `start_opl` in the file's units
+//! means the same path lengths.
+
+mod shapes;
+mod xml;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, anyhow, bail};
+use glam::{Mat3, Mat4, Vec3};
+
+pub use shapes::TESSELLATION_ERROR;
+use xml::{Element, Object};
+
+use super::camera::ThinLens;
+use super::{
+    CameraDesc, DirectionalLight, LoadOptions, MaterialDesc, NamedNode, PointLight, Scene, SceneSettings,
+    SceneTriangle, TextureData,
+};
+use crate::gpu::layout::MIN_ALPHA;
+
+/// Loads a Mitsuba 3 XML scene (see the module's header).
+pub fn load_mitsuba(path: &Path, options: &LoadOptions) -> Result<Scene> {
+    let name = path.display().to_string();
+    if options.time.is_some() {
+        bail!("{name}: animation times apply to glTF animations; a Mitsuba XML scene is static");
+    }
+    if options.capture {
+        bail!(
+            "{name}: NLOS captures (--nlos) from Mitsuba XML scenes (transient_nlos_path, nlos_capture_meter) are not \
+             read yet: describe the capture in glTF (docs/nlos.md)"
+        );
+    }
+    let root = xml::read_scene(path)?;
+    let default = default_bsdf();
+    let mut b = Builder::new(path, &root, &default)?;
+    for child in &root.children {
+        match child.tag.as_str() {
+            "default" => {}
+            "shape" => b.shape(child)?,
+            "emitter" => b.emitter(child)?,
+            "sensor" => b.sensor(child)?,
+            "integrator" => b.integrator(child)?,
+            // Read where a shape refers to them.
+            "bsdf" | "texture" => {}
+            "medium" => return Err(child.error("participating media are not rendered yet")),
+            other => return Err(child.error(format!("<{other}> is not understood at the top of a scene"))),
+        }
+    }
+    b.finish()
+}
+
+/// The render settings a Mitsuba XML scene carries (its first sensor's film and sampler, and its
+/// integrator), read without loading its meshes.
+pub fn read_settings(path: &Path) -> Result<SceneSettings> {
+    let root = xml::read_scene(path)?;
+    let default = default_bsdf();
+    let mut b = Builder::new(path, &root, &default)?;
+    for child in &root.children {
+        match child.tag.as_str() {
+            "sensor" => b.sensor(child)?,
+            "integrator" => b.integrator(child)?,
+            _ => {}
+        }
+    }
+    Ok(b.settings)
+}
+
+/// Maps every `id` in the tree to its element; an id given twice is an error.
+fn collect_ids<'e>(e: &'e Element, ids: &mut HashMap<String, &'e Element>) -> Result<()> {
+    if let Some(id) = e.attribute("id").filter(|_| e.tag != "ref")
+        && let Some(first) = ids.insert(id.to_owned(), e)
+    {
+        return Err(e.error(format!("the id `{id}` is given twice (first at line {})", first.line)));
+    }
+    e.children.iter().try_for_each(|c| collect_ids(c, ids))
+}
+
+/// What a BSDF turns into.
+#[derive(Clone, Debug)]
+struct Surface {
+    base_color: Vec3,
+    /// A texture of the base colour, and the affine map from the shape's uv to the texture's.
+    texture: Option<(u32, glam::Affine2)>,
+    metallic: f32,
+    roughness: f32,
+    double_sided: bool,
+    name: String,
+}
+
+struct Builder<'e> {
+    name: String,
+    base: PathBuf,
+    ids: HashMap<String, &'e Element>,
+    /// Mitsuba's default BSDF, for shapes without one.
+    default_bsdf: &'e Element,
+    materials: Vec<MaterialDesc>,
+    /// The uv map of each material's texture (`to_uv`), baked into its triangles' uvs.
+    uv_maps: HashMap<u32, glam::Affine2>,
+    textures: Vec<TextureData>,
+    /// Texture index per texture element address.
+    texture_of: HashMap<usize, u32>,
+    /// Material index per (BSDF element address, emitted radiance bits).
+    material_of: HashMap<(usize, [u32; 3]), u32>,
+    triangles: Vec<SceneTriangle>,
+    point_lights: Vec<PointLight>,
+    directional_lights: Vec<DirectionalLight>,
+    camera: Option<CameraDesc>,
+    nodes: Vec<NamedNode>,
+    warnings: Vec<String>,
+    dropped_degenerate: usize,
+    settings: SceneSettings,
+    integrator_seen: bool,
+}
+
+impl<'e> Builder<'e> {
+    /// A builder for the scene `root` read from `path`.
+    fn new(path: &Path, root: &'e Element, default_bsdf: &'e Element) -> Result<Self> {
+        root.only_attributes(&["version"])?;
+        let mut ids = HashMap::new();
+        collect_ids(root, &mut ids)?;
+        Ok(Builder {
+            name: path.display().to_string(),
+            base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+            ids,
+            default_bsdf,
+            materials: Vec::new(),
+            uv_maps: HashMap::new(),
+            textures: Vec::new(),
+            texture_of: HashMap::new(),
+            material_of: HashMap::new(),
+            triangles: Vec::new(),
+            point_lights: Vec::new(),
+            directional_lights: Vec::new(),
+            camera: None,
+            nodes: Vec::new(),
+            warnings: Vec::new(),
+            dropped_degenerate: 0,
+            settings: SceneSettings::default(),
+            integrator_seen: false,
+        })
+    }
+
+    fn warn(&mut self, e: &Element, text: impl std::fmt::Display) {
+        self.warnings.push(format!("{}: {text}", e.at()));
+    }
+
+    /// The element a `<ref id>` names, which must have tag `tag`.
+    fn resolve(&self, r: &'e Element, tag: &str) -> Result<&'e Element> {
+        r.only_attributes(&["id", "name"])?;
+        let id = r.required("id")?;
+        let target = self.ids.get(id).ok_or_else(|| r.error(format!("no object has the id `{id}`")))?;
+        if target.tag != tag {
+            return Err(r.error(format!("`{id}` is a <{}>, where a <{tag}> is needed", target.tag)));
+        }
+        Ok(target)
+    }
+
+    /// The BSDF of a shape: its one `<bsdf>` or `<ref>` child, or None for Mitsuba's default.
+    fn shape_bsdf(&self, shape: &'e Element) -> Result<Option<&'e Element>> {
+        let mut found = None;
+        for c in &shape.children {
+            let bsdf = match c.tag.as_str() {
+                "bsdf" => c,
+                "ref" => self.resolve(c, "bsdf")?,
+                _ => continue,
+            };
+            if found.replace(bsdf).is_some() {
+                return Err(c.error("a shape takes one BSDF"));
+            }
+        }
+        Ok(found)
+    }
+
+    /// What a `<bsdf>` element describes, or an error for the BSDFs gatetrace does not render.
+    fn surface(&mut self, e: &'e Element) -> Result<Surface> {
+        e.only_attributes(&["type", "id", "name"])?;
+        let o = Object::new(e);
+        let name = e.attribute("id").unwrap_or("").to_owned();
+        let surface = match o.kind()? {
+            "twosided" => {
+                let inner: Vec<&Element> =
+                    e.children.iter().filter(|c| matches!(c.tag.as_str(), "bsdf" | "ref")).collect();
+                let [inner] = inner[..] else {
+                    return Err(e.error(
+                        "a twosided BSDF with a different BSDF on each side is not rendered (give it one BSDF)",
+                    ));
+                };
+                let inner = if inner.tag == "ref" { self.resolve(inner, "bsdf")? } else { inner };
+                if inner.attribute("type") == Some("twosided") {
+                    return Err(inner.error("a twosided BSDF inside a twosided BSDF"));
+                }
+                o.finish(&["bsdf", "ref"])?;
+                let mut s = self.surface(inner)?;
+                s.double_sided = true;
+                if !name.is_empty() {
+                    s.name = name;
+                }
+                return Ok(s);
+            }
+            "diffuse" => {
+                let mut texture = None;
+                for t in e.children.iter().filter(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
+                    if t.attribute("name") != Some("reflectance") || texture.is_some() {
+                        return Err(t.error("a diffuse BSDF takes one texture, named `reflectance`"));
+                    }
+                    let t = if t.tag == "ref" { self.resolve(t, "texture")? } else { t };
+                    texture = Some(self.texture(t)?);
+                }
+                let reflectance = o.color("reflectance")?;
+                if texture.is_some() && reflectance.is_some() {
+                    return Err(e.error("`reflectance` is given twice (a value and a texture)"));
+                }
+                let reflectance = reflectance.unwrap_or(if texture.is_some() { Vec3::ONE } else { Vec3::splat(0.5) });
+                check_albedo(e, reflectance)?;
+                o.finish(&["texture", "ref"])?;
+                Surface { base_color: reflectance, texture, metallic: 0.0, roughness: 1.0, double_sided: false, name }
+            }
+            kind @ ("conductor" | "roughconductor") => {
+                if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
+                    return Err(t.error("textures are not read from Mitsuba scenes yet"));
+                }
+                let f0 = self.conductor_f0(&o)?;
+                let alpha = if kind == "roughconductor" {
+                    let distribution = o.string("distribution")?.unwrap_or("beckmann");
+                    match distribution {
+                        "ggx" => {}
+                        "beckmann" => self.warn(
+                            e,
+                            "the Beckmann distribution (Mitsuba's default) is rendered as GGX with the same alpha: \
+                             highlights get GGX's longer tails (give `distribution` ggx to match Mitsuba)",
+                        ),
+                        other => return Err(e.error(format!("the microfacet distribution `{other}` is not known"))),
+                    }
+                    if o.float("alpha_u")?.is_some() || o.float("alpha_v")?.is_some() {
+                        return Err(e.error("anisotropic roughness (alpha_u, alpha_v) is not rendered: give `alpha`"));
+                    }
+                    o.ignore(&["sample_visible"]);
+                    let alpha = o.float("alpha")?.unwrap_or(0.1);
+                    if !(alpha > 0.0 && alpha <= 1.0) {
+                        return Err(e.error(format!("alpha {alpha} is not in (0, 1]")));
+                    }
+                    if alpha < MIN_ALPHA {
+                        self.warn(
+                            e,
+                            format!("alpha {alpha} is rendered as {MIN_ALPHA}, gatetrace's smallest roughness"),
+                        );
+                    }
+                    alpha.max(MIN_ALPHA)
+                } else {
+                    self.warn(
+                        e,
+                        format!("a smooth conductor is rendered as a GGX conductor of alpha {MIN_ALPHA}, gatetrace's smallest"),
+                    );
+                    MIN_ALPHA
+                };
+                o.finish(&[])?;
+                Surface {
+                    base_color: f0,
+                    texture: None,
+                    metallic: 1.0,
+                    roughness: alpha.sqrt(),
+                    double_sided: false,
+                    name,
+                }
+            }
+            kind @ ("dielectric" | "roughdielectric" | "thindielectric" | "plastic" | "roughplastic") => {
+                return Err(e.error(format!(
+                    "the `{kind}` BSDF is not rendered yet (gatetrace's surfaces are opaque: Lambertian and GGX \
+                     conductors)"
+                )));
+            }
+            "null" => return Err(e.error("the `null` BSDF bounds media, which are not rendered yet")),
+            other => return Err(e.error(format!("the BSDF `{other}` is not rendered by gatetrace"))),
+        };
+        Ok(surface)
+    }
+
+    /// A texture (`bitmap` or `checkerboard`): its index in the scene's textures and its `to_uv`.
+    fn texture(&mut self, t: &'e Element) -> Result<(u32, glam::Affine2)> {
+        t.only_attributes(&["type", "id", "name"])?;
+        let o = Object::new(t);
+        let m = o.transform("to_uv")?;
+        let map = glam::Affine2::from_cols(
+            m.x_axis.truncate().truncate(),
+            m.y_axis.truncate().truncate(),
+            m.w_axis.truncate().truncate(),
+        );
+        if let Some(&index) = self.texture_of.get(&(t as *const Element as usize)) {
+            o.finish(&[])?;
+            return Ok((index, map));
+        }
+        let texture = match o.kind()? {
+            "checkerboard" => {
+                let c0 = o.color("color0")?.unwrap_or(Vec3::splat(0.4));
+                let c1 = o.color("color1")?.unwrap_or(Vec3::splat(0.2));
+                check_albedo(t, c0)?;
+                check_albedo(t, c1)?;
+                // Mitsuba's checkerboard: color0 where u and v lie in halves of the same parity
+                // of their unit square, color1 elsewhere: two by two texels, nearest lookups.
+                TextureData {
+                    width: 2,
+                    height: 2,
+                    texels: vec![c0, c1, c1, c0],
+                    clamp_u: false,
+                    clamp_v: false,
+                    nearest: true,
+                }
+            }
+            "bitmap" => {
+                let file = o.string("filename")?.ok_or_else(|| t.error("`filename` is missing"))?;
+                let path = self.base.join(file);
+                let raw = o.boolean("raw")?.unwrap_or(false);
+                let nearest = match o.string("filter_type")?.unwrap_or("bilinear") {
+                    "bilinear" => false,
+                    "nearest" => true,
+                    other => return Err(t.error(format!("filter_type `{other}` is not bilinear or nearest"))),
+                };
+                let clamp = match o.string("wrap_mode")?.unwrap_or("repeat") {
+                    "repeat" => false,
+                    "clamp" => true,
+                    other => return Err(t.error(format!("wrap_mode `{other}` is not rendered (repeat and clamp are)"))),
+                };
+                let (width, height, texels) = read_bitmap(&path, raw).map_err(|err| t.error(format!("{err:#}")))?;
+                if texels.iter().any(|c| c.min_element() < 0.0 || c.max_element() > 1.0) {
+                    return Err(t.error("a reflectance texture with values outside [0, 1]"));
+                }
+                TextureData { width, height, texels, clamp_u: clamp, clamp_v: clamp, nearest }
+            }
+            other => return Err(t.error(format!("the texture `{other}` is not read (bitmap and checkerboard are)"))),
+        };
+        o.finish(&[])?;
+        self.textures.push(texture);
+        let index = self.textures.len() as u32 - 1;
+        self.texture_of.insert(t as *const Element as usize, index);
+        Ok((index, map))
+    }
+
+    /// A conductor's reflectance at normal incidence: 1 for Mitsuba's `material="none"` (a
+    /// perfect mirror), else from `eta` and `k`; times `specular_reflectance`. Below 1,
+    /// Schlick's approximation stands in for Mitsuba's exact Fresnel term, with a warning.
+    fn conductor_f0(&mut self, o: &Object<'e>) -> Result<Vec3> {
+        let e = o.element;
+        let eta = o.color("eta")?;
+        let k = o.color("k")?;
+        let material = o.string("material")?;
+        let f0 = match (material, eta, k) {
+            (Some(m), Some(_), _) | (Some(m), _, Some(_)) => {
+                return Err(e.error(format!("give either `material` ({m}) or `eta` and `k`, not both")));
+            }
+            (Some("none") | None, None, None) => Vec3::ONE,
+            (Some(m), None, None) => {
+                return Err(e.error(format!(
+                    "the conductor preset `{m}` is not built in: give its `eta` and `k` as <rgb> (or `none`: a \
+                     perfect mirror)"
+                )));
+            }
+            (None, Some(eta), k) => {
+                let k = k.unwrap_or(Vec3::ZERO);
+                ((eta - Vec3::ONE).powf(2.0) + k * k) / ((eta + Vec3::ONE).powf(2.0) + k * k)
+            }
+            (None, None, Some(_)) => return Err(e.error("`k` needs `eta` beside it")),
+        };
+        let specular = o.color("specular_reflectance")?.unwrap_or(Vec3::ONE);
+        check_albedo(e, specular)?;
+        let f0 = f0 * specular;
+        if f0 != Vec3::ONE {
+            self.warn(
+                e,
+                format!(
+                    "the conductor's Fresnel term is Schlick's approximation from its reflectance at normal incidence \
+                     ({:.4}, {:.4}, {:.4}), where Mitsuba evaluates the exact conductor Fresnel term (times \
+                     specular_reflectance)",
+                    f0.x, f0.y, f0.z
+                ),
+            );
+        }
+        Ok(f0)
+    }
+
+    /// The material index of a shape's BSDF with its emitted radiance.
+    fn material(&mut self, bsdf: Option<&'e Element>, radiance: Vec3) -> Result<u32> {
+        let bsdf = bsdf.unwrap_or(self.default_bsdf);
+        let key = (bsdf as *const Element as usize, radiance.to_array().map(f32::to_bits));
+        if let Some(&m) = self.material_of.get(&key) {
+            return Ok(m);
+        }
+        let s = self.surface(bsdf)?;
+        if let Some((_, map)) = s.texture {
+            self.uv_maps.insert(self.materials.len() as u32, map);
+        }
+        self.materials.push(MaterialDesc {
+            name: s.name,
+            base_color: s.base_color,
+            base_color_texture: s.texture.map(|(t, _)| t),
+            emission: radiance,
+            double_sided: s.double_sided,
+            metallic: s.metallic,
+            roughness: s.roughness,
+        });
+        let m = self.materials.len() as u32 - 1;
+        self.material_of.insert(key, m);
+        Ok(m)
+    }
+
+    fn shape(&mut self, e: &'e Element) -> Result<()> {
+        e.only_attributes(&["type", "id", "name"])?;
+        let o = Object::new(e);
+        let kind = o.kind()?;
+        let mut to_world = o.transform("to_world")?;
+        let file = |o: &Object| -> Result<PathBuf> {
+            let f = o.string("filename")?.ok_or_else(|| e.error("`filename` is missing"))?;
+            Ok(self.base.join(f))
+        };
+        let mesh = match kind {
+            "obj" => {
+                let flip = o.boolean("flip_tex_coords")?.unwrap_or(true);
+                shapes::read_obj(&file(&o)?, flip)
+            }
+            "ply" => shapes::read_ply(&file(&o)?),
+            "rectangle" => Ok(shapes::rectangle()),
+            "cube" => Ok(shapes::cube()),
+            "disk" => Ok(shapes::disk()),
+            "sphere" => {
+                let center = o.point("center")?.unwrap_or(Vec3::ZERO);
+                let radius = o.float("radius")?.unwrap_or(1.0);
+                if radius <= 0.0 {
+                    return Err(e.error(format!("radius {radius} is not positive")));
+                }
+                to_world = to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
+                Ok(shapes::sphere())
+            }
+            "cylinder" => {
+                let p0 = o.point("p0")?.unwrap_or(Vec3::ZERO);
+                let p1 = o.point("p1")?.unwrap_or(Vec3::Z);
+                let radius = o.float("radius")?.unwrap_or(1.0);
+                let axis = p1 - p0;
+                if radius <= 0.0 || axis.length() == 0.0 {
+                    return Err(e.error("the cylinder needs a positive radius and p0 != p1"));
+                }
+                let z = axis.normalize();
+                let (x, y) = z.any_orthonormal_pair();
+                let frame = Mat4::from_mat3(Mat3::from_cols(x * radius, y * radius, axis));
+                to_world = to_world * Mat4::from_translation(p0) * frame;
+                Ok(shapes::cylinder())
+            }
+            "serialized" => {
+                return Err(e.error(
+                    "Mitsuba's serialized meshes are not read: save the mesh as PLY or OBJ (in Python, mitsuba's \
+                     mesh.write_ply)",
+                ));
+            }
+            "shapegroup" | "instance" => return Err(e.error("instancing (shapegroup, instance) is not read yet")),
+            other => return Err(e.error(format!("the shape `{other}` is not read by gatetrace"))),
+        };
+        let mut mesh = mesh.map_err(|err| e.error(format!("{err:#}")))?;
+        if o.boolean("face_normals")?.unwrap_or(false) {
+            mesh.normals = None;
+        }
+        let flip = o.boolean("flip_normals")?.unwrap_or(false);
+        let bsdf = self.shape_bsdf(e)?;
+        let mut radiance = Vec3::ZERO;
+        let mut emitters = e.children.iter().filter(|c| c.tag == "emitter");
+        if let Some(emitter) = emitters.next() {
+            emitter.only_attributes(&["type", "id", "name"])?;
+            let eo = Object::new(emitter);
+            if eo.kind()? != "area" {
+                return Err(emitter.error("a shape carries only `area` emitters"));
+            }
+            radiance = eo.color("radiance")?.unwrap_or(Vec3::ONE);
+            if radiance.min_element() < 0.0 {
+                return Err(emitter.error("negative radiance"));
+            }
+            eo.finish(&[])?;
+            if let Some(second) = emitters.next() {
+                return Err(second.error("a shape takes one emitter"));
+            }
+            if bsdf.is_some_and(|b| b.attribute("type") == Some("twosided")) {
+                return Err(emitter.error(
+                    "an area emitter on a shape with a twosided BSDF: gatetrace's two-sided materials emit from \
+                     both faces, Mitsuba's area emitters from the front only",
+                ));
+            }
+        }
+        if let Some(c) = e.children.iter().find(|c| c.tag == "sensor") {
+            return Err(c.error("sensors on shapes (NLOS capture meters) are not read yet"));
+        }
+        o.finish(&["bsdf", "ref", "emitter"])?;
+        let material = self.material(bsdf, radiance)?;
+        self.add_mesh(e, &mesh, to_world, flip, material)
+    }
+
+    /// Adds a mesh's triangles in world space (a named node when the shape has an id).
+    fn add_mesh(&mut self, e: &Element, mesh: &shapes::Mesh, to_world: Mat4, flip: bool, material: u32) -> Result<()> {
+        let normal_matrix = Mat3::from_mat4(to_world).inverse().transpose();
+        let positions: Vec<Vec3> = mesh.positions.iter().map(|&p| to_world.transform_point3(p)).collect();
+        if let Some(p) = positions.iter().find(|p| p.abs().max_element() > super::gltf_loader::MAX_COORDINATE) {
+            return Err(e.error(format!("a vertex lies at {p}, beyond the coordinates gatetrace accepts")));
+        }
+        let sign = if flip { -1.0 } else { 1.0 };
+        let normals: Option<Vec<Vec3>> =
+            mesh.normals.as_ref().map(|n| n.iter().map(|&v| sign * (normal_matrix * v).normalize_or_zero()).collect());
+        let first = self.triangles.len();
+        let uv_map = self.uv_maps.get(&material).copied().unwrap_or(glam::Affine2::IDENTITY);
+        for t in mesh.indices.chunks_exact(3) {
+            let [a, b, c] = [t[0] as usize, t[1] as usize, t[2] as usize];
+            let [a, b, c] = if flip { [a, c, b] } else { [a, b, c] };
+            let triangle = SceneTriangle {
+                positions: [positions[a], positions[b], positions[c]],
+                normals: normals.as_ref().map(|n| [n[a], n[b], n[c]]),
+                uvs: mesh
+                    .uvs
+                    .as_ref()
+                    .map_or([glam::Vec2::ZERO; 3], |u| [u[a], u[b], u[c]].map(|t| uv_map.transform_point2(t))),
+                material,
+            };
+            if triangle.area() > 0.0 {
+                self.triangles.push(triangle);
+            } else {
+                self.dropped_degenerate += 1;
+            }
+        }
+        if let Some(id) = e.attribute("id").or(e.attribute("name")) {
+            self.nodes.push(NamedNode {
+                name: id.to_owned(),
+                position: to_world.transform_point3(Vec3::ZERO),
+                triangles: first..self.triangles.len(),
+                texcoords: mesh.uvs.as_ref().map(|_| self.triangles[first..].iter().map(|t| t.uvs).collect()),
+            });
+        }
+        Ok(())
+    }
+
+    fn emitter(&mut self, e: &'e Element) -> Result<()> {
+        e.only_attributes(&["type", "id", "name"])?;
+        let o = Object::new(e);
+        match o.kind()? {
+            "point" => {
+                let to_world = o.transform("to_world")?;
+                let position = o.point("position")?.unwrap_or(Vec3::ZERO);
+                let intensity = o.color("intensity")?.unwrap_or(Vec3::ONE);
+                if intensity.min_element() < 0.0 {
+                    return Err(e.error("negative intensity"));
+                }
+                o.finish(&[])?;
+                self.point_lights.push(PointLight {
+                    position: to_world.transform_point3(position),
+                    intensity,
+                    spot: None,
+                });
+            }
+            "directional" => {
+                let to_world = o.transform("to_world")?;
+                let direction = o.point("direction")?.unwrap_or(Vec3::Z);
+                let direction = to_world
+                    .transform_vector3(direction)
+                    .try_normalize()
+                    .ok_or_else(|| e.error("the light's direction is zero"))?;
+                let irradiance = o.color("irradiance")?.unwrap_or(Vec3::ONE);
+                if irradiance.min_element() < 0.0 {
+                    return Err(e.error("negative irradiance"));
+                }
+                o.finish(&[])?;
+                self.directional_lights.push(DirectionalLight { direction, irradiance });
+            }
+            "area" => return Err(e.error("an area emitter belongs inside a <shape>")),
+            "spot" => {
+                return Err(e.error(
+                    "Mitsuba's spot light (falloff linear in angle from beam_width to cutoff_angle) is not rendered \
+                     yet: gatetrace's spot lights are glTF's",
+                ));
+            }
+            "projector" => return Err(e.error("projector emitters are not rendered yet")),
+            kind @ ("constant" | "envmap" | "sunsky") => {
+                return Err(e.error(format!("environment lighting (`{kind}`) is not rendered")));
+            }
+            other => return Err(e.error(format!("the emitter `{other}` is not rendered by gatetrace"))),
+        }
+        Ok(())
+    }
+
+    fn sensor(&mut self, e: &'e Element) -> Result<()> {
+        e.only_attributes(&["type", "id", "name"])?;
+        if self.camera.is_some() {
+            self.warn(e, "a second sensor: gatetrace renders from the first");
+            return Ok(());
+        }
+        let o = Object::new(e);
+        let kind = o.kind()?;
+        if !matches!(kind, "perspective" | "thinlens") {
+            return Err(e.error(format!("the sensor `{kind}` is not read (perspective and thinlens are)")));
+        }
+        let to_world = o.transform("to_world")?;
+        // Mitsuba's default near clip plane.
+        let near_clip = o.float("near_clip")?.unwrap_or(0.01);
+        o.ignore(&["far_clip"]);
+        for offset in ["principal_point_offset_x", "principal_point_offset_y"] {
+            if o.float(offset)?.is_some_and(|x| x != 0.0) {
+                return Err(e.error(format!("a non-zero `{offset}` is not rendered")));
+            }
+        }
+        if o.string("focal_length")?.is_some() {
+            return Err(e.error("give the field of view as `fov` (degrees): `focal_length` is not read"));
+        }
+        let fov = o.float("fov")?.ok_or_else(|| e.error("`fov` (degrees) is missing"))?;
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(e.error(format!("fov {fov} is not in (0, 180) degrees")));
+        }
+        let fov_axis = o.string("fov_axis")?.unwrap_or("x");
+        let lens = if kind == "thinlens" {
+            let radius = o.float("aperture_radius")?.ok_or_else(|| e.error("`aperture_radius` is missing"))?;
+            let focus = o.float("focus_distance")?.unwrap_or(0.0);
+            Some(ThinLens::new(radius, focus).map_err(|err| e.error(err))?)
+        } else {
+            // A pinhole: its focus distance changes nothing.
+            o.ignore(&["focus_distance"]);
+            None
+        };
+        let (width, height, bin_width) = self.film(e)?;
+        if let Some(bin_width) = bin_width.filter(|&w| near_clip > 0.01 * w) {
+            self.warn(
+                e,
+                format!(
+                    "mitransient measures the camera's segment from the near clip plane (near_clip {near_clip}: its \
+                     path lengths are near_clip / cos(angle to the view axis) shorter, {:.2} bins or more); gatetrace \
+                     measures it from the pinhole, so its transient comes that much later than mitransient's render \
+                     of this file (set near_clip well below the bin width, {bin_width}, to compare them)",
+                    near_clip / bin_width
+                ),
+            );
+        }
+        self.sampler(e)?;
+        o.finish(&["film", "sampler"])?;
+        let (w, h) = (width as f32, height as f32);
+        let tan = (0.5 * fov.to_radians()).tan();
+        let tan_y = match fov_axis {
+            "x" => tan * h / w,
+            "y" => tan,
+            "diagonal" => tan * h / (w * w + h * h).sqrt(),
+            "smaller" if w <= h => tan * h / w,
+            "smaller" => tan,
+            "larger" if w >= h => tan * h / w,
+            "larger" => tan,
+            other => return Err(e.error(format!("fov_axis `{other}` is not x, y, diagonal, smaller or larger"))),
+        };
+        let camera = CameraDesc {
+            position: to_world.transform_point3(Vec3::ZERO),
+            // Mitsuba's camera looks along local +z with +y up and +x to the image's left.
+            right: -to_world.transform_vector3(Vec3::X).normalize(),
+            up: to_world.transform_vector3(Vec3::Y).normalize(),
+            forward: to_world.transform_vector3(Vec3::Z).normalize(),
+            yfov: 2.0 * tan_y.atan(),
+            lens,
+        };
+        if ![camera.right, camera.up, camera.forward].iter().all(|v| v.is_finite()) {
+            return Err(e.error("the sensor's to_world is degenerate"));
+        }
+        self.camera = Some(camera);
+        Ok(())
+    }
+
+    /// The sensor's film: its size (Mitsuba's default 768 x 576), and for mitransient's
+    /// `transient_hdr_film` the time bins as a default transient gate, and their width.
+    fn film(&mut self, sensor: &'e Element) -> Result<(u32, u32, Option<f32>)> {
+        let Some(film) = sensor.children.iter().find(|c| c.tag == "film") else {
+            return Ok((768, 576, None));
+        };
+        film.only_attributes(&["type", "id", "name"])?;
+        let o = Object::new(film);
+        let kind = o.kind()?;
+        if !matches!(kind, "hdrfilm" | "transient_hdr_film") {
+            return Err(film.error(format!("the film `{kind}` is not read (hdrfilm and transient_hdr_film are)")));
+        }
+        let size = |key: &str, default: i64| -> Result<u32> {
+            let v = o.integer(key)?.unwrap_or(default);
+            u32::try_from(v)
+                .ok()
+                .filter(|&v| v > 0)
+                .ok_or_else(|| film.error(format!("{key} {v} is not a positive size")))
+        };
+        let (width, height) = (size("width", 768)?, size("height", 576)?);
+        o.ignore(&["pixel_format", "component_format", "sample_border", "banner", "file_format"]);
+        let mut bin_width = None;
+        if kind == "transient_hdr_film" {
+            let bins = o.integer("temporal_bins")?.ok_or_else(|| film.error("`temporal_bins` is missing"))?;
+            let start = o.float("start_opl")?.ok_or_else(|| film.error("`start_opl` is missing"))?;
+            let width = o.float("bin_width_opl")?.ok_or_else(|| film.error("`bin_width_opl` is missing"))?;
+            if o.boolean("auto_detect_bins")? == Some(true) {
+                return Err(film.error("auto_detect_bins is not read: give start_opl and bin_width_opl"));
+            }
+            if bins < 1 || width <= 0.0 {
+                return Err(film.error("temporal_bins and bin_width_opl must be positive"));
+            }
+            self.settings.gate = Some(format!("transient:{start},{width},{bins}"));
+            bin_width = Some(width);
+        }
+        for filter in film.children.iter().filter(|c| c.tag == "rfilter") {
+            match filter.attribute("type") {
+                Some("box") if filter.children.is_empty() => {}
+                Some(kind) => self.warn(
+                    filter,
+                    format!("the reconstruction filter `{kind}` is rendered as gatetrace's box filter (one pixel)"),
+                ),
+                None => return Err(filter.error("the attribute `type` is missing")),
+            }
+        }
+        o.finish(&["rfilter"])?;
+        self.settings.resolution = Some((width, height));
+        Ok((width, height, bin_width))
+    }
+
+    fn sampler(&mut self, sensor: &'e Element) -> Result<()> {
+        let Some(sampler) = sensor.children.iter().find(|c| c.tag == "sampler") else { return Ok(()) };
+        sampler.only_attributes(&["type", "id", "name"])?;
+        let o = Object::new(sampler);
+        // gatetrace draws its own random numbers: the sampler's type does not change the mean.
+        let count = o.integer("sample_count")?;
+        let seed = o.integer("seed")?;
+        o.ignore(&["jitter", "scramble"]);
+        o.finish(&[])?;
+        if let Some(n) = count {
+            self.settings.spp = Some(
+                u64::try_from(n)
+                    .ok()
+                    .filter(|&n| n > 0)
+                    .ok_or_else(|| sampler.error(format!("sample_count {n} is not a positive number")))?,
+            );
+        }
+        if let Some(s) = seed {
+            self.settings.seed = Some(u32::try_from(s).map_err(|_| sampler.error(format!("seed {s} is not a u32")))?);
+        }
+        Ok(())
+    }
+
+    fn integrator(&mut self, e: &'e Element) -> Result<()> {
+        e.only_attributes(&["type", "id", "name"])?;
+        if std::mem::replace(&mut self.integrator_seen, true) {
+            return Err(e.error("a scene takes one integrator"));
+        }
+        let o = Object::new(e);
+        match o.kind()? {
+            "path" | "transient_path" => {}
+            "transient_nlos_path" => {
+                return Err(e.error("NLOS scenes (transient_nlos_path) are not read yet: describe the capture in glTF"));
+            }
+            kind @ ("volpath" | "volpathmis" | "prbvolpath" | "transient_prbvolpath") => {
+                return Err(e.error(format!("`{kind}` renders media, which gatetrace does not render yet")));
+            }
+            other => return Err(e.error(format!("the integrator `{other}` is not read (path and transient_path are)"))),
+        }
+        let refuse_true = |key: &str, why: &str| -> Result<()> {
+            match o.boolean(key)? {
+                Some(true) => Err(e.error(format!("`{key}` true is not rendered: {why}"))),
+                _ => Ok(()),
+            }
+        };
+        refuse_true("camera_unwarp", "gatetrace's path lengths include the segment to the camera")?;
+        refuse_true("hide_emitters", "lights seen directly are always rendered")?;
+        refuse_true("discard_direct_paths", "the paths of one bounce are always rendered")?;
+        if let Some(filter) = o.string("temporal_filter")?
+            && filter != "box"
+        {
+            return Err(e.error(format!("temporal_filter `{filter}`: gatetrace's transient bins are boxes")));
+        }
+        // Russian roulette and block sizes do not change the mean.
+        o.ignore(&["rr_depth", "block_size", "gaussian_stddev"]);
+        if let Some(depth) = o.integer("max_depth")? {
+            match depth {
+                -1 => self.warn(e, "max_depth -1 (no limit): the render's --max-bounces applies"),
+                d if d >= 1 => self.settings.max_bounces = Some((d - 1) as u32),
+                d => return Err(e.error(format!("max_depth {d} renders nothing"))),
+            }
+        }
+        o.finish(&[])
+    }
+
+    fn finish(self) -> Result<Scene> {
+        let name = self.name;
+        let camera =
+            self.camera.ok_or_else(|| anyhow!("{name}: no <sensor>: gatetrace renders from a perspective sensor"))?;
+        if self.triangles.is_empty() {
+            bail!("{name}: the scene has no triangles");
+        }
+        let emissive = self.triangles.iter().any(|t| self.materials[t.material as usize].is_emissive());
+        let powered = self.point_lights.iter().any(|l| l.intensity.max_element() > 0.0)
+            || self.directional_lights.iter().any(|l| l.irradiance.max_element() > 0.0);
+        if !emissive && !powered {
+            bail!("{name}: no emitter gives light (area emitters on shapes, point and directional emitters)");
+        }
+        let mut warnings = self.warnings;
+        if self.dropped_degenerate > 0 {
+            warnings.push(format!("{name}: dropped {} zero-area triangles", self.dropped_degenerate));
+        }
+        Ok(Scene {
+            source: name,
+            triangles: self.triangles,
+            materials: self.materials,
+            textures: self.textures,
+            point_lights: self.point_lights,
+            directional_lights: self.directional_lights,
+            camera,
+            dropped_degenerate: self.dropped_degenerate,
+            nodes: self.nodes,
+            warnings,
+            settings: self.settings,
+        })
+    }
+}
+
+/// Mitsuba's default BSDF (diffuse, reflectance 0.5) as an element.
+fn default_bsdf() -> Element {
+    Element {
+        tag: "bsdf".into(),
+        attributes: vec![("type".into(), "diffuse".into()), ("id".into(), "(default)".into())],
+        children: Vec::new(),
+        file: "(Mitsuba's default BSDF)".into(),
+        line: 1,
+    }
+}
+
+/// A bitmap's size and linear RGB texels, row 0 at the top (v = 0): PNG and JPEG decoded from
+/// sRGB unless `raw`, EXR as stored (linear).
+fn read_bitmap(path: &Path, raw: bool) -> Result<(u32, u32, Vec<Vec3>)> {
+    let name = path.display();
+    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if extension == "exr" {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |resolution, _| (resolution.width(), vec![Vec3::ZERO; resolution.width() * resolution.height()]),
+            |(width, texels): &mut (usize, Vec<Vec3>), position, (r, g, b, _a): (f32, f32, f32, f32)| {
+                texels[position.y() * *width + position.x()] = Vec3::new(r, g, b);
+            },
+        )
+        .map_err(|e| anyhow!("{name}: cannot read the EXR image: {e}"))?;
+        let size = image.layer_data.size;
+        let (_, texels) = image.layer_data.channel_data.pixels;
+        return Ok((size.width() as u32, size.height() as u32, texels));
+    }
+    let image = image::ImageReader::open(path)
+        .map_err(|e| anyhow!("{name}: cannot read the image: {e}"))?
+        .with_guessed_format()
+        .map_err(|e| anyhow!("{name}: cannot read the image: {e}"))?
+        .decode()
+        .map_err(|e| anyhow!("{name}: cannot decode the image (PNG, JPEG and EXR are read): {e}"))?;
+    let rgb = image.to_rgb32f();
+    let decode = |c: f32| if raw { c } else { super::gltf_loader::srgb_to_linear(c) };
+    let texels = rgb.pixels().map(|p| Vec3::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2]))).collect();
+    Ok((rgb.width(), rgb.height(), texels))
+}
+
+/// Errors on a reflectance outside [0, 1] (such a surface would create energy).
+fn check_albedo(e: &Element, c: Vec3) -> Result<()> {
+    if c.min_element() < 0.0 || c.max_element() > 1.0 {
+        return Err(e.error(format!("the reflectance {c} is outside [0, 1]")));
+    }
+    Ok(())
+}

@@ -1,0 +1,152 @@
+//! Mitsuba 3 XML scenes (src/scene/mitsuba): what the loader reads from a file that uses every
+//! part of it (assets/scenes/mitsuba_box, written by tools/scenes/make_mitsuba_scene.py), renders
+//! of it against Mitsuba 3.9.1 + mitransient 1.3.1 rendering the same file
+//! (tests/data/mitsuba_box_peer), the XML Cornell box against the glTF one, and the file's render
+//! settings as the command line's defaults.
+
+mod common;
+
+use std::process::Command;
+
+use common::peer::{check_image, check_transient};
+use gatetrace::film::Gate;
+use gatetrace::integrator::{Method, RenderSettings};
+use gatetrace::scene::{LoadOptions, PreparedScene, Scene, SceneSettings, load_scene_with};
+use glam::Vec3;
+
+fn mitsuba_box() -> Scene {
+    load_scene_with(&common::repo_path("assets/scenes/mitsuba_box/scene.xml"), &LoadOptions::default()).unwrap()
+}
+
+/// Total area (m^2) of a named node's triangles.
+fn area(scene: &Scene, node: &str) -> f32 {
+    let n = scene.node(node).unwrap_or_else(|| panic!("no node {node}"));
+    scene.triangles[n.triangles.clone()].iter().map(|t| t.area()).sum()
+}
+
+#[test]
+fn a_mitsuba_scene_loads_as_written() {
+    let scene = mitsuba_box();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // Film, sampler and integrator: the render's defaults ($res, $spp, $bins substituted).
+    let expected = SceneSettings {
+        resolution: Some((32, 32)),
+        spp: Some(64),
+        max_bounces: Some(5),
+        gate: Some("transient:1.94,0.1,20".into()),
+        seed: None,
+    };
+    assert_eq!(scene.settings, expected);
+    // The camera: at (0, 0, 2) looking down -z, 40 degrees across the smaller (equal) axis.
+    let c = scene.camera;
+    assert!(c.position.abs_diff_eq(Vec3::new(0.0, 0.0, 2.0), 1e-6));
+    assert!(c.forward.abs_diff_eq(Vec3::NEG_Z, 1e-6) && c.right.abs_diff_eq(Vec3::X, 1e-6));
+    assert!(c.up.abs_diff_eq(Vec3::Y, 1e-6) && (c.yfov - 40f32.to_radians()).abs() < 1e-6);
+    // Shapes: triangle counts, areas and places after their transforms.
+    let count = |node: &str| scene.node(node).unwrap().triangles.len();
+    assert_eq!([count("floor"), count("block"), count("tetrahedron"), count("slab")], [2, 12, 4, 12]);
+    assert!((area(&scene, "floor") - 1.0).abs() < 1e-5);
+    let block = 2.0 * (0.24 * 0.4 + 0.24 * 0.24 + 0.24 * 0.4);
+    assert!((area(&scene, "block") - block).abs() < 1e-5, "OBJ quads, scaled");
+    let slab = 2.0 * (0.3 * 0.04 + 0.3 * 0.2 + 0.04 * 0.2);
+    assert!((area(&scene, "slab") - slab).abs() < 1e-5, "cube, scaled");
+    let tolerance = 4.0 * gatetrace::scene::mitsuba::TESSELLATION_ERROR;
+    let relative = |got: f32, exact: f32| (got - exact).abs() / exact;
+    let pi = std::f32::consts::PI;
+    assert!(relative(area(&scene, "ball"), 4.0 * pi * 0.15 * 0.15) < tolerance, "sphere");
+    assert!(relative(area(&scene, "post"), 2.0 * pi * 0.05 * 0.3) < tolerance, "cylinder");
+    assert!(relative(area(&scene, "plate"), pi * 0.01) < tolerance, "disk");
+    let ball = &scene.triangles[scene.node("ball").unwrap().triangles.clone()];
+    for p in ball.iter().flat_map(|t| t.positions) {
+        assert!((p.distance(Vec3::new(0.2, -0.35, 0.15)) - 0.15).abs() < 1e-5, "sphere vertices lie on it");
+    }
+    let tetrahedron = &scene.triangles[scene.node("tetrahedron").unwrap().triangles.clone()];
+    let lowest = tetrahedron.iter().flat_map(|t| t.positions).map(|p| p.y).fold(f32::INFINITY, f32::min);
+    assert!((lowest + 0.5).abs() < 1e-6, "the PLY tetrahedron stands on the floor (matrix)");
+    // face_normals drops the OBJ's normals; the sphere keeps the true sphere's.
+    assert!(scene.triangles[scene.node("block").unwrap().triangles.clone()].iter().all(|t| t.normals.is_none()));
+    assert!(ball.iter().all(|t| t.normals.is_some()));
+    // Materials: the included file's BSDFs (with its default), twosided, the conductor, textures.
+    let material =
+        |node: &str| &scene.materials[scene.triangles[scene.node(node).unwrap().triangles.start].material as usize];
+    assert_eq!(material("ceiling").base_color, Vec3::splat(0.8));
+    assert!(material("post").double_sided && !material("ceiling").double_sided);
+    assert_eq!((material("ball").metallic, material("ball").base_color), (1.0, Vec3::ONE));
+    assert!((material("ball").roughness - 0.2f32.sqrt()).abs() < 1e-6);
+    assert_eq!(material("light").emission, Vec3::splat(10.0));
+    assert_eq!(scene.point_lights.len(), 1);
+    assert_eq!(scene.textures.len(), 2);
+    let checker = &scene.textures[material("floor").base_color_texture.unwrap() as usize];
+    assert!(checker.nearest && (checker.width, checker.height) == (2, 2));
+    let floor = &scene.triangles[scene.node("floor").unwrap().triangles.clone()];
+    let largest_uv = floor.iter().flat_map(|t| t.uvs).fold(0.0f32, |m, uv| m.max(uv.x).max(uv.y));
+    assert_eq!(largest_uv, 4.0, "to_uv scales the floor's uv by 4");
+}
+
+#[test]
+fn a_mitsuba_scene_agrees_with_mitransient_rendering_the_same_file() {
+    let ctx = common::gpu();
+    let mut scene = mitsuba_box();
+    assert_eq!(scene.settings.max_bounces, Some(5));
+    let steady = RenderSettings { width: 64, height: 64, max_bounces: 5, seed: 3, ..Default::default() };
+    scene.settings = SceneSettings::default();
+    let scene = PreparedScene::new(scene).unwrap();
+    let films = common::render_films(&ctx, &scene, &steady, 8, 64);
+    check_image("mitsuba_box_steady", &films, "mitsuba_box_peer/steady");
+    let transient = RenderSettings {
+        width: 16,
+        height: 16,
+        gate: Gate::parse("transient:1.94,0.1,20").unwrap(),
+        seed: 4,
+        ..steady
+    };
+    let films = common::render_films(&ctx, &scene, &transient, 8, 512);
+    check_transient("mitsuba_box_transient", &films, "mitsuba_box_peer/transient_16x16", 20);
+    for method in [Method::Direct, Method::Ellipsoidal] {
+        let settings = RenderSettings { method, seed: 5, ..transient.clone() };
+        let films = common::render_films(&ctx, &scene, &settings, 8, 128);
+        check_transient(&format!("mitsuba_box_transient_{method:?}"), &films, "mitsuba_box_peer/transient_16x16", 20);
+    }
+}
+
+#[test]
+fn the_mitsuba_cornell_box_renders_as_the_gltf_one() {
+    let ctx = common::gpu();
+    let xml = load_scene_with(&common::repo_path("assets/scenes/cornell_box.xml"), &LoadOptions::default()).unwrap();
+    assert_eq!(xml.settings.max_bounces, Some(5));
+    assert_eq!(xml.triangles.len(), 12);
+    let xml = PreparedScene::new(xml).unwrap();
+    let gltf = common::cornell_box();
+    for method in [Method::Path, Method::Direct] {
+        let settings = RenderSettings { width: 32, height: 32, max_bounces: 5, method, ..Default::default() };
+        let a = common::render_films(&ctx, &xml, &RenderSettings { seed: 1, ..settings.clone() }, 8, 32);
+        let b = common::render_films(&ctx, &gltf, &RenderSettings { seed: 2, ..settings }, 8, 32);
+        common::assert_films_agree(&format!("XML and glTF Cornell box, {method:?}"), &a, &b, 8, 0.01);
+    }
+}
+
+/// Renders `args` with the binary and returns the output's JSON sidecar.
+fn render_metadata(name: &str, args: &[&str]) -> serde_json::Value {
+    let dir = common::scratch_dir(name);
+    let out = dir.join("out.npy");
+    let o =
+        Command::new(env!("CARGO_BIN_EXE_gatetrace")).arg("render").args(args).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn the_files_render_settings_are_defaults_the_command_line_overrides() {
+    let scene = common::repo_path("assets/scenes/mitsuba_box/scene.xml");
+    let scene = scene.to_str().unwrap();
+    let m = render_metadata("mitsuba_settings", &[scene, "--res", "8x8"]);
+    assert_eq!(m["resolution"], serde_json::json!([8, 8]), "--res given");
+    assert_eq!(m["spp"], 64, "the sampler's sample_count");
+    assert_eq!(m["max_bounces"], 5, "the integrator's max_depth 6");
+    assert_eq!(m["gate"], "transient:1.94,0.1,20", "the transient film's bins");
+    let m = render_metadata(
+        "mitsuba_settings_overridden",
+        &[scene, "--res", "4x4", "--spp", "2", "--max-bounces", "1", "--gate", "none"],
+    );
+    assert_eq!((m["spp"].clone(), m["max_bounces"].clone(), m["gate"].clone()), (2.into(), 1.into(), "none".into()));
+}
