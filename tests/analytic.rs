@@ -400,13 +400,24 @@ fn one_sided_emitters_light_only_their_front() {
 
 #[test]
 fn a_spot_light_lights_the_plane_by_its_falloff() {
+    spot_lights_the_plane(gatetrace::scene::SpotFalloff::CosineRampSquared);
+}
+
+#[test]
+fn a_mitsuba_spot_light_lights_the_plane_by_its_falloff_linear_in_angle() {
+    spot_lights_the_plane(gatetrace::scene::SpotFalloff::LinearInAngle);
+}
+
+fn spot_lights_the_plane(profile: gatetrace::scene::SpotFalloff) {
     // The plane lit from the camera again, the point light made a spot looking down the axis
     // with a wide ramp (inner cone 0.05 rad, outer 0.2 rad; the image reaches 0.35 rad at its
     // corners): along a ray at angle theta, L = rho I s(cos theta) cos^3(theta) / (pi d^2) with
-    // glTF's falloff s = clamp((cos - cos_outer) / (cos_inner - cos_outer), 0, 1)^2, averaged
-    // over each pixel's rectangle by a 48 x 48 midpoint rule. Both the path tracer (next-event
-    // estimation) and `direct` (light subpaths sampled over the cone, MIS) must agree with it.
+    // glTF's falloff s = clamp((cos - cos_outer) / (cos_inner - cos_outer), 0, 1)^2, or
+    // Mitsuba's s = clamp((outer - theta) / (outer - inner), 0, 1), averaged over each pixel's
+    // rectangle by a 48 x 48 midpoint rule. Both the path tracer (next-event estimation) and
+    // `direct` (light subpaths sampled over the cone, MIS) must agree with it.
     use gatetrace::integrator::Method;
+    use gatetrace::scene::SpotFalloff;
     let (inner, outer) = (0.05f64, 0.2f64);
     let dir = common::scratch_dir("plane_spot");
     let base = Scene {
@@ -416,10 +427,17 @@ fn a_spot_light_lights_the_plane_by_its_falloff() {
         point_lights: vec![PointLight { position: [0.0; 3], intensity: PLANE_I as f32 }],
     };
     let mut scene = load_gltf(&base.write(&dir, "plane_spot.gltf")).unwrap();
-    scene.point_lights[0].spot =
-        Some(gatetrace::scene::SpotCone { direction: glam::Vec3::NEG_Z, inner: inner as f32, outer: outer as f32 });
+    scene.point_lights[0].spot = Some(gatetrace::scene::SpotCone {
+        direction: glam::Vec3::NEG_Z,
+        inner: inner as f32,
+        outer: outer as f32,
+        falloff: profile,
+    });
     let scene = PreparedScene::new(scene).unwrap();
-    let falloff = |c: f64| ((c - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2);
+    let falloff = |c: f64| match profile {
+        SpotFalloff::CosineRampSquared => ((c - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0).powi(2),
+        SpotFalloff::LinearInAngle => ((outer - c.clamp(-1.0, 1.0).acos()) / (outer - inner)).clamp(0.0, 1.0),
+    };
     let ctx = common::gpu();
     let batches = 16;
     let methods = [Method::Path, Method::Direct];

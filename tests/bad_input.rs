@@ -355,7 +355,13 @@ fn cases() -> Vec<(Case, Setup)> {
             render("{dir}/scene.xml", &[]),
             &["scene.xml: no <sensor>"],
         ),
-        xml_case("XML spot light", "<emitter type=\"spot\"/>", &[], &["scene.xml:5: <emitter type=\"spot\">", "spot light"]),
+        xml_case(
+            "XML spot light wider than a hemisphere",
+            "<emitter type=\"spot\"><float name=\"cutoff_angle\" value=\"120\"/></emitter>",
+            &[],
+            &["scene.xml:5: <emitter type=\"spot\">", "cutoff_angle 120", "<= 90"],
+        ),
+        xml_case("XML projector", "<emitter type=\"projector\"/>", &[], &["<emitter type=\"projector\">", "not rendered yet"]),
         xml_case("XML area emitter outside a shape", "<emitter type=\"area\"/>", &[], &["belongs inside a <shape>"]),
         xml_case(
             "XML NLOS integrator",
@@ -1250,6 +1256,108 @@ mod properties {
                 })
             })
             .unwrap()
+    }
+
+    /// Attribute values a mutation may put into a Mitsuba XML scene.
+    fn hostile_attribute() -> impl Strategy<Value = String> {
+        prop::sample::select(vec![
+            "",
+            "0",
+            "-1",
+            "1e30",
+            "-1e30",
+            "1e-40",
+            "nan",
+            "inf",
+            "4294967296",
+            "0, 0, 0",
+            "1 2",
+            "1,2,3,4",
+            "$",
+            "$nope",
+            "$spp",
+            "true",
+            "false",
+            "sphere",
+            "obj",
+            "diffuse",
+            "twosided",
+            "ggx",
+            "x",
+            "diagonal",
+            "scene.xml",
+            "materials.xml",
+            "../../../../etc/passwd",
+            "block.obj",
+            "tetrahedron.ply",
+            "quadrants.png",
+            "white",
+            "camera",
+            "360",
+            "-90",
+        ])
+        .prop_map(str::to_owned)
+    }
+
+    /// One edit of a Mitsuba scene's text: the `pick`-th attribute value replaced by `value`, or
+    /// the `pick`-th element of one line (`<... />`) removed or repeated (so most edits leave
+    /// well-formed XML for the loader to judge).
+    fn edit_xml(text: &str, pick: usize, action: u8, value: &str) -> String {
+        let lines: Vec<&str> = text.lines().collect();
+        let whole: Vec<usize> =
+            (0..lines.len()).filter(|&i| lines[i].trim_start().starts_with('<') && lines[i].ends_with("/>")).collect();
+        let line = whole[pick % whole.len()];
+        match action {
+            0 => lines.iter().enumerate().filter(|(i, _)| *i != line).map(|(_, l)| *l).collect::<Vec<_>>().join("\n"),
+            1 => {
+                let mut out = lines.clone();
+                out.insert(line, lines[line]);
+                out.join("\n")
+            }
+            _ => {
+                // Attribute values are the text between a `="` and the next `"`.
+                let starts: Vec<usize> = text.match_indices("=\"").map(|(i, _)| i + 2).collect();
+                let Some(&start) = starts.get(pick % starts.len().max(1)) else { return text.to_owned() };
+                let end = start + text[start..].find('"').unwrap_or(0);
+                format!("{}{}{}", &text[..start], value.replace('"', ""), &text[end..])
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 300, failure_persistence: None, ..ProptestConfig::default() })]
+
+        /// Mitsuba XML scenes with 1 to 4 edits (attribute values replaced, lines removed or
+        /// repeated), in the scene or its included file, and their meshes with bytes overwritten,
+        /// load or fail with an error; what loads can be prepared.
+        #[test]
+        fn mutated_mitsuba_scenes_never_panic(
+            edits in prop::collection::vec((any::<usize>(), 0u8..4, hostile_attribute(), any::<bool>()), 1..5),
+            flips in prop::collection::vec((any::<usize>(), any::<u8>(), any::<bool>()), 0..3),
+        ) {
+            let source = common::repo_path("assets/scenes/mitsuba_box");
+            let dir = scratch(&format!("properties_xml_{:?}", std::thread::current().id()).replace(['(', ')'], ""));
+            for file in ["scene.xml", "materials.xml", "block.obj", "tetrahedron.ply", "quadrants.png"] {
+                std::fs::copy(source.join(file), dir.join(file)).unwrap();
+            }
+            for (pick, action, value, included) in &edits {
+                let file = dir.join(if *included { "materials.xml" } else { "scene.xml" });
+                let text = std::fs::read_to_string(&file).unwrap();
+                std::fs::write(&file, edit_xml(&text, *pick, *action, value)).unwrap();
+            }
+            for (at, byte, ply) in flips {
+                let file = dir.join(if ply { "tetrahedron.ply" } else { "block.obj" });
+                let mut bytes = std::fs::read(&file).unwrap();
+                let n = bytes.len();
+                bytes[at % n] = byte;
+                std::fs::write(&file, bytes).unwrap();
+            }
+            let path = dir.join("scene.xml");
+            let _ = gatetrace::scene::scene_settings(&path);
+            if let Ok(scene) = gatetrace::scene::load_scene_with(&path, &Default::default()) {
+                let _ = PreparedScene::new(scene);
+            }
+        }
     }
 
     proptest! {

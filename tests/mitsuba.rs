@@ -74,7 +74,10 @@ fn a_mitsuba_scene_loads_as_written() {
     assert_eq!((material("ball").metallic, material("ball").base_color), (1.0, Vec3::ONE));
     assert!((material("ball").roughness - 0.2f32.sqrt()).abs() < 1e-6);
     assert_eq!(material("light").emission, Vec3::splat(10.0));
-    assert_eq!(scene.point_lights.len(), 1);
+    assert_eq!(scene.point_lights.len(), 2);
+    let spot = scene.point_lights[1].spot.expect("the spot light");
+    assert!((spot.outer - 25f32.to_radians()).abs() < 1e-6 && (spot.inner - 10f32.to_radians()).abs() < 1e-6);
+    assert_eq!(spot.falloff, gatetrace::scene::SpotFalloff::LinearInAngle);
     assert_eq!(scene.textures.len(), 2);
     let checker = &scene.textures[material("floor").base_color_texture.unwrap() as usize];
     assert!(checker.nearest && (checker.width, checker.height) == (2, 2));

@@ -27,6 +27,9 @@ pub const LIGHT_POINT: u32 = 1;
 pub const LIGHT_DIRECTIONAL: u32 = 2;
 /// [`Light::flags`]: an area light that emits from both faces.
 pub const LIGHT_DOUBLE_SIDED: u32 = 1;
+/// [`Light::flags`]: a spot light's intensity falls linearly in the angle between its cones
+/// (Mitsuba's spot), not as the square of a ramp in the cosine (glTF's).
+pub const LIGHT_SPOT_LINEAR_IN_ANGLE: u32 = 2;
 /// Largest triangle count a BVH leaf can hold (4 bits of `BvhNode::leaf`).
 pub const MAX_LEAF_TRIANGLES: u32 = 15;
 /// Largest triangle index a BVH leaf can address (28 bits of `BvhNode::leaf`).
@@ -214,7 +217,7 @@ pub struct Light {
     pub area: f32,
     /// Probability that light sampling picks this light.
     pub select_pdf: f32,
-    /// [`LIGHT_DOUBLE_SIDED`].
+    /// [`LIGHT_DOUBLE_SIDED`] | [`LIGHT_SPOT_LINEAR_IN_ANGLE`].
     pub flags: u32,
     /// Point or spot light: cosine of the outer cone half-angle (-1 for a point light and for
     /// a directional light).

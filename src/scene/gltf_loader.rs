@@ -12,7 +12,7 @@ use anyhow::{Context as _, Result, anyhow, bail};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use super::camera::ThinLens;
-use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone};
+use super::{CameraDesc, DirectionalLight, MaterialDesc, PointLight, Scene, SceneTriangle, SpotCone, SpotFalloff};
 pub use materials::srgb_to_linear;
 
 /// The glTF extensions gatetrace implements; any other is refused when a file requires it
@@ -438,7 +438,12 @@ impl Loader<'_> {
                                  needs 0 <= inner < outer <= pi/2"
                             );
                         }
-                        Some(SpotCone { direction: light_direction(world, name, node_name)?, inner, outer })
+                        Some(SpotCone {
+                            direction: light_direction(world, name, node_name)?,
+                            inner,
+                            outer,
+                            falloff: SpotFalloff::CosineRampSquared,
+                        })
                     }
                     _ => None,
                 };

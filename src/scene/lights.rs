@@ -7,7 +7,9 @@
 use glam::{Vec2, Vec3};
 
 use super::Scene;
-use crate::gpu::layout::{LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_POINT, Light, NONE, Triangle};
+use crate::gpu::layout::{
+    LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_POINT, LIGHT_SPOT_LINEAR_IN_ANGLE, Light, NONE, Triangle,
+};
 use crate::sampling::sample_triangle_barycentrics;
 
 /// Lights with their selection CDF.
@@ -51,6 +53,7 @@ impl LightTable {
                 Some(s) => (s.direction, s.outer.cos(), s.inner.cos()),
                 None => (Vec3::Z, -1.0, -1.0),
             };
+            let linear = p.spot.is_some_and(|s| s.falloff == crate::scene::SpotFalloff::LinearInAngle);
             // Power over the cone, the falloff's ramp counted as half (4 pi I for a point).
             let solid_angle = 2.0 * std::f64::consts::PI * (1.0 - 0.5 * (cos_outer as f64 + cos_inner as f64));
             power.push(solid_angle * mean(p.intensity));
@@ -62,6 +65,7 @@ impl LightTable {
                 direction,
                 cos_outer,
                 cos_inner,
+                flags: if linear { LIGHT_SPOT_LINEAR_IN_ANGLE } else { 0 },
                 ..Default::default()
             });
             source_triangle.push(NONE);

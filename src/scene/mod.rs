@@ -124,36 +124,54 @@ pub struct PointLight {
 }
 
 /// The beam of a spot light: full intensity within `inner` of its axis, falling to zero at
-/// `outer` as glTF's KHR_lights_punctual recommends (the square of a ramp linear in the cosine
-/// of the angle to the axis; `spot_falloff` in lights.wesl).
+/// `outer` along the profile `falloff` (`spot_falloff` in lights.wesl).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpotCone {
     /// Unit axis of the beam (world space).
     pub direction: Vec3,
-    /// Inner cone half-angle (rad), 0 <= inner < outer.
+    /// Inner cone half-angle (rad), 0 <= inner <= outer (equal: a hard edge).
     pub inner: f32,
     /// Outer cone half-angle (rad), at most pi/2.
     pub outer: f32,
+    /// How the intensity falls from the inner cone to the outer one.
+    pub falloff: SpotFalloff,
+}
+
+/// How a spot light's intensity falls between its inner and outer cones.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpotFalloff {
+    /// The square of a ramp linear in the cosine of the angle to the axis (glTF
+    /// KHR_lights_punctual's recommended falloff).
+    CosineRampSquared,
+    /// A ramp linear in the angle itself (Mitsuba 3's `spot` emitter, from `beam_width` to
+    /// `cutoff_angle`).
+    LinearInAngle,
 }
 
 impl SpotCone {
     /// Relative intensity (0 to 1) toward unit direction `w` (twin of `spot_falloff`).
     pub fn falloff(&self, w: Vec3) -> f32 {
-        spot_falloff(w.dot(self.direction), self.outer.cos(), self.inner.cos())
+        let linear_in_angle = self.falloff == SpotFalloff::LinearInAngle;
+        spot_falloff(w.dot(self.direction), self.outer.cos(), self.inner.cos(), linear_in_angle)
     }
 }
 
-/// The falloff of a spot light whose cone half-angles have cosines `cos_outer` < `cos_inner`
-/// at cosine `cd` to its axis: 0 outside the outer cone, 1 inside the inner one, the square of
-/// the linear ramp in the cosine between (twin of `spot_falloff`); a hard edge when the two
-/// cosines are equal (a point light has both at -1: 1 everywhere).
-pub fn spot_falloff(cd: f32, cos_outer: f32, cos_inner: f32) -> f32 {
+/// The falloff of a spot light whose cone half-angles have cosines `cos_outer` <= `cos_inner`
+/// at cosine `cd` to its axis: 0 outside the outer cone, 1 inside the inner one, between them
+/// the square of the ramp linear in the cosine, or with `linear_in_angle` the ramp linear in the
+/// angle (twin of `spot_falloff`); a hard edge when the two cosines are equal (a point light has
+/// both at -1: 1 everywhere).
+pub fn spot_falloff(cd: f32, cos_outer: f32, cos_inner: f32, linear_in_angle: bool) -> f32 {
     if cd < cos_outer {
         return 0.0;
     }
     let span = cos_inner - cos_outer;
-    if span <= 0.0 {
+    if span <= 0.0 || cd >= cos_inner {
         return 1.0;
+    }
+    if linear_in_angle {
+        let outer = cos_outer.clamp(-1.0, 1.0).acos();
+        return ((outer - cd.clamp(-1.0, 1.0).acos()) / (outer - cos_inner.clamp(-1.0, 1.0).acos())).clamp(0.0, 1.0);
     }
     let ramp = ((cd - cos_outer) / span).clamp(0.0, 1.0);
     ramp * ramp

@@ -12,7 +12,7 @@ The Cornell box of cornell_box.xml (walls as `rectangle`s) with
 * a `cube` scaled flat;
 * a floor with a `checkerboard` texture (`to_uv` scaled) and a back wall with a `bitmap` texture
   (a 4 x 4 sRGB PNG, nearest lookups);
-* the area light and a `point` light;
+* the area light, a `point` light and a `spot` light;
 * a `transient_hdr_film` of 20 bins of 0.1 m from 1.94 m, a `transient_path` integrator of
   `max_depth` 6 (5 bounces), and a near clip of 1e-5 m (mitransient measures the camera's segment
   from the near clip plane: a negligible one keeps both renderers' time origin at the pinhole).
@@ -137,6 +137,15 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
     <emitter type="point">
         <point name="position" x="0.3" y="0.3" z="0.3"/>
         <rgb name="intensity" value="0.2, 0.15, 0.1"/>
+    </emitter>
+
+    <emitter type="spot">
+        <rgb name="intensity" value="0.6, 0.5, 0.4"/>
+        <float name="cutoff_angle" value="25"/>
+        <float name="beam_width" value="10"/>
+        <transform name="to_world">
+            <lookat origin="-0.3, 0.4, 0.3" target="0.3, -0.2, -0.5" up="0, 1, 0"/>
+        </transform>
     </emitter>
 
     <shape type="obj" id="block">

@@ -10,7 +10,7 @@
 //!   gatetrace's smallest roughness), `twosided`.
 //! - Textures of a diffuse reflectance: `bitmap` (PNG, JPEG, EXR) and `checkerboard`, with
 //!   `to_uv` (baked into the texture coordinates of the shapes that use them).
-//! - Emitters: `area` (on a shape), `point`, `directional`.
+//! - Emitters: `area` (on a shape), `point`, `spot` (its falloff linear in angle), `directional`.
 //! - Sensors: `perspective` and `thinlens`, with `hdrfilm` or mitransient's
 //!   `transient_hdr_film` and a sampler; the integrator `path` or `transient_path`. Their
 //!   resolution, samples, depth and time bins become the render's defaults ([`SceneSettings`]).
@@ -583,10 +583,35 @@ impl<'e> Builder<'e> {
             }
             "area" => return Err(e.error("an area emitter belongs inside a <shape>")),
             "spot" => {
-                return Err(e.error(
-                    "Mitsuba's spot light (falloff linear in angle from beam_width to cutoff_angle) is not rendered \
-                     yet: gatetrace's spot lights are glTF's",
-                ));
+                if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
+                    return Err(t.error("a spot light's texture is not rendered"));
+                }
+                let to_world = o.transform("to_world")?;
+                let intensity = o.color("intensity")?.unwrap_or(Vec3::ONE);
+                let cutoff = o.float("cutoff_angle")?.unwrap_or(20.0);
+                let beam = o.float("beam_width")?.unwrap_or(0.75 * cutoff);
+                if intensity.min_element() < 0.0 {
+                    return Err(e.error("negative intensity"));
+                }
+                if !(cutoff > 0.0 && cutoff <= 90.0 && beam >= 0.0 && beam <= cutoff) {
+                    return Err(e.error(format!(
+                        "cutoff_angle {cutoff} and beam_width {beam} (degrees): gatetrace renders spots of 0 <= \
+                         beam_width <= cutoff_angle <= 90"
+                    )));
+                }
+                o.finish(&[])?;
+                let direction = to_world
+                    .transform_vector3(Vec3::Z)
+                    .try_normalize()
+                    .ok_or_else(|| e.error("the light's to_world is degenerate"))?;
+                let spot = super::SpotCone {
+                    direction,
+                    inner: beam.to_radians(),
+                    outer: cutoff.to_radians(),
+                    falloff: super::SpotFalloff::LinearInAngle,
+                };
+                let position = to_world.transform_point3(Vec3::ZERO);
+                self.point_lights.push(PointLight { position, intensity, spot: Some(spot) });
             }
             "projector" => return Err(e.error("projector emitters are not rendered yet")),
             kind @ ("constant" | "envmap" | "sunsky") => {
