@@ -401,6 +401,18 @@ fn cases() -> Vec<(Case, Setup)> {
             &[],
             &["the conductor preset `Au` is not built in"],
         ),
+        case(
+            "Mitsuba parameter without a value",
+            none,
+            plain(&["render", "-D", "spp", "--out", "{out}"]),
+            &["`spp` is not NAME=VALUE"],
+        ),
+        case(
+            "Mitsuba parameter for a glTF scene",
+            none,
+            plain(&["render", "--res", "8x8", "-D", "spp=4", "--out", "{out}"]),
+            &["cornell_box.gltf", "parameters (here `spp`) apply to Mitsuba XML scenes"],
+        ),
         xml_case("XML medium", "<medium type=\"homogeneous\"/>", &[], &["<medium type=\"homogeneous\">", "participating media"]),
         case(
             "XML field of view of zero",
@@ -1353,7 +1365,7 @@ mod properties {
                 std::fs::write(&file, bytes).unwrap();
             }
             let path = dir.join("scene.xml");
-            let _ = gatetrace::scene::scene_settings(&path);
+            let _ = gatetrace::scene::scene_settings(&path, &[]);
             if let Ok(scene) = gatetrace::scene::load_scene_with(&path, &Default::default()) {
                 let _ = PreparedScene::new(scene);
             }

@@ -128,28 +128,38 @@ fn the_mitsuba_cornell_box_renders_as_the_gltf_one() {
     }
 }
 
-/// Renders `args` with the binary and returns the output's JSON sidecar.
-fn render_metadata(name: &str, args: &[&str]) -> serde_json::Value {
+/// Renders `args` with the binary and returns the output's JSON sidecar and the stderr.
+fn render_metadata(name: &str, args: &[&str]) -> (serde_json::Value, String) {
     let dir = common::scratch_dir(name);
     let out = dir.join("out.npy");
     let o =
         Command::new(env!("CARGO_BIN_EXE_gatetrace")).arg("render").args(args).arg("--out").arg(&out).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap()
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{stderr}");
+    (serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap(), stderr)
 }
 
 #[test]
 fn the_files_render_settings_are_defaults_the_command_line_overrides() {
     let scene = common::repo_path("assets/scenes/mitsuba_box/scene.xml");
     let scene = scene.to_str().unwrap();
-    let m = render_metadata("mitsuba_settings", &[scene, "--res", "8x8"]);
+    let (m, _) = render_metadata("mitsuba_settings", &[scene, "--res", "8x8"]);
     assert_eq!(m["resolution"], serde_json::json!([8, 8]), "--res given");
     assert_eq!(m["spp"], 64, "the sampler's sample_count");
     assert_eq!(m["max_bounces"], 5, "the integrator's max_depth 6");
     assert_eq!(m["gate"], "transient:1.94,0.1,20", "the transient film's bins");
-    let m = render_metadata(
+    let (m, _) = render_metadata(
         "mitsuba_settings_overridden",
         &[scene, "--res", "4x4", "--spp", "2", "--max-bounces", "1", "--gate", "none"],
     );
     assert_eq!((m["spp"].clone(), m["max_bounces"].clone(), m["gate"].clone()), (2.into(), 1.into(), "none".into()));
+    // Parameters replace the file's defaults ($res, $spp, $bins), as mitsuba -D does; one the
+    // file does not use is said.
+    let (m, stderr) = render_metadata(
+        "mitsuba_parameters",
+        &[scene, "-D", "res=6", "--define", "spp=3", "-D", "bins=4", "-D", "nope=1"],
+    );
+    assert_eq!(m["resolution"], serde_json::json!([6, 6]));
+    assert_eq!((m["spp"].clone(), m["gate"].clone()), (3.into(), "transient:1.94,0.1,4".into()));
+    assert!(stderr.contains("the parameter `nope` is given, but the scene uses no $nope"), "{stderr}");
 }

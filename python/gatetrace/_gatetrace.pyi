@@ -17,8 +17,10 @@ class Scene:
         aperture_radius: Optional[float] = None,
         focus_distance: Optional[float] = None,
         allow_unsupported_materials: bool = False,
+        parameters: Optional[Dict[str, str]] = None,
     ) -> "Scene":
-        """Loads a .gltf, .glb or Mitsuba 3 XML file; `aperture_radius` and `focus_distance` (m) make the camera a
+        """Loads a .gltf, .glb or Mitsuba 3 XML file (`parameters`: values that replace the XML's
+        `<default>`s, as ``render --define``); `aperture_radius` and `focus_distance` (m) make the camera a
         thin lens; `allow_unsupported_materials` renders materials using KHR_materials_transmission,
         KHR_materials_volume or KHR_materials_diffuse_transmission as opaque surfaces instead of
         refusing the scene. FileNotFoundError when the file does not exist, ValueError when it is

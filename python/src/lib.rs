@@ -70,21 +70,26 @@ impl Scene {
     /// `allow_unsupported_materials` renders materials using a glTF extension that lets light
     /// through the surface (KHR_materials_transmission, KHR_materials_volume, ...) as opaque
     /// surfaces instead of refusing the scene (`render --allow-unsupported-materials`).
+    /// `parameters` (name to value) replace a Mitsuba scene's `<default>`s (`render --define`).
     /// FileNotFoundError when the file does not exist; ValueError when it cannot be used.
     #[staticmethod]
-    #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None, allow_unsupported_materials=false))]
+    #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None, allow_unsupported_materials=false,
+        parameters=None))]
     fn load(
         py: Python<'_>,
         path: PathBuf,
         aperture_radius: Option<f32>,
         focus_distance: Option<f32>,
         allow_unsupported_materials: bool,
+        parameters: Option<std::collections::BTreeMap<String, String>>,
     ) -> PyResult<Self> {
         if !path.exists() {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
         }
         let load = || -> anyhow::Result<PreparedScene> {
-            let mut scene = load_scene_with(&path, &LoadOptions { allow_unsupported_materials, ..Default::default() })?;
+            let parameters = parameters.unwrap_or_default().into_iter().collect();
+            let options = LoadOptions { allow_unsupported_materials, parameters, ..Default::default() };
+            let mut scene = load_scene_with(&path, &options)?;
             scene
                 .camera
                 .override_lens(aperture_radius, focus_distance, "focus_distance=METRES")

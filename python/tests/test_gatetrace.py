@@ -361,6 +361,7 @@ def test_a_mitsuba_scene_renders_with_its_own_settings_as_the_command_line_does(
     cli, cli_meta = cli_render(tmp_path, str(xml))
     assert cli_meta["gate"] == meta["gate"] == "transient:1.94,0.1,20"
     assert image.mean() > 0 and np.array_equal(image, cli), f"largest difference {np.abs(image - cli).max()}"
-    # Arguments override the file's settings.
+    # Arguments override the file's settings; parameters replace its defaults.
     small = gatetrace.render(scene, gate="none", spp=2, res=(8, 4), max_bounces=1)
     assert small.shape == (4, 8, 3)
+    assert gatetrace.Scene.load(xml, parameters={"res": "8", "bins": "3"}).settings["res"] == (8, 8)

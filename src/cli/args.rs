@@ -9,7 +9,9 @@ use gatetrace::integrator::Method;
 use gatetrace::nlos::Scan;
 use gatetrace::scene::LoadOptions;
 
-use super::parse::{MethodParser, NamesOnly, parse_point, parse_resolution, parse_shard, parse_strategy, parse_uv};
+use super::parse::{
+    MethodParser, NamesOnly, parse_define, parse_point, parse_resolution, parse_shard, parse_strategy, parse_uv,
+};
 
 /// What both render and view render: the scene, its camera's lens, the gate, the image and
 /// the paths. One definition of each option, so both commands take the same options with the
@@ -22,6 +24,9 @@ pub struct ImageArgs {
     /// Render transmissive glTF materials as opaque, with a warning, instead of refusing them.
     #[arg(long)]
     pub allow_unsupported_materials: bool,
+    /// A Mitsuba XML scene's parameter: VALUE replaces the file's default for $NAME (repeatable).
+    #[arg(long, short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub define: Vec<(String, String)>,
     /// Pathlength importance W, lengths in metres of optical path or with a ps/ns/mm suffix: none;
     /// box:A..B (W = 1 on [A, B)); gaussian:MU,SIGMA; cw:FREQ_HZ,PHASE_DEG[,CODE] (signed);
     /// table:FILE.csv (length,weight rows); transient:START,WIDTH,BINS (a cube of BINS images){n}
@@ -68,7 +73,7 @@ impl ImageArgs {
     /// Takes the scene file's render settings (a Mitsuba scene's film, sampler and integrator)
     /// for the options the command line did not give; returns the samples per pixel it sets.
     pub fn take_scene_settings(&mut self, scene: &std::path::Path) -> anyhow::Result<Option<u64>> {
-        let settings = gatetrace::scene::scene_settings(scene)?;
+        let settings = gatetrace::scene::scene_settings(scene, &self.define)?;
         if let Some(gate) = settings.gate.filter(|_| !self.was_given("gate")) {
             self.gate = gate;
         }
@@ -212,7 +217,12 @@ pub struct RenderArgs {
 impl RenderArgs {
     /// How `render` loads its scene: at animation time `time` (s), as its options say.
     pub fn load_options(&self, time: Option<f64>) -> LoadOptions {
-        LoadOptions { time, capture: false, allow_unsupported_materials: self.allow_unsupported_materials }
+        LoadOptions {
+            time,
+            capture: false,
+            allow_unsupported_materials: self.allow_unsupported_materials,
+            parameters: self.define.clone(),
+        }
     }
 }
 

@@ -118,6 +118,16 @@ pub fn parse_uv(s: &str) -> Result<glam::Vec2, String> {
     Ok(glam::Vec2::new(u, v))
 }
 
+/// A Mitsuba scene parameter, NAME=VALUE (the name: letters, digits and underscores).
+pub fn parse_define(s: &str) -> Result<(String, String), String> {
+    let bad = || format!("`{s}` is not NAME=VALUE (a Mitsuba scene's parameter, e.g. spp=256)");
+    let (name, value) = s.split_once('=').ok_or_else(bad)?;
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        return Err(bad());
+    }
+    Ok((name.to_owned(), value.to_owned()))
+}
+
 pub fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
     parse_pair(s, "S,T")
 }

@@ -69,6 +69,7 @@ pub fn run(mut args: ViewArgs) -> Result<()> {
     run_viewer(ViewOptions {
         scene,
         allow_unsupported_materials: image.allow_unsupported_materials,
+        parameters: image.define.clone(),
         width: image.res.0,
         height: image.res.1,
         method: args.method,

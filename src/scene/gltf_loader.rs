@@ -28,7 +28,7 @@ pub const TRANSMISSIVE_EXTENSIONS: [&str; 3] =
     ["KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_diffuse_transmission"];
 
 /// How a scene file is loaded.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct LoadOptions {
     /// Time (s of the animation clock) at which node animations are sampled and baked in like
     /// static transforms (see `animation`); `None`: the rest pose.
@@ -40,6 +40,9 @@ pub struct LoadOptions {
     /// Render materials with a [`TRANSMISSIVE_EXTENSIONS`] extension as the opaque surfaces their
     /// core glTF properties describe, with a warning, instead of refusing the scene.
     pub allow_unsupported_materials: bool,
+    /// A Mitsuba XML scene's parameters (name, value): each replaces the file's `<default>` for
+    /// `$name` (`mitsuba -D name=value`; `render --define`). A glTF file takes none.
+    pub parameters: Vec<(String, String)>,
 }
 
 /// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).
@@ -62,6 +65,9 @@ pub fn load_gltf_for_capture(path: &Path) -> Result<Scene> {
 /// XML, ...: see `formats`) is refused with what it is and how to convert it.
 pub fn load_gltf_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
     let name = path.display().to_string();
+    if let Some((parameter, _)) = options.parameters.first() {
+        bail!("{name}: parameters (here `{parameter}`) apply to Mitsuba XML scenes, not to glTF files");
+    }
     let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read the scene file"))?;
     if let Some(error) = super::formats::foreign_format_error(&name, path, &bytes) {
         bail!(error);

@@ -26,10 +26,10 @@ pub fn load_scene_with(path: &std::path::Path, options: &LoadOptions) -> anyhow:
     if formats::is_mitsuba_xml(path) { mitsuba::load_mitsuba(path, options) } else { load_gltf_with(path, options) }
 }
 
-/// The render settings the scene file at `path` carries ([`SceneSettings`]; none for glTF),
-/// read without loading its geometry.
-pub fn scene_settings(path: &std::path::Path) -> anyhow::Result<SceneSettings> {
-    if formats::is_mitsuba_xml(path) { mitsuba::read_settings(path) } else { Ok(SceneSettings::default()) }
+/// The render settings the scene file at `path` carries ([`SceneSettings`]; none for glTF) with
+/// a Mitsuba scene's `parameters` given, read without loading its geometry.
+pub fn scene_settings(path: &std::path::Path, parameters: &[(String, String)]) -> anyhow::Result<SceneSettings> {
+    if formats::is_mitsuba_xml(path) { mitsuba::read_settings(path, parameters) } else { Ok(SceneSettings::default()) }
 }
 
 /// Render settings a scene file carries (a Mitsuba scene's film, sampler and integrator): the

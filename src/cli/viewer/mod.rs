@@ -37,6 +37,8 @@ pub struct ViewOptions {
     pub scene: PathBuf,
     /// See [`gatetrace::scene::LoadOptions::allow_unsupported_materials`].
     pub allow_unsupported_materials: bool,
+    /// See [`gatetrace::scene::LoadOptions::parameters`].
+    pub parameters: Vec<(String, String)>,
     /// Image size (pixels).
     pub width: u32,
     /// Image size (pixels).
@@ -78,7 +80,11 @@ pub struct ViewOptions {
 
 /// Opens the window and runs until it is closed (or the screenshot is saved).
 pub fn run_viewer(options: ViewOptions) -> Result<()> {
-    let load = LoadOptions { allow_unsupported_materials: options.allow_unsupported_materials, ..Default::default() };
+    let load = LoadOptions {
+        allow_unsupported_materials: options.allow_unsupported_materials,
+        parameters: options.parameters.clone(),
+        ..Default::default()
+    };
     let mut scene = load_scene_with(&options.scene, &load)?;
     crate::cli::report::print_warnings(&scene.warnings);
     if options.aperture_radius.is_some() || options.focus_distance.is_some() {

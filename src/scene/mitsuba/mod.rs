@@ -2,7 +2,8 @@
 //! onto what gatetrace renders, read into the same [`Scene`] as a glTF file. Everything outside
 //! it is an error naming the file, line and element; nothing is substituted silently.
 //!
-//! - Structure: `<default>` and `$name` parameters, `<include>`, `id` and `<ref>`, nested objects.
+//! - Structure: `<default>` and `$name` parameters (a value given in [`LoadOptions::parameters`]
+//!   replaces the default), `<include>`, `id` and `<ref>`, nested objects.
 //! - Transforms: `translate`, `rotate`, `scale`, `matrix`, `lookat` (module `xml`).
 //! - Shapes: `obj`, `ply`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (module `shapes`),
 //!   with `to_world`, `flip_normals`, `face_normals`.
@@ -49,9 +50,10 @@ pub fn load_mitsuba(path: &Path, options: &LoadOptions) -> Result<Scene> {
              read yet: describe the capture in glTF (docs/nlos.md)"
         );
     }
-    let root = xml::read_scene(path)?;
+    let (root, warnings) = xml::read_scene(path, &options.parameters)?;
     let default = default_bsdf();
     let mut b = Builder::new(path, &root, &default)?;
+    b.warnings = warnings;
     for child in &root.children {
         match child.tag.as_str() {
             "default" => {}
@@ -69,9 +71,9 @@ pub fn load_mitsuba(path: &Path, options: &LoadOptions) -> Result<Scene> {
 }
 
 /// The render settings a Mitsuba XML scene carries (its first sensor's film and sampler, and its
-/// integrator), read without loading its meshes.
-pub fn read_settings(path: &Path) -> Result<SceneSettings> {
-    let root = xml::read_scene(path)?;
+/// integrator) with `parameters` given, read without loading its meshes.
+pub fn read_settings(path: &Path, parameters: &[(String, String)]) -> Result<SceneSettings> {
+    let (root, _) = xml::read_scene(path, parameters)?;
     let default = default_bsdf();
     let mut b = Builder::new(path, &root, &default)?;
     for child in &root.children {

@@ -65,18 +65,25 @@ impl Element {
     }
 }
 
-/// Reads `path` and every file it includes into the `<scene>` element, with `<default>`
-/// parameters applied (`$name` in any attribute of any file replaced by the default's value) and
-/// `<include>` elements replaced by the included file's children.
-pub fn read_scene(path: &Path) -> Result<Element> {
+/// Reads `path` and every file it includes into the `<scene>` element, with its parameters
+/// applied (`$name` in any attribute of any file replaced by the value `given` for it, else by
+/// its `<default>`) and `<include>` elements replaced by the included file's children. Returns
+/// the scene and a warning for each parameter given that no `$name` uses.
+pub fn read_scene(path: &Path, given: &[(String, String)]) -> Result<(Element, Vec<String>)> {
     let mut scene = read_file(path, 0)?;
     if scene.tag != "scene" {
         bail!("{}: the root element is <{}>, not <scene>: not a Mitsuba scene", scene.at(), scene.tag);
     }
-    let mut parameters = HashMap::new();
+    let mut parameters: HashMap<String, String> = given.iter().cloned().collect();
     collect_defaults(&scene, &mut parameters)?;
-    substitute(&mut scene, &parameters)?;
-    Ok(scene)
+    let mut used = std::collections::HashSet::new();
+    substitute(&mut scene, &parameters, &mut used)?;
+    let warnings = given
+        .iter()
+        .filter(|(name, _)| !used.contains(name))
+        .map(|(name, _)| format!("{}: the parameter `{name}` is given, but the scene uses no ${name}", path.display()))
+        .collect();
+    Ok((scene, warnings))
 }
 
 /// One file's root element, its includes spliced in (`depth`: how many includes lead here).
@@ -134,8 +141,13 @@ fn collect_defaults(scene: &Element, parameters: &mut HashMap<String, String>) -
     Ok(())
 }
 
-/// Replaces `$name` in every attribute below `element` (a `$` not followed by a name is kept).
-fn substitute(element: &mut Element, parameters: &HashMap<String, String>) -> Result<()> {
+/// Replaces `$name` in every attribute below `element` (a `$` not followed by a name is kept),
+/// recording the names in `used`.
+fn substitute(
+    element: &mut Element,
+    parameters: &HashMap<String, String>,
+    used: &mut std::collections::HashSet<String>,
+) -> Result<()> {
     let at = element.at();
     for (_, value) in element.attributes.iter_mut() {
         if !value.contains('$') {
@@ -152,7 +164,10 @@ fn substitute(element: &mut Element, parameters: &HashMap<String, String>) -> Re
             } else {
                 let name = &tail[..len];
                 match parameters.get(name) {
-                    Some(v) => out += v,
+                    Some(v) => {
+                        out += v;
+                        used.insert(name.to_owned());
+                    }
                     None => bail!("{at}: the parameter ${name} has no <default name=\"{name}\" value=\"...\"/>"),
                 }
             }
@@ -162,7 +177,7 @@ fn substitute(element: &mut Element, parameters: &HashMap<String, String>) -> Re
         *value = out;
     }
     for child in &mut element.children {
-        substitute(child, parameters)?;
+        substitute(child, parameters, used)?;
     }
     Ok(())
 }
@@ -436,10 +451,16 @@ mod tests {
         let mut e = element("<scene><default name=\"spp\" value=\"16\"/><integer name=\"n\" value=\"$spp\"/></scene>");
         let mut p = HashMap::new();
         collect_defaults(&e, &mut p).unwrap();
-        substitute(&mut e, &p).unwrap();
+        substitute(&mut e, &p, &mut Default::default()).unwrap();
         assert_eq!(e.children[1].attribute("value"), Some("16"));
+        // A value given replaces the default.
+        let mut e = element("<scene><default name=\"spp\" value=\"16\"/><integer name=\"n\" value=\"$spp\"/></scene>");
+        let mut p = HashMap::from([("spp".to_owned(), "4".to_owned())]);
+        collect_defaults(&e, &mut p).unwrap();
+        substitute(&mut e, &p, &mut Default::default()).unwrap();
+        assert_eq!(e.children[1].attribute("value"), Some("4"));
         let mut e = element("<scene>\n<float name=\"x\" value=\"$nope\"/></scene>");
-        let err = substitute(&mut e, &HashMap::new()).unwrap_err().to_string();
+        let err = substitute(&mut e, &HashMap::new(), &mut Default::default()).unwrap_err().to_string();
         assert!(err.contains("t.xml:2") && err.contains("$nope"), "{err}");
     }
 
