@@ -63,6 +63,12 @@ fn a_mitsuba_scene_loads_as_written() {
     let tetrahedron = &scene.triangles[scene.node("tetrahedron").unwrap().triangles.clone()];
     let lowest = tetrahedron.iter().flat_map(|t| t.positions).map(|p| p.y).fold(f32::INFINITY, f32::min);
     assert!((lowest + 0.5).abs() < 1e-6, "the PLY tetrahedron stands on the floor (matrix)");
+    // The shapegroup's cube, once per instance, each moved by its instance.
+    let pillars: Vec<_> = scene.nodes.iter().filter(|n| n.name == "pillar cube").collect();
+    assert_eq!(pillars.len(), 2);
+    assert!(pillars.iter().all(|n| n.triangles.len() == 12));
+    assert!(pillars[0].position.abs_diff_eq(Vec3::new(-0.4, -0.4, -0.4), 1e-6));
+    assert!(pillars[1].position.abs_diff_eq(Vec3::new(0.4, -0.4, -0.4), 1e-6));
     // face_normals drops the OBJ's normals; the sphere keeps the true sphere's.
     assert!(scene.triangles[scene.node("block").unwrap().triangles.clone()].iter().all(|t| t.normals.is_none()));
     assert!(ball.iter().all(|t| t.normals.is_some()));

@@ -9,7 +9,7 @@ The Cornell box of cornell_box.xml (walls as `rectangle`s) with
 * a tetrahedron from a binary little-endian PLY file, placed by a `matrix`;
 * a `sphere` with a GGX `roughconductor` (a perfect mirror's reflectance, alpha 0.2);
 * a `cylinder` (open tube) and a `disk`, both `twosided`;
-* a `cube` scaled flat;
+* a `cube` scaled flat, and a `shapegroup` of a cube placed twice by `instance`s;
 * a floor with a `checkerboard` texture (`to_uv` scaled) and a back wall with a `bitmap` texture
   (a 4 x 4 sRGB PNG, nearest lookups);
 * the area light, a `point` light and a `spot` light;
@@ -198,6 +198,31 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
             <translate x="0.25" y="0.1" z="-0.35"/>
         </transform>
         <ref id="white"/>
+    </shape>
+
+    <shape type="shapegroup" id="pillar">
+        <shape type="cube" id="pillar cube">
+            <transform name="to_world">
+                <scale x="0.04" y="0.1" z="0.04"/>
+                <translate y="0.1"/>
+            </transform>
+            <ref id="red"/>
+        </shape>
+    </shape>
+
+    <shape type="instance" id="left pillar">
+        <ref id="pillar"/>
+        <transform name="to_world">
+            <translate x="-0.4" y="-0.5" z="-0.4"/>
+        </transform>
+    </shape>
+
+    <shape type="instance" id="right pillar">
+        <ref id="pillar"/>
+        <transform name="to_world">
+            <rotate y="1" angle="45"/>
+            <translate x="0.4" y="-0.5" z="-0.4"/>
+        </transform>
     </shape>
 </scene>
 """

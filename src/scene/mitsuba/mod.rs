@@ -6,7 +6,8 @@
 //!   replaces the default), `<include>`, `id` and `<ref>`, nested objects.
 //! - Transforms: `translate`, `rotate`, `scale`, `matrix`, `lookat` (module `xml`).
 //! - Shapes: `obj`, `ply`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (module `shapes`),
-//!   with `to_world`, `flip_normals`, `face_normals`.
+//!   with `to_world`, `flip_normals`, `face_normals`; `shapegroup` and `instance` (each instance's
+//!   copies baked in).
 //! - BSDFs: `diffuse`, `conductor` and `roughconductor` (GGX; a smooth conductor is GGX at
 //!   gatetrace's smallest roughness), `twosided`.
 //! - Textures of a diffuse reflectance: `bitmap` (PNG, JPEG, EXR) and `checkerboard`, with
@@ -57,7 +58,7 @@ pub fn load_mitsuba(path: &Path, options: &LoadOptions) -> Result<Scene> {
     for child in &root.children {
         match child.tag.as_str() {
             "default" => {}
-            "shape" => b.shape(child)?,
+            "shape" => b.shape(child, Mat4::IDENTITY)?,
             "emitter" => b.emitter(child)?,
             "sensor" => b.sensor(child)?,
             "integrator" => b.integrator(child)?,
@@ -423,11 +424,43 @@ impl<'e> Builder<'e> {
         Ok(m)
     }
 
-    fn shape(&mut self, e: &'e Element) -> Result<()> {
+    /// Adds a shape, its own `to_world` applied after `parent` (an instance's), or the shapes of
+    /// the group an `instance` refers to; a `shapegroup` adds nothing by itself.
+    fn shape(&mut self, e: &'e Element, parent: Mat4) -> Result<()> {
         e.only_attributes(&["type", "id", "name"])?;
         let o = Object::new(e);
         let kind = o.kind()?;
-        let mut to_world = o.transform("to_world")?;
+        if kind == "shapegroup" {
+            for c in &e.children {
+                if c.tag != "shape" {
+                    return Err(c.error("a shapegroup holds shapes only"));
+                }
+                if c.attribute("type").is_some_and(|t| matches!(t, "shapegroup" | "instance")) {
+                    return Err(c.error("nested shapegroups and instances are not read"));
+                }
+                if let Some(emitter) = c.children.iter().find(|g| g.tag == "emitter") {
+                    return Err(emitter.error("a shape in a shapegroup cannot emit (as in Mitsuba)"));
+                }
+            }
+            return Ok(());
+        }
+        if kind == "instance" {
+            let to_world = parent * o.transform("to_world")?;
+            let groups: Vec<&Element> =
+                e.children.iter().filter(|c| matches!(c.tag.as_str(), "ref" | "shape")).collect();
+            let [group] = groups[..] else { return Err(e.error("an instance refers to one shapegroup")) };
+            let group = if group.tag == "ref" { self.resolve(group, "shape")? } else { group };
+            if group.attribute("type") != Some("shapegroup") {
+                return Err(group.error("an instance refers to a shapegroup"));
+            }
+            o.finish(&["ref", "shape"])?;
+            self.shape(group, Mat4::IDENTITY)?;
+            for member in &group.children {
+                self.shape(member, to_world)?;
+            }
+            return Ok(());
+        }
+        let mut to_world = parent * o.transform("to_world")?;
         let file = |o: &Object| -> Result<PathBuf> {
             let f = o.string("filename")?.ok_or_else(|| e.error("`filename` is missing"))?;
             Ok(self.base.join(f))
@@ -470,7 +503,6 @@ impl<'e> Builder<'e> {
                      mesh.write_ply)",
                 ));
             }
-            "shapegroup" | "instance" => return Err(e.error("instancing (shapegroup, instance) is not read yet")),
             other => return Err(e.error(format!("the shape `{other}` is not read by gatetrace"))),
         };
         let mut mesh = mesh.map_err(|err| e.error(format!("{err:#}")))?;
