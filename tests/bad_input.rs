@@ -128,6 +128,9 @@ const MITSUBA_XML: &str = "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<scene ve
 /// What a case writes into its directory before the command runs.
 type Setup = Box<dyn FnOnce(&Path)>;
 
+/// A Mitsuba serialized file of two shapes (tools/scenes/make_mitsuba_scene.py).
+const SERIALIZED: &[u8] = include_bytes!("../assets/scenes/mitsuba_box/shapes.serialized");
+
 /// A Mitsuba 3 scene with a camera and a lit rectangle (lines 1 to 4), then `body` from line 5.
 fn xml_with(body: &str) -> String {
     format!(
@@ -310,6 +313,19 @@ fn cases() -> Vec<(Case, Setup)> {
             "<shape type=\"ply\"><string name=\"filename\" value=\"tri.ply\"/></shape>",
             &[("tri.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")],
             &["tri.ply: face 0 names vertex 7, out of range (3 vertices)"],
+        ),
+        xml_case(
+            "XML serialized mesh that is not one",
+            "<shape type=\"serialized\"><string name=\"filename\" value=\"junk.serialized\"/></shape>",
+            &[("junk.serialized", b"\x1c\x04\x04\x00 not zlib at all, and no offsets")],
+            &["scene.xml:5", "junk.serialized: not a readable Mitsuba serialized mesh"],
+        ),
+        xml_case(
+            "XML serialized shape index beyond the file",
+            "<shape type=\"serialized\"><string name=\"filename\" value=\"shapes.serialized\"/>\
+             <integer name=\"shape_index\" value=\"7\"/></shape>",
+            &[("shapes.serialized", SERIALIZED)],
+            &["shapes.serialized: shape_index 7: the file holds 2 shape(s)"],
         ),
         xml_case("XML include of a missing file", "<include filename=\"gone.xml\"/>", &[], &["scene.xml:5: <include>", "gone.xml: cannot read"]),
         xml_case("XML include of itself", "<include filename=\"scene.xml\"/>", &[], &["includes nest deeper than 16 files"]),
@@ -1345,11 +1361,11 @@ mod properties {
         #[test]
         fn mutated_mitsuba_scenes_never_panic(
             edits in prop::collection::vec((any::<usize>(), 0u8..4, hostile_attribute(), any::<bool>()), 1..5),
-            flips in prop::collection::vec((any::<usize>(), any::<u8>(), any::<bool>()), 0..3),
+            flips in prop::collection::vec((any::<usize>(), any::<u8>(), 0usize..3), 0..3),
         ) {
             let source = common::repo_path("assets/scenes/mitsuba_box");
             let dir = scratch(&format!("properties_xml_{:?}", std::thread::current().id()).replace(['(', ')'], ""));
-            for file in ["scene.xml", "materials.xml", "block.obj", "tetrahedron.ply", "quadrants.png"] {
+            for file in ["scene.xml", "materials.xml", "block.obj", "tetrahedron.ply", "quadrants.png", "shapes.serialized"] {
                 std::fs::copy(source.join(file), dir.join(file)).unwrap();
             }
             for (pick, action, value, included) in &edits {
@@ -1357,8 +1373,8 @@ mod properties {
                 let text = std::fs::read_to_string(&file).unwrap();
                 std::fs::write(&file, edit_xml(&text, *pick, *action, value)).unwrap();
             }
-            for (at, byte, ply) in flips {
-                let file = dir.join(if ply { "tetrahedron.ply" } else { "block.obj" });
+            for (at, byte, mesh) in flips {
+                let file = dir.join(["tetrahedron.ply", "block.obj", "shapes.serialized"][mesh]);
                 let mut bytes = std::fs::read(&file).unwrap();
                 let n = bytes.len();
                 bytes[at % n] = byte;

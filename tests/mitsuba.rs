@@ -60,6 +60,11 @@ fn a_mitsuba_scene_loads_as_written() {
     for p in ball.iter().flat_map(|t| t.positions) {
         assert!((p.distance(Vec3::new(0.2, -0.35, 0.15)) - 0.15).abs() < 1e-5, "sphere vertices lie on it");
     }
+    // The serialized file's second shape (double precision), a pyramid of 0.2 m squared base.
+    assert_eq!(count("pyramid"), 6);
+    let base = 0.2 * 0.2;
+    let slant = 0.1 * (0.12f32 * 0.12 + 0.1 * 0.1).sqrt() * 4.0;
+    assert!((area(&scene, "pyramid") - (base + slant)).abs() < 1e-5, "serialized");
     let tetrahedron = &scene.triangles[scene.node("tetrahedron").unwrap().triangles.clone()];
     let lowest = tetrahedron.iter().flat_map(|t| t.positions).map(|p| p.y).fold(f32::INFINITY, f32::min);
     assert!((lowest + 0.5).abs() < 1e-6, "the PLY tetrahedron stands on the floor (matrix)");

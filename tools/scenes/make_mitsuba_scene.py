@@ -7,6 +7,8 @@ The Cornell box of cornell_box.xml (walls as `rectangle`s) with
 * an `include`d file holding shared BSDFs, `default` parameters and `$name` substitution;
 * a block from an OBJ file (quads, vertex normals ignored by `face_normals`), turned by `rotate`;
 * a tetrahedron from a binary little-endian PLY file, placed by a `matrix`;
+* a pyramid, the second of two shapes in a Mitsuba `serialized` file (format version 4, double
+  precision, texture coordinates), picked by `shape_index`;
 * a `sphere` with a GGX `roughconductor` (a perfect mirror's reflectance, alpha 0.2);
 * a `cylinder` (open tube) and a `disk`, both `twosided`;
 * a `cube` scaled flat, and a `shapegroup` of a cube placed twice by `instance`s;
@@ -167,6 +169,16 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
         <ref id="white"/>
     </shape>
 
+    <shape type="serialized" id="pyramid">
+        <string name="filename" value="shapes.serialized"/>
+        <integer name="shape_index" value="1"/>
+        <transform name="to_world">
+            <scale value="0.1"/>
+            <translate x="0.05" y="-0.5" z="-0.05"/>
+        </transform>
+        <ref id="white"/>
+    </shape>
+
     <shape type="sphere" id="ball">
         <point name="center" x="0.2" y="-0.35" z="0.15"/>
         <float name="radius" value="0.15"/>
@@ -283,6 +295,24 @@ def tetrahedron_ply():
     return header + body
 
 
+def serialized(shapes):
+    """A Mitsuba `serialized` file (format version 4) of `shapes`, each (name, vertices, uvs or
+    None, triangles): per shape the tag 0x041C, the version and a zlib stream of flags (double
+    precision, texture coordinates when given), the name, the vertex and triangle counts and the
+    arrays; then the shapes' 64-bit offsets and their 32-bit count."""
+    out, offsets = b"", []
+    for name, vertices, uvs, triangles in shapes:
+        flags = 0x2000 | (0x0002 if uvs else 0)
+        body = struct.pack("<I", flags) + name.encode() + b"\0" + struct.pack("<QQ", len(vertices), len(triangles))
+        body += b"".join(struct.pack("<3d", *v) for v in vertices)
+        if uvs:
+            body += b"".join(struct.pack("<2d", *t) for t in uvs)
+        body += b"".join(struct.pack("<3I", *t) for t in triangles)
+        offsets.append(len(out))
+        out += struct.pack("<HH", 0x041C, 4) + zlib.compress(body)
+    return out + b"".join(struct.pack("<Q", o) for o in offsets) + struct.pack("<I", len(shapes))
+
+
 def png_rgb8(width, height, rows):
     """An 8-bit RGB PNG of `rows` (lists of (r, g, b) per pixel, top row first)."""
     raw = b"".join(b"\x00" + bytes(c for pixel in row for c in pixel) for row in rows)
@@ -300,6 +330,12 @@ def main():
     (OUT / "materials.xml").write_text(MATERIALS)
     (OUT / "block.obj").write_text(BLOCK_OBJ)
     (OUT / "tetrahedron.ply").write_bytes(tetrahedron_ply())
+    # A quad (never used: shape 0), and a square pyramid standing on y = 0, faces outwards.
+    quad = ("quad", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], None, [(0, 1, 2), (0, 2, 3)])
+    apex, base = (0.0, 1.2, 0.0), [(-1.0, 0.0, -1.0), (1.0, 0.0, -1.0), (1.0, 0.0, 1.0), (-1.0, 0.0, 1.0)]
+    pyramid = ("pyramid", base + [apex], [(0, 0), (1, 0), (1, 1), (0, 1), (0.5, 0.5)],
+               [(0, 1, 2), (0, 2, 3), (0, 4, 1), (1, 4, 2), (2, 4, 3), (3, 4, 0)])
+    (OUT / "shapes.serialized").write_bytes(serialized([quad, pyramid]))
     # Quadrants: red, green over blue, yellow (sRGB), in a 4 x 4 image.
     top = [(230, 60, 60)] * 2 + [(60, 200, 60)] * 2
     bottom = [(60, 60, 220)] * 2 + [(220, 220, 60)] * 2

@@ -5,7 +5,7 @@
 //! - Structure: `<default>` and `$name` parameters (a value given in [`LoadOptions::parameters`]
 //!   replaces the default), `<include>`, `id` and `<ref>`, nested objects.
 //! - Transforms: `translate`, `rotate`, `scale`, `matrix`, `lookat` (module `xml`).
-//! - Shapes: `obj`, `ply`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (module `shapes`),
+//! - Shapes: `obj`, `ply`, `serialized`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (module `shapes`),
 //!   with `to_world`, `flip_normals`, `face_normals`; `shapegroup` and `instance` (each instance's
 //!   copies baked in).
 //! - BSDFs: `diffuse`, `conductor` and `roughconductor` (GGX; a smooth conductor is GGX at
@@ -498,16 +498,18 @@ impl<'e> Builder<'e> {
                 Ok(shapes::cylinder())
             }
             "serialized" => {
-                return Err(e.error(
-                    "Mitsuba's serialized meshes are not read: save the mesh as PLY or OBJ (in Python, mitsuba's \
-                     mesh.write_ply)",
-                ));
+                let index = o.integer("shape_index")?.unwrap_or(0);
+                let index = u32::try_from(index).map_err(|_| e.error(format!("shape_index {index} is negative")))?;
+                shapes::read_serialized(&file(&o)?, index)
             }
             other => return Err(e.error(format!("the shape `{other}` is not read by gatetrace"))),
         };
         let mut mesh = mesh.map_err(|err| e.error(format!("{err:#}")))?;
         if o.boolean("face_normals")?.unwrap_or(false) {
             mesh.normals = None;
+        } else if matches!(kind, "obj" | "ply" | "serialized") {
+            // Mitsuba shades a mesh file without normals smoothly.
+            mesh.smooth_normals();
         }
         let flip = o.boolean("flip_normals")?.unwrap_or(false);
         let bsdf = self.shape_bsdf(e)?;
@@ -552,6 +554,8 @@ impl<'e> Builder<'e> {
         let sign = if flip { -1.0 } else { 1.0 };
         let normals: Option<Vec<Vec3>> =
             mesh.normals.as_ref().map(|n| n.iter().map(|&v| sign * (normal_matrix * v).normalize_or_zero()).collect());
+        // A triangle with a vanishing vertex normal keeps its own flat normal.
+        let usable = |n: [Vec3; 3]| n.iter().all(|v| v.length_squared() > 0.5);
         let first = self.triangles.len();
         let uv_map = self.uv_maps.get(&material).copied().unwrap_or(glam::Affine2::IDENTITY);
         for t in mesh.indices.chunks_exact(3) {
@@ -559,7 +563,7 @@ impl<'e> Builder<'e> {
             let [a, b, c] = if flip { [a, c, b] } else { [a, b, c] };
             let triangle = SceneTriangle {
                 positions: [positions[a], positions[b], positions[c]],
-                normals: normals.as_ref().map(|n| [n[a], n[b], n[c]]),
+                normals: normals.as_ref().map(|n| [n[a], n[b], n[c]]).filter(|n| usable(*n)),
                 uvs: mesh
                     .uvs
                     .as_ref()

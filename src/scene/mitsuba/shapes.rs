@@ -1,5 +1,6 @@
 //! The shapes of the Mitsuba 3 loader as triangle meshes in the shape's own space: OBJ files
-//! (through `tobj`), PLY files (through `ply-rs-bw`), and Mitsuba's primitives (`rectangle`,
+//! (through `tobj`), PLY files (through `ply-rs-bw`), Mitsuba's own `serialized` files, and
+//! Mitsuba's primitives (`rectangle`,
 //! `cube`, `disk`, `cylinder`, and `sphere`), the curved ones tessellated so that no point of the
 //! mesh lies farther than [`TESSELLATION_ERROR`] x radius from the true surface.
 
@@ -23,6 +24,26 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// Gives a mesh without vertex normals smooth ones, as Mitsuba does for a mesh file without
+    /// `face_normals`: at each vertex the sum of its triangles' unit normals weighted by their
+    /// angles there, normalised (a vertex whose sum vanishes keeps its triangles' own normals:
+    /// those triangles get none).
+    pub fn smooth_normals(&mut self) {
+        if self.normals.is_some() {
+            return;
+        }
+        let mut sums = vec![Vec3::ZERO; self.positions.len()];
+        for t in self.indices.chunks_exact(3) {
+            let p = [0, 1, 2].map(|k| self.positions[t[k] as usize]);
+            let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+            for k in 0..3 {
+                let (a, b) = ((p[(k + 1) % 3] - p[k]).normalize_or_zero(), (p[(k + 2) % 3] - p[k]).normalize_or_zero());
+                sums[t[k] as usize] += n * a.dot(b).clamp(-1.0, 1.0).acos();
+            }
+        }
+        self.normals = Some(sums.into_iter().map(Vec3::normalize_or_zero).collect());
+    }
+
     /// Checks that every index names a vertex and the attribute counts match (`name`: the file).
     fn checked(self, name: &str) -> Result<Mesh> {
         let n = self.positions.len();
@@ -145,6 +166,118 @@ pub fn read_ply(path: &Path) -> Result<Mesh> {
         }
     }
     mesh.checked(&name)
+}
+
+/// Shape `index` of a Mitsuba `serialized` file: shapes one after the other, each a 16-bit
+/// format tag 0x041C and version (3 or 4) and then a zlib stream holding flags, (version 4) a
+/// name, the vertex and triangle counts and the arrays (positions, then as the flags say normals,
+/// texture coordinates and colours, in f32 or f64, then 32- or 64-bit indices); the file ends
+/// with the shapes' offsets (32-bit in version 3, 64-bit in 4) and their count (32-bit).
+pub fn read_serialized(path: &Path, index: u32) -> Result<Mesh> {
+    use std::io::Read as _;
+    const TAG: u16 = 0x041C;
+    const HAS_NORMALS: u32 = 0x0001;
+    const HAS_TEXCOORDS: u32 = 0x0002;
+    const HAS_COLORS: u32 = 0x0008;
+    const FACE_NORMALS: u32 = 0x0010;
+    const SINGLE: u32 = 0x1000;
+    const DOUBLE: u32 = 0x2000;
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| anyhow!("{name}: cannot read the mesh: {e}"))?;
+    let bad = |what: &str| anyhow!("{name}: not a readable Mitsuba serialized mesh: {what}");
+    let u16_at = |at: usize| bytes.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let u32_at = |at: usize| bytes.get(at..at + 4).map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")));
+    let u64_at = |at: usize| bytes.get(at..at + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
+    if u16_at(0) != Some(TAG) {
+        return Err(bad("the file does not start with the format tag 0x041C"));
+    }
+    let version = u16_at(2).ok_or_else(|| bad("truncated"))?;
+    if !matches!(version, 3 | 4) {
+        return Err(bad(&format!("format version {version} (3 and 4 are read)")));
+    }
+    let count = bytes.len().checked_sub(4).and_then(u32_at).ok_or_else(|| bad("truncated"))?;
+    if index >= count {
+        bail!("{name}: shape_index {index}: the file holds {count} shape(s)");
+    }
+    let width = if version == 4 { 8 } else { 4 };
+    let table = (bytes.len() - 4).checked_sub(count as usize * width).ok_or_else(|| bad("the offset table"))?;
+    let at = table + index as usize * width;
+    let offset = if version == 4 { u64_at(at) } else { u32_at(at).map(u64::from) }.ok_or_else(|| bad("the offsets"))?;
+    let start = usize::try_from(offset).ok().filter(|&o| o + 4 <= table).ok_or_else(|| bad("an offset"))?;
+    if u16_at(start) != Some(TAG) || u16_at(start + 2) != Some(version) {
+        return Err(bad(&format!("shape {index} does not start with the format tag and version")));
+    }
+    let mut data = Vec::new();
+    flate2::read::ZlibDecoder::new(&bytes[start + 4..table])
+        .read_to_end(&mut data)
+        .map_err(|e| bad(&format!("shape {index}'s zlib stream: {e}")))?;
+    let mut stream = Stream { data: &data, at: 0 };
+    let truncated = || bad(&format!("shape {index}'s data is truncated"));
+    let flags = u32::from_le_bytes(stream.take(4).ok_or_else(truncated)?.try_into().expect("4 bytes"));
+    if version == 4 {
+        while stream.take(1).ok_or_else(truncated)?[0] != 0 {}
+    }
+    let vertices = u64::from_le_bytes(stream.take(8).ok_or_else(truncated)?.try_into().expect("8 bytes"));
+    let triangles = u64::from_le_bytes(stream.take(8).ok_or_else(truncated)?.try_into().expect("8 bytes"));
+    let real = match (flags & SINGLE != 0, flags & DOUBLE != 0) {
+        (true, false) => 4,
+        (false, true) => 8,
+        _ => return Err(bad("neither single nor double precision")),
+    };
+    // Counts bounded by the data they claim, before any allocation.
+    let per_vertex = real
+        * (3 + 3 * (flags & HAS_NORMALS != 0) as usize
+            + 2 * (flags & HAS_TEXCOORDS != 0) as usize
+            + 3 * (flags & HAS_COLORS != 0) as usize);
+    let index_width = if vertices > u32::MAX as u64 { 8 } else { 4 };
+    let needed = (vertices as u128) * per_vertex as u128 + (triangles as u128) * 3 * index_width as u128;
+    if needed > (data.len() - stream.at) as u128 {
+        return Err(bad(&format!("{vertices} vertices and {triangles} triangles need more data than the stream holds")));
+    }
+    let mut reals = |n: usize| -> Result<Vec<f32>> {
+        let b = stream.take(n * real).ok_or_else(truncated)?;
+        Ok(if real == 4 {
+            b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
+        } else {
+            b.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")) as f32).collect()
+        })
+    };
+    let n = vertices as usize;
+    let triple = |v: Vec<f32>| v.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect::<Vec<_>>();
+    let positions = triple(reals(3 * n)?);
+    let normals = if flags & HAS_NORMALS != 0 { Some(triple(reals(3 * n)?)) } else { None };
+    let uvs = if flags & HAS_TEXCOORDS != 0 {
+        Some(reals(2 * n)?.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])).collect())
+    } else {
+        None
+    };
+    if flags & HAS_COLORS != 0 {
+        reals(3 * n)?;
+    }
+    let ib = stream.take(triangles as usize * 3 * index_width).ok_or_else(truncated)?;
+    let indices = if index_width == 4 {
+        ib.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
+    } else {
+        let wide: Vec<u64> = ib.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
+        wide.into_iter().map(|i| u32::try_from(i).unwrap_or(u32::MAX)).collect()
+    };
+    let normals = normals.filter(|_| flags & FACE_NORMALS == 0).map(|n| n.into_iter().map(Vec3::normalize_or_zero).collect());
+    Mesh { positions, normals, uvs, indices }.checked(&name)
+}
+
+/// Bytes read one run after another.
+struct Stream<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Stream<'a> {
+    /// The next `n` bytes, or None past the end.
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let s = self.data.get(self.at..self.at.checked_add(n)?)?;
+        self.at += n;
+        Some(s)
+    }
 }
 
 /// Mitsuba's `rectangle`: [-1, 1]^2 in the plane z = 0, facing +z.
