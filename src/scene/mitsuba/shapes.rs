@@ -232,7 +232,9 @@ pub fn read_serialized(path: &Path, index: u32) -> Result<Mesh> {
     let index_width = if vertices > u32::MAX as u64 { 8 } else { 4 };
     let needed = (vertices as u128) * per_vertex as u128 + (triangles as u128) * 3 * index_width as u128;
     if needed > (data.len() - stream.at) as u128 {
-        return Err(bad(&format!("{vertices} vertices and {triangles} triangles need more data than the stream holds")));
+        return Err(bad(&format!(
+            "{vertices} vertices and {triangles} triangles need more data than the stream holds"
+        )));
     }
     let mut reals = |n: usize| -> Result<Vec<f32>> {
         let b = stream.take(n * real).ok_or_else(truncated)?;
@@ -261,7 +263,8 @@ pub fn read_serialized(path: &Path, index: u32) -> Result<Mesh> {
         let wide: Vec<u64> = ib.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
         wide.into_iter().map(|i| u32::try_from(i).unwrap_or(u32::MAX)).collect()
     };
-    let normals = normals.filter(|_| flags & FACE_NORMALS == 0).map(|n| n.into_iter().map(Vec3::normalize_or_zero).collect());
+    let normals =
+        normals.filter(|_| flags & FACE_NORMALS == 0).map(|n| n.into_iter().map(Vec3::normalize_or_zero).collect());
     Mesh { positions, normals, uvs, indices }.checked(&name)
 }
 
