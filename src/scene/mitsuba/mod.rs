@@ -5,8 +5,9 @@
 //! - Structure: `<default>` and `$name` parameters (a value given in [`LoadOptions::parameters`]
 //!   replaces the default), `<include>`, `id` and `<ref>`, nested objects.
 //! - Transforms: `translate`, `rotate`, `scale`, `matrix`, `lookat` (module `xml`).
-//! - Shapes: `obj`, `ply`, `serialized`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder` (module `shapes`),
-//!   with `to_world`, `flip_normals`, `face_normals`; `shapegroup` and `instance` (each instance's
+//! - Shapes: `obj`, `ply`, `serialized`, `rectangle`, `cube`, `sphere`, `disk`, `cylinder`
+//!   (module `shapes`), with `to_world`, `flip_normals`, `face_normals` (mesh files without
+//!   normals are shaded smoothly, as Mitsuba does); `shapegroup` and `instance` (each instance's
 //!   copies baked in).
 //! - BSDFs: `diffuse`, `conductor` and `roughconductor` (GGX; a smooth conductor is GGX at
 //!   gatetrace's smallest roughness), `twosided`.
@@ -239,7 +240,9 @@ impl<'e> Builder<'e> {
             }
             kind @ ("conductor" | "roughconductor") => {
                 if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
-                    return Err(t.error("textures are not read from Mitsuba scenes yet"));
+                    return Err(
+                        t.error("a conductor's textures are not read (textures apply to a diffuse reflectance)")
+                    );
                 }
                 let f0 = self.conductor_f0(&o)?;
                 let alpha = if kind == "roughconductor" {
@@ -861,6 +864,13 @@ impl<'e> Builder<'e> {
             self.camera.ok_or_else(|| anyhow!("{name}: no <sensor>: gatetrace renders from a perspective sensor"))?;
         if self.triangles.is_empty() {
             bail!("{name}: the scene has no triangles");
+        }
+        if self.triangles.len() > crate::gpu::layout::MAX_TRIANGLES as usize {
+            bail!(
+                "{name}: {} triangles exceed the supported {}",
+                self.triangles.len(),
+                crate::gpu::layout::MAX_TRIANGLES
+            );
         }
         let emissive = self.triangles.iter().any(|t| self.materials[t.material as usize].is_emissive());
         let powered = self.point_lights.iter().any(|l| l.intensity.max_element() > 0.0)
