@@ -150,3 +150,37 @@ fn cli_records_the_choice_and_refuses_auto_where_it_does_not_apply() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+/// Every place README.md and docs/ state `auto`'s pilot share ("N % of a `--time` budget", "N %
+/// of each ... render") states the share the code uses, and the table of `auto`'s equal-time
+/// figures states the conditions they were measured under (the pilot, the budget).
+#[test]
+fn the_docs_state_autos_pilot_share_as_the_code_has_it() {
+    let share = (gatetrace::integrator::auto::PILOT_SHARE * 100.0).round() as u32;
+    let mut claims = Vec::new();
+    for page in ["README.md", "docs/methods.md", "docs/design.md"] {
+        let text = std::fs::read_to_string(common::repo_path(page)).unwrap().replace('\n', " ");
+        for phrase in [" % of a `--time` budget", " % of each "] {
+            for (at, _) in text.match_indices(phrase) {
+                let number: String = text[..at]
+                    .chars()
+                    .rev()
+                    .take_while(|c| c.is_ascii_digit())
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .rev()
+                    .collect();
+                claims.push((page, number));
+            }
+        }
+    }
+    assert!(claims.len() >= 4, "the pilot's share is stated in README.md and docs/: {claims:?}");
+    for (page, number) in &claims {
+        assert_eq!(*number, share.to_string(), "{page} states a pilot of {number} %, the code takes {share} %");
+    }
+    let methods = std::fs::read_to_string(common::repo_path("docs/methods.md")).unwrap().replace('\n', " ");
+    assert!(
+        methods.contains("Every `auto` figure includes its pilot"),
+        "docs/methods.md's table of auto's figures states that they include the pilot"
+    );
+}

@@ -27,7 +27,7 @@ pub struct BenchArgs {
     /// Image sizes, comma-separated WIDTHxHEIGHT.
     #[arg(long, value_delimiter = ',', default_value = "64x64", value_parser = parse_resolution)]
     res: Vec<(u32, u32)>,
-    /// glTF 2.0 scene (default: the Cornell box).
+    /// Scene, glTF 2.0 or Mitsuba 3 XML (default: the Cornell box).
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Gate of path and direct (see render --gate; metres of optical path).

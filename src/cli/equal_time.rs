@@ -16,7 +16,7 @@ use super::parse::parse_resolution;
 
 #[derive(clap::Args)]
 pub struct EqualTimeArgs {
-    /// glTF 2.0 scenes, each compared separately; the Cornell box when omitted.
+    /// Scenes (glTF 2.0 or Mitsuba 3 XML), each compared separately; the Cornell box when omitted.
     scenes: Vec<PathBuf>,
     /// Methods to compare, comma-separated: path, direct, ellipsoidal, auto, and ellipsoidal
     /// (or auto, for its ellipsoidal candidate) with options after colons: K (render

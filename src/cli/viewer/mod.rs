@@ -33,7 +33,7 @@ use gate::GateControls;
 /// Settings of `gatetrace view` (initial values of the controls and the screenshot mode).
 #[derive(Clone, Debug)]
 pub struct ViewOptions {
-    /// glTF scene.
+    /// Scene file (glTF 2.0 or Mitsuba 3 XML).
     pub scene: PathBuf,
     /// See [`gatetrace::scene::LoadOptions::allow_unsupported_materials`].
     pub allow_unsupported_materials: bool,
