@@ -419,7 +419,7 @@ fn spot_lights_the_plane(profile: gatetrace::scene::SpotFalloff) {
     use gatetrace::integrator::Method;
     use gatetrace::scene::SpotFalloff;
     let (inner, outer) = (0.05f64, 0.2f64);
-    let dir = common::scratch_dir("plane_spot");
+    let dir = common::scratch_dir(&format!("plane_spot_{profile:?}"));
     let base = Scene {
         meshes: vec![quad_z(4.0, -PLANE_D as f32, true, 0)],
         materials: vec![Material::diffuse([PLANE_RHO as f32; 3])],
