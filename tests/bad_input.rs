@@ -328,6 +328,15 @@ fn cases() -> Vec<(Case, Setup)> {
             &["shapes.serialized: shape_index 7: the file holds 2 shape(s)"],
         ),
         xml_case("XML include of a missing file", "<include filename=\"gone.xml\"/>", &[], &["scene.xml:5: <include>", "gone.xml: cannot read"]),
+        case(
+            "XML nested a hundred thousand levels deep",
+            |d| {
+                let xml = format!("<scene version=\"3.0.0\">{}{}</scene>", "<shape>".repeat(100_000), "</shape>".repeat(100_000));
+                std::fs::write(d.join("scene.xml"), xml).unwrap()
+            },
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:1", "elements nest deeper than 64 levels"],
+        ),
         xml_case("XML include of itself", "<include filename=\"scene.xml\"/>", &[], &["includes nest deeper than 16 files"]),
         xml_case(
             "XML unknown transform operation",

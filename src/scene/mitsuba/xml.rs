@@ -14,6 +14,10 @@ use glam::{Mat3, Mat4, Vec3, Vec4};
 /// How deep `<include>` may nest (a file including itself is caught by this bound).
 const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// How deep elements may nest in one file (Mitsuba scenes nest a handful of levels; the bound
+/// keeps the loader's recursion off the stack's end).
+const MAX_NESTING: usize = 64;
+
 /// An XML element with its parameters substituted, and where it was written.
 #[derive(Clone, Debug)]
 pub struct Element {
@@ -92,17 +96,22 @@ fn read_file(path: &Path, depth: usize) -> Result<Element> {
     let text = std::fs::read_to_string(path).map_err(|e| anyhow!("{name}: cannot read the scene file: {e}"))?;
     let document = roxmltree::Document::parse(&text).map_err(|e| anyhow!("{name}: not well-formed XML: {e}"))?;
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    convert(&document, document.root_element(), &name, &base, depth)
+    convert(&document, document.root_element(), &name, &base, depth, 0)
 }
 
+/// The element of `node` (at nesting `level` in its file) with its children, includes spliced.
 fn convert(
     document: &roxmltree::Document,
     node: roxmltree::Node,
     file: &Rc<str>,
     base: &Path,
     depth: usize,
+    level: usize,
 ) -> Result<Element> {
     let line = document.text_pos_at(node.range().start).row;
+    if level > MAX_NESTING {
+        bail!("{file}:{line}: elements nest deeper than {MAX_NESTING} levels");
+    }
     let mut element = Element {
         tag: node.tag_name().name().to_owned(),
         attributes: node.attributes().map(|a| (a.name().to_owned(), a.value().to_owned())).collect(),
@@ -111,7 +120,7 @@ fn convert(
         line,
     };
     for child in node.children().filter(roxmltree::Node::is_element) {
-        let child = convert(document, child, file, base, depth)?;
+        let child = convert(document, child, file, base, depth, level + 1)?;
         if child.tag != "include" {
             element.children.push(child);
             continue;
@@ -423,7 +432,7 @@ mod tests {
 
     fn element(xml: &str) -> Element {
         let doc = roxmltree::Document::parse(xml).unwrap();
-        convert(&doc, doc.root_element(), &Rc::from("t.xml"), Path::new("."), 0).unwrap()
+        convert(&doc, doc.root_element(), &Rc::from("t.xml"), Path::new("."), 0, 0).unwrap()
     }
 
     #[test]
