@@ -327,6 +327,32 @@ fn cases() -> Vec<(Case, Setup)> {
             &[("shapes.serialized", SERIALIZED)],
             &["shapes.serialized: shape_index 7: the file holds 2 shape(s)"],
         ),
+        case(
+            "XML bitmap claiming 100,000 x 100,000 texels",
+            |d| {
+                // A PNG of a huge header and almost no data: the size is read before any texel.
+                let chunk = |kind: &[u8], data: &[u8]| {
+                    let mut crc = flate2::Crc::new();
+                    crc.update(kind);
+                    crc.update(data);
+                    [&(data.len() as u32).to_be_bytes()[..], kind, data, &crc.sum().to_be_bytes()].concat()
+                };
+                let ihdr = [&100_000u32.to_be_bytes()[..], &100_000u32.to_be_bytes(), &[8, 2, 0, 0, 0]].concat();
+                let png = [
+                    &b"\x89PNG\r\n\x1a\n"[..],
+                    &chunk(b"IHDR", &ihdr),
+                    &chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]),
+                    &chunk(b"IEND", &[]),
+                ]
+                .concat();
+                std::fs::write(d.join("huge.png"), png).unwrap();
+                let body = "<shape type=\"cube\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">\
+                            <string name=\"filename\" value=\"huge.png\"/></texture></bsdf></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            render("{dir}/scene.xml", &[]),
+            &["huge.png: a 100000 x 100000 image is larger than the 67108864 texels a texture may hold"],
+        ),
         xml_case("XML include of a missing file", "<include filename=\"gone.xml\"/>", &[], &["scene.xml:5: <include>", "gone.xml: cannot read"]),
         case(
             "XML nested a hundred thousand levels deep",

@@ -912,9 +912,21 @@ fn default_bsdf() -> Element {
 /// A bitmap's size and linear RGB texels, row 0 at the top (v = 0): PNG and JPEG decoded from
 /// sRGB unless `raw`, EXR as stored (linear).
 fn read_bitmap(path: &Path, raw: bool) -> Result<(u32, u32, Vec<Vec3>)> {
+    // Texels a texture may hold (8192 x 8192), checked from the header before decoding.
+    const MAX_TEXELS: u64 = 1 << 26;
     let name = path.display();
+    let too_large =
+        |w: u64, h: u64| anyhow!("{name}: a {w} x {h} image is larger than the {MAX_TEXELS} texels a texture may hold");
     let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if extension == "exr" {
+        let meta = exr::meta::MetaData::read_from_file(path, false)
+            .map_err(|e| anyhow!("{name}: cannot read the EXR image: {e}"))?;
+        for header in &meta.headers {
+            let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
+            if w * h > MAX_TEXELS {
+                return Err(too_large(w, h));
+            }
+        }
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |resolution, _| (resolution.width(), vec![Vec3::ZERO; resolution.width() * resolution.height()]),
@@ -927,12 +939,20 @@ fn read_bitmap(path: &Path, raw: bool) -> Result<(u32, u32, Vec<Vec3>)> {
         let (_, texels) = image.layer_data.channel_data.pixels;
         return Ok((size.width() as u32, size.height() as u32, texels));
     }
-    let image = image::ImageReader::open(path)
-        .map_err(|e| anyhow!("{name}: cannot read the image: {e}"))?
-        .with_guessed_format()
-        .map_err(|e| anyhow!("{name}: cannot read the image: {e}"))?
-        .decode()
+    let open = || -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+        image::ImageReader::open(path)
+            .map_err(|e| anyhow!("{name}: cannot read the image: {e}"))?
+            .with_guessed_format()
+            .map_err(|e| anyhow!("{name}: cannot read the image: {e}"))
+    };
+    let (w, h) = open()?
+        .into_dimensions()
         .map_err(|e| anyhow!("{name}: cannot decode the image (PNG, JPEG and EXR are read): {e}"))?;
+    if w as u64 * h as u64 > MAX_TEXELS {
+        return Err(too_large(w as u64, h as u64));
+    }
+    let image =
+        open()?.decode().map_err(|e| anyhow!("{name}: cannot decode the image (PNG, JPEG and EXR are read): {e}"))?;
     let rgb = image.to_rgb32f();
     let decode = |c: f32| if raw { c } else { super::gltf_loader::srgb_to_linear(c) };
     let texels = rgb.pixels().map(|p| Vec3::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2]))).collect();
