@@ -90,7 +90,10 @@ pub fn write_failure_images(name: &str, shape: &[usize], actual: &[f32], referen
 
 /// A fresh empty directory under target/test-scratch for files a test writes.
 pub fn scratch_dir(name: &str) -> PathBuf {
-    let dir = repo_path("target/test-scratch").join(name);
+    // The tests of one binary run on parallel threads: each thread gets a directory of its own,
+    // so two tests that use one name cannot remove each other's files.
+    let thread = format!("{:?}", std::thread::current().id()).replace(|c: char| !c.is_ascii_alphanumeric(), "");
+    let dir = repo_path("target/test-scratch").join(name).join(thread);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
