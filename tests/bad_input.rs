@@ -261,10 +261,43 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:5: <bsdf type=\"dielectric\">", "not rendered yet"],
         ),
         xml_case(
-            "XML rough plastic",
-            "<bsdf type=\"roughplastic\" id=\"p\"/><shape type=\"cube\"><ref id=\"p\"/></shape>",
+            "XML rough dielectric",
+            "<bsdf type=\"roughdielectric\" id=\"p\"/><shape type=\"cube\"><ref id=\"p\"/></shape>",
             &[],
-            &["<bsdf type=\"roughplastic\" id=\"p\">", "`roughplastic` BSDF is not rendered yet"],
+            &["<bsdf type=\"roughdielectric\" id=\"p\">", "`roughdielectric` BSDF is not rendered yet"],
+        ),
+        xml_case(
+            "XML plastic of an unknown named index",
+            "<shape type=\"cube\"><bsdf type=\"plastic\"><string name=\"int_ior\" value=\"unobtainium\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"plastic\">", "`unobtainium` (int_ior) is not a known material", "bk7"],
+        ),
+        xml_case(
+            "XML plastic whose coat does not refract",
+            "<shape type=\"cube\"><bsdf type=\"roughplastic\"><float name=\"int_ior\" value=\"1.2\"/>\
+             <float name=\"ext_ior\" value=\"1.2\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"roughplastic\">", "int_ior and ext_ior are both 1.2"],
+        ),
+        xml_case(
+            "XML plastic of an index below 1",
+            "<shape type=\"cube\"><bsdf type=\"plastic\"><float name=\"int_ior\" value=\"0.5\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"plastic\">", "int_ior 0.5 is not an index of refraction in [1, 10]"],
+        ),
+        xml_case(
+            "XML plastic with a coloured specular reflectance",
+            "<shape type=\"cube\"><bsdf type=\"roughplastic\">\
+             <rgb name=\"specular_reflectance\" value=\"1, 0.5, 0.5\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"roughplastic\">", "a coloured specular_reflectance"],
+        ),
+        xml_case(
+            "XML plastic with a texture under another name",
+            "<shape type=\"cube\"><bsdf type=\"roughplastic\"><texture type=\"checkerboard\" name=\"reflectance\"/>\
+             </bsdf></shape>",
+            &[],
+            &["scene.xml:5: <texture type=\"checkerboard\" name=\"reflectance\">", "takes one texture, named `diffuse_reflectance`"],
         ),
         xml_case(
             "XML property gatetrace does not read",

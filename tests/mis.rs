@@ -1,5 +1,5 @@
 //! The multiple-importance weights of bidirectional path tracing (CPU twin of the kernels'
-//! code): on random paths with Lambertian and glossy vertices, area, point and directional
+//! code): on random paths with Lambertian, glossy and plastic vertices, area, point and directional
 //! lights, the weights of all strategies sum to one, and each equals the power heuristic
 //! computed independently from the full path densities p_s = prod(light-side densities of
 //! x_0..x_{s-1}) x prod(camera-side densities of x_s..x_{k-2}); likewise the paper's approximate
@@ -11,8 +11,22 @@ mod common;
 
 use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
 use gatetrace::rng::Xorshift64Star;
-use gatetrace::scene::bsdf::Bsdf;
+use gatetrace::scene::bsdf::{Bsdf, PlasticLobe};
+use gatetrace::scene::plastic;
 use glam::Vec3;
+
+/// A plastic coat (GGX alpha 0.2, eta 1.5), whose sampling pdf depends on the direction it is
+/// seen from through the coat's transmittance.
+fn plastic_coat() -> PlasticLobe {
+    static TABLE: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    let table = TABLE.get_or_init(|| plastic::transmittance_table(0.2, 1.5));
+    PlasticLobe {
+        eta: 1.5,
+        specular: 1.0,
+        specular_weight: 0.6,
+        transmittance: std::array::from_fn(|i| table[i] as f32),
+    }
+}
 
 /// The kinds of light a random path starts on.
 #[derive(Clone, Copy, PartialEq)]
@@ -58,11 +72,15 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light) -> Vec<Vertex> 
                 normal: (toward(k - 2) + 0.3 * rng.next_vec3()).normalize(),
             }
         } else {
-            let bsdf = Bsdf {
+            let mut bsdf = Bsdf {
                 base_color: Vec3::new(0.8, 0.5, 0.2),
                 metallic: if rng.next_f32() < 0.4 { 0.0 } else { rng.next_f32() },
                 alpha: 0.05 + 0.9 * rng.next_f32() * rng.next_f32(),
+                plastic: None,
             };
+            if rng.next_f32() < 0.3 {
+                bsdf = Bsdf { metallic: 0.0, alpha: 0.2, plastic: Some(plastic_coat()), ..bsdf };
+            }
             let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.next_vec3()).normalize();
             Vertex { kind: VertexKind::Surface(bsdf), position: p, normal: n }
         };

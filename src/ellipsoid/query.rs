@@ -298,7 +298,8 @@ pub fn arc_weight(spheroid: &Spheroid, triangle: &OracleTriangle) -> f64 {
 }
 
 /// The factor a triangle's arc weight is multiplied by in a query for reflecting vertices (twin
-/// of `reflection_factor`): the material's largest albedo channel times a bound on the cosines
+/// of `reflection_factor`): the material's largest albedo channel (a plastic: or its coat's
+/// specular factor, if larger) times a bound on the cosines
 /// towards the foci, min(1, |h_s| / r) min(1, |h_c| / r) (h: a focus's signed distance to the
 /// triangle's plane; r = (tau_e - d) / 2, the least distance from a focus to the spheroid); 0
 /// where every connection through the triangle is (foci on opposite sides or in its plane,
@@ -312,7 +313,8 @@ pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Materi
         return 0.0;
     }
     let nearest = 0.5 * (q.tau_e - q.focus_s.distance(q.focus_c));
-    material.base_color.max_element() as f64 * (hs.abs() / nearest).min(1.0) * (hc.abs() / nearest).min(1.0)
+    let albedo = material.base_color.max_element().max(material.plastic_specular);
+    albedo as f64 * (hs.abs() / nearest).min(1.0) * (hc.abs() / nearest).min(1.0)
 }
 
 /// A focus nearer a triangle's plane than this times tau_e lies in it for `reflection_factor`

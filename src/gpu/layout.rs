@@ -13,6 +13,12 @@ pub const NONE: u32 = u32::MAX;
 pub const SHADING_HAS_NORMALS: u32 = 1;
 /// [`Material::flags`]: both faces reflect (and emit).
 pub const MATERIAL_DOUBLE_SIDED: u32 = 1;
+/// [`Material::flags`]: a plastic, a Lambertian base under a dielectric coat (the `plastic_*`
+/// members; Mitsuba's `plastic` and `roughplastic`).
+pub const MATERIAL_PLASTIC: u32 = 2;
+/// [`Material::flags`]: a plastic whose base's albedo also scales its internal reflections
+/// (Mitsuba's `nonlinear`).
+pub const MATERIAL_PLASTIC_NONLINEAR: u32 = 4;
 /// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
@@ -159,7 +165,8 @@ pub struct NodeSurface {
     pub spread: [u32; 3],
 }
 
-/// A surface material: a Lambertian lobe and a GGX conductor lobe blended by `metallic`.
+/// A surface material: a Lambertian lobe and a GGX conductor lobe blended by `metallic`, or with
+/// [`MATERIAL_PLASTIC`] a Lambertian base under a dielectric GGX coat.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Material {
@@ -169,16 +176,25 @@ pub struct Material {
     pub base_color_texture: u32,
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
-    /// [`MATERIAL_DOUBLE_SIDED`].
+    /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`].
     pub flags: u32,
-    /// Weight of the conductor lobe (glTF metallic factor, 0..1).
+    /// Weight of the conductor lobe (glTF metallic factor, 0..1); 0 for a plastic.
     pub metallic: f32,
     /// GGX alpha = roughness^2, at least [`MIN_ALPHA`].
     pub alpha: f32,
+    /// A plastic's coat: relative index of refraction (inside over outside).
+    pub plastic_eta: f32,
+    /// A plastic's coat: index into the texture table of its transmittance table
+    /// (`scene::plastic::transmittance_table`, red channel).
+    pub plastic_table: u32,
+    /// A plastic's coat: factor of its specular reflection.
+    pub plastic_specular: f32,
+    /// A plastic's coat: the fraction of diffuse light it reflects back into the base.
+    pub plastic_internal_reflectance: f32,
+    /// A plastic's coat: specular weight of its lobe choice, s / (s + mean albedo).
+    pub plastic_specular_weight: f32,
     /// Padding.
     pub reserved0: u32,
-    /// Padding.
-    pub reserved1: u32,
 }
 
 /// Where one texture's texels lie in the texel buffer.

@@ -18,6 +18,9 @@ use crate::sampling::Frame;
 use crate::scene::bsdf::Bsdf;
 
 /// What a path vertex is.
+// A surface's BSDF may hold a plastic's transmittance table (256 bytes): this CPU twin keeps
+// vertices by value for clarity over size.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum VertexKind {
     /// The pinhole; `image_area` is the image's area at unit distance (the camera samples

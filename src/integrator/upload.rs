@@ -132,6 +132,7 @@ pub fn upload_scene(
         ("HAS_POINT_LIGHTS", flag(scene.has_point_lights())),
         ("HAS_DIRECTIONAL_LIGHTS", flag(!scene.scene.directional_lights.is_empty())),
         ("HAS_GLOSSY", flag(scene.has_glossy())),
+        ("HAS_PLASTIC", flag(scene.has_plastic())),
         ("TRIANGLES_PER_CHUNK", triangles.per_chunk as f64),
         ("TRIANGLE_SHADING_PER_CHUNK", triangle_shading.per_chunk as f64),
         ("BVH_NODES_PER_CHUNK", bvh_nodes.per_chunk as f64),

@@ -1,6 +1,7 @@
 //! CPU twin of `shaders/lib/bsdf.wesl`: the glTF metallic-roughness material as a linear blend
 //! (weight `metallic`) of a Lambertian lobe and a GGX conductor lobe (F0 = base colour, Schlick
-//! Fresnel, height-correlated Smith masking, visible-normal sampling). Reflection only.
+//! Fresnel, height-correlated Smith masking, visible-normal sampling), or a plastic: a Lambertian
+//! base under a dielectric GGX coat (`scene::plastic`). Reflection only.
 //!
 //! Directions are unit vectors in the local frame of the shading normal (z up); `wo` points back
 //! along the path, `wi` onwards. f is in sr^-1 (no cosine), pdfs are solid-angle densities.
@@ -9,15 +10,59 @@ use std::f32::consts::{FRAC_1_PI, PI};
 
 use glam::{Vec2, Vec3};
 
+use super::materials::{albedo_at, plastic_table};
+use super::prepared::PreparedScene;
+use crate::gpu::layout::{MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR};
+use crate::scene::plastic::TRANSMITTANCE_TABLE_LEN;
+
 /// The material at a surface point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bsdf {
-    /// Lambertian albedo and conductor F0 (linear RGB).
+    /// Lambertian albedo and conductor F0 (linear RGB); for a plastic, the albedo its base
+    /// reflects through the coat, internal reflections included, divided by eta^2.
     pub base_color: Vec3,
-    /// Weight of the conductor lobe (0..1), also its sampling probability.
+    /// Weight of the conductor lobe (0..1), also its sampling probability; 0 for a plastic.
     pub metallic: f32,
-    /// GGX alpha (roughness^2).
+    /// GGX alpha (roughness^2) of the conductor lobe or of a plastic's coat.
     pub alpha: f32,
+    /// A plastic's coat, when the material is one.
+    pub plastic: Option<PlasticLobe>,
+}
+
+/// A plastic's coat as the BSDF reads it (twin of the `plastic_*` members of WGSL `Bsdf`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlasticLobe {
+    /// Relative index of refraction.
+    pub eta: f32,
+    /// Factor of the coat's specular reflection.
+    pub specular: f32,
+    /// Specular weight of the lobe choice.
+    pub specular_weight: f32,
+    /// The transmittance table's entries, as the kernels read them.
+    pub transmittance: [f32; TRANSMITTANCE_TABLE_LEN],
+}
+
+impl PlasticLobe {
+    /// t(cos theta), linear between the table's entries (twin of `plastic_transmittance`).
+    pub fn transmittance(&self, cos_theta: f32) -> f32 {
+        let n = TRANSMITTANCE_TABLE_LEN;
+        let x = cos_theta.clamp(0.0, 1.0) * (n - 1) as f32;
+        let i = (x as usize).min(n - 2);
+        let (a, b) = (self.transmittance[i], self.transmittance[i + 1]);
+        a + (b - a) * (x - i as f32)
+    }
+}
+
+/// Unpolarised Fresnel reflectance of a dielectric interface (twin of `fresnel_dielectric`).
+pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
+    let sin_t2 = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    0.5 * (rs * rs + rp * rp)
 }
 
 fn ggx_d(h: Vec3, a2: f32) -> f32 {
@@ -64,6 +109,51 @@ pub struct BsdfSample {
 }
 
 impl Bsdf {
+    /// The BSDF of material `material` of `scene` at texture coordinates `uv` (twin of `bsdf_at`).
+    pub fn at(scene: &PreparedScene, material: u32, uv: Vec2) -> Bsdf {
+        let m = scene.materials[material as usize];
+        let albedo = albedo_at(&scene.texture_infos, &scene.texels, &m, uv);
+        if m.flags & MATERIAL_PLASTIC == 0 {
+            return Bsdf { base_color: albedo, metallic: m.metallic, alpha: m.alpha, plastic: None };
+        }
+        let mut reflected = Vec3::splat(m.plastic_internal_reflectance);
+        if m.flags & MATERIAL_PLASTIC_NONLINEAR != 0 {
+            reflected *= albedo;
+        }
+        let eta = m.plastic_eta;
+        let table = plastic_table(&scene.texture_infos, &scene.texels, m.plastic_table);
+        let transmittance = std::array::from_fn(|i| table[i]);
+        Bsdf {
+            base_color: albedo / ((Vec3::ONE - reflected) * (eta * eta)),
+            metallic: 0.0,
+            alpha: m.alpha,
+            plastic: Some(PlasticLobe {
+                eta,
+                specular: m.plastic_specular,
+                specular_weight: m.plastic_specular_weight,
+                transmittance,
+            }),
+        }
+    }
+
+    fn plastic_eval(&self, p: &PlasticLobe, wo: Vec3, wi: Vec3) -> Vec3 {
+        let h = (wo + wi).normalize();
+        let a2 = self.alpha * self.alpha;
+        let g = 1.0 / ((1.0 + ggx_lambda(wo, a2)) * (1.0 + ggx_lambda(wi, a2)));
+        let specular = p.specular * fresnel_dielectric(wo.dot(h), p.eta) * (ggx_d(h, a2) * g / (4.0 * wo.z) / wi.z);
+        let through = p.transmittance(wo.z) * p.transmittance(wi.z);
+        self.base_color * (FRAC_1_PI * through) + Vec3::splat(specular)
+    }
+
+    /// Probability that a plastic's sampling picks the coat's reflection (twin of
+    /// `plastic_specular_probability`).
+    fn plastic_specular_probability(p: &PlasticLobe, wo: Vec3) -> f32 {
+        let t = p.transmittance(wo.z);
+        let s = (1.0 - t) * p.specular_weight;
+        let d = t * (1.0 - p.specular_weight);
+        s / (s + d).max(1e-20)
+    }
+
     fn conductor_eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         let h = (wo + wi).normalize();
         let a2 = self.alpha * self.alpha;
@@ -71,7 +161,7 @@ impl Bsdf {
         schlick_fresnel(self.base_color, wo.dot(h)) * (ggx_d(h, a2) * g2 / (4.0 * wo.z) / wi.z)
     }
 
-    fn conductor_pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    fn ggx_reflection_pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let h = (wo + wi).normalize();
         let a2 = self.alpha * self.alpha;
         let g1 = 1.0 / (1.0 + ggx_lambda(wo, a2));
@@ -82,6 +172,9 @@ impl Bsdf {
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Vec3::ZERO;
+        }
+        if let Some(p) = &self.plastic {
+            return self.plastic_eval(p, wo, wi);
         }
         let mut f = (1.0 - self.metallic) * FRAC_1_PI * self.base_color;
         if self.metallic > 0.0 {
@@ -95,16 +188,25 @@ impl Bsdf {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
+        if let Some(p) = &self.plastic {
+            let s = Self::plastic_specular_probability(p, wo);
+            return s * self.ggx_reflection_pdf(wo, wi) + (1.0 - s) * wi.z * FRAC_1_PI;
+        }
         let mut pdf = (1.0 - self.metallic) * wi.z * FRAC_1_PI;
         if self.metallic > 0.0 {
-            pdf += self.metallic * self.conductor_pdf(wo, wi);
+            pdf += self.metallic * self.ggx_reflection_pdf(wo, wi);
         }
         pdf
     }
 
-    /// Picks the conductor lobe with probability `metallic` (by `u_lobe`), samples it with `u`.
+    /// Picks the conductor lobe with probability `metallic` (a plastic: the coat's reflection with
+    /// its specular probability) by `u_lobe`, samples it with `u`.
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> BsdfSample {
-        let wi = if u_lobe < self.metallic {
+        let glossy = match &self.plastic {
+            Some(p) if wo.z > 0.0 => u_lobe < Self::plastic_specular_probability(p, wo),
+            _ => u_lobe < self.metallic,
+        };
+        let wi = if glossy {
             let h = ggx_sample_visible_normal(wo, self.alpha, u);
             2.0 * wo.dot(h) * h - wo
         } else {

@@ -272,6 +272,7 @@ impl Loader<'_> {
             double_sided: false,
             metallic: 1.0,
             roughness: 1.0,
+            plastic: None,
         });
 
         let mut c = Collected::default();

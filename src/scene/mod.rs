@@ -10,6 +10,7 @@ pub mod gltf_loader;
 pub mod lights;
 pub mod materials;
 pub mod mitsuba;
+pub mod plastic;
 pub mod prepared;
 pub mod surface;
 
@@ -84,8 +85,25 @@ pub struct MaterialDesc {
     pub double_sided: bool,
     /// glTF metallic factor.
     pub metallic: f32,
-    /// glTF roughness factor.
+    /// glTF roughness factor; GGX alpha is its square.
     pub roughness: f32,
+    /// A plastic's coat over the Lambertian base (albedo `base_color`); `metallic` is then 0.
+    pub plastic: Option<PlasticCoat>,
+}
+
+/// The dielectric coat of a plastic material (Mitsuba's `plastic`, `roughplastic`): an interface
+/// of GGX roughness alpha = roughness² over a Lambertian base (`scene::plastic` has the model).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlasticCoat {
+    /// Relative index of refraction, inside over outside (Mitsuba's int_ior / ext_ior).
+    pub eta: f32,
+    /// Factor of the coat's specular reflection (Mitsuba's specular_reflectance, 0..1).
+    pub specular: f32,
+    /// The base's albedo also scales its internal reflections (Mitsuba's `nonlinear`).
+    pub nonlinear: bool,
+    /// A smooth coat (Mitsuba's `plastic`), rendered at the smallest roughness with the published
+    /// fit for its internal reflectance; else rough (`roughplastic`).
+    pub smooth: bool,
 }
 
 impl MaterialDesc {

@@ -5,10 +5,12 @@ use anyhow::Result;
 
 use super::Scene;
 use super::lights::LightTable;
-use super::materials::{gpu_materials, gpu_textures};
+use super::materials::gpu_materials_and_textures;
 use crate::bvh::Bvh;
 use crate::bvh::wide::WideBvh;
-use crate::gpu::layout::{Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading};
+use crate::gpu::layout::{
+    MATERIAL_PLASTIC, Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading,
+};
 
 /// Everything the kernels read about a scene.
 #[derive(Clone, Debug)]
@@ -91,7 +93,7 @@ impl PreparedScene {
                 },
             });
         }
-        let (texture_infos, texels) = gpu_textures(&scene);
+        let (materials, texture_infos, texels) = gpu_materials_and_textures(&scene);
         let ray_epsilon = 1e-6 * scene.triangle_extent();
         let wide = WideBvh::build(&bvh);
         let sums = bvh.surface_sums(&triangles);
@@ -99,7 +101,7 @@ impl PreparedScene {
         let child_surfaces = wide.child_surfaces(&sums);
         drop(sums);
         Ok(Self {
-            materials: gpu_materials(&scene),
+            materials,
             scene,
             bvh,
             wide,
@@ -121,7 +123,7 @@ impl PreparedScene {
         self.shading.iter().any(|s| s.flags & SHADING_HAS_NORMALS != 0)
     }
 
-    /// True when some material has a base-colour texture.
+    /// True when some material has a base-colour texture or a plastic's transmittance table.
     pub fn has_textures(&self) -> bool {
         !self.texture_infos.is_empty()
     }
@@ -129,6 +131,11 @@ impl PreparedScene {
     /// True when some material has a conductor lobe (metallic > 0).
     pub fn has_glossy(&self) -> bool {
         self.materials.iter().any(|m| m.metallic > 0.0)
+    }
+
+    /// True when some material is a plastic ([`MATERIAL_PLASTIC`]).
+    pub fn has_plastic(&self) -> bool {
+        self.materials.iter().any(|m| m.flags & MATERIAL_PLASTIC != 0)
     }
 
     /// True when the scene has point lights.

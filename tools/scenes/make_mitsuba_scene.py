@@ -5,13 +5,16 @@ the same file (standard library only).
 
 The Cornell box of cornell_box.xml (walls as `rectangle`s) with
 * an `include`d file holding shared BSDFs, `default` parameters and `$name` substitution;
-* a block from an OBJ file (quads, vertex normals ignored by `face_normals`), turned by `rotate`;
+* a block from an OBJ file (quads, vertex normals ignored by `face_normals`), turned by `rotate`,
+  of GGX `roughplastic`;
 * a tetrahedron from a binary little-endian PLY file, placed by a `matrix`;
 * a pyramid, the second of two shapes in a Mitsuba `serialized` file (format version 4, double
-  precision, texture coordinates), picked by `shape_index`;
+  precision, texture coordinates), picked by `shape_index`, of `roughplastic` with a checkerboard
+  diffuse reflectance, `nonlinear` and a specular reflectance of 0.8;
 * a `sphere` with a GGX `roughconductor` (a perfect mirror's reflectance, alpha 0.2);
 * a `cylinder` (open tube) and a `disk`, both `twosided`;
-* a `cube` scaled flat, and a `shapegroup` of a cube placed twice by `instance`s;
+* a `cube` scaled flat, of smooth `plastic` (index of refraction by name, `bk7`), and a
+  `shapegroup` of a cube placed twice by `instance`s;
 * a floor with a `checkerboard` texture (`to_uv` scaled) and a back wall with a `bitmap` texture
   (a 4 x 4 sRGB PNG, nearest lookups);
 * the area light, a `point` light and a `spot` light;
@@ -158,7 +161,12 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
             <rotate y="1" angle="25"/>
             <translate x="-0.22" y="-0.3" z="-0.2"/>
         </transform>
-        <ref id="white"/>
+        <bsdf type="roughplastic">
+            <string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.15"/>
+            <float name="int_ior" value="1.5"/>
+            <rgb name="diffuse_reflectance" value="0.25, 0.45, 0.7"/>
+        </bsdf>
     </shape>
 
     <shape type="ply" id="tetrahedron">
@@ -176,7 +184,19 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
             <scale value="0.1"/>
             <translate x="0.05" y="-0.5" z="-0.05"/>
         </transform>
-        <ref id="white"/>
+        <bsdf type="roughplastic">
+            <string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.3"/>
+            <boolean name="nonlinear" value="true"/>
+            <float name="specular_reflectance" value="0.8"/>
+            <texture type="checkerboard" name="diffuse_reflectance">
+                <rgb name="color0" value="0.7, 0.7, 0.2"/>
+                <rgb name="color1" value="0.1, 0.5, 0.2"/>
+                <transform name="to_uv">
+                    <scale x="3" y="3"/>
+                </transform>
+            </texture>
+        </bsdf>
     </shape>
 
     <shape type="sphere" id="ball">
@@ -209,7 +229,10 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
             <scale x="0.15" y="0.02" z="0.1"/>
             <translate x="0.25" y="0.1" z="-0.35"/>
         </transform>
-        <ref id="white"/>
+        <bsdf type="plastic">
+            <string name="int_ior" value="bk7"/>
+            <rgb name="diffuse_reflectance" value="0.7, 0.35, 0.2"/>
+        </bsdf>
     </shape>
 
     <shape type="shapegroup" id="pillar">

@@ -100,6 +100,7 @@ impl Loader<'_> {
             double_sided: m.double_sided(),
             metallic,
             roughness,
+            plastic: None,
         })
     }
 }

@@ -273,6 +273,19 @@ impl<'e> Object<'e> {
         }
     }
 
+    /// A `<float>` or `<string>` property (a number or the name of one, such as an index of
+    /// refraction): Ok(Some(Ok(number))) or Ok(Some(Err(name))).
+    pub fn float_or_name(&self, name: &str) -> Result<Option<std::result::Result<f32, &'e str>>> {
+        let Some((p, v)) = self.value(name, &["float", "integer", "string"])? else { return Ok(None) };
+        if p.tag == "string" {
+            return Ok(Some(Err(v)));
+        }
+        match v.trim().parse::<f32>() {
+            Ok(x) if x.is_finite() => Ok(Some(Ok(x))),
+            _ => Err(p.error(format!("`{v}` is not a finite number"))),
+        }
+    }
+
     /// A `<string>` property.
     pub fn string(&self, name: &str) -> Result<Option<&'e str>> {
         Ok(self.value(name, &["string"])?.map(|(_, v)| v))
