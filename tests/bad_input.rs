@@ -255,16 +255,32 @@ fn cases() -> Vec<(Case, Setup)> {
         ),
         xml_case("XML unknown shape", "<shape type=\"teapot\"/>", &[], &["scene.xml:5", "the shape `teapot`"]),
         xml_case(
-            "XML dielectric",
-            "<shape type=\"cube\"><bsdf type=\"dielectric\"/></shape>",
+            "XML thin dielectric",
+            "<shape type=\"cube\"><bsdf type=\"thindielectric\"/></shape>",
             &[],
-            &["scene.xml:5: <bsdf type=\"dielectric\">", "not rendered yet"],
+            &["scene.xml:5: <bsdf type=\"thindielectric\">", "not rendered yet"],
         ),
         xml_case(
             "XML rough dielectric",
             "<bsdf type=\"roughdielectric\" id=\"p\"/><shape type=\"cube\"><ref id=\"p\"/></shape>",
             &[],
             &["<bsdf type=\"roughdielectric\" id=\"p\">", "`roughdielectric` BSDF is not rendered yet"],
+        ),
+        case(
+            "XML glass rendered by ellipsoidal connections",
+            |d| {
+                let glass = "<shape type=\"sphere\"><bsdf type=\"dielectric\"/></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(glass)).unwrap()
+            },
+            render("{dir}/scene.xml", &["--method", "ellipsoidal", "--gate", "box:2..2.1"]),
+            &["dielectric (glass)", "`ellipsoidal` does not render yet", "--method path"],
+        ),
+        xml_case(
+            "XML dielectric whose indices are equal",
+            "<shape type=\"cube\"><bsdf type=\"dielectric\"><float name=\"int_ior\" value=\"1.3\"/>\
+             <float name=\"ext_ior\" value=\"1.3\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"dielectric\">", "int_ior and ext_ior are both 1.3"],
         ),
         xml_case(
             "XML plastic of an unknown named index",

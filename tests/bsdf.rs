@@ -23,7 +23,7 @@ fn glossy_scene() -> PreparedScene {
 
 fn probe_bsdf(metallic: f32, alpha: f32, white: bool) -> Bsdf {
     let base_color = if white { Vec3::ONE } else { Vec3::new(0.9, 0.6, 0.3) };
-    Bsdf { base_color, metallic, alpha, plastic: None }
+    Bsdf { base_color, metallic, alpha, plastic: None, dielectric: None }
 }
 
 /// The Mitsuba box, whose block, pyramid and slab are plastics, and their material indices.
@@ -472,6 +472,7 @@ fn a_white_plastic_reflects_as_mitsubas_does() {
                 specular_weight: 0.5,
                 transmittance: std::array::from_fn(|i| table[i] as f32),
             }),
+            dielectric: None,
         };
         for (&cos_wo, &peer) in cosines.iter().zip(&mitsuba) {
             let wo = wo_of(cos_wo);
@@ -498,6 +499,75 @@ fn a_white_plastic_reflects_as_mitsubas_does() {
             if alpha <= 0.001 {
                 assert!((mean - (r + t)).abs() < 2e-3 + 4.0 * sigma, "{label}: albedo {mean} vs R + T {}", r + t);
             }
+        }
+    }
+}
+
+/// The glass box's sphere (a smooth BK7 dielectric) and its material index.
+fn glass_scene() -> (PreparedScene, u32) {
+    let path = common::repo_path("assets/scenes/glass_box.xml");
+    let scene = PreparedScene::new(load_scene_with(&path, &LoadOptions::default()).unwrap()).unwrap();
+    let glass = (0..scene.scene.materials.len() as u32)
+        .find(|&m| scene.scene.materials[m as usize].dielectric.is_some())
+        .expect("the glass box has a dielectric");
+    (scene, glass)
+}
+
+/// A smooth dielectric: the WGSL samples the twin's directions with the twin's probabilities;
+/// reflection is chosen as often as the Fresnel reflectance says (binomial z-test at five
+/// angles); the directions obey the law of reflection and Snell's law, refracting back recovers
+/// the incident direction, light from inside beyond the critical angle is reflected whole, and
+/// every sample's weight f |cos| / pdf is the specular factor (reflection) or the transmittance
+/// over eta^2 (refraction: radiance is compressed into the denser medium).
+#[test]
+fn a_dielectric_reflects_and_refracts_as_fresnel_and_snell_say() {
+    let ctx = common::gpu();
+    let (scene, glass) = glass_scene();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let bsdf = Bsdf::at(&scene, glass, PROBE_UV);
+    let d = bsdf.dielectric.expect("a dielectric");
+    assert!((d.eta - 1.5046 / 1.000277).abs() < 1e-6);
+    let n = 100_000;
+    for (c, cos_wo) in [1.0f32, 0.8, 0.5, 0.2, 0.05].into_iter().enumerate() {
+        let wo = wo_of(cos_wo);
+        let input: Vec<[f32; 4]> = uniforms(n, 200 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
+        let sampled = run_material(&ctx, &tracer, 12, glass, &input);
+        let mut reflected = 0usize;
+        for (i, (x, g)) in input.iter().zip(&sampled).enumerate() {
+            let s = bsdf.sample(wo, x[0], Vec2::new(x[1], x[2]));
+            assert!(s.delta && s.pdf > 0.0);
+            for k in 0..3 {
+                assert!((g[k] - s.wi[k]).abs() < 1e-5, "cos {cos_wo} record {i}: wi GPU {g:?} CPU {:?}", s.wi);
+            }
+            assert!((g[3] - s.pdf).abs() < 1e-5, "cos {cos_wo} record {i}: pdf GPU {} CPU {}", g[3], s.pdf);
+            let weight = s.f * s.wi.z.abs() / s.pdf;
+            if s.wi.z > 0.0 {
+                reflected += 1;
+                assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6, "the law of reflection");
+                assert!((weight - Vec3::splat(d.specular)).abs().max_element() < 1e-5);
+            } else {
+                let sin_t = (s.wi.x * s.wi.x + s.wi.y * s.wi.y).sqrt();
+                assert!((sin_t * d.eta - (1.0 - cos_wo * cos_wo).sqrt()).abs() < 1e-5, "Snell's law");
+                assert!((s.wi.length() - 1.0).abs() < 1e-5);
+                assert!((weight - bsdf.base_color / (d.eta * d.eta)).abs().max_element() < 1e-5);
+                // Back through the interface from inside: the incident direction again.
+                let inside = Bsdf { dielectric: Some(gatetrace::scene::Dielectric { eta: 1.0 / d.eta, ..d }), ..bsdf };
+                let back = inside.sample(-s.wi, 1.0, Vec2::ZERO);
+                assert!(back.wi.z < 0.0 && (-back.wi - wo).length() < 1e-5, "refraction is reversible");
+            }
+        }
+        let f = gatetrace::scene::bsdf::fresnel_dielectric(cos_wo, d.eta) as f64;
+        let z = (reflected as f64 - n as f64 * f) / (n as f64 * f * (1.0 - f)).sqrt();
+        println!("cos {cos_wo}: reflected {reflected} of {n}, Fresnel {f:.5}, z {z:+.2}");
+        assert!(z.abs() < 4.5, "cos {cos_wo}: {reflected} reflections of {n} for F = {f} (z = {z:.2})");
+    }
+    // From inside, beyond the critical angle (sin > 1 / eta): total internal reflection.
+    let inside = Bsdf { dielectric: Some(gatetrace::scene::Dielectric { eta: 1.0 / d.eta, ..d }), ..bsdf };
+    let critical = (1.0 - 1.0 / (d.eta * d.eta)).sqrt();
+    for cos_wo in [0.5 * critical, 0.9 * critical] {
+        for u in [0.0f32, 0.5, 0.999] {
+            let s = inside.sample(wo_of(cos_wo), u, Vec2::ZERO);
+            assert!(s.wi.z > 0.0 && s.pdf == 1.0, "cos {cos_wo}: total internal reflection");
         }
     }
 }

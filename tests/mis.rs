@@ -77,6 +77,7 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light) -> Vec<Vertex> 
                 metallic: if rng.next_f32() < 0.4 { 0.0 } else { rng.next_f32() },
                 alpha: 0.05 + 0.9 * rng.next_f32() * rng.next_f32(),
                 plastic: None,
+                dielectric: None,
             };
             if rng.next_f32() < 0.3 {
                 bsdf = Bsdf { metallic: 0.0, alpha: 0.2, plastic: Some(plastic_coat()), ..bsdf };

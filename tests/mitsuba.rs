@@ -230,3 +230,38 @@ fn a_black_plastic_reflects_through_its_coat_with_every_method() {
         common::assert_films_agree(&label, &films, &reference, 4, 0.01);
     }
 }
+
+/// Glass (`assets/scenes/glass_box.xml`: a BK7 sphere in the Cornell box) rendered by `path`
+/// agrees with mitransient rendering the same file, steady and as a transient, where every path
+/// through the sphere is longer by (eta - 1) times its distance in glass; `direct` and
+/// `ellipsoidal` refuse the scene with what to do instead, and `auto` renders it with `path`.
+#[test]
+fn glass_agrees_with_mitransient_and_the_connection_methods_refuse_it() {
+    let ctx = common::gpu();
+    let scene = load_scene_with(&common::repo_path("assets/scenes/glass_box.xml"), &LoadOptions::default()).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!(scene.settings.max_bounces, Some(7));
+    let scene = PreparedScene::new(scene).unwrap();
+    let steady = RenderSettings { width: 64, height: 64, max_bounces: 7, seed: 7, ..Default::default() };
+    let films = common::render_films(&ctx, &scene, &steady, 8, 64);
+    check_image("glass_box_steady", &films, "glass_box_peer/steady");
+    let transient = RenderSettings {
+        width: 16,
+        height: 16,
+        gate: Gate::parse("transient:1.94,0.1,20").unwrap(),
+        seed: 8,
+        ..steady.clone()
+    };
+    let films = common::render_films(&ctx, &scene, &transient, 8, 512);
+    check_transient("glass_box_transient", &films, "glass_box_peer/transient_16x16", 20);
+    for method in [Method::Direct, Method::Ellipsoidal] {
+        let error =
+            gatetrace::integrator::create_integrator(&ctx, &scene, &RenderSettings { method, ..transient.clone() })
+                .err()
+                .expect("connections through glass are refused");
+        let text = format!("{error:#}");
+        assert!(text.contains("dielectric") && text.contains("--method path"), "{text}");
+    }
+    let settings = RenderSettings { method: Method::Auto, ..transient };
+    assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
+}

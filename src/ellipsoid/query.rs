@@ -313,7 +313,7 @@ pub fn reflection_factor(q: &Query, triangle: &OracleTriangle, material: &Materi
         return 0.0;
     }
     let nearest = 0.5 * (q.tau_e - q.focus_s.distance(q.focus_c));
-    let albedo = material.base_color.max_element().max(material.plastic_specular);
+    let albedo = material.base_color.max_element().max(material.specular);
     albedo as f64 * (hs.abs() / nearest).min(1.0) * (hc.abs() / nearest).min(1.0)
 }
 

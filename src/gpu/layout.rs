@@ -19,6 +19,9 @@ pub const MATERIAL_PLASTIC: u32 = 2;
 /// [`Material::flags`]: a plastic whose base's albedo also scales its internal reflections
 /// (Mitsuba's `nonlinear`).
 pub const MATERIAL_PLASTIC_NONLINEAR: u32 = 4;
+/// [`Material::flags`]: a smooth dielectric interface such as glass (`eta`, `specular`, and
+/// `base_color` as its transmittance factor; Mitsuba's `dielectric`).
+pub const MATERIAL_DIELECTRIC: u32 = 8;
 /// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
@@ -176,19 +179,21 @@ pub struct Material {
     pub base_color_texture: u32,
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
-    /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`].
+    /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`] |
+    /// [`MATERIAL_DIELECTRIC`].
     pub flags: u32,
     /// Weight of the conductor lobe (glTF metallic factor, 0..1); 0 for a plastic.
     pub metallic: f32,
     /// GGX alpha = roughness^2, at least [`MIN_ALPHA`].
     pub alpha: f32,
-    /// A plastic's coat: relative index of refraction (inside over outside).
-    pub plastic_eta: f32,
+    /// A plastic's coat or a dielectric: relative index of refraction, inside (behind the
+    /// triangles' front faces) over outside.
+    pub eta: f32,
     /// A plastic's coat: index into the texture table of its transmittance table
     /// (`scene::plastic::transmittance_table`, red channel).
     pub plastic_table: u32,
-    /// A plastic's coat: factor of its specular reflection.
-    pub plastic_specular: f32,
+    /// A plastic's coat or a dielectric: factor of its specular reflection.
+    pub specular: f32,
     /// A plastic's coat: the fraction of diffuse light it reflects back into the base.
     pub plastic_internal_reflectance: f32,
     /// A plastic's coat: specular weight of its lobe choice, s / (s + mean albedo).

@@ -161,9 +161,13 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
     RenderSettings { method, connections_per_query, ..settings.clone() }
 }
 
-/// The methods `auto` measures for `settings`: `path` and `direct` always, and `ellipsoidal`
-/// where there is a gate (it has no steady state).
-pub fn candidate_methods(settings: &RenderSettings) -> Vec<Method> {
+/// The methods `auto` measures for `settings` and `scene`: `path` and `direct` always, and
+/// `ellipsoidal` where there is a gate (it has no steady state); `path` alone for a scene with a
+/// dielectric, which only it renders.
+pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
+    if scene.has_dielectric() {
+        return vec![Method::Path];
+    }
     let mut methods = vec![Method::Path, Method::Direct];
     if !matches!(settings.gate, Gate::None) {
         methods.push(Method::Ellipsoidal);
@@ -199,7 +203,7 @@ pub fn choose(
         settings.nlos.is_none(),
         "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal"
     );
-    let methods = candidate_methods(settings);
+    let methods = candidate_methods(settings, scene);
     let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = pilot_budget(budget, pixel_ratio, methods.len());

@@ -164,6 +164,13 @@ impl<'a> BidirectionalTracer<'a> {
         family: Option<(Family, f64)>,
     ) -> Result<Self> {
         check_tracer_settings(settings)?;
+        if scene.has_dielectric() {
+            anyhow::bail!(
+                "the scene has a dielectric (glass) material, which `{}` does not render yet (connections through \
+                 delta surfaces are not built): render it with --method path",
+                settings.method.name()
+            );
+        }
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let camera_vertices = b as u64 + 2;

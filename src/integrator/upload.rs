@@ -133,6 +133,7 @@ pub fn upload_scene(
         ("HAS_DIRECTIONAL_LIGHTS", flag(!scene.scene.directional_lights.is_empty())),
         ("HAS_GLOSSY", flag(scene.has_glossy())),
         ("HAS_PLASTIC", flag(scene.has_plastic())),
+        ("HAS_DIELECTRIC", flag(scene.has_dielectric())),
         ("TRIANGLES_PER_CHUNK", triangles.per_chunk as f64),
         ("TRIANGLE_SHADING_PER_CHUNK", triangle_shading.per_chunk as f64),
         ("BVH_NODES_PER_CHUNK", bvh_nodes.per_chunk as f64),

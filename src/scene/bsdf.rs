@@ -1,7 +1,9 @@
 //! CPU twin of `shaders/lib/bsdf.wesl`: the glTF metallic-roughness material as a linear blend
 //! (weight `metallic`) of a Lambertian lobe and a GGX conductor lobe (F0 = base colour, Schlick
 //! Fresnel, height-correlated Smith masking, visible-normal sampling), or a plastic: a Lambertian
-//! base under a dielectric GGX coat (`scene::plastic`). Reflection only.
+//! base under a dielectric GGX coat (`scene::plastic`); these reflect only. A smooth dielectric
+//! (glass) is a delta BSDF: reflection with the Fresnel reflectance, else refraction, returned
+//! only by `sample` (see bsdf.wesl for the convention of its samples).
 //!
 //! Directions are unit vectors in the local frame of the shading normal (z up); `wo` points back
 //! along the path, `wi` onwards. f is in sr^-1 (no cosine), pdfs are solid-angle densities.
@@ -12,7 +14,7 @@ use glam::{Vec2, Vec3};
 
 use super::materials::{albedo_at, plastic_table};
 use super::prepared::PreparedScene;
-use crate::gpu::layout::{MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR};
+use crate::gpu::layout::{MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR};
 use crate::scene::plastic::TRANSMITTANCE_TABLE_LEN;
 
 /// The material at a surface point.
@@ -27,6 +29,9 @@ pub struct Bsdf {
     pub alpha: f32,
     /// A plastic's coat, when the material is one.
     pub plastic: Option<PlasticLobe>,
+    /// A smooth dielectric, when the material is one (`base_color` its transmittance factor),
+    /// its `eta` across the interface from the side the path arrives on.
+    pub dielectric: Option<crate::scene::Dielectric>,
 }
 
 /// A plastic's coat as the BSDF reads it (twin of the `plastic_*` members of WGSL `Bsdf`).
@@ -106,6 +111,9 @@ pub struct BsdfSample {
     pub pdf: f32,
     /// f(wo, wi) of the blend (sr^-1).
     pub f: Vec3,
+    /// A dielectric's reflection or refraction: `pdf` is the choice's probability and f |wi.z| /
+    /// pdf the path's weight.
+    pub delta: bool,
 }
 
 impl Bsdf {
@@ -113,14 +121,18 @@ impl Bsdf {
     pub fn at(scene: &PreparedScene, material: u32, uv: Vec2) -> Bsdf {
         let m = scene.materials[material as usize];
         let albedo = albedo_at(&scene.texture_infos, &scene.texels, &m, uv);
+        if m.flags & MATERIAL_DIELECTRIC != 0 {
+            let dielectric = Some(crate::scene::Dielectric { eta: m.eta, specular: m.specular });
+            return Bsdf { base_color: albedo, metallic: 0.0, alpha: m.alpha, plastic: None, dielectric };
+        }
         if m.flags & MATERIAL_PLASTIC == 0 {
-            return Bsdf { base_color: albedo, metallic: m.metallic, alpha: m.alpha, plastic: None };
+            return Bsdf { base_color: albedo, metallic: m.metallic, alpha: m.alpha, plastic: None, dielectric: None };
         }
         let mut reflected = Vec3::splat(m.plastic_internal_reflectance);
         if m.flags & MATERIAL_PLASTIC_NONLINEAR != 0 {
             reflected *= albedo;
         }
-        let eta = m.plastic_eta;
+        let eta = m.eta;
         let table = plastic_table(&scene.texture_infos, &scene.texels, m.plastic_table);
         let transmittance = std::array::from_fn(|i| table[i]);
         Bsdf {
@@ -129,10 +141,11 @@ impl Bsdf {
             alpha: m.alpha,
             plastic: Some(PlasticLobe {
                 eta,
-                specular: m.plastic_specular,
+                specular: m.specular,
                 specular_weight: m.plastic_specular_weight,
                 transmittance,
             }),
+            dielectric: None,
         }
     }
 
@@ -170,7 +183,7 @@ impl Bsdf {
 
     /// f(wo, wi) (sr^-1); zero unless both directions lie above the surface.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
+        if wo.z <= 0.0 || wi.z <= 0.0 || self.dielectric.is_some() {
             return Vec3::ZERO;
         }
         if let Some(p) = &self.plastic {
@@ -185,7 +198,7 @@ impl Bsdf {
 
     /// Solid-angle pdf (sr^-1) with which `sample` returns wi given wo.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
+        if wo.z <= 0.0 || wi.z <= 0.0 || self.dielectric.is_some() {
             return 0.0;
         }
         if let Some(p) = &self.plastic {
@@ -202,6 +215,20 @@ impl Bsdf {
     /// Picks the conductor lobe with probability `metallic` (a plastic: the coat's reflection with
     /// its specular probability) by `u_lobe`, samples it with `u`.
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> BsdfSample {
+        if let Some(d) = self.dielectric {
+            if wo.z <= 0.0 {
+                return BsdfSample { wi: wo, pdf: 0.0, f: Vec3::ZERO, delta: true };
+            }
+            let f = fresnel_dielectric(wo.z, d.eta);
+            if u_lobe < f {
+                let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+                return BsdfSample { wi, pdf: f, f: Vec3::splat(d.specular * f / wo.z), delta: true };
+            }
+            let cos_t = (1.0 - (1.0 - wo.z * wo.z) / (d.eta * d.eta)).max(0.0).sqrt();
+            let wi = Vec3::new(-wo.x / d.eta, -wo.y / d.eta, -cos_t);
+            let value = self.base_color * ((1.0 - f) / (d.eta * d.eta * cos_t));
+            return BsdfSample { wi, pdf: 1.0 - f, f: value, delta: true };
+        }
         let glossy = match &self.plastic {
             Some(p) if wo.z > 0.0 => u_lobe < Self::plastic_specular_probability(p, wo),
             _ => u_lobe < self.metallic,
@@ -214,8 +241,8 @@ impl Bsdf {
         };
         let pdf = self.pdf(wo, wi);
         if wo.z <= 0.0 || wi.z <= 0.0 || pdf.is_nan() || pdf <= 0.0 {
-            return BsdfSample { wi, pdf: 0.0, f: Vec3::ZERO };
+            return BsdfSample { wi, pdf: 0.0, f: Vec3::ZERO, delta: false };
         }
-        BsdfSample { wi, pdf, f: self.eval(wo, wi) }
+        BsdfSample { wi, pdf, f: self.eval(wo, wi), delta: false }
     }
 }

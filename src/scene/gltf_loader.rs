@@ -273,6 +273,7 @@ impl Loader<'_> {
             metallic: 1.0,
             roughness: 1.0,
             plastic: None,
+            dielectric: None,
         });
 
         let mut c = Collected::default();

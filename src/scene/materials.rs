@@ -7,8 +7,8 @@ use std::collections::HashMap;
 
 use super::{Scene, TextureData, plastic};
 use crate::gpu::layout::{
-    MATERIAL_DOUBLE_SIDED, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U,
-    TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
+    MATERIAL_DIELECTRIC, MATERIAL_DOUBLE_SIDED, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MIN_ALPHA, Material,
+    NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
 };
 pub use crate::gpu::packing::{pack2x16float, unpack2x16float};
 
@@ -75,11 +75,17 @@ pub fn gpu_materials_and_textures(scene: &Scene) -> (Vec<Material>, Vec<TextureI
                 let diffuse_mean = (m.base_color * texture_mean).element_sum() / 3.0;
                 material.flags |= MATERIAL_PLASTIC | if coat.nonlinear { MATERIAL_PLASTIC_NONLINEAR } else { 0 };
                 material.metallic = 0.0;
-                material.plastic_eta = coat.eta;
+                material.eta = coat.eta;
                 material.plastic_table = table;
-                material.plastic_specular = coat.specular;
+                material.specular = coat.specular;
                 material.plastic_internal_reflectance = internal;
                 material.plastic_specular_weight = coat.specular / (coat.specular + diffuse_mean).max(1e-6);
+            }
+            if let Some(d) = m.dielectric {
+                material.flags |= MATERIAL_DIELECTRIC | MATERIAL_DOUBLE_SIDED;
+                material.metallic = 0.0;
+                material.eta = d.eta;
+                material.specular = d.specular;
             }
             material
         })

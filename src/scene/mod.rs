@@ -89,6 +89,20 @@ pub struct MaterialDesc {
     pub roughness: f32,
     /// A plastic's coat over the Lambertian base (albedo `base_color`); `metallic` is then 0.
     pub plastic: Option<PlasticCoat>,
+    /// A smooth dielectric interface (glass); `base_color` is then its transmittance factor,
+    /// `metallic` 0, and the material double-sided.
+    pub dielectric: Option<Dielectric>,
+}
+
+/// A smooth dielectric interface, such as glass (Mitsuba's `dielectric`): light is reflected
+/// with the Fresnel reflectance and refracted otherwise; inside, path lengths count `eta` times
+/// the distance travelled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dielectric {
+    /// Relative index of refraction, inside (behind the triangles' front faces) over outside.
+    pub eta: f32,
+    /// Factor of the reflected light (Mitsuba's specular_reflectance, 0..1).
+    pub specular: f32,
 }
 
 /// The dielectric coat of a plastic material (Mitsuba's `plastic`, `roughplastic`): an interface

@@ -101,6 +101,7 @@ impl Loader<'_> {
             metallic,
             roughness,
             plastic: None,
+            dielectric: None,
         })
     }
 }

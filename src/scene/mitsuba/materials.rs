@@ -9,7 +9,7 @@ use glam::Vec3;
 use super::Builder;
 use super::xml::{Element, Object};
 use crate::gpu::layout::MIN_ALPHA;
-use crate::scene::{PlasticCoat, TextureData};
+use crate::scene::{Dielectric, PlasticCoat, TextureData};
 
 /// What a BSDF turns into.
 #[derive(Clone, Debug)]
@@ -20,6 +20,7 @@ pub(super) struct Surface {
     pub metallic: f32,
     pub roughness: f32,
     pub plastic: Option<PlasticCoat>,
+    pub dielectric: Option<Dielectric>,
     pub double_sided: bool,
     pub name: String,
 }
@@ -92,6 +93,7 @@ impl<'e> Builder<'e> {
                     metallic: 0.0,
                     roughness: 1.0,
                     plastic: None,
+                    dielectric: None,
                     double_sided: false,
                     name,
                 }
@@ -131,6 +133,7 @@ impl<'e> Builder<'e> {
                     metallic: 0.0,
                     roughness: alpha.sqrt(),
                     plastic: Some(PlasticCoat { eta: int_ior / ext_ior, specular: specular.x, nonlinear, smooth }),
+                    dielectric: None,
                     double_sided: false,
                     name,
                 }
@@ -158,14 +161,45 @@ impl<'e> Builder<'e> {
                     metallic: 1.0,
                     roughness: alpha.sqrt(),
                     plastic: None,
+                    dielectric: None,
                     double_sided: false,
                     name,
                 }
             }
-            kind @ ("dielectric" | "roughdielectric" | "thindielectric") => {
+            "dielectric" => {
+                if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
+                    return Err(t.error("a dielectric's textures are not read"));
+                }
+                let int_ior = self.ior(&o, "int_ior", 1.5046)?;
+                let ext_ior = self.ior(&o, "ext_ior", 1.000277)?;
+                if int_ior == ext_ior {
+                    return Err(e.error(format!("int_ior and ext_ior are both {int_ior}: the interface must refract")));
+                }
+                let specular = o.color("specular_reflectance")?.unwrap_or(Vec3::ONE);
+                check_albedo(e, specular)?;
+                if specular.x != specular.y || specular.y != specular.z {
+                    return Err(e.error(format!(
+                        "a coloured specular_reflectance ({specular}) is not rendered: give one value for all channels"
+                    )));
+                }
+                let transmittance = o.color("specular_transmittance")?.unwrap_or(Vec3::ONE);
+                check_albedo(e, transmittance)?;
+                o.finish(&[])?;
+                Surface {
+                    base_color: transmittance,
+                    texture: None,
+                    metallic: 0.0,
+                    roughness: 0.0,
+                    plastic: None,
+                    dielectric: Some(Dielectric { eta: int_ior / ext_ior, specular: specular.x }),
+                    double_sided: true,
+                    name,
+                }
+            }
+            kind @ ("roughdielectric" | "thindielectric") => {
                 return Err(e.error(format!(
-                    "the `{kind}` BSDF is not rendered yet (gatetrace's surfaces are opaque: Lambertian, GGX \
-                     conductors and plastics)"
+                    "the `{kind}` BSDF is not rendered yet (gatetrace renders Lambertian surfaces, GGX \
+                     conductors, plastics and smooth dielectrics)"
                 )));
             }
             "null" => return Err(e.error("the `null` BSDF bounds media, which are not rendered yet")),

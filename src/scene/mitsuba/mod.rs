@@ -203,6 +203,7 @@ impl<'e> Builder<'e> {
             metallic: s.metallic,
             roughness: s.roughness,
             plastic: s.plastic,
+            dielectric: s.dielectric,
         });
         let m = self.materials.len() as u32 - 1;
         self.material_of.insert(key, m);
