@@ -146,7 +146,8 @@ mod tests {
 
     /// A nearly smooth coat transmits 1 - F; the diffuse reflectance from inside, integrated
     /// exactly (2 ∫ F(μ, 1/eta) μ dμ by a fine midpoint rule), matches the published fit
-    /// within its stated 0.1 %, and the table's discrete mean within 1 %.
+    /// within its stated 0.1 %; the rough coat's definition (Mitsuba's: a mean over 64 cosines,
+    /// 2 % below the integral) equals that mean of the exact F at those cosines.
     #[test]
     fn a_smooth_coat_has_the_closed_forms() {
         let eta = 1.49;
@@ -161,18 +162,27 @@ mod tests {
         let fit = smooth_internal_reflectance(eta);
         assert!((fit / exact - 1.0).abs() < 1e-3, "fit {fit} exact {exact}");
         let table = internal_reflectance(1e-4, eta);
-        assert!((table / exact - 1.0).abs() < 1e-2, "table {table} exact {exact}");
+        let discrete =
+            2.0 * table_cosines().map(|m| fresnel_dielectric(m, 1.0 / eta) * m).sum::<f64>() / TRANSMITTANCE_TABLE_LEN as f64;
+        assert!((table - discrete).abs() < 2e-3, "table {table} discrete mean {discrete} (exact {exact})");
     }
 
     /// Rough coats: reflectance and transmittance from outside never sum above 1 (masking only
-    /// loses light), and roughness moves light from one to the other smoothly.
+    /// loses light); at normal incidence a nearly smooth coat loses under 1 %, and rougher
+    /// coats lose more.
     #[test]
     fn a_rough_coat_conserves_energy() {
+        let mut previous_loss = 0.0;
         for alpha in [0.05, 0.3, 0.8] {
             for c in [1.0, 0.5, 0.1] {
                 let (r, t) = (reflectance(c, alpha, 1.5), transmittance(c, alpha, 1.5));
                 assert!(r > 0.0 && t > 0.0 && r + t <= 1.0 + 1e-9, "alpha {alpha} cos {c}: R {r} T {t}");
-                assert!(r + t > 0.9, "alpha {alpha} cos {c}: R {r} T {t} lose too much");
+                if c == 1.0 {
+                    let loss = 1.0 - (r + t);
+                    assert!(loss > previous_loss, "alpha {alpha}: loses {loss}, less than a smoother coat");
+                    assert!(alpha > 0.05 || loss < 0.01, "alpha {alpha}: loses {loss} at normal incidence");
+                    previous_loss = loss;
+                }
             }
         }
     }
