@@ -255,10 +255,11 @@ fn cases() -> Vec<(Case, Setup)> {
         ),
         xml_case("XML unknown shape", "<shape type=\"teapot\"/>", &[], &["scene.xml:5", "the shape `teapot`"]),
         xml_case(
-            "XML thin dielectric",
-            "<shape type=\"cube\"><bsdf type=\"thindielectric\"/></shape>",
+            "XML thin dielectric with a texture",
+            "<shape type=\"cube\"><bsdf type=\"thindielectric\"><texture type=\"checkerboard\" \
+             name=\"specular_transmittance\"/></bsdf></shape>",
             &[],
-            &["scene.xml:5: <bsdf type=\"thindielectric\">", "not rendered yet"],
+            &["scene.xml:5: <texture type=\"checkerboard\" name=\"specular_transmittance\">", "a dielectric's textures are not read"],
         ),
         xml_case(
             "XML rough dielectric",

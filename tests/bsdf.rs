@@ -503,13 +503,14 @@ fn a_white_plastic_reflects_as_mitsubas_does() {
     }
 }
 
-/// The glass box's sphere (a smooth BK7 dielectric) and its material index.
-fn glass_scene() -> (PreparedScene, u32) {
+/// The glass box and the material index of its sphere (a smooth BK7 dielectric) or, with
+/// `thin`, of its pane (a thin dielectric).
+fn glass_scene(thin: bool) -> (PreparedScene, u32) {
     let path = common::repo_path("assets/scenes/glass_box.xml");
     let scene = PreparedScene::new(load_scene_with(&path, &LoadOptions::default()).unwrap()).unwrap();
     let glass = (0..scene.scene.materials.len() as u32)
-        .find(|&m| scene.scene.materials[m as usize].dielectric.is_some())
-        .expect("the glass box has a dielectric");
+        .find(|&m| scene.scene.materials[m as usize].dielectric.is_some_and(|d| d.thin == thin))
+        .expect("the glass box has a dielectric of each kind");
     (scene, glass)
 }
 
@@ -522,7 +523,7 @@ fn glass_scene() -> (PreparedScene, u32) {
 #[test]
 fn a_dielectric_reflects_and_refracts_as_fresnel_and_snell_say() {
     let ctx = common::gpu();
-    let (scene, glass) = glass_scene();
+    let (scene, glass) = glass_scene(false);
     let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let bsdf = Bsdf::at(&scene, glass, PROBE_UV);
     let d = bsdf.dielectric.expect("a dielectric");
@@ -569,5 +570,48 @@ fn a_dielectric_reflects_and_refracts_as_fresnel_and_snell_say() {
             let s = inside.sample(wo_of(cos_wo), u, Vec2::ZERO);
             assert!(s.wi.z > 0.0 && s.pdf == 1.0, "cos {cos_wo}: total internal reflection");
         }
+    }
+}
+
+/// A thin pane: the WGSL samples the twin's directions with the twin's probabilities; it
+/// reflects as often as its reflectance says, which sums the light bouncing inside it to the
+/// closed form 2F / (1 + F); it passes the rest straight on (wi = -wo) without changing its
+/// radiance, and looks alike from both sides.
+#[test]
+fn a_thin_pane_reflects_2f_over_1_plus_f_and_passes_the_rest_straight_on() {
+    use gatetrace::scene::bsdf::{fresnel_dielectric, thin_reflectance};
+    let ctx = common::gpu();
+    let (scene, pane) = glass_scene(true);
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let bsdf = Bsdf::at(&scene, pane, PROBE_UV);
+    let d = bsdf.dielectric.expect("a dielectric");
+    assert!(d.thin && (d.eta - 1.5 / 1.000277).abs() < 1e-6);
+    let n = 100_000;
+    for (c, cos_wo) in [1.0f32, 0.6, 0.2, 0.05].into_iter().enumerate() {
+        let f = fresnel_dielectric(cos_wo, d.eta);
+        let r = thin_reflectance(cos_wo, d.eta);
+        assert!((r - 2.0 * f / (1.0 + f)).abs() < 1e-6, "cos {cos_wo}: {r} vs 2F / (1 + F)");
+        let wo = wo_of(cos_wo);
+        let input: Vec<[f32; 4]> = uniforms(n, 400 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
+        let sampled = run_material(&ctx, &tracer, 12, pane, &input);
+        let mut reflected = 0usize;
+        for (i, (x, g)) in input.iter().zip(&sampled).enumerate() {
+            let s = bsdf.sample(wo, x[0], Vec2::new(x[1], x[2]));
+            for k in 0..3 {
+                assert!((g[k] - s.wi[k]).abs() < 1e-6, "cos {cos_wo} record {i}: wi GPU {g:?} CPU {:?}", s.wi);
+            }
+            assert!((g[3] - s.pdf).abs() < 1e-6, "cos {cos_wo} record {i}: pdf GPU {} CPU {}", g[3], s.pdf);
+            let weight = s.f * s.wi.z.abs() / s.pdf;
+            if s.wi.z > 0.0 {
+                reflected += 1;
+                assert!((weight - Vec3::splat(d.specular)).abs().max_element() < 1e-5);
+            } else {
+                assert_eq!(s.wi, -wo, "straight through");
+                assert!((weight - bsdf.base_color).abs().max_element() < 1e-5, "radiance passes unchanged");
+            }
+        }
+        let z = (reflected as f64 - n as f64 * r as f64) / (n as f64 * r as f64 * (1.0 - r as f64)).sqrt();
+        println!("cos {cos_wo}: reflected {reflected} of {n}, thin reflectance {r:.5}, z {z:+.2}");
+        assert!(z.abs() < 4.5, "cos {cos_wo}: {reflected} reflections of {n} for R = {r} (z = {z:.2})");
     }
 }

@@ -22,6 +22,9 @@ pub const MATERIAL_PLASTIC_NONLINEAR: u32 = 4;
 /// [`Material::flags`]: a smooth dielectric interface such as glass (`eta`, `specular`, and
 /// `base_color` as its transmittance factor; Mitsuba's `dielectric`).
 pub const MATERIAL_DIELECTRIC: u32 = 8;
+/// [`Material::flags`], with [`MATERIAL_DIELECTRIC`]: a thin pane (Mitsuba's `thindielectric`),
+/// which passes light straight through, its internal reflections summed into its reflectance.
+pub const MATERIAL_THIN: u32 = 16;
 /// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
@@ -180,7 +183,7 @@ pub struct Material {
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
     /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`] |
-    /// [`MATERIAL_DIELECTRIC`].
+    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`].
     pub flags: u32,
     /// Weight of the conductor lobe (glTF metallic factor, 0..1); 0 for a plastic.
     pub metallic: f32,

@@ -14,7 +14,7 @@ use glam::{Vec2, Vec3};
 
 use super::materials::{albedo_at, plastic_table};
 use super::prepared::PreparedScene;
-use crate::gpu::layout::{MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR};
+use crate::gpu::layout::{MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_THIN};
 use crate::scene::plastic::TRANSMITTANCE_TABLE_LEN;
 
 /// The material at a surface point.
@@ -56,6 +56,14 @@ impl PlasticLobe {
         let (a, b) = (self.transmittance[i], self.transmittance[i + 1]);
         a + (b - a) * (x - i as f32)
     }
+}
+
+/// Reflectance of a thin pane of relative index `eta` for light at `cos_i`: the interface's F
+/// plus the light reflected back out after bouncing inside, F + (1 - F)^2 F / (1 - F^2) (twin
+/// of `thin_reflectance`).
+pub fn thin_reflectance(cos_i: f32, eta: f32) -> f32 {
+    let f = fresnel_dielectric(cos_i, eta);
+    if f >= 1.0 { 1.0 } else { f + (1.0 - f) * (1.0 - f) * f / (1.0 - f * f) }
 }
 
 /// Unpolarised Fresnel reflectance of a dielectric interface (twin of `fresnel_dielectric`).
@@ -122,7 +130,8 @@ impl Bsdf {
         let m = scene.materials[material as usize];
         let albedo = albedo_at(&scene.texture_infos, &scene.texels, &m, uv);
         if m.flags & MATERIAL_DIELECTRIC != 0 {
-            let dielectric = Some(crate::scene::Dielectric { eta: m.eta, specular: m.specular });
+            let thin = m.flags & MATERIAL_THIN != 0;
+            let dielectric = Some(crate::scene::Dielectric { eta: m.eta, specular: m.specular, thin });
             return Bsdf { base_color: albedo, metallic: 0.0, alpha: m.alpha, plastic: None, dielectric };
         }
         if m.flags & MATERIAL_PLASTIC == 0 {
@@ -218,6 +227,14 @@ impl Bsdf {
         if let Some(d) = self.dielectric {
             if wo.z <= 0.0 {
                 return BsdfSample { wi: wo, pdf: 0.0, f: Vec3::ZERO, delta: true };
+            }
+            if d.thin {
+                let r = thin_reflectance(wo.z, d.eta);
+                if u_lobe < r {
+                    let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+                    return BsdfSample { wi, pdf: r, f: Vec3::splat(d.specular * r / wo.z), delta: true };
+                }
+                return BsdfSample { wi: -wo, pdf: 1.0 - r, f: self.base_color * ((1.0 - r) / wo.z), delta: true };
             }
             let f = fresnel_dielectric(wo.z, d.eta);
             if u_lobe < f {

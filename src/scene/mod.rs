@@ -103,6 +103,9 @@ pub struct Dielectric {
     pub eta: f32,
     /// Factor of the reflected light (Mitsuba's specular_reflectance, 0..1).
     pub specular: f32,
+    /// A thin pane (Mitsuba's `thindielectric`): light passes straight through, path lengths
+    /// are unchanged, and the reflectance sums the pane's internal reflections.
+    pub thin: bool,
 }
 
 /// The dielectric coat of a plastic material (Mitsuba's `plastic`, `roughplastic`): an interface

@@ -162,8 +162,8 @@ mod tests {
         let fit = smooth_internal_reflectance(eta);
         assert!((fit / exact - 1.0).abs() < 1e-3, "fit {fit} exact {exact}");
         let table = internal_reflectance(1e-4, eta);
-        let discrete =
-            2.0 * table_cosines().map(|m| fresnel_dielectric(m, 1.0 / eta) * m).sum::<f64>() / TRANSMITTANCE_TABLE_LEN as f64;
+        let discrete = 2.0 * table_cosines().map(|m| fresnel_dielectric(m, 1.0 / eta) * m).sum::<f64>()
+            / TRANSMITTANCE_TABLE_LEN as f64;
         assert!((table - discrete).abs() < 2e-3, "table {table} discrete mean {discrete} (exact {exact})");
     }
 

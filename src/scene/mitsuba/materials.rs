@@ -166,7 +166,7 @@ impl<'e> Builder<'e> {
                     name,
                 }
             }
-            "dielectric" => {
+            kind @ ("dielectric" | "thindielectric") => {
                 if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
                     return Err(t.error("a dielectric's textures are not read"));
                 }
@@ -191,12 +191,16 @@ impl<'e> Builder<'e> {
                     metallic: 0.0,
                     roughness: 0.0,
                     plastic: None,
-                    dielectric: Some(Dielectric { eta: int_ior / ext_ior, specular: specular.x }),
+                    dielectric: Some(Dielectric {
+                        eta: int_ior / ext_ior,
+                        specular: specular.x,
+                        thin: kind == "thindielectric",
+                    }),
                     double_sided: true,
                     name,
                 }
             }
-            kind @ ("roughdielectric" | "thindielectric") => {
+            kind @ "roughdielectric" => {
                 return Err(e.error(format!(
                     "the `{kind}` BSDF is not rendered yet (gatetrace renders Lambertian surfaces, GGX \
                      conductors, plastics and smooth dielectrics)"
