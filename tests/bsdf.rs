@@ -96,25 +96,9 @@ fn wgsl_bsdf_matches_cpu_twin() {
     let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     for material in [(1.0, 0.3, false), (0.4, 0.05, false), (0.0, 1.0, false)] {
         let bsdf = probe_bsdf(material.0, material.1, material.2);
-        // Sampling: the same numbers give the same direction, pdf.
+        // Sampling: the same numbers give the same direction, pdf; evaluation at random
+        // directions of the upper hemisphere.
         let input: Vec<[f32; 4]> = uniforms(2048, 3).iter().map(|u| [u[0], u[1], u[2], 0.05 + 0.95 * u[3]]).collect();
-        for (i, (x, g)) in input.iter().zip(run(&ctx, &tracer, 12, material, &input)).enumerate() {
-            let c = bsdf.sample(wo_of(x[3]), x[0], Vec2::new(x[1], x[2]));
-            if c.pdf == 0.0 {
-                assert!(g[3] == 0.0 || c.wi.z.abs() < 1e-4, "record {i}: CPU fails, GPU pdf {}", g[3]);
-                continue;
-            }
-            for k in 0..3 {
-                assert!((g[k] - c.wi[k]).abs() < 2e-4, "{material:?} record {i}: wi GPU {g:?} CPU {:?}", c.wi);
-            }
-            assert!(
-                (g[3] - c.pdf).abs() <= 2e-3 * c.pdf + 1e-5,
-                "{material:?} record {i}: pdf GPU {} CPU {}",
-                g[3],
-                c.pdf
-            );
-        }
-        // Evaluation at random directions of the upper hemisphere.
         let dirs: Vec<[f32; 4]> = uniforms(2048, 4)
             .iter()
             .map(|u| {
@@ -122,15 +106,8 @@ fn wgsl_bsdf_matches_cpu_twin() {
                 [w.x, w.y, w.z, 0.05 + 0.95 * u[2]]
             })
             .collect();
-        for (i, (x, g)) in dirs.iter().zip(run(&ctx, &tracer, 13, material, &dirs)).enumerate() {
-            let wo = wo_of(x[3]);
-            let wi = Vec3::new(x[0], x[1], x[2]);
-            let (f, pdf) = (bsdf.eval(wo, wi), bsdf.pdf(wo, wi));
-            for k in 0..3 {
-                assert!((g[k] - f[k]).abs() <= 1e-3 * f[k] + 1e-6, "{material:?} record {i}: f GPU {g:?} CPU {f:?}");
-            }
-            assert!((g[3] - pdf).abs() <= 1e-3 * pdf + 1e-6, "{material:?} record {i}: pdf GPU {} CPU {pdf}", g[3]);
-        }
+        let (sampled, evaluated) = (run(&ctx, &tracer, 12, material, &input), run(&ctx, &tracer, 13, material, &dirs));
+        assert_matches_twin(&format!("{material:?}"), &bsdf, &input, &sampled, &dirs, &evaluated);
     }
 }
 
@@ -153,6 +130,45 @@ fn integrate_cell(g: &dyn Fn(Vec3) -> f64, (z0, z1): (f64, f64), (p0, p1): (f64,
     sum * (t1 - t0) / n as f64 * (p1 - p0) / n as f64
 }
 
+/// Pearson's chi-square of BSDF samples (probe outputs: wi, pdf; pdf 0 when sampling failed)
+/// against `bsdf`'s pdf seen from cos theta = `cos_wo`: Mitsuba's recipe, samples binned over
+/// the hemisphere in (t = sqrt(1 - z), phi), 16 x 24 cells finer towards the pole, expected counts
+/// from the pdf integrated per cell, the failed samples against the pdf's missing mass, low
+/// counts pooled. Returns (statistic, degrees of freedom, p, failed samples).
+fn sampling_chi2(samples: &[[f32; 4]], bsdf: &Bsdf, cos_wo: f32) -> (f64, usize, f64, f64) {
+    let (nz, nphi, n) = (16usize, 24usize, samples.len());
+    let mut observed = vec![0.0; nz * nphi];
+    let mut failed = 0.0;
+    for g in samples {
+        if g[3] <= 0.0 {
+            failed += 1.0;
+            continue;
+        }
+        let t = (1.0 - g[2] as f64).max(0.0).sqrt();
+        let phi = (g[1] as f64).atan2(g[0] as f64).rem_euclid(std::f64::consts::TAU);
+        let iz = ((t * nz as f64) as usize).min(nz - 1);
+        let ip = ((phi / std::f64::consts::TAU * nphi as f64) as usize).min(nphi - 1);
+        observed[iz * nphi + ip] += 1.0;
+    }
+    let wo = wo_of(cos_wo);
+    let pdf = |w: Vec3| bsdf.pdf(wo, w) as f64;
+    let mut expected = vec![0.0; nz * nphi];
+    for iz in 0..nz {
+        let (t0, t1) = (iz as f64 / nz as f64, (iz + 1) as f64 / nz as f64);
+        for ip in 0..nphi {
+            let p = (
+                ip as f64 / nphi as f64 * std::f64::consts::TAU,
+                (ip + 1) as f64 / nphi as f64 * std::f64::consts::TAU,
+            );
+            expected[iz * nphi + ip] = n as f64 * integrate_cell(&pdf, (1.0 - t1 * t1, 1.0 - t0 * t0), p, 12);
+        }
+    }
+    observed.push(failed);
+    expected.push((n as f64 - expected.iter().sum::<f64>()).max(0.0));
+    let (stat, dof, p) = chi2_test(&observed, &expected);
+    (stat, dof, p, failed)
+}
+
 #[test]
 fn bsdf_sampling_follows_its_pdf() {
     // Mitsuba's recipe: samples binned over the hemisphere in (z, phi); expected counts from the
@@ -161,43 +177,12 @@ fn bsdf_sampling_follows_its_pdf() {
     let scene = glossy_scene();
     let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let configs = [(1.0, 0.3, 0.8), (1.0, 0.1, 0.35), (0.5, 0.2, 0.6), (1.0, 0.6, 0.15), (0.0, 1.0, 0.5)];
-    let (nz, nphi, n) = (16usize, 24usize, 200_000usize);
+    let n = 200_000usize;
     for (c, &(metallic, alpha, cos_wo)) in configs.iter().enumerate() {
         let material = (metallic, alpha, false);
         let bsdf = probe_bsdf(metallic, alpha, false);
         let input: Vec<[f32; 4]> = uniforms(n, 10 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-        let mut observed = vec![0.0; nz * nphi];
-        let mut failed = 0.0;
-        for g in run(&ctx, &tracer, 12, material, &input) {
-            if g[3] <= 0.0 {
-                failed += 1.0;
-                continue;
-            }
-            // Cells in t = sqrt(1 - z) (finer towards the pole) and phi.
-            let t = (1.0 - g[2] as f64).max(0.0).sqrt();
-            let phi = (g[1] as f64).atan2(g[0] as f64).rem_euclid(std::f64::consts::TAU);
-            let iz = ((t * nz as f64) as usize).min(nz - 1);
-            let ip = ((phi / std::f64::consts::TAU * nphi as f64) as usize).min(nphi - 1);
-            observed[iz * nphi + ip] += 1.0;
-        }
-        let wo = wo_of(cos_wo);
-        let pdf = |w: Vec3| bsdf.pdf(wo, w) as f64;
-        let mut expected = vec![0.0; nz * nphi];
-        for iz in 0..nz {
-            let (t0, t1) = (iz as f64 / nz as f64, (iz + 1) as f64 / nz as f64);
-            let z = (1.0 - t1 * t1, 1.0 - t0 * t0);
-            for ip in 0..nphi {
-                let p = (
-                    ip as f64 / nphi as f64 * std::f64::consts::TAU,
-                    (ip + 1) as f64 / nphi as f64 * std::f64::consts::TAU,
-                );
-                expected[iz * nphi + ip] = n as f64 * integrate_cell(&pdf, z, p, 12);
-            }
-        }
-        // Directions below the surface (rejected samples) are the pdf's missing mass.
-        observed.push(failed);
-        expected.push((n as f64 - expected.iter().sum::<f64>()).max(0.0));
-        let (stat, dof, p) = chi2_test(&observed, &expected);
+        let (stat, dof, p, failed) = sampling_chi2(&run(&ctx, &tracer, 12, material, &input), &bsdf, cos_wo);
         println!(
             "metallic {metallic} alpha {alpha} cos_wo {cos_wo}: chi2 {stat:.1} dof {dof} p {p:.3}, {failed} rejected"
         );
@@ -337,7 +322,7 @@ fn plastic_sampling_follows_its_pdf() {
     let ctx = common::gpu();
     let (scene, plastics) = plastic_scene();
     let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
-    let (nz, nphi, n) = (16usize, 24usize, 200_000usize);
+    let n = 200_000usize;
     let plastics = rough(&scene, &plastics);
     let cosines = [0.9f32, 0.4, 0.12];
     let tests = plastics.len() * cosines.len();
@@ -346,35 +331,7 @@ fn plastic_sampling_follows_its_pdf() {
         for (c, &cos_wo) in cosines.iter().enumerate() {
             let input: Vec<[f32; 4]> =
                 uniforms(n, 40 + c as u32 + 10 * m).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-            let mut observed = vec![0.0; nz * nphi];
-            let mut failed = 0.0;
-            for g in run_material(&ctx, &tracer, 12, m, &input) {
-                if g[3] <= 0.0 {
-                    failed += 1.0;
-                    continue;
-                }
-                let t = (1.0 - g[2] as f64).max(0.0).sqrt();
-                let phi = (g[1] as f64).atan2(g[0] as f64).rem_euclid(std::f64::consts::TAU);
-                let iz = ((t * nz as f64) as usize).min(nz - 1);
-                let ip = ((phi / std::f64::consts::TAU * nphi as f64) as usize).min(nphi - 1);
-                observed[iz * nphi + ip] += 1.0;
-            }
-            let wo = wo_of(cos_wo);
-            let pdf = |w: Vec3| bsdf.pdf(wo, w) as f64;
-            let mut expected = vec![0.0; nz * nphi];
-            for iz in 0..nz {
-                let (t0, t1) = (iz as f64 / nz as f64, (iz + 1) as f64 / nz as f64);
-                for ip in 0..nphi {
-                    let p = (
-                        ip as f64 / nphi as f64 * std::f64::consts::TAU,
-                        (ip + 1) as f64 / nphi as f64 * std::f64::consts::TAU,
-                    );
-                    expected[iz * nphi + ip] = n as f64 * integrate_cell(&pdf, (1.0 - t1 * t1, 1.0 - t0 * t0), p, 12);
-                }
-            }
-            observed.push(failed);
-            expected.push((n as f64 - expected.iter().sum::<f64>()).max(0.0));
-            let (stat, dof, p) = chi2_test(&observed, &expected);
+            let (stat, dof, p, failed) = sampling_chi2(&run_material(&ctx, &tracer, 12, m, &input), &bsdf, cos_wo);
             println!("plastic {m} cos_wo {cos_wo}: chi2 {stat:.1} dof {dof} p {p:.3}, {failed} rejected");
             assert!(p > sidak(ALPHA, tests), "plastic {m} cos_wo {cos_wo}: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
         }

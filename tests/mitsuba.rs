@@ -107,25 +107,40 @@ fn a_mitsuba_scene_loads_as_written() {
     assert_eq!(largest_uv, 4.0, "to_uv scales the floor's uv by 4");
 }
 
+/// Renders `scene` with `path` (at most `max_bounces` bounces, seeds from `seed`) as the peer
+/// data in tests/data/NAME_peer hold it: steady 64×64 (8 × 64 spp) against `steady`, and a
+/// transient 16×16 of 20 bins of 0.1 m from 1.94 m (8 × 512 spp) against `transient_16x16`.
+/// Returns the transient's settings.
+fn path_agrees_with_peer(
+    ctx: &gatetrace::gpu::GpuContext,
+    scene: &PreparedScene,
+    name: &str,
+    max_bounces: u32,
+    seed: u32,
+) -> RenderSettings {
+    let steady = RenderSettings { width: 64, height: 64, max_bounces, seed, ..Default::default() };
+    let films = common::render_films(ctx, scene, &steady, 8, 64);
+    check_image(&format!("{name}_steady"), &films, &format!("{name}_peer/steady"));
+    let transient = RenderSettings {
+        width: 16,
+        height: 16,
+        gate: Gate::parse("transient:1.94,0.1,20").unwrap(),
+        seed: seed + 1,
+        ..steady
+    };
+    let films = common::render_films(ctx, scene, &transient, 8, 512);
+    check_transient(&format!("{name}_transient"), &films, &format!("{name}_peer/transient_16x16"), 20);
+    transient
+}
+
 #[test]
 fn a_mitsuba_scene_agrees_with_mitransient_rendering_the_same_file() {
     let ctx = common::gpu();
     let mut scene = mitsuba_box();
     assert_eq!(scene.settings.max_bounces, Some(5));
-    let steady = RenderSettings { width: 64, height: 64, max_bounces: 5, seed: 3, ..Default::default() };
     scene.settings = SceneSettings::default();
     let scene = PreparedScene::new(scene).unwrap();
-    let films = common::render_films(&ctx, &scene, &steady, 8, 64);
-    check_image("mitsuba_box_steady", &films, "mitsuba_box_peer/steady");
-    let transient = RenderSettings {
-        width: 16,
-        height: 16,
-        gate: Gate::parse("transient:1.94,0.1,20").unwrap(),
-        seed: 4,
-        ..steady
-    };
-    let films = common::render_films(&ctx, &scene, &transient, 8, 512);
-    check_transient("mitsuba_box_transient", &films, "mitsuba_box_peer/transient_16x16", 20);
+    let transient = path_agrees_with_peer(&ctx, &scene, "mitsuba_box", 5, 3);
     for method in [Method::Direct, Method::Ellipsoidal] {
         let settings = RenderSettings { method, seed: 5, ..transient.clone() };
         let films = common::render_films(&ctx, &scene, &settings, 8, 128);
@@ -242,18 +257,7 @@ fn glass_agrees_with_mitransient_and_the_connection_methods_refuse_it() {
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
     assert_eq!(scene.settings.max_bounces, Some(7));
     let scene = PreparedScene::new(scene).unwrap();
-    let steady = RenderSettings { width: 64, height: 64, max_bounces: 7, seed: 7, ..Default::default() };
-    let films = common::render_films(&ctx, &scene, &steady, 8, 64);
-    check_image("glass_box_steady", &films, "glass_box_peer/steady");
-    let transient = RenderSettings {
-        width: 16,
-        height: 16,
-        gate: Gate::parse("transient:1.94,0.1,20").unwrap(),
-        seed: 8,
-        ..steady.clone()
-    };
-    let films = common::render_films(&ctx, &scene, &transient, 8, 512);
-    check_transient("glass_box_transient", &films, "glass_box_peer/transient_16x16", 20);
+    let transient = path_agrees_with_peer(&ctx, &scene, "glass_box", 7, 7);
     for method in [Method::Direct, Method::Ellipsoidal] {
         let error =
             gatetrace::integrator::create_integrator(&ctx, &scene, &RenderSettings { method, ..transient.clone() })

@@ -66,16 +66,10 @@ pub fn thin_reflectance(cos_i: f32, eta: f32) -> f32 {
     if f >= 1.0 { 1.0 } else { f + (1.0 - f) * (1.0 - f) * f / (1.0 - f * f) }
 }
 
-/// Unpolarised Fresnel reflectance of a dielectric interface (twin of `fresnel_dielectric`).
+/// Unpolarised Fresnel reflectance of a dielectric interface (twin of `fresnel_dielectric`,
+/// evaluated in f64 by `scene::plastic::fresnel_dielectric`).
 pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
-    let sin_t2 = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
-    if sin_t2 >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin_t2).sqrt();
-    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    0.5 * (rs * rs + rp * rp)
+    super::plastic::fresnel_dielectric(cos_i as f64, eta as f64) as f32
 }
 
 fn ggx_d(h: Vec3, a2: f32) -> f32 {
