@@ -249,7 +249,8 @@ fn a_black_plastic_reflects_through_its_coat_with_every_method() {
 /// Glass (`assets/scenes/glass_box.xml`: a BK7 sphere in the Cornell box) rendered by `path`
 /// agrees with mitransient rendering the same file, steady and as a transient, where every path
 /// through the sphere is longer by (eta - 1) times its distance in glass; `direct` and
-/// `ellipsoidal` refuse the scene with what to do instead, and `auto` renders it with `path`.
+/// `ellipsoidal` refuse the scene with what to do instead, and `auto` renders it with `path`
+/// without a pilot.
 #[test]
 fn glass_agrees_with_mitransient_and_the_connection_methods_refuse_it() {
     let ctx = common::gpu();
@@ -268,4 +269,8 @@ fn glass_agrees_with_mitransient_and_the_connection_methods_refuse_it() {
     }
     let settings = RenderSettings { method: Method::Auto, ..transient };
     assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
+    let budget = gatetrace::integrator::Budget::Time(std::time::Duration::from_secs(1));
+    let choice = gatetrace::integrator::auto::choose(&ctx, &scene, &settings, budget).unwrap();
+    assert_eq!((choice.chosen, choice.pilot_seconds, choice.candidates.len()), (Method::Path, 0.0, 0));
+    assert!(choice.reason.contains("only method"), "{}", choice.reason);
 }

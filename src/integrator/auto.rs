@@ -146,7 +146,7 @@ pub struct MethodChoice {
     pub chosen: Method,
     /// The pilot's figures of each method measured, in the order of [`candidate_methods`].
     pub candidates: Vec<CandidateFigures>,
-    /// Width and height of the pilot's image (pixels).
+    /// Width and height of the pilot's image (pixels); (0, 0) when there was no pilot.
     pub pilot_resolution: (u32, u32),
     /// Why, in words (for logs and metadata).
     pub reason: String,
@@ -204,6 +204,16 @@ pub fn choose(
         "--method auto does not apply to NLOS captures: choose path, direct or ellipsoidal"
     );
     let methods = candidate_methods(settings, scene);
+    if let [only] = methods[..] {
+        // Nothing to compare: no pilot, the whole budget for the render.
+        return Ok(MethodChoice {
+            chosen: only,
+            candidates: Vec::new(),
+            pilot_resolution: (0, 0),
+            reason: format!("{} is the only method that renders this scene (it holds glass): no pilot", only.name()),
+            pilot_seconds: 0.0,
+        });
+    }
     let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = pilot_budget(budget, pixel_ratio, methods.len());
