@@ -497,10 +497,16 @@ fn cases() -> Vec<(Case, Setup)> {
             &["<emitter type=\"area\">", "twosided BSDF"],
         ),
         xml_case(
-            "XML conductor preset",
-            "<shape type=\"cube\"><bsdf type=\"conductor\"><string name=\"material\" value=\"Au\"/></bsdf></shape>",
+            "XML conductor of an unknown material",
+            "<shape type=\"cube\"><bsdf type=\"conductor\"><string name=\"material\" value=\"Unobtainium\"/></bsdf></shape>",
             &[],
-            &["the conductor preset `Au` is not built in"],
+            &["the conductor `Unobtainium` is not known", "Au, Be"],
+        ),
+        xml_case(
+            "XML conductor of a negative index",
+            "<shape type=\"cube\"><bsdf type=\"conductor\"><rgb name=\"eta\" value=\"0.2, -1, 1\"/></bsdf></shape>",
+            &[],
+            &["scene.xml:5: <bsdf type=\"conductor\">", "must not be negative"],
         ),
         case(
             "Mitsuba parameter without a value",

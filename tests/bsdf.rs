@@ -23,7 +23,7 @@ fn glossy_scene() -> PreparedScene {
 
 fn probe_bsdf(metallic: f32, alpha: f32, white: bool) -> Bsdf {
     let base_color = if white { Vec3::ONE } else { Vec3::new(0.9, 0.6, 0.3) };
-    Bsdf { base_color, metallic, alpha, plastic: None, dielectric: None }
+    Bsdf { base_color, metallic, alpha, plastic: None, dielectric: None, conductor_index: None }
 }
 
 /// The Mitsuba box, whose block, pyramid and slab are plastics, and their material indices.
@@ -430,6 +430,7 @@ fn a_white_plastic_reflects_as_mitsubas_does() {
                 transmittance: std::array::from_fn(|i| table[i] as f32),
             }),
             dielectric: None,
+            conductor_index: None,
         };
         for (&cos_wo, &peer) in cosines.iter().zip(&mitsuba) {
             let wo = wo_of(cos_wo);
@@ -571,4 +572,40 @@ fn a_thin_pane_reflects_2f_over_1_plus_f_and_passes_the_rest_straight_on() {
         println!("cos {cos_wo}: reflected {reflected} of {n}, thin reflectance {r:.5}, z {z:+.2}");
         assert!(z.abs() < 4.5, "cos {cos_wo}: {reflected} reflections of {n} for R = {r} (z = {z:.2})");
     }
+}
+
+/// A conductor given by its complex index (Mitsuba's `material` Au, the Mitsuba box's ball)
+/// takes the exact Fresnel term: at normal incidence ((n - 1)^2 + k^2) / ((n + 1)^2 + k^2), with
+/// k = 0 the dielectric's, 1 at grazing light; the WGSL matches the twin on the ball's material.
+#[test]
+fn a_conductor_of_a_named_material_takes_the_exact_fresnel_term() {
+    use gatetrace::scene::bsdf::{fresnel_conductor, fresnel_dielectric};
+    let (eta, k) = (Vec3::new(0.143036, 0.375307, 1.44205), Vec3::new(3.983, 2.38556, 1.60336));
+    let normal = ((eta - Vec3::ONE) * (eta - Vec3::ONE) + k * k) / ((eta + Vec3::ONE) * (eta + Vec3::ONE) + k * k);
+    assert!((fresnel_conductor(1.0, eta, k) - normal).abs().max_element() < 1e-6);
+    assert!((fresnel_conductor(1e-6, eta, k) - Vec3::ONE).abs().max_element() < 1e-4, "grazing");
+    for c in [0.9f32, 0.5, 0.1] {
+        let dielectric = fresnel_conductor(c, Vec3::splat(1.5), Vec3::ZERO).x;
+        assert!((dielectric - fresnel_dielectric(c, 1.5)).abs() < 1e-6, "k = 0 at cos {c}");
+    }
+    assert_eq!(fresnel_conductor(1.0, Vec3::ZERO, Vec3::ZERO), Vec3::ONE, "an index of 0 + 0i at normal incidence");
+
+    let ctx = common::gpu();
+    let (scene, _) = plastic_scene();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let ball = scene.scene.triangles[scene.scene.node("ball").unwrap().triangles.start].material;
+    let bsdf = Bsdf::at(&scene, ball, PROBE_UV);
+    let (e, kk) = bsdf.conductor_index.expect("the ball's conductor has its index");
+    assert!((e - eta).abs().max_element() < 1e-6 && (kk - k).abs().max_element() < 1e-6);
+    let input: Vec<[f32; 4]> = uniforms(2048, 8).iter().map(|u| [u[0], u[1], u[2], 0.05 + 0.95 * u[3]]).collect();
+    let dirs: Vec<[f32; 4]> = uniforms(2048, 9)
+        .iter()
+        .map(|u| {
+            let w = gatetrace::sampling::sample_cosine_hemisphere(Vec2::new(u[0], u[1]));
+            [w.x, w.y, w.z, 0.05 + 0.95 * u[2]]
+        })
+        .collect();
+    let (sampled, evaluated) =
+        (run_material(&ctx, &tracer, 12, ball, &input), run_material(&ctx, &tracer, 13, ball, &dirs));
+    assert_matches_twin("gold", &bsdf, &input, &sampled, &dirs, &evaluated);
 }

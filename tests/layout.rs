@@ -21,7 +21,8 @@ fn wgsl_structs_match_rust_structs() {
         WideNode { origin, exponents, planes_xy, planes_z, parent, subtree, children }
         NodeSurface { centroid, area, light_area, spread }
         Material { base_color, base_color_texture, emission, flags, metallic, alpha, eta, plastic_table,
-                   specular, plastic_internal_reflectance, plastic_specular_weight, reserved0 }
+                   specular, plastic_internal_reflectance, plastic_specular_weight, reserved0, conductor_eta, reserved1,
+                   conductor_k, reserved2 }
         TextureInfo { offset, width, height, wrap }
         Light { position, kind, emission, triangle, direction, area, select_pdf, flags, cos_outer, cos_inner }
         Camera { position, tan_half_fov_y, right, aspect, up, lens_radius, forward, focus_distance }

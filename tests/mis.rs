@@ -78,6 +78,7 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light) -> Vec<Vertex> 
                 alpha: 0.05 + 0.9 * rng.next_f32() * rng.next_f32(),
                 plastic: None,
                 dielectric: None,
+                conductor_index: None,
             };
             if rng.next_f32() < 0.3 {
                 bsdf = Bsdf { metallic: 0.0, alpha: 0.2, plastic: Some(plastic_coat()), ..bsdf };

@@ -86,6 +86,8 @@ fn a_mitsuba_scene_loads_as_written() {
     assert!(material("post").double_sided && !material("ceiling").double_sided);
     assert_eq!((material("ball").metallic, material("ball").base_color), (1.0, Vec3::ONE));
     assert!((material("ball").roughness - 0.2f32.sqrt()).abs() < 1e-6);
+    let (eta, k) = material("ball").conductor_index.expect("gold's complex index");
+    assert!((eta.x - 0.143036).abs() < 1e-6 && (k.z - 1.60336).abs() < 1e-6, "Mitsuba's RGB gold");
     assert_eq!(material("light").emission, Vec3::splat(10.0));
     // Plastics: a rough one (eta as given, Mitsuba's default ext_ior of air), a textured
     // nonlinear one, a smooth one whose index is named (bk7).

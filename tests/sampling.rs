@@ -96,6 +96,7 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         roughness: 1.0,
         plastic: None,
         dielectric: None,
+        conductor_index: None,
     };
     let tri = |a: [f32; 3], b: [f32; 3], c: [f32; 3], m: u32| SceneTriangle {
         positions: [a.into(), b.into(), c.into()],

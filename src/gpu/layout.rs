@@ -25,6 +25,9 @@ pub const MATERIAL_DIELECTRIC: u32 = 8;
 /// [`Material::flags`], with [`MATERIAL_DIELECTRIC`]: a thin pane (Mitsuba's `thindielectric`),
 /// which passes light straight through, its internal reflections summed into its reflectance.
 pub const MATERIAL_THIN: u32 = 16;
+/// [`Material::flags`]: the conductor lobe's Fresnel term is the exact one of the complex index
+/// `conductor_eta` + i `conductor_k` (times `base_color`), not Schlick's from `base_color`.
+pub const MATERIAL_CONDUCTOR_INDEX: u32 = 32;
 /// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
@@ -183,7 +186,7 @@ pub struct Material {
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
     /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`] |
-    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`].
+    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`] | [`MATERIAL_CONDUCTOR_INDEX`].
     pub flags: u32,
     /// Weight of the conductor lobe (glTF metallic factor, 0..1); 0 for a plastic.
     pub metallic: f32,
@@ -203,6 +206,15 @@ pub struct Material {
     pub plastic_specular_weight: f32,
     /// Padding.
     pub reserved0: u32,
+    /// With [`MATERIAL_CONDUCTOR_INDEX`]: the real part of the conductor's complex index of
+    /// refraction (RGB), relative to the outside.
+    pub conductor_eta: Vec3,
+    /// Padding.
+    pub reserved1: u32,
+    /// With [`MATERIAL_CONDUCTOR_INDEX`]: its imaginary part, the extinction coefficient (RGB).
+    pub conductor_k: Vec3,
+    /// Padding.
+    pub reserved2: u32,
 }
 
 /// Where one texture's texels lie in the texel buffer.

@@ -14,7 +14,9 @@ use glam::{Vec2, Vec3};
 
 use super::materials::{albedo_at, plastic_table};
 use super::prepared::PreparedScene;
-use crate::gpu::layout::{MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_THIN};
+use crate::gpu::layout::{
+    MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_THIN,
+};
 use crate::scene::plastic::TRANSMITTANCE_TABLE_LEN;
 
 /// The material at a surface point.
@@ -32,6 +34,25 @@ pub struct Bsdf {
     /// A smooth dielectric, when the material is one (`base_color` its transmittance factor),
     /// its `eta` across the interface from the side the path arrives on.
     pub dielectric: Option<crate::scene::Dielectric>,
+    /// The conductor lobe's complex index (eta, k), when its Fresnel term is the exact one
+    /// (times `base_color`) instead of Schlick's.
+    pub conductor_index: Option<(Vec3, Vec3)>,
+}
+
+/// Unpolarised Fresnel reflectance of a conductor of complex index eta + i k (per channel) for
+/// light at `cos_i` > 0 (twin of `fresnel_conductor`).
+pub fn fresnel_conductor(cos_i: f32, eta: Vec3, k: Vec3) -> Vec3 {
+    let (c2, s2) = (cos_i * cos_i, 1.0 - cos_i * cos_i);
+    let t0 = eta * eta - k * k - Vec3::splat(s2);
+    let a2b2 = (t0 * t0 + 4.0 * eta * eta * k * k).powf(0.5);
+    let a = (0.5 * (a2b2 + t0)).max(Vec3::ZERO).powf(0.5);
+    let t1 = a2b2 + Vec3::splat(c2);
+    let t2 = 2.0 * cos_i * a;
+    let rs = (t1 - t2) / (t1 + t2);
+    let t3 = c2 * a2b2 + Vec3::splat(s2 * s2);
+    let t4 = t2 * s2;
+    let ratio = Vec3::select((t3 + t4).cmpeq(Vec3::ZERO), Vec3::ONE, (t3 - t4) / (t3 + t4));
+    0.5 * (rs + rs * ratio)
 }
 
 /// A plastic's coat as the BSDF reads it (twin of the `plastic_*` members of WGSL `Bsdf`).
@@ -126,10 +147,25 @@ impl Bsdf {
         if m.flags & MATERIAL_DIELECTRIC != 0 {
             let thin = m.flags & MATERIAL_THIN != 0;
             let dielectric = Some(crate::scene::Dielectric { eta: m.eta, specular: m.specular, thin });
-            return Bsdf { base_color: albedo, metallic: 0.0, alpha: m.alpha, plastic: None, dielectric };
+            return Bsdf {
+                base_color: albedo,
+                metallic: 0.0,
+                alpha: m.alpha,
+                plastic: None,
+                dielectric,
+                conductor_index: None,
+            };
         }
         if m.flags & MATERIAL_PLASTIC == 0 {
-            return Bsdf { base_color: albedo, metallic: m.metallic, alpha: m.alpha, plastic: None, dielectric: None };
+            let conductor_index = (m.flags & MATERIAL_CONDUCTOR_INDEX != 0).then_some((m.conductor_eta, m.conductor_k));
+            return Bsdf {
+                base_color: albedo,
+                metallic: m.metallic,
+                alpha: m.alpha,
+                plastic: None,
+                dielectric: None,
+                conductor_index,
+            };
         }
         let mut reflected = Vec3::splat(m.plastic_internal_reflectance);
         if m.flags & MATERIAL_PLASTIC_NONLINEAR != 0 {
@@ -149,6 +185,7 @@ impl Bsdf {
                 transmittance,
             }),
             dielectric: None,
+            conductor_index: None,
         }
     }
 
@@ -174,7 +211,11 @@ impl Bsdf {
         let h = (wo + wi).normalize();
         let a2 = self.alpha * self.alpha;
         let g2 = 1.0 / (1.0 + ggx_lambda(wo, a2) + ggx_lambda(wi, a2));
-        schlick_fresnel(self.base_color, wo.dot(h)) * (ggx_d(h, a2) * g2 / (4.0 * wo.z) / wi.z)
+        let fresnel = match self.conductor_index {
+            Some((eta, k)) => self.base_color * fresnel_conductor(wo.dot(h), eta, k),
+            None => schlick_fresnel(self.base_color, wo.dot(h)),
+        };
+        fresnel * (ggx_d(h, a2) * g2 / (4.0 * wo.z) / wi.z)
     }
 
     fn ggx_reflection_pdf(&self, wo: Vec3, wi: Vec3) -> f32 {

@@ -274,6 +274,7 @@ impl Loader<'_> {
             roughness: 1.0,
             plastic: None,
             dielectric: None,
+            conductor_index: None,
         });
 
         let mut c = Collected::default();

@@ -7,8 +7,8 @@ use std::collections::HashMap;
 
 use super::{Scene, TextureData, plastic};
 use crate::gpu::layout::{
-    MATERIAL_DIELECTRIC, MATERIAL_DOUBLE_SIDED, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_THIN, MIN_ALPHA,
-    Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
+    MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_DOUBLE_SIDED, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR,
+    MATERIAL_THIN, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
 };
 pub use crate::gpu::packing::{pack2x16float, unpack2x16float};
 
@@ -80,6 +80,11 @@ pub fn gpu_materials_and_textures(scene: &Scene) -> (Vec<Material>, Vec<TextureI
                 material.specular = coat.specular;
                 material.plastic_internal_reflectance = internal;
                 material.plastic_specular_weight = coat.specular / (coat.specular + diffuse_mean).max(1e-6);
+            }
+            if let Some((eta, k)) = m.conductor_index {
+                material.flags |= MATERIAL_CONDUCTOR_INDEX;
+                material.conductor_eta = eta;
+                material.conductor_k = k;
             }
             if let Some(d) = m.dielectric {
                 material.flags |= MATERIAL_DIELECTRIC | MATERIAL_DOUBLE_SIDED | if d.thin { MATERIAL_THIN } else { 0 };

@@ -92,6 +92,9 @@ pub struct MaterialDesc {
     /// A smooth dielectric interface (glass); `base_color` is then its transmittance factor,
     /// `metallic` 0, and the material double-sided.
     pub dielectric: Option<Dielectric>,
+    /// The complex index of refraction (eta, k; RGB) of the conductor lobe, whose Fresnel term is
+    /// then the exact one (times `base_color`) instead of Schlick's from `base_color`.
+    pub conductor_index: Option<(Vec3, Vec3)>,
 }
 
 /// A smooth dielectric interface, such as glass (Mitsuba's `dielectric`): light is reflected

@@ -11,7 +11,8 @@ The Cornell box of cornell_box.xml (walls as `rectangle`s) with
 * a pyramid, the second of two shapes in a Mitsuba `serialized` file (format version 4, double
   precision, texture coordinates), picked by `shape_index`, of `roughplastic` with a checkerboard
   diffuse reflectance, `nonlinear` and a specular reflectance of 0.8;
-* a `sphere` with a GGX `roughconductor` (a perfect mirror's reflectance, alpha 0.2);
+* a `sphere` with a GGX `roughconductor` of gold (`material` Au: the exact Fresnel term of its
+  complex index), alpha 0.2;
 * a `cylinder` (open tube) and a `disk`, both `twosided`;
 * a `cube` scaled flat, of smooth `plastic` (index of refraction by name, `bk7`), and a
   `shapegroup` of a cube placed twice by `instance`s;
@@ -205,6 +206,7 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
         <bsdf type="roughconductor">
             <string name="distribution" value="ggx"/>
             <float name="alpha" value="0.2"/>
+            <string name="material" value="Au"/>
         </bsdf>
     </shape>
 

@@ -102,6 +102,7 @@ impl Loader<'_> {
             roughness,
             plastic: None,
             dielectric: None,
+            conductor_index: None,
         })
     }
 }

@@ -21,6 +21,7 @@ pub(super) struct Surface {
     pub roughness: f32,
     pub plastic: Option<PlasticCoat>,
     pub dielectric: Option<Dielectric>,
+    pub conductor_index: Option<(Vec3, Vec3)>,
     pub double_sided: bool,
     pub name: String,
 }
@@ -94,6 +95,7 @@ impl<'e> Builder<'e> {
                     roughness: 1.0,
                     plastic: None,
                     dielectric: None,
+                    conductor_index: None,
                     double_sided: false,
                     name,
                 }
@@ -134,6 +136,7 @@ impl<'e> Builder<'e> {
                     roughness: alpha.sqrt(),
                     plastic: Some(PlasticCoat { eta: int_ior / ext_ior, specular: specular.x, nonlinear, smooth }),
                     dielectric: None,
+                    conductor_index: None,
                     double_sided: false,
                     name,
                 }
@@ -144,7 +147,7 @@ impl<'e> Builder<'e> {
                         t.error("a conductor's textures are not read (textures apply to a diffuse reflectance)")
                     );
                 }
-                let f0 = self.conductor_f0(&o)?;
+                let (specular, index) = self.conductor(&o)?;
                 let alpha = if kind == "roughconductor" {
                     self.microfacet_alpha(&o)?
                 } else {
@@ -156,12 +159,13 @@ impl<'e> Builder<'e> {
                 };
                 o.finish(&[])?;
                 Surface {
-                    base_color: f0,
+                    base_color: specular,
                     texture: None,
                     metallic: 1.0,
                     roughness: alpha.sqrt(),
                     plastic: None,
                     dielectric: None,
+                    conductor_index: index,
                     double_sided: false,
                     name,
                 }
@@ -191,6 +195,7 @@ impl<'e> Builder<'e> {
                     metallic: 0.0,
                     roughness: 0.0,
                     plastic: None,
+                    conductor_index: None,
                     dielectric: Some(Dielectric {
                         eta: int_ior / ext_ior,
                         specular: specular.x,
@@ -342,46 +347,40 @@ impl<'e> Builder<'e> {
         Ok((index, map))
     }
 
-    /// A conductor's reflectance at normal incidence: 1 for Mitsuba's `material="none"` (a
-    /// perfect mirror), else from `eta` and `k`; times `specular_reflectance`. Below 1,
-    /// Schlick's approximation stands in for Mitsuba's exact Fresnel term, with a warning.
-    fn conductor_f0(&mut self, o: &Object<'e>) -> Result<Vec3> {
+    /// A conductor's `specular_reflectance` and complex index of refraction (eta, k): none for
+    /// Mitsuba's `material="none"` (its default: a perfect mirror), a preset's
+    /// ([`super::conductors`]), or `eta` and `k` as given (k defaults to 1, as in Mitsuba).
+    fn conductor(&mut self, o: &Object<'e>) -> Result<(Vec3, Option<(Vec3, Vec3)>)> {
         let e = o.element;
         let eta = o.color("eta")?;
         let k = o.color("k")?;
         let material = o.string("material")?;
-        let f0 = match (material, eta, k) {
-            (Some(m), Some(_), _) | (Some(m), _, Some(_)) => {
+        let index = match (material, eta, k) {
+            (Some(m), Some(_), _) | (Some(m), _, Some(_)) if m != "none" => {
                 return Err(e.error(format!("give either `material` ({m}) or `eta` and `k`, not both")));
             }
-            (Some("none") | None, None, None) => Vec3::ONE,
+            (Some("none") | None, None, None) => None,
             (Some(m), None, None) => {
-                return Err(e.error(format!(
-                    "the conductor preset `{m}` is not built in: give its `eta` and `k` as <rgb> (or `none`: a \
-                     perfect mirror)"
-                )));
+                let (eta, k) = super::conductors::conductor(m).ok_or_else(|| {
+                    e.error(format!(
+                        "the conductor `{m}` is not known: give its `eta` and `k` as <rgb>, `none` (a perfect \
+                         mirror), or one of {}",
+                        super::conductors::CONDUCTORS.iter().map(|(n, _, _)| *n).collect::<Vec<_>>().join(", ")
+                    ))
+                })?;
+                Some((Vec3::from(eta), Vec3::from(k)))
             }
-            (None, Some(eta), k) => {
-                let k = k.unwrap_or(Vec3::ZERO);
-                ((eta - Vec3::ONE).powf(2.0) + k * k) / ((eta + Vec3::ONE).powf(2.0) + k * k)
-            }
-            (None, None, Some(_)) => return Err(e.error("`k` needs `eta` beside it")),
+            (_, Some(eta), k) => Some((eta, k.unwrap_or(Vec3::ONE))),
+            (_, None, Some(_)) => return Err(e.error("`k` needs `eta` beside it")),
         };
+        if let Some((eta, k)) = index
+            && (eta.min_element() < 0.0 || k.min_element() < 0.0)
+        {
+            return Err(e.error(format!("a conductor's eta ({eta}) and k ({k}) must not be negative")));
+        }
         let specular = o.color("specular_reflectance")?.unwrap_or(Vec3::ONE);
         check_albedo(e, specular)?;
-        let f0 = f0 * specular;
-        if f0 != Vec3::ONE {
-            self.warn(
-                e,
-                format!(
-                    "the conductor's Fresnel term is Schlick's approximation from its reflectance at normal incidence \
-                     ({:.4}, {:.4}, {:.4}), where Mitsuba evaluates the exact conductor Fresnel term (times \
-                     specular_reflectance)",
-                    f0.x, f0.y, f0.z
-                ),
-            );
-        }
-        Ok(f0)
+        Ok((specular, index))
     }
 }
 

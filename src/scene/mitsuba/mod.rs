@@ -22,6 +22,7 @@
 //! Lengths are the file's own units, read as metres: a gate or `start_opl` in the file's units
 //! means the same path lengths.
 
+mod conductors;
 mod materials;
 mod shapes;
 mod xml;
@@ -204,6 +205,7 @@ impl<'e> Builder<'e> {
             roughness: s.roughness,
             plastic: s.plastic,
             dielectric: s.dielectric,
+            conductor_index: s.conductor_index,
         });
         let m = self.materials.len() as u32 - 1;
         self.material_of.insert(key, m);
