@@ -89,6 +89,23 @@ fn uniforms(n: usize, seed: u32) -> Vec<[f32; 4]> {
     (0..n).map(|_| [rng.next_f32(), rng.next_f32(), rng.next_f32(), rng.next_f32()]).collect()
 }
 
+/// 2,048 inputs of the sampling probe: (u_lobe, u) and cos theta of wo in [0.05, 1).
+fn sampling_inputs(seed: u32) -> Vec<[f32; 4]> {
+    uniforms(2048, seed).iter().map(|u| [u[0], u[1], u[2], 0.05 + 0.95 * u[3]]).collect()
+}
+
+/// 2,048 inputs of the evaluation probe: wi cosine-distributed over the upper hemisphere, and
+/// cos theta of wo in [0.05, 1).
+fn evaluation_inputs(seed: u32) -> Vec<[f32; 4]> {
+    uniforms(2048, seed)
+        .iter()
+        .map(|u| {
+            let w = gatetrace::sampling::sample_cosine_hemisphere(Vec2::new(u[0], u[1]));
+            [w.x, w.y, w.z, 0.05 + 0.95 * u[2]]
+        })
+        .collect()
+}
+
 #[test]
 fn wgsl_bsdf_matches_cpu_twin() {
     let ctx = common::gpu();
@@ -98,14 +115,8 @@ fn wgsl_bsdf_matches_cpu_twin() {
         let bsdf = probe_bsdf(material.0, material.1, material.2);
         // Sampling: the same numbers give the same direction, pdf; evaluation at random
         // directions of the upper hemisphere.
-        let input: Vec<[f32; 4]> = uniforms(2048, 3).iter().map(|u| [u[0], u[1], u[2], 0.05 + 0.95 * u[3]]).collect();
-        let dirs: Vec<[f32; 4]> = uniforms(2048, 4)
-            .iter()
-            .map(|u| {
-                let w = gatetrace::sampling::sample_cosine_hemisphere(Vec2::new(u[0], u[1]));
-                [w.x, w.y, w.z, 0.05 + 0.95 * u[2]]
-            })
-            .collect();
+        let input = sampling_inputs(3);
+        let dirs = evaluation_inputs(4);
         let (sampled, evaluated) = (run(&ctx, &tracer, 12, material, &input), run(&ctx, &tracer, 13, material, &dirs));
         assert_matches_twin(&format!("{material:?}"), &bsdf, &input, &sampled, &dirs, &evaluated);
     }
@@ -300,14 +311,8 @@ fn wgsl_plastic_matches_cpu_twin() {
     let ctx = common::gpu();
     let (scene, plastics) = plastic_scene();
     let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
-    let input: Vec<[f32; 4]> = uniforms(2048, 5).iter().map(|u| [u[0], u[1], u[2], 0.05 + 0.95 * u[3]]).collect();
-    let dirs: Vec<[f32; 4]> = uniforms(2048, 6)
-        .iter()
-        .map(|u| {
-            let w = gatetrace::sampling::sample_cosine_hemisphere(Vec2::new(u[0], u[1]));
-            [w.x, w.y, w.z, 0.05 + 0.95 * u[2]]
-        })
-        .collect();
+    let input = sampling_inputs(5);
+    let dirs = evaluation_inputs(6);
     for &m in &plastics {
         let bsdf = Bsdf::at(&scene, m, PROBE_UV);
         assert!(bsdf.plastic.is_some());
@@ -597,14 +602,8 @@ fn a_conductor_of_a_named_material_takes_the_exact_fresnel_term() {
     let bsdf = Bsdf::at(&scene, ball, PROBE_UV);
     let (e, kk) = bsdf.conductor_index.expect("the ball's conductor has its index");
     assert!((e - eta).abs().max_element() < 1e-6 && (kk - k).abs().max_element() < 1e-6);
-    let input: Vec<[f32; 4]> = uniforms(2048, 8).iter().map(|u| [u[0], u[1], u[2], 0.05 + 0.95 * u[3]]).collect();
-    let dirs: Vec<[f32; 4]> = uniforms(2048, 9)
-        .iter()
-        .map(|u| {
-            let w = gatetrace::sampling::sample_cosine_hemisphere(Vec2::new(u[0], u[1]));
-            [w.x, w.y, w.z, 0.05 + 0.95 * u[2]]
-        })
-        .collect();
+    let input = sampling_inputs(8);
+    let dirs = evaluation_inputs(9);
     let (sampled, evaluated) =
         (run_material(&ctx, &tracer, 12, ball, &input), run_material(&ctx, &tracer, 13, ball, &dirs));
     assert_matches_twin("gold", &bsdf, &input, &sampled, &dirs, &evaluated);
