@@ -102,18 +102,8 @@ impl<'e> Builder<'e> {
             }
             kind @ ("plastic" | "roughplastic") => {
                 let (diffuse, texture) = self.albedo(&o, "diffuse_reflectance")?;
-                let specular = o.color("specular_reflectance")?.unwrap_or(Vec3::ONE);
-                check_albedo(e, specular)?;
-                if specular.x != specular.y || specular.y != specular.z {
-                    return Err(e.error(format!(
-                        "a coloured specular_reflectance ({specular}) is not rendered: give one value for all channels"
-                    )));
-                }
-                let int_ior = self.ior(&o, "int_ior", 1.49)?;
-                let ext_ior = self.ior(&o, "ext_ior", 1.000277)?;
-                if int_ior == ext_ior {
-                    return Err(e.error(format!("int_ior and ext_ior are both {int_ior}: the coat must refract")));
-                }
+                // Mitsuba's plastics default to polypropylene.
+                let (eta, specular) = self.interface(&o, 1.49)?;
                 let nonlinear = o.boolean("nonlinear")?.unwrap_or(false);
                 let smooth = kind == "plastic";
                 let alpha = if smooth {
@@ -134,7 +124,7 @@ impl<'e> Builder<'e> {
                     texture,
                     metallic: 0.0,
                     roughness: alpha.sqrt(),
-                    plastic: Some(PlasticCoat { eta: int_ior / ext_ior, specular: specular.x, nonlinear, smooth }),
+                    plastic: Some(PlasticCoat { eta, specular, nonlinear, smooth }),
                     dielectric: None,
                     conductor_index: None,
                     double_sided: false,
@@ -174,18 +164,8 @@ impl<'e> Builder<'e> {
                 if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
                     return Err(t.error("a dielectric's textures are not read"));
                 }
-                let int_ior = self.ior(&o, "int_ior", 1.5046)?;
-                let ext_ior = self.ior(&o, "ext_ior", 1.000277)?;
-                if int_ior == ext_ior {
-                    return Err(e.error(format!("int_ior and ext_ior are both {int_ior}: the interface must refract")));
-                }
-                let specular = o.color("specular_reflectance")?.unwrap_or(Vec3::ONE);
-                check_albedo(e, specular)?;
-                if specular.x != specular.y || specular.y != specular.z {
-                    return Err(e.error(format!(
-                        "a coloured specular_reflectance ({specular}) is not rendered: give one value for all channels"
-                    )));
-                }
+                // Mitsuba's dielectrics default to BK7.
+                let (eta, specular) = self.interface(&o, 1.5046)?;
                 let transmittance = o.color("specular_transmittance")?.unwrap_or(Vec3::ONE);
                 check_albedo(e, transmittance)?;
                 o.finish(&[])?;
@@ -196,11 +176,7 @@ impl<'e> Builder<'e> {
                     roughness: 0.0,
                     plastic: None,
                     conductor_index: None,
-                    dielectric: Some(Dielectric {
-                        eta: int_ior / ext_ior,
-                        specular: specular.x,
-                        thin: kind == "thindielectric",
-                    }),
+                    dielectric: Some(Dielectric { eta, specular, thin: kind == "thindielectric" }),
                     double_sided: true,
                     name,
                 }
@@ -265,6 +241,26 @@ impl<'e> Builder<'e> {
             self.warn(e, format!("alpha {alpha} is rendered as {MIN_ALPHA}, gatetrace's smallest roughness"));
         }
         Ok(alpha.max(MIN_ALPHA))
+    }
+
+    /// A dielectric interface (a dielectric's, or a plastic's coat): its relative index
+    /// int_ior / ext_ior (`int_ior` defaulting to `default_int_ior`, `ext_ior` to air) and its
+    /// `specular_reflectance`, one value for all channels.
+    fn interface(&mut self, o: &Object<'e>, default_int_ior: f32) -> Result<(f32, f32)> {
+        let e = o.element;
+        let int_ior = self.ior(o, "int_ior", default_int_ior)?;
+        let ext_ior = self.ior(o, "ext_ior", 1.000277)?;
+        if int_ior == ext_ior {
+            return Err(e.error(format!("int_ior and ext_ior are both {int_ior}: the interface must refract")));
+        }
+        let specular = o.color("specular_reflectance")?.unwrap_or(Vec3::ONE);
+        check_albedo(e, specular)?;
+        if specular.x != specular.y || specular.y != specular.z {
+            return Err(e.error(format!(
+                "a coloured specular_reflectance ({specular}) is not rendered: give one value for all channels"
+            )));
+        }
+        Ok((int_ior / ext_ior, specular.x))
     }
 
     /// An index of refraction: a number, or the name of a material in Mitsuba's table
