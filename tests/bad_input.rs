@@ -274,7 +274,7 @@ fn cases() -> Vec<(Case, Setup)> {
                 std::fs::write(d.join("scene.xml"), xml_with(glass)).unwrap()
             },
             render("{dir}/scene.xml", &["--method", "ellipsoidal", "--gate", "box:2..2.1"]),
-            &["dielectric (glass)", "`ellipsoidal` does not render yet", "--method path"],
+            &["dielectric (glass)", "`ellipsoidal` alone would leave them out", "--method combined"],
         ),
         xml_case(
             "XML dielectric whose indices are equal",

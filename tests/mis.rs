@@ -5,12 +5,16 @@
 //! x_0..x_{s-1}) x prod(camera-side densities of x_s..x_{k-2}); likewise the paper's approximate
 //! weights of ellipsoidal connections (with a directional light, e = 1 weighs the next-event
 //! connection that replaces the spheroid next to the light); and the combined estimator's
-//! weights of both families together.
+//! weights of both families together. Paths may hold glass (delta) vertices: the strategies that
+//! would connect at one are left out, no spheroid places one or a vertex next to one, and the
+//! delta steps' densities count as 1 in every product (PBRT's convention, under which they
+//! cancel between the strategies that remain).
 
 mod common;
 
 use gatetrace::integrator::mis::{Vertex, VertexKind, mis_weight, vertex_pdf};
 use gatetrace::rng::Xorshift64Star;
+use gatetrace::scene::Dielectric;
 use gatetrace::scene::bsdf::{Bsdf, PlasticLobe};
 use gatetrace::scene::plastic;
 use glam::Vec3;
@@ -42,9 +46,10 @@ fn light_of_trial(i: usize) -> Light {
     [Light::Point, Light::Directional, Light::Area, Light::Area][i % 4]
 }
 
-/// A random path of `k` vertices: a light, k - 2 surfaces whose normals face both neighbours,
-/// and a pinhole looking roughly at its neighbour.
-fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light) -> Vec<Vertex> {
+/// A random path of `k` vertices: a light, k - 2 surfaces whose normals face both neighbours
+/// (each glass, a delta vertex, with probability `glass`), and a pinhole looking roughly at its
+/// neighbour.
+fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light, glass: f32) -> Vec<Vertex> {
     let positions: Vec<Vec3> = (0..k).map(|_| rng.next_vec3() * 2.0).collect();
     let mut path = Vec::with_capacity(k);
     for i in 0..k {
@@ -83,6 +88,10 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light) -> Vec<Vertex> 
             if rng.next_f32() < 0.3 {
                 bsdf = Bsdf { metallic: 0.0, alpha: 0.2, plastic: Some(plastic_coat()), ..bsdf };
             }
+            if glass > 0.0 && rng.next_f32() < glass {
+                let dielectric = Dielectric { eta: 1.5, specular: 1.0, thin: false };
+                bsdf = Bsdf { metallic: 0.0, plastic: None, dielectric: Some(dielectric), ..bsdf };
+            }
             let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.next_vec3()).normalize();
             Vertex { kind: VertexKind::Surface(bsdf), position: p, normal: n }
         };
@@ -102,28 +111,49 @@ fn is_valid(path: &[Vertex]) -> bool {
     })
 }
 
+/// Whether strategy s (s light-side vertices) can sample the path: s = 0 needs an area light,
+/// and no connection ends at a delta vertex.
+fn connectible(path: &[Vertex], s: usize) -> bool {
+    match s {
+        0 => !path[0].is_delta_light(),
+        _ => !(path[s - 1].is_delta() || path[s].is_delta()),
+    }
+}
+
 /// p_s of the full path, computed directly: the light side generates x_0..x_{s-1} forwards, the
-/// camera side x_{k-2}..x_s backwards (the pinhole x_{k-1} is not sampled).
+/// camera side x_{k-2}..x_s backwards (the pinhole x_{k-1} is not sampled); zero for a
+/// strategy that cannot sample the path.
 fn strategy_pdf(path: &[Vertex], s: usize) -> f64 {
-    if s == 0 && path[0].is_delta_light() {
+    if !connectible(path, s) {
         return 0.0;
     }
     light_side_pdf(path, s) * camera_side_pdf(path, s)
 }
 
-/// The density with which the light side generates x_0..x_{n-1}.
+/// The density with which the light side generates x_0..x_{n-1} (a step from a delta vertex
+/// counting 1).
 fn light_side_pdf(path: &[Vertex], n: usize) -> f64 {
     (0..n)
         .map(|i| match i {
             0 => path[0].light_origin_pdf() as f64,
+            _ if path[i - 1].is_delta() => 1.0,
             _ => vertex_pdf(&path[i - 1], i.checked_sub(2).map(|j| &path[j]), &path[i]) as f64,
         })
         .product()
 }
 
-/// The density with which the camera side generates x_{k-2}..x_from backwards.
+/// The density with which the camera side generates x_{k-2}..x_from backwards (a step from a
+/// delta vertex counting 1).
 fn camera_side_pdf(path: &[Vertex], from: usize) -> f64 {
-    (from..path.len() - 1).map(|i| vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) as f64).product()
+    (from..path.len() - 1)
+        .map(|i| if path[i + 1].is_delta() { 1.0 } else { vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) as f64 })
+        .product()
+}
+
+/// c_j of edge j in the paper's weights: half for each end of the edge a spheroid can place.
+fn edge_share(path: &[Vertex], j: usize) -> f64 {
+    use gatetrace::integrator::mis::spheroid_places;
+    0.5 * (spheroid_places(path, j - 1) as u8 + spheroid_places(path, j) as u8) as f64
 }
 
 #[test]
@@ -133,11 +163,11 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
     for trial in 0..4000 {
         let k = 2 + trial % 6;
         let light = light_of_trial(trial);
-        let path = random_path(&mut rng, k, light);
+        let path = random_path(&mut rng, k, light, 0.25);
         if !is_valid(&path) {
             continue;
         }
-        let strategies = if light == Light::Area { 0..k } else { 1..k };
+        let strategies = (0..k).filter(|&s| connectible(&path, s));
         let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
         let norm: f64 = pdfs.iter().map(|p| p * p).sum();
         if !(norm.is_finite() && norm > 0.0) {
@@ -164,23 +194,22 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
 /// explicit product, as `strategy_pdf`.
 #[test]
 fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
-    use gatetrace::integrator::mis::ellipsoidal_mis_weight;
+    use gatetrace::integrator::mis::{ellipsoidal_mis_weight, spheroid_places};
     let mut rng = Xorshift64Star(0x1234_5678_9ABC_DEF1);
     let mut checked = 0;
     for trial in 0..4000 {
         let k = 3 + trial % 5;
-        let path = random_path(&mut rng, k, light_of_trial(trial));
+        let path = random_path(&mut rng, k, light_of_trial(trial), 0.2);
         if !is_valid(&path) {
             continue;
         }
         let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
-        let c = |j: usize| if j == 1 || j == k - 1 { 0.5 } else { 1.0 };
-        let norm: f64 = (1..k).map(|j| c(j) * pdfs[j]).sum();
+        let norm: f64 = (1..k).map(|j| edge_share(&path, j) * pdfs[j]).sum();
         if !(norm.is_finite() && norm > 0.0) {
             continue;
         }
         let mut sum = 0.0f64;
-        for e in 1..=k - 2 {
+        for e in (1..=k - 2).filter(|&e| spheroid_places(&path, e)) {
             let w = ellipsoidal_mis_weight(&path, e) as f64;
             let expected = 0.5 * (pdfs[e] + pdfs[e + 1]) / norm;
             assert!(
@@ -196,10 +225,11 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
 }
 
 /// The random path of trial `trial` of the combined weights' tests (3 to 8 vertices, area and
-/// point lights: a combined render refuses directional ones), if every strategy can sample it.
-fn combined_trial_path(rng: &mut Xorshift64Star, trial: usize) -> Option<(Vec<Vertex>, Light)> {
+/// point lights: a combined render refuses directional ones; glass vertices with probability
+/// `glass`), if its directions leave each vertex on its normal's side.
+fn combined_trial_path(rng: &mut Xorshift64Star, trial: usize, glass: f32) -> Option<(Vec<Vertex>, Light)> {
     let light = if trial.is_multiple_of(3) { Light::Point } else { Light::Area };
-    let path = random_path(rng, 3 + trial % 6, light);
+    let path = random_path(rng, 3 + trial % 6, light, glass);
     is_valid(&path).then_some((path, light))
 }
 
@@ -213,12 +243,12 @@ fn combined_trial_path(rng: &mut Xorshift64Star, trial: usize) -> Option<(Vec<Ve
 #[test]
 fn combined_weights_match_their_definition_and_sum_to_one() {
     use gatetrace::integrator::combined::Family;
-    use gatetrace::integrator::mis::{combined_weight, spheroid_vertex_density};
+    use gatetrace::integrator::mis::{combined_weight, spheroid_places, spheroid_vertex_density};
     let mut rng = Xorshift64Star(0x0DDB_1A5E_5BAD_5EED);
     let mut checked = 0;
     let mut shares = Vec::new();
     for trial in 0..4000 {
-        let Some((path, light)) = combined_trial_path(&mut rng, trial) else { continue };
+        let Some((path, _)) = combined_trial_path(&mut rng, trial, 0.2) else { continue };
         let k = path.len();
         // Target densities from those of a 1 mm gate (1000 m^-1) to a 10 m one's, 1 to 8
         // ellipsoidal connections per direct one.
@@ -227,29 +257,27 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
         let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
         let sd: f64 = pdfs.iter().sum();
         let sd2: f64 = pdfs.iter().map(|p| p * p).sum();
-        let c = |j: usize| if j == 1 || j == k - 1 { 0.5 } else { 1.0 };
-        let sc: f64 = (1..k).map(|j| c(j) * pdfs[j]).sum();
+        let sc: f64 = (1..k).map(|j| edge_share(&path, j) * pdfs[j]).sum();
         let mut se = 0.0f64;
-        for m in 1..=k - 2 {
+        for m in (1..=k - 2).filter(|&m| spheroid_places(&path, m)) {
             let v = &path[m];
             let e =
                 spheroid_vertex_density(path[m - 1].position, v.position, v.normal, path[m + 1].position, p_tau, 1e-6);
             se += light_side_pdf(&path, m) * e as f64 * camera_side_pdf(&path, m + 1);
         }
         let share = sd / (sd + ratio as f64 * se);
-        if !(share.is_finite() && sd2.is_finite() && sd > 0.0 && sc > 0.0) {
+        if !(share.is_finite() && sd2.is_finite() && sd > 0.0) {
             continue;
         }
         let close = |w: f64, expected: f64| (w - expected).abs() <= 1e-3 * expected.max(1e-3);
         let mut sum = 0.0f64;
-        let strategies = if light == Light::Area { 0..k } else { 1..k };
-        for s in strategies {
+        for s in (0..k).filter(|&s| connectible(&path, s)) {
             let w = combined_weight(&path, Family::Direct, s, p_tau, ratio, 1e-6) as f64;
             let expected = share * pdfs[s] * pdfs[s] / sd2;
             assert!(close(w, expected), "path of {k} vertices, direct s = {s}: weight {w}, definition {expected}");
             sum += w;
         }
-        for e in 1..=k - 2 {
+        for e in (1..=k - 2).filter(|&e| spheroid_places(&path, e)) {
             let w = combined_weight(&path, Family::Ellipsoidal, e, p_tau, ratio, 1e-6) as f64;
             let expected = (1.0 - share) * 0.5 * (pdfs[e] + pdfs[e + 1]) / sc;
             assert!(close(w, expected), "path of {k} vertices, spheroid vertex {e}: weight {w}, definition {expected}");
@@ -266,13 +294,14 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
 }
 
 /// `combined_weight` of family_mis.wesl (probe_functions 20) against its twin on random paths and
-/// family ratios: the same densities in, the same weights out, with the target-length density
-/// of a box gate's table (checked against the CPU sampler's).
+/// family ratios (paths with glass vertices among them): the same densities and delta vertices
+/// in, the same weights out, with the target-length density of a box gate's table (checked
+/// against the CPU sampler's).
 #[test]
 fn combined_weights_in_wgsl_match_the_twin() {
     use gatetrace::film::Gate;
     use gatetrace::integrator::combined::Family;
-    use gatetrace::integrator::mis::combined_weight;
+    use gatetrace::integrator::mis::{combined_weight, spheroid_places};
     use gatetrace::integrator::{PathTracer, RenderSettings, target_sampler};
     const RECORDS: usize = 18; // COMBINED_RECORDS: a header, two records per vertex (k <= 8), the ratio
     let ctx = common::gpu();
@@ -284,16 +313,24 @@ fn combined_weights_in_wgsl_match_the_twin() {
     let mut rng = Xorshift64Star(0xC0FF_EE00_1234_5678);
     let (mut input, mut cases) = (Vec::new(), Vec::new());
     for trial in 0..2000 {
-        let Some((path, light)) = combined_trial_path(&mut rng, trial) else { continue };
+        let Some((path, light)) = combined_trial_path(&mut rng, trial, 0.2) else { continue };
         let k = path.len();
+        let placed: Vec<usize> = (1..=k - 2).filter(|&e| spheroid_places(&path, e)).collect();
+        let connected: Vec<usize> = (0..k).filter(|&s| connectible(&path, s)).collect();
         let (length, inv_p) = sampler.sample(rng.next_f32());
-        let (family, own) = if trial % 2 == 0 {
-            let first = if light == Light::Area { 0 } else { 1 };
-            (Family::Direct, first + (rng.next_f32() * (k - first) as f32) as usize)
+        let pick = |of: &[usize], u: f32| of[((u * of.len() as f32) as usize).min(of.len() - 1)];
+        let u = rng.next_f32();
+        let (family, own) = if trial % 2 == 0 || placed.is_empty() {
+            if connected.is_empty() {
+                continue;
+            }
+            (Family::Direct, pick(&connected, u))
         } else {
-            (Family::Ellipsoidal, 1 + (rng.next_f32() * (k - 2) as f32) as usize)
+            (Family::Ellipsoidal, pick(&placed, u))
         };
-        let code = family as u32 + if light == Light::Area { 4 } else { 0 };
+        // The family, 4 for an area light, 8 times the bits of the delta vertices.
+        let deltas: u32 = path.iter().enumerate().map(|(i, v)| u32::from(v.is_delta()) << i).sum();
+        let code = family as u32 + if light == Light::Area { 4 } else { 0 } + 8 * deltas;
         input.push([k as f32, own as f32, code as f32, length]);
         for (i, v) in path.iter().enumerate() {
             let from_light = match i {
@@ -311,7 +348,9 @@ fn combined_weights_in_wgsl_match_the_twin() {
         cases.push((path, family, own, 1.0 / inv_p, ratio));
     }
     assert!(cases.len() > 500, "only {} valid random paths", cases.len());
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 20.0)], &input, cases.len());
+    assert!(cases.iter().any(|c| c.0.iter().any(Vertex::is_delta)), "some paths hold glass");
+    let extra = [("FUNCTION", 20.0), ("HAS_DIELECTRIC", 1.0)];
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &extra, &input, cases.len());
     for (i, ((path, family, own, p_tau, ratio), o)) in cases.iter().zip(&out).enumerate() {
         assert!((o[1] - p_tau).abs() <= 1e-4 * p_tau, "path {i}: target density GPU {} CPU {p_tau}", o[1]);
         let twin = combined_weight(path, *family, *own, o[1], *ratio, 1e-6);

@@ -162,14 +162,15 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 }
 
 /// The methods `auto` measures for `settings` and `scene`: `path` and `direct` always, and
-/// `ellipsoidal` where there is a gate (it has no steady state); `path` alone for a scene with a
-/// dielectric, which only it renders.
+/// `ellipsoidal` where there is a gate (it has no steady state). In a scene with a dielectric
+/// `ellipsoidal` is left out (alone it cannot sample the paths through glass), and an NLOS
+/// capture of one takes `path` alone, which only it renders.
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
-    if scene.has_dielectric() {
+    if scene.has_dielectric() && settings.nlos.is_some() {
         return vec![Method::Path];
     }
     let mut methods = vec![Method::Path, Method::Direct];
-    if !matches!(settings.gate, Gate::None) {
+    if !matches!(settings.gate, Gate::None) && !scene.has_dielectric() {
         methods.push(Method::Ellipsoidal);
     }
     methods

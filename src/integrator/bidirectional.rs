@@ -165,11 +165,23 @@ impl<'a> BidirectionalTracer<'a> {
     ) -> Result<Self> {
         check_tracer_settings(settings)?;
         if scene.has_dielectric() {
-            anyhow::bail!(
-                "the scene has a dielectric (glass) material, which `{}` does not render yet (connections through \
-                 delta surfaces are not built): render it with --method path",
-                settings.method.name()
-            );
+            if settings.nlos.is_some() {
+                anyhow::bail!(
+                    "the scene has a dielectric (glass) material, which NLOS captures do not render yet with `{}`: \
+                     capture it with --method path",
+                    settings.method.name()
+                );
+            }
+            // A path seen or lit only through glass has no vertex a spheroid can place (none lies
+            // next to a delta vertex): ellipsoidal connections alone would leave it out. A
+            // combined render's direct half samples those paths.
+            if settings.method == Method::Ellipsoidal && family.is_none() {
+                anyhow::bail!(
+                    "the scene has a dielectric (glass) material: paths seen or lit through it have no ellipsoidal \
+                     connection, so `ellipsoidal` alone would leave them out; render it with --method combined (direct \
+                     connections for those paths, ellipsoidal ones for the rest), direct, path or auto"
+                );
+            }
         }
         let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());

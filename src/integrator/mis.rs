@@ -70,6 +70,12 @@ impl Vertex {
         matches!(self.kind, VertexKind::Surface(_) | VertexKind::AreaLight { .. })
     }
 
+    /// A vertex on a delta BSDF (a smooth or thin dielectric): no connection ends there, and its
+    /// sampled directions have no density (the kernels' VERTEX_DELTA).
+    pub fn is_delta(&self) -> bool {
+        matches!(self.kind, VertexKind::Surface(bsdf) if bsdf.dielectric.is_some())
+    }
+
     /// A point or directional light: no camera subpath reaches it.
     pub fn is_delta_light(&self) -> bool {
         matches!(self.kind, VertexKind::PointLight { .. } | VertexKind::DirectionalLight { .. })
@@ -166,7 +172,10 @@ fn remap0(x: f32) -> f32 {
 }
 
 /// The power-heuristic weight of strategy (s, t = path.len() - s) for `path` (x_0 on a light,
-/// the last vertex the pinhole), computed as `connect_direct` does.
+/// the last vertex the pinhole), computed as `connect_direct` does: strategies whose connection
+/// would end at a delta vertex are left out, and the zero densities that mark delta steps count
+/// as 1 (PBRT's BDPT). Only for strategies that can sample the path (neither x_{s-1} nor x_s
+/// a delta vertex).
 pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
     let k = path.len();
     let t = k - s;
@@ -203,7 +212,9 @@ pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
             camera[i].pdf_rev
         };
         ri *= remap0(rev) / remap0(camera[i].pdf_fwd);
-        sum += ri * ri;
+        if !(camera[i].vertex.is_delta() || camera[i - 1].vertex.is_delta()) {
+            sum += ri * ri;
+        }
     }
     ri = 1.0;
     for i in (0..s).rev() {
@@ -215,7 +226,11 @@ pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
             light[i].pdf_rev
         };
         ri *= remap0(rev) / remap0(light[i].pdf_fwd);
-        if !(i == 0 && light[0].vertex.is_delta_light()) {
+        let connectible = match i {
+            0 => !light[0].vertex.is_delta_light(),
+            _ => !(light[i].vertex.is_delta() || light[i - 1].vertex.is_delta()),
+        };
+        if connectible {
             sum += ri * ri;
         }
     }
@@ -229,7 +244,10 @@ pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
 /// to p_e of each vertex's light-side and camera-side densities, using the densities the
 /// subpaths store and those the connection computes next to x_e. With a directional light,
 /// e = 1 is the weight of the next-event connection from camera vertex x_1 to the light, which
-/// takes the place of the spheroid next to it.
+/// takes the place of the spheroid next to it. With delta vertices, c_j counts only the
+/// vertices a spheroid can place ([`spheroid_places`]), and delta steps' zero densities count
+/// as 1. (The kernels also bar vertices inside a medium, which this twin's vertices do not
+/// model.)
 pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
     let k = path.len();
     assert!(e >= 1 && e + 2 <= k);
@@ -240,7 +258,8 @@ pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
     let (qs, pt, xe) = (&path[s - 1], &path[e + 1], &path[e]);
     let qsm = (s >= 2).then(|| path[s - 2]);
     let ptm = (t >= 2).then(|| path[e + 2]);
-    let c = |j: usize| if j == 1 || j == k - 1 { 0.5 } else { 1.0 };
+    let delta: Vec<bool> = path.iter().map(Vertex::is_delta).collect();
+    let c = |j: usize| spheroid_edge_share(path, j);
     let mut sum = c(s);
     let mut r = 1.0f32;
     for j in (1..s).rev() {
@@ -251,7 +270,9 @@ pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
         } else {
             light[j].pdf_rev
         };
-        r *= pc / light[j].pdf_fwd.max(1e-30);
+        let pc = if delta[j + 1] { 1.0 } else { pc };
+        let pl = if delta[j - 1] { 1.0 } else { light[j].pdf_fwd.max(1e-30) };
+        r *= pc / pl;
         sum += c(j) * r;
     }
     r = vertex_pdf(qs, qsm.as_ref(), xe) / vertex_pdf(pt, ptm.as_ref(), xe).max(1e-30);
@@ -266,10 +287,24 @@ pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
         } else {
             camera[i].pdf_rev
         };
-        r *= pl / camera[i].pdf_fwd.max(1e-30);
+        let pl = if delta[j - 1] { 1.0 } else { pl };
+        let pc = if delta[j + 1] { 1.0 } else { camera[i].pdf_fwd.max(1e-30) };
+        r *= pl / pc;
         sum += c(j + 1) * r;
     }
     0.5 * (1.0 + r_next) / sum
+}
+
+/// Whether a spheroid can place vertex m of `path` (family_mis.wesl `spheroid_places`): 1 <= m
+/// <= k - 2, and neither it nor a neighbour is a delta vertex.
+pub fn spheroid_places(path: &[Vertex], m: usize) -> bool {
+    (1..=path.len().saturating_sub(2)).contains(&m) && !path[m - 1..=m + 1].iter().any(Vertex::is_delta)
+}
+
+/// c_j of edge j >= 1 (between x_{j-1} and x_j) in the paper's weights: half for each of its two
+/// ends a spheroid can place (1/2 at the ends of a path without delta vertices, 1 between).
+fn spheroid_edge_share(path: &[Vertex], j: usize) -> f32 {
+    0.5 * (f32::from(u8::from(spheroid_places(path, j - 1))) + f32::from(u8::from(spheroid_places(path, j))))
 }
 
 /// `spheroid_vertex_density` of family_mis.wesl: the area density (m^-2) the families' weights
@@ -296,7 +331,9 @@ pub fn spheroid_vertex_density(prev: Vec3, x: Vec3, normal: Vec3, next: Vec3, p_
 /// sum of the direct strategies' densities and S_E that of the spheroid vertices' stand-in
 /// densities (`spheroid_vertex_density` for the placed vertex, the subpaths' densities for the
 /// rest), with target-length density `p_tau` (m^-1) at the path's length and `ratio`
-/// ellipsoidal connections per direct one (paths of at least three vertices).
+/// ellipsoidal connections per direct one (paths of at least three vertices). Both sums leave
+/// out what cannot sample the path (direct strategies ending at a delta vertex, vertices
+/// [`spheroid_places`] rules out), and delta steps' zero densities count as 1.
 pub fn combined_weight(
     path: &[Vertex],
     family: super::bidirectional::Family,
@@ -315,11 +352,14 @@ pub fn combined_weight(
     let from_camera = |i: usize| if i + 1 < k { vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) } else { 1.0 };
     let first = if path[0].is_delta_light() { 1 } else { 0 };
     let (mut r, mut sd, mut sd2, mut sc, mut se, mut r_own, mut r_next) = (1.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let delta: Vec<bool> = path.iter().map(Vertex::is_delta).collect();
     for j in first..k {
-        sd += r;
-        sd2 += r * r;
+        if j == 0 || !(delta[j - 1] || delta[j]) {
+            sd += r;
+            sd2 += r * r;
+        }
         if j >= 1 {
-            sc += if j == 1 || j + 1 == k { 0.5 } else { 1.0 } * r;
+            sc += spheroid_edge_share(path, j) * r;
         }
         if j == own {
             r_own = r;
@@ -327,8 +367,9 @@ pub fn combined_weight(
         if j == own + 1 {
             r_next = r;
         }
-        let camera = from_camera(j).max(1e-30);
-        if j >= 1 && j + 2 <= k && p_tau > 0.0 {
+        let camera = if j + 1 < k && delta[j + 1] { 1.0 } else { from_camera(j).max(1e-30) };
+        let light = if j >= 1 && delta[j - 1] { 1.0 } else { from_light(j) };
+        if spheroid_places(path, j) && p_tau > 0.0 {
             let v = &path[j];
             let e = spheroid_vertex_density(
                 path[j - 1].position,
@@ -340,7 +381,7 @@ pub fn combined_weight(
             );
             se += r * e / camera;
         }
-        r *= (from_light(j) / camera).min(1e8);
+        r *= (light / camera).min(1e8);
         if r > 1e10 || sd > 1e10 {
             let f = 1e-10;
             (r, sd, sd2, sc, se, r_own, r_next) = (r * f, sd * f, sd2 * f * f, sc * f, se * f, r_own * f, r_next * f);
