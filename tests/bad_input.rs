@@ -262,10 +262,20 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:5: <texture type=\"checkerboard\" name=\"specular_transmittance\">", "a dielectric's textures are not read"],
         ),
         xml_case(
-            "XML rough dielectric",
-            "<bsdf type=\"roughdielectric\" id=\"p\"/><shape type=\"cube\"><ref id=\"p\"/></shape>",
+            "XML rough dielectric of anisotropic roughness",
+            "<bsdf type=\"roughdielectric\" id=\"p\"><float name=\"alpha_u\" value=\"0.1\"/>\
+             <float name=\"alpha_v\" value=\"0.3\"/></bsdf><shape type=\"cube\"><ref id=\"p\"/></shape>",
             &[],
-            &["<bsdf type=\"roughdielectric\" id=\"p\">", "`roughdielectric` BSDF is not rendered yet"],
+            &["<bsdf type=\"roughdielectric\" id=\"p\">", "anisotropic roughness (alpha_u, alpha_v) is not rendered"],
+        ),
+        case(
+            "XML rough glass rendered by direct connections",
+            |d| {
+                let glass = "<shape type=\"sphere\"><bsdf type=\"roughdielectric\"/></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(glass)).unwrap()
+            },
+            render("{dir}/scene.xml", &["--method", "direct"]),
+            &["rough dielectric (`roughdielectric`)", "`direct` does not render yet", "--method path"],
         ),
         case(
             "XML glass rendered by ellipsoidal connections",

@@ -147,11 +147,18 @@ fn integrate_cell(g: &dyn Fn(Vec3) -> f64, (z0, z1): (f64, f64), (p0, p1): (f64,
 /// from the pdf integrated per cell, the failed samples against the pdf's missing mass, low
 /// counts pooled. Returns (statistic, degrees of freedom, p, failed samples).
 fn sampling_chi2(samples: &[[f32; 4]], bsdf: &Bsdf, cos_wo: f32) -> (f64, usize, f64, f64) {
+    let wo = wo_of(cos_wo);
+    sampling_chi2_with(samples, &|w: Vec3| bsdf.pdf(wo, w) as f64)
+}
+
+/// `sampling_chi2` against the density `pdf` over the upper hemisphere (samples outside it
+/// counted as failed).
+fn sampling_chi2_with(samples: &[[f32; 4]], pdf: &dyn Fn(Vec3) -> f64) -> (f64, usize, f64, f64) {
     let (nz, nphi, n) = (16usize, 24usize, samples.len());
     let mut observed = vec![0.0; nz * nphi];
     let mut failed = 0.0;
     for g in samples {
-        if g[3] <= 0.0 {
+        if g[3] <= 0.0 || g[2] <= 0.0 {
             failed += 1.0;
             continue;
         }
@@ -161,8 +168,6 @@ fn sampling_chi2(samples: &[[f32; 4]], bsdf: &Bsdf, cos_wo: f32) -> (f64, usize,
         let ip = ((phi / std::f64::consts::TAU * nphi as f64) as usize).min(nphi - 1);
         observed[iz * nphi + ip] += 1.0;
     }
-    let wo = wo_of(cos_wo);
-    let pdf = |w: Vec3| bsdf.pdf(wo, w) as f64;
     let mut expected = vec![0.0; nz * nphi];
     for iz in 0..nz {
         let (t0, t1) = (iz as f64 / nz as f64, (iz + 1) as f64 / nz as f64);
@@ -171,7 +176,7 @@ fn sampling_chi2(samples: &[[f32; 4]], bsdf: &Bsdf, cos_wo: f32) -> (f64, usize,
                 ip as f64 / nphi as f64 * std::f64::consts::TAU,
                 (ip + 1) as f64 / nphi as f64 * std::f64::consts::TAU,
             );
-            expected[iz * nphi + ip] = n as f64 * integrate_cell(&pdf, (1.0 - t1 * t1, 1.0 - t0 * t0), p, 12);
+            expected[iz * nphi + ip] = n as f64 * integrate_cell(pdf, (1.0 - t1 * t1, 1.0 - t0 * t0), p, 12);
         }
     }
     observed.push(failed);
@@ -607,4 +612,104 @@ fn a_conductor_of_a_named_material_takes_the_exact_fresnel_term() {
     let (sampled, evaluated) =
         (run_material(&ctx, &tracer, 12, ball, &input), run_material(&ctx, &tracer, 13, ball, &dirs));
     assert_matches_twin("gold", &bsdf, &input, &sampled, &dirs, &evaluated);
+}
+
+/// The rough glass box and the material index of its frosted sphere (a rough BK7 dielectric,
+/// GGX alpha 0.2).
+fn rough_glass_scene() -> (PreparedScene, u32) {
+    let path = common::repo_path("assets/scenes/rough_glass_box.xml");
+    let scene = PreparedScene::new(load_scene_with(&path, &LoadOptions::default()).unwrap()).unwrap();
+    let glass = (0..scene.scene.materials.len() as u32)
+        .find(|&m| scene.scene.materials[m as usize].dielectric.is_some_and(|d| d.alpha > 0.0))
+        .expect("the rough glass box has a rough dielectric");
+    (scene, glass)
+}
+
+/// A rough dielectric (GGX microfacets that reflect with F(wo.h) and refract otherwise): the
+/// WGSL samples the twin's directions with the twin's densities and values; its samples follow
+/// that density on both sides of the surface (chi-square of the reflected and of the refracted
+/// directions, from outside on the GPU and from inside, total internal reflection included, on
+/// the twin); a refracted sample's radiance weight is its importance weight over eta^2; and
+/// the mean importance weight f |cos| / pdf (eta^2 restored for refraction), which is Smith's
+/// G1 of the outgoing direction, lies below one and near it.
+#[test]
+fn a_rough_dielectric_matches_its_twin_and_samples_its_density_on_both_sides() {
+    let ctx = common::gpu();
+    let (scene, glass) = rough_glass_scene();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let bsdf = Bsdf::at(&scene, glass, PROBE_UV);
+    let d = bsdf.dielectric.expect("a dielectric");
+    assert!((d.alpha - 0.2).abs() < 1e-6 && (d.eta - 1.5046 / 1.000277).abs() < 1e-6);
+    let inside = Bsdf { dielectric: Some(gatetrace::scene::Dielectric { eta: 1.0 / d.eta, ..d }), ..bsdf };
+    let n = 200_000;
+    let cosines = [0.9f32, 0.5, 0.15];
+    // Beyond the critical angle the refracted lobe is a sliver at the horizon, finer than the
+    // quadrature's cells: there only the reflected side is tested from inside.
+    let critical = (1.0 - 1.0 / (d.eta * d.eta)).sqrt();
+    let tests = cosines.iter().map(|&c| if c > critical { 4 } else { 3 }).sum::<usize>();
+    for (c, cos_wo) in cosines.into_iter().enumerate() {
+        let wo = wo_of(cos_wo);
+        let input: Vec<[f32; 4]> = uniforms(n, 300 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
+        let sampled = run_material(&ctx, &tracer, 12, glass, &input);
+        let (mut weights, mut refracted) = (0.0f64, 0usize);
+        for (i, (x, g)) in input.iter().zip(&sampled).enumerate() {
+            let s = bsdf.sample(wo, x[0], Vec2::new(x[1], x[2]));
+            assert!(!s.delta);
+            if s.pdf == 0.0 {
+                assert!(g[3] == 0.0 || s.wi.z.abs() < 1e-4, "cos {cos_wo} record {i}: CPU fails, GPU pdf {}", g[3]);
+                continue;
+            }
+            for k in 0..3 {
+                assert!((g[k] - s.wi[k]).abs() < 2e-4, "cos {cos_wo} record {i}: wi GPU {g:?} CPU {:?}", s.wi);
+            }
+            assert!(
+                (g[3] - s.pdf).abs() <= 2e-3 * s.pdf + 1e-5,
+                "cos {cos_wo} record {i}: pdf GPU {} CPU {}",
+                g[3],
+                s.pdf
+            );
+            let mut weight = (s.f.x * s.wi.z.abs() / s.pdf) as f64;
+            if s.wi.z < 0.0 {
+                refracted += 1;
+                weight *= (d.eta * d.eta) as f64;
+            }
+            weights += weight;
+        }
+        let mean = weights / n as f64;
+        println!("cos {cos_wo}: {refracted} of {n} refracted, mean importance weight {mean:.4}");
+        assert!(mean <= 1.0 + 1e-4 && mean > 0.9, "cos {cos_wo}: mean weight {mean}");
+        // The GPU's samples against the twin's density, each side on its own.
+        let above: Vec<[f32; 4]> = sampled.iter().map(|g| if g[2] > 0.0 { *g } else { [0.0; 4] }).collect();
+        let below: Vec<[f32; 4]> = sampled
+            .iter()
+            .map(|g| if g[2] < 0.0 && g[3] > 0.0 { [g[0], g[1], -g[2], g[3]] } else { [0.0; 4] })
+            .collect();
+        let flip = |w: Vec3| Vec3::new(w.x, w.y, -w.z);
+        let sides: [(&str, &[[f32; 4]], &Bsdf, bool); 2] =
+            [("reflected", &above, &bsdf, false), ("refracted", &below, &bsdf, true)];
+        for (side, samples, b, flipped) in sides {
+            let pdf = |w: Vec3| b.rough_dielectric_pdf(wo, if flipped { flip(w) } else { w }) as f64;
+            let (stat, dof, p, _) = sampling_chi2_with(samples, &pdf);
+            println!("cos {cos_wo}, {side}: chi2 {stat:.1} dof {dof} p {p:.3}");
+            assert!(p > sidak(ALPHA, tests), "cos {cos_wo}, {side}: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
+        }
+        // From inside (the twin): beyond the critical angle most light reflects.
+        let twin: Vec<[f32; 4]> = uniforms(n, 400 + c as u32)
+            .iter()
+            .map(|u| {
+                let s = inside.sample(wo, u[0], Vec2::new(u[1], u[2]));
+                [s.wi.x, s.wi.y, s.wi.z, s.pdf]
+            })
+            .collect();
+        let above: Vec<[f32; 4]> = twin.iter().map(|g| if g[2] > 0.0 { *g } else { [0.0; 4] }).collect();
+        let below: Vec<[f32; 4]> =
+            twin.iter().map(|g| if g[2] < 0.0 && g[3] > 0.0 { [g[0], g[1], -g[2], g[3]] } else { [0.0; 4] }).collect();
+        let sides = [("reflected from inside", &above, false), ("refracted from inside", &below, true)];
+        for (side, samples, flipped) in sides.into_iter().take(if cos_wo > critical { 2 } else { 1 }) {
+            let pdf = |w: Vec3| inside.rough_dielectric_pdf(wo, if flipped { flip(w) } else { w }) as f64;
+            let (stat, dof, p, _) = sampling_chi2_with(samples, &pdf);
+            println!("cos {cos_wo}, {side}: chi2 {stat:.1} dof {dof} p {p:.3}");
+            assert!(p > sidak(ALPHA, tests), "cos {cos_wo}, {side}: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
+        }
+    }
 }

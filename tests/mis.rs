@@ -89,7 +89,7 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light, glass: f32) -> 
                 bsdf = Bsdf { metallic: 0.0, alpha: 0.2, plastic: Some(plastic_coat()), ..bsdf };
             }
             if glass > 0.0 && rng.next_f32() < glass {
-                let dielectric = Dielectric { eta: 1.5, specular: 1.0, thin: false };
+                let dielectric = Dielectric { eta: 1.5, specular: 1.0, thin: false, alpha: 0.0 };
                 bsdf = Bsdf { metallic: 0.0, plastic: None, dielectric: Some(dielectric), ..bsdf };
             }
             let n = (toward(i - 1) + toward(i + 1) + 0.3 * rng.next_vec3()).normalize();

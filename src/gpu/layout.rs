@@ -28,6 +28,10 @@ pub const MATERIAL_THIN: u32 = 16;
 /// [`Material::flags`]: the conductor lobe's Fresnel term is the exact one of the complex index
 /// `conductor_eta` + i `conductor_k` (times `base_color`), not Schlick's from `base_color`.
 pub const MATERIAL_CONDUCTOR_INDEX: u32 = 32;
+/// [`Material::flags`], with [`MATERIAL_DIELECTRIC`]: a rough interface (Mitsuba's
+/// `roughdielectric`): GGX microfacets of `alpha`, reflecting and refracting as Walter et al.
+/// (2007); not a delta BSDF.
+pub const MATERIAL_ROUGH: u32 = 64;
 /// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
@@ -186,7 +190,7 @@ pub struct Material {
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
     /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`] |
-    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`] | [`MATERIAL_CONDUCTOR_INDEX`].
+    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`] | [`MATERIAL_CONDUCTOR_INDEX`] | [`MATERIAL_ROUGH`].
     pub flags: u32,
     /// Weight of the conductor lobe (glTF metallic factor, 0..1); 0 for a plastic.
     pub metallic: f32,

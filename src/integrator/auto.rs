@@ -163,10 +163,10 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 
 /// The methods `auto` measures for `settings` and `scene`: `path` and `direct` always, and
 /// `ellipsoidal` where there is a gate (it has no steady state). In a scene with a dielectric
-/// `ellipsoidal` is left out (alone it cannot sample the paths through glass), and an NLOS
-/// capture of one takes `path` alone, which only it renders.
+/// `ellipsoidal` is left out (alone it cannot sample the paths through glass); a scene with a
+/// rough dielectric, or an NLOS capture of glass, takes `path` alone, which only it renders.
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
-    if scene.has_dielectric() && settings.nlos.is_some() {
+    if scene.has_rough_dielectric() || (scene.has_dielectric() && settings.nlos.is_some()) {
         return vec![Method::Path];
     }
     let mut methods = vec![Method::Path, Method::Direct];

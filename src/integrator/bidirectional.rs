@@ -164,6 +164,13 @@ impl<'a> BidirectionalTracer<'a> {
         family: Option<(Family, f64)>,
     ) -> Result<Self> {
         check_tracer_settings(settings)?;
+        if scene.has_rough_dielectric() {
+            anyhow::bail!(
+                "the scene has a rough dielectric (`roughdielectric`), which `{}` does not render yet (connections \
+                 through a surface that transmits are not built): render it with --method path",
+                settings.method.name()
+            );
+        }
         if scene.has_dielectric() {
             if settings.nlos.is_some() {
                 anyhow::bail!(

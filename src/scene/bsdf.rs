@@ -3,7 +3,10 @@
 //! Fresnel, height-correlated Smith masking, visible-normal sampling), or a plastic: a Lambertian
 //! base under a dielectric GGX coat (`scene::plastic`); these reflect only. A smooth dielectric
 //! (glass) is a delta BSDF: reflection with the Fresnel reflectance, else refraction, returned
-//! only by `sample` (see bsdf.wesl for the convention of its samples).
+//! only by `sample` (see bsdf.wesl for the convention of its samples). A rough dielectric (its
+//! `alpha` > 0) is an interface of GGX microfacets that reflect and refract (Walter et al. 2007):
+//! `eval` and `pdf` give its reflection, [`Bsdf::rough_dielectric_eval`] and
+//! [`Bsdf::rough_dielectric_pdf`] both sides, and `sample` may refract.
 //!
 //! Directions are unit vectors in the local frame of the shading normal (z up); `wo` points back
 //! along the path, `wi` onwards. f is in sr^-1 (no cosine), pdfs are solid-angle densities.
@@ -15,7 +18,8 @@ use glam::{Vec2, Vec3};
 use super::materials::{albedo_at, plastic_table};
 use super::prepared::PreparedScene;
 use crate::gpu::layout::{
-    MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_THIN,
+    MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_ROUGH,
+    MATERIAL_THIN,
 };
 use crate::scene::plastic::TRANSMITTANCE_TABLE_LEN;
 
@@ -119,6 +123,26 @@ pub fn ggx_sample_visible_normal(wo: Vec3, alpha: f32, u: Vec2) -> Vec3 {
     Vec3::new(alpha * nh.x, alpha * nh.y, nh.z.max(1e-7)).normalize()
 }
 
+/// Smith's G1 of direction w for microfacet normal h, zero unless w meets h from its own side
+/// (twin of `ggx_g1`).
+fn ggx_g1(w: Vec3, h: Vec3, a2: f32) -> f32 {
+    if w.dot(h) * w.z <= 0.0 {
+        return 0.0;
+    }
+    1.0 / (1.0 + ggx_lambda(w, a2))
+}
+
+/// The microfacet normal (z >= 0) that reflects wo into wi or refracts one into the other
+/// across relative index `eta` (twin of `rough_dielectric_normal`); zero when there is none.
+fn rough_dielectric_normal(wo: Vec3, wi: Vec3, eta: f32) -> Vec3 {
+    let h = if wi.z < 0.0 { wo + eta * wi } else { wo + wi };
+    let len = h.length();
+    if !(len > 0.0) {
+        return Vec3::ZERO;
+    }
+    h * (h.z.signum() / len)
+}
+
 fn schlick_fresnel(f0: Vec3, cos_theta: f32) -> Vec3 {
     let m = (1.0 - cos_theta).clamp(0.0, 1.0);
     let m2 = m * m;
@@ -146,7 +170,8 @@ impl Bsdf {
         let albedo = albedo_at(&scene.texture_infos, &scene.texels, &m, uv);
         if m.flags & MATERIAL_DIELECTRIC != 0 {
             let thin = m.flags & MATERIAL_THIN != 0;
-            let dielectric = Some(crate::scene::Dielectric { eta: m.eta, specular: m.specular, thin });
+            let alpha = if m.flags & MATERIAL_ROUGH != 0 { m.alpha } else { 0.0 };
+            let dielectric = Some(crate::scene::Dielectric { eta: m.eta, specular: m.specular, thin, alpha });
             return Bsdf {
                 base_color: albedo,
                 metallic: 0.0,
@@ -225,8 +250,58 @@ impl Bsdf {
         g1 * ggx_d(h, a2) / (4.0 * wo.z)
     }
 
+    /// The rough dielectric's interface, when the material is one.
+    fn rough_dielectric(&self) -> Option<crate::scene::Dielectric> {
+        self.dielectric.filter(|d| d.alpha > 0.0)
+    }
+
+    /// f(wo, wi) (sr^-1) of a rough dielectric for wo above the surface and wi on either side
+    /// (twin of `rough_dielectric_eval`); zero for other materials.
+    pub fn rough_dielectric_eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let Some(d) = self.rough_dielectric() else { return Vec3::ZERO };
+        let h = rough_dielectric_normal(wo, wi, d.eta);
+        let a2 = d.alpha * d.alpha;
+        let g = ggx_g1(wo, h, a2) * ggx_g1(wi, h, a2);
+        if g.is_nan() || g <= 0.0 || wi.z == 0.0 || wo.z <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let wo_h = wo.dot(h);
+        let f = fresnel_dielectric(wo_h, d.eta);
+        let dh = ggx_d(h, a2);
+        if wi.z > 0.0 {
+            return Vec3::splat(d.specular * f * dh * g / (4.0 * wo.z * wi.z));
+        }
+        let wi_h = wi.dot(h);
+        let denom = wo_h + d.eta * wi_h;
+        self.base_color * ((1.0 - f) * dh * g * (wo_h * wi_h).abs() / (wo.z * wi.z.abs() * denom * denom))
+    }
+
+    /// Solid-angle pdf (sr^-1) of a rough dielectric's sampling for wo above the surface and wi
+    /// on either side (twin of `rough_dielectric_pdf`); zero for other materials.
+    pub fn rough_dielectric_pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let Some(d) = self.rough_dielectric() else { return 0.0 };
+        let h = rough_dielectric_normal(wo, wi, d.eta);
+        let a2 = d.alpha * d.alpha;
+        let g1 = ggx_g1(wo, h, a2);
+        let wi_h = wi.dot(h);
+        if g1.is_nan() || g1 <= 0.0 || wi_h * wi.z <= 0.0 || wo.z <= 0.0 {
+            return 0.0;
+        }
+        let wo_h = wo.dot(h);
+        let visible = g1 * wo_h * ggx_d(h, a2) / wo.z;
+        let f = fresnel_dielectric(wo_h, d.eta);
+        if wi.z > 0.0 {
+            return f * visible / (4.0 * wo_h);
+        }
+        let denom = wo_h + d.eta * wi_h;
+        (1.0 - f) * visible * d.eta * d.eta * wi_h.abs() / (denom * denom)
+    }
+
     /// f(wo, wi) (sr^-1); zero unless both directions lie above the surface.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        if self.rough_dielectric().is_some() {
+            return if wi.z > 0.0 { self.rough_dielectric_eval(wo, wi) } else { Vec3::ZERO };
+        }
         if wo.z <= 0.0 || wi.z <= 0.0 || self.dielectric.is_some() {
             return Vec3::ZERO;
         }
@@ -242,6 +317,9 @@ impl Bsdf {
 
     /// Solid-angle pdf (sr^-1) with which `sample` returns wi given wo.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if self.rough_dielectric().is_some() {
+            return if wi.z > 0.0 { self.rough_dielectric_pdf(wo, wi) } else { 0.0 };
+        }
         if wo.z <= 0.0 || wi.z <= 0.0 || self.dielectric.is_some() {
             return 0.0;
         }
@@ -259,6 +337,32 @@ impl Bsdf {
     /// Picks the conductor lobe with probability `metallic` (a plastic: the coat's reflection with
     /// its specular probability) by `u_lobe`, samples it with `u`.
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> BsdfSample {
+        if let Some(d) = self.rough_dielectric() {
+            let failed = BsdfSample { wi: wo, pdf: 0.0, f: Vec3::ZERO, delta: false };
+            if wo.z <= 0.0 {
+                return failed;
+            }
+            let h = ggx_sample_visible_normal(wo, d.alpha, u);
+            let wo_h = wo.dot(h);
+            let wi = if u_lobe < fresnel_dielectric(wo_h, d.eta) {
+                2.0 * wo_h * h - wo
+            } else {
+                let sin2_t = (1.0 - wo_h * wo_h) / (d.eta * d.eta);
+                if sin2_t >= 1.0 {
+                    return failed;
+                }
+                (wo_h / d.eta - (1.0 - sin2_t).sqrt()) * h - wo / d.eta
+            };
+            // Reflection must stay above, refraction below (checked as the kernel does).
+            if (u_lobe < fresnel_dielectric(wo_h, d.eta)) != (wi.z > 0.0) || wi.z == 0.0 {
+                return failed;
+            }
+            let pdf = self.rough_dielectric_pdf(wo, wi);
+            if pdf.is_nan() || pdf <= 0.0 {
+                return failed;
+            }
+            return BsdfSample { wi, pdf, f: self.rough_dielectric_eval(wo, wi), delta: false };
+        }
         if let Some(d) = self.dielectric {
             if wo.z <= 0.0 {
                 return BsdfSample { wi: wo, pdf: 0.0, f: Vec3::ZERO, delta: true };

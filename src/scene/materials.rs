@@ -8,7 +8,8 @@ use std::collections::HashMap;
 use super::{Scene, TextureData, plastic};
 use crate::gpu::layout::{
     MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_DOUBLE_SIDED, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR,
-    MATERIAL_THIN, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
+    MATERIAL_ROUGH, MATERIAL_THIN, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST,
+    TextureInfo,
 };
 pub use crate::gpu::packing::{pack2x16float, unpack2x16float};
 
@@ -91,6 +92,10 @@ pub fn gpu_materials_and_textures(scene: &Scene) -> (Vec<Material>, Vec<TextureI
                 material.metallic = 0.0;
                 material.eta = d.eta;
                 material.specular = d.specular;
+                if d.alpha > 0.0 {
+                    material.flags |= MATERIAL_ROUGH;
+                    material.alpha = d.alpha.max(MIN_ALPHA);
+                }
             }
             material
         })

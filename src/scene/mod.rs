@@ -109,6 +109,9 @@ pub struct Dielectric {
     /// A thin pane (Mitsuba's `thindielectric`): light passes straight through, path lengths
     /// are unchanged, and the reflectance sums the pane's internal reflections.
     pub thin: bool,
+    /// GGX alpha of a rough interface (Mitsuba's `roughdielectric`, Walter et al. 2007); 0 for a
+    /// smooth one (a delta BSDF). A thin pane is smooth.
+    pub alpha: f32,
 }
 
 /// The dielectric coat of a plastic material (Mitsuba's `plastic`, `roughplastic`): an interface

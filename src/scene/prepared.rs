@@ -9,8 +9,8 @@ use super::materials::gpu_materials_and_textures;
 use crate::bvh::Bvh;
 use crate::bvh::wide::WideBvh;
 use crate::gpu::layout::{
-    MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, Material, NONE, NodeSurface, SHADING_HAS_NORMALS, TextureInfo, Triangle,
-    TriangleShading,
+    MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_ROUGH, Material, NONE, NodeSurface, SHADING_HAS_NORMALS,
+    TextureInfo, Triangle, TriangleShading,
 };
 
 /// Everything the kernels read about a scene.
@@ -139,9 +139,14 @@ impl PreparedScene {
         self.materials.iter().any(|m| m.flags & MATERIAL_PLASTIC != 0)
     }
 
-    /// True when some material is a dielectric ([`MATERIAL_DIELECTRIC`]): only `path` renders it.
+    /// True when some material is a dielectric ([`MATERIAL_DIELECTRIC`]), smooth or rough.
     pub fn has_dielectric(&self) -> bool {
         self.materials.iter().any(|m| m.flags & MATERIAL_DIELECTRIC != 0)
+    }
+
+    /// True when some material is a rough dielectric ([`MATERIAL_ROUGH`]): only `path` renders it.
+    pub fn has_rough_dielectric(&self) -> bool {
+        self.materials.iter().any(|m| m.flags & MATERIAL_ROUGH != 0)
     }
 
     /// True when the scene has point lights.

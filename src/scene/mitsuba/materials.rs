@@ -160,10 +160,11 @@ impl<'e> Builder<'e> {
                     name,
                 }
             }
-            kind @ ("dielectric" | "thindielectric") => {
+            kind @ ("dielectric" | "thindielectric" | "roughdielectric") => {
                 if let Some(t) = e.children.iter().find(|c| matches!(c.tag.as_str(), "texture" | "ref")) {
                     return Err(t.error("a dielectric's textures are not read"));
                 }
+                let alpha = if kind == "roughdielectric" { self.microfacet_alpha(&o)? } else { 0.0 };
                 // Mitsuba's dielectrics default to BK7.
                 let (eta, specular) = self.interface(&o, 1.5046)?;
                 let transmittance = o.color("specular_transmittance")?.unwrap_or(Vec3::ONE);
@@ -173,19 +174,13 @@ impl<'e> Builder<'e> {
                     base_color: transmittance,
                     texture: None,
                     metallic: 0.0,
-                    roughness: 0.0,
+                    roughness: alpha.sqrt(),
                     plastic: None,
                     conductor_index: None,
-                    dielectric: Some(Dielectric { eta, specular, thin: kind == "thindielectric" }),
+                    dielectric: Some(Dielectric { eta, specular, thin: kind == "thindielectric", alpha }),
                     double_sided: true,
                     name,
                 }
-            }
-            kind @ "roughdielectric" => {
-                return Err(e.error(format!(
-                    "the `{kind}` BSDF is not rendered yet (gatetrace renders Lambertian surfaces, GGX \
-                     conductors, plastics and smooth dielectrics)"
-                )));
             }
             "null" => return Err(e.error("the `null` BSDF bounds media, which are not rendered yet")),
             other => return Err(e.error(format!("the BSDF `{other}` is not rendered by gatetrace"))),
