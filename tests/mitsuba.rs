@@ -336,6 +336,7 @@ fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
                 .expect("connections through rough glass are refused");
         let text = format!("{error:#}");
         assert!(text.contains("rough dielectric") && text.contains("--method path"), "{text}");
+        assert!(text.contains(&format!("`{}` does not render", method.name())), "{text}");
     }
     let settings = RenderSettings { method: Method::Auto, ..transient };
     assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);

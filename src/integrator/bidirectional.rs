@@ -164,19 +164,19 @@ impl<'a> BidirectionalTracer<'a> {
         family: Option<(Family, f64)>,
     ) -> Result<Self> {
         check_tracer_settings(settings)?;
+        // The method the user asked for: a combined render's, for either half.
+        let method = if family.is_some() { Method::Combined.name() } else { settings.method.name() };
         if scene.has_rough_dielectric() {
             anyhow::bail!(
-                "the scene has a rough dielectric (`roughdielectric`), which `{}` does not render yet (connections \
-                 through a surface that transmits are not built): render it with --method path",
-                settings.method.name()
+                "the scene has a rough dielectric (`roughdielectric`), which `{method}` does not render yet \
+                 (connections through a surface that transmits are not built): render it with --method path"
             );
         }
         if scene.has_dielectric() {
             if settings.nlos.is_some() {
                 anyhow::bail!(
-                    "the scene has a dielectric (glass) material, which NLOS captures do not render yet with `{}`: \
-                     capture it with --method path",
-                    settings.method.name()
+                    "the scene has a dielectric (glass) material, which NLOS captures do not render yet with \
+                     `{method}`: capture it with --method path"
                 );
             }
             // A path seen or lit only through glass has no vertex a spheroid can place (none lies
