@@ -295,8 +295,8 @@ pub fn ellipsoidal_mis_weight(path: &[Vertex], e: usize) -> f32 {
     0.5 * (1.0 + r_next) / sum
 }
 
-/// Whether a spheroid can place vertex m of `path` (family_mis.wesl `spheroid_places`): 1 <= m
-/// <= k - 2, and neither it nor a neighbour is a delta vertex.
+/// Whether a spheroid can place vertex m of `path` (ellipsoidal_mis.wesl `spheroid_places`):
+/// 1 <= m <= k - 2, and neither it nor a neighbour is a delta vertex.
 pub fn spheroid_places(path: &[Vertex], m: usize) -> bool {
     (1..=path.len().saturating_sub(2)).contains(&m) && !path[m - 1..=m + 1].iter().any(Vertex::is_delta)
 }

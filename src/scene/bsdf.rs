@@ -344,7 +344,8 @@ impl Bsdf {
             }
             let h = ggx_sample_visible_normal(wo, d.alpha, u);
             let wo_h = wo.dot(h);
-            let wi = if u_lobe < fresnel_dielectric(wo_h, d.eta) {
+            let reflect = u_lobe < fresnel_dielectric(wo_h, d.eta);
+            let wi = if reflect {
                 2.0 * wo_h * h - wo
             } else {
                 let sin2_t = (1.0 - wo_h * wo_h) / (d.eta * d.eta);
@@ -354,7 +355,7 @@ impl Bsdf {
                 (wo_h / d.eta - (1.0 - sin2_t).sqrt()) * h - wo / d.eta
             };
             // Reflection must stay above, refraction below (checked as the kernel does).
-            if (u_lobe < fresnel_dielectric(wo_h, d.eta)) != (wi.z > 0.0) || wi.z == 0.0 {
+            if reflect != (wi.z > 0.0) || wi.z == 0.0 {
                 return failed;
             }
             let pdf = self.rough_dielectric_pdf(wo, wi);
