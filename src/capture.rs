@@ -17,8 +17,8 @@ use crate::gpu::layout::WallPoint;
 use crate::integrator::bidirectional::{DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT};
 use crate::integrator::{Budget, Method, Progress, RenderOutput, RenderSettings, render_metadata, render_resumable};
 use crate::nlos::band_index::AUTO_MIN_TRIANGLES;
-use crate::nlos::{LaserAim, NlosCapture, Scan, ShellPreparation, capture_record, cell_uv, check_capture};
-use crate::scene::{LoadOptions, PreparedScene, load_scene_with};
+use crate::nlos::{Laser, LaserAim, NlosCapture, Scan, ShellPreparation, capture_record, cell_uv, check_capture};
+use crate::scene::{LoadOptions, PreparedScene, SceneCapture, load_scene_with};
 
 /// The method a capture renders with when none is asked for: ellipsoidal where a gate gives
 /// target lengths (the default the capture tables of docs/nlos.md measure), path without one.
@@ -105,8 +105,8 @@ pub struct CaptureRequest {
     pub laser_spot: Vec2,
     /// Exhaustive scans: the grid of laser spots, width x height (None: the sensed points').
     pub laser_grid: Option<(u32, u32)>,
-    /// Beam power (W).
-    pub laser_power: f32,
+    /// The laser.
+    pub laser: Laser,
     /// Count the laser origin -> spot and sensed point -> sensor origin segments in path lengths.
     pub count_first_and_last: bool,
     /// The band index was left to decide by itself (`auto`): it is declined where the hidden
@@ -114,7 +114,58 @@ pub struct CaptureRequest {
     pub band_index_auto: bool,
 }
 
+/// The scan of the capture a scene file describes.
+pub fn described_scan(file: &SceneCapture) -> Scan {
+    if file.confocal { Scan::Confocal } else { Scan::Single }
+}
+
+/// What a caller asks of a capture over its defaults (the command line's options, Python's
+/// arguments): each None keeps the setting of the capture the scene file describes, else the
+/// default of [`CaptureRequest::new`].
+#[derive(Clone, Debug, Default)]
+pub struct CaptureOptions {
+    /// The relay wall's node name (default [`crate::nlos::DEFAULT_RELAY_WALL`]).
+    pub relay_wall: Option<String>,
+    /// Where the sensor looks at the wall from (m; default: the scene's nodes).
+    pub sensor_origin: Option<Vec3>,
+    /// Where the laser starts (m; default: the scene's nodes).
+    pub laser_origin: Option<Vec3>,
+    /// Single scans: the spot, texture coordinates of the wall (default (0.5, 0.5)).
+    pub laser_spot: Option<Vec2>,
+    /// Exhaustive scans: the grid of laser spots, width x height (default: the sensed points').
+    pub laser_grid: Option<(u32, u32)>,
+    /// A beam of this power (W) as the laser (default: the file's projector, else 1 W).
+    pub laser_power: Option<f32>,
+    /// Count the first and last segments in path lengths (also where the file does).
+    pub count_first_and_last: bool,
+    /// The band index is left to decide by itself.
+    pub band_index_auto: bool,
+}
+
 impl CaptureRequest {
+    /// A capture scanned by `scan`: the one `file` describes (a Mitsuba scene's; None for a
+    /// glTF scene), with `options` over it.
+    pub fn new(scan: Scan, file: Option<&SceneCapture>, options: CaptureOptions) -> CaptureRequest {
+        CaptureRequest {
+            scan,
+            relay_wall: options
+                .relay_wall
+                .or(file.map(|f| f.relay_wall.clone()))
+                .unwrap_or_else(|| crate::nlos::DEFAULT_RELAY_WALL.into()),
+            sensor_origin: options.sensor_origin.or(file.map(|f| f.sensor_origin)),
+            laser_origin: options.laser_origin.or(file.map(|f| f.laser_origin)),
+            laser_spot: options.laser_spot.or(file.map(|f| f.laser_spot)).unwrap_or(Vec2::splat(0.5)),
+            laser_grid: options.laser_grid,
+            laser: match (options.laser_power, file) {
+                (Some(power), _) => Laser::Beam(power),
+                (None, Some(f)) => Laser::Projector(f.projector_irradiance),
+                (None, None) => Laser::Beam(1.0),
+            },
+            count_first_and_last: options.count_first_and_last || file.is_some_and(|f| f.count_first_and_last),
+            band_index_auto: options.band_index_auto,
+        }
+    }
+
     /// Checks the request against the render's settings before any work.
     pub fn check(&self, settings: &RenderSettings) -> Result<()> {
         ensure!(
@@ -196,7 +247,7 @@ pub fn prepare_capture(
         sensor_origin,
         laser_origin,
         aim: if scan == Scan::Confocal { LaserAim::Confocal } else { LaserAim::Spot(request.laser_spot) },
-        laser_power: request.laser_power,
+        laser: request.laser,
         count_first_and_last: request.count_first_and_last,
     };
     check_capture(&scene.scene, &capture)?;

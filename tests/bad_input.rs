@@ -163,6 +163,35 @@ fn xml_case(
     )
 }
 
+/// A Mitsuba 3 NLOS capture: the integrator (line 3), a projector laser (line 4), the relay wall
+/// carrying its capture meter (line 5) and a hidden panel (line 6).
+const CAPTURE_XML: &str = "<?xml version=\"1.0\"?>\n<scene version=\"3.0.0\">\n<integrator \
+     type=\"transient_nlos_path\"><boolean name=\"nlos_laser_sampling\" value=\"true\"/></integrator>\n<emitter type=\"projector\"/>\n<shape type=\"rectangle\" id=\"wall\"><sensor \
+     type=\"nlos_capture_meter\"><point name=\"sensor_origin\" value=\"0, 0, 1\"/><point name=\"laser_origin\" \
+     value=\"0, 0, 1\"/><point name=\"laser_lookat_pixel\" value=\"4, 4, 0\"/><film type=\"transient_hdr_film\">\
+     <integer name=\"width\" value=\"8\"/><integer name=\"height\" value=\"8\"/><integer name=\"temporal_bins\" \
+     value=\"10\"/><float name=\"start_opl\" value=\"1\"/><float name=\"bin_width_opl\" value=\"0.1\"/></film>\
+     </sensor></shape>\n<shape type=\"rectangle\"><transform name=\"to_world\"><rotate y=\"1\" angle=\"180\"/>\
+     <translate z=\"1\"/></transform></shape>\n</scene>\n";
+
+/// A case rendering [`CAPTURE_XML`] with each (from, to) of `edits` replaced, as scene.xml.
+fn capture_case(name: &'static str, edits: &'static [(&str, &str)], needles: &[&str]) -> (Case, Setup) {
+    let args = ["render", "{dir}/scene.xml", "--spp", "1", "--out", "{out}"];
+    case(
+        name,
+        move |d| {
+            let mut xml = CAPTURE_XML.to_owned();
+            for (from, to) in edits {
+                assert!(xml.contains(from), "{name}: `{from}` is not in the capture scene");
+                xml = xml.replace(from, to);
+            }
+            std::fs::write(d.join("scene.xml"), xml).unwrap();
+        },
+        args.iter().map(|s| s.to_string()).collect(),
+        needles,
+    )
+}
+
 fn cases() -> Vec<(Case, Setup)> {
     // `render SCENE` of a tiny image with `extra` options, writing {out}.
     let render = |scene: &str, extra: &[&str]| -> Vec<String> {
@@ -472,14 +501,99 @@ fn cases() -> Vec<(Case, Setup)> {
             &[],
             &["scene.xml:5: <emitter type=\"spot\">", "cutoff_angle 120", "<= 90"],
         ),
-        xml_case("XML projector", "<emitter type=\"projector\"/>", &[], &["<emitter type=\"projector\">", "not rendered yet"]),
+        xml_case(
+            "XML projector in a camera scene",
+            "<emitter type=\"projector\"/>",
+            &[],
+            &["scene.xml:5: <emitter type=\"projector\">", "light NLOS captures only"],
+        ),
         xml_case("XML area emitter outside a shape", "<emitter type=\"area\"/>", &[], &["belongs inside a <shape>"]),
         xml_case(
-            "XML NLOS integrator",
-            "<integrator type=\"transient_nlos_path\"/>",
+            "XML NLOS integrator keeping one depth",
+            "<integrator type=\"transient_nlos_path\"><integer name=\"filter_depth\" value=\"3\"/></integrator>",
             &[],
-            &["scene.xml:5: <integrator type=\"transient_nlos_path\">", "not read yet"],
+            &["scene.xml:5: <integrator type=\"transient_nlos_path\">", "`filter_depth` 3 keeps the paths of one depth"],
         ),
+        capture_case(
+            "XML capture without laser sampling",
+            &[("<boolean name=\"nlos_laser_sampling\" value=\"true\"/>", "")],
+            &["scene.xml:3: <integrator type=\"transient_nlos_path\">", "nlos_laser_sampling must be true"],
+        ),
+        xml_case(
+            "XML NLOS integrator in a camera scene",
+            "<integrator type=\"transient_nlos_path\"><boolean name=\"nlos_laser_sampling\" value=\"true\"/></integrator>",
+            &[],
+            &["scene.xml: transient_nlos_path renders NLOS captures", "render a camera image with transient_path"],
+        ),
+        capture_case(
+            "XML capture meter on a cube",
+            &[("<shape type=\"rectangle\" id=\"wall\">", "<shape type=\"cube\" id=\"wall\">")],
+            &["scene.xml:5: <sensor type=\"nlos_capture_meter\">", "the relay wall must be a `rectangle`"],
+        ),
+        capture_case(
+            "XML capture meter outside a shape",
+            &[("<shape type=\"rectangle\" id=\"wall\"><sensor", "<sensor"), ("</sensor></shape>", "</sensor>")],
+            &["scene.xml:5: <sensor type=\"nlos_capture_meter\">", "belongs inside its relay wall's <shape>"],
+        ),
+        capture_case(
+            "XML capture without a laser",
+            &[("<emitter type=\"projector\"/>", "")],
+            &["scene.xml:5: <sensor type=\"nlos_capture_meter\">", "lit by one projector emitter", "has 0"],
+        ),
+        capture_case(
+            "XML capture with two lasers",
+            &[("<emitter type=\"projector\"/>", "<emitter type=\"projector\"/><emitter type=\"projector\"/>")],
+            &["lit by one projector emitter", "has 2"],
+        ),
+        capture_case(
+            "XML capture with a camera integrator",
+            &[(
+                "<integrator type=\"transient_nlos_path\"><boolean name=\"nlos_laser_sampling\" value=\"true\"/></integrator>",
+                "<integrator type=\"transient_path\"/>",
+            )],
+            &["scene.xml:5:", "rendered with the integrator transient_nlos_path"],
+        ),
+        capture_case(
+            "XML laser aimed off the film",
+            &[("value=\"4, 4, 0\"", "value=\"12, 4, 0\"")],
+            &["laser_lookat_pixel (12, 4) lies outside the 8 x 8 film"],
+        ),
+        capture_case(
+            "XML laser missing the relay wall",
+            &[("<point name=\"laser_lookat_pixel\" value=\"4, 4, 0\"/>", "")],
+            &["scene.xml:4: <emitter type=\"projector\">", "misses the relay wall `wall`"],
+        ),
+        capture_case(
+            "XML exhaustive capture",
+            &[("<boolean name=\"nlos_laser_sampling\" value=\"true\"/>", "<boolean name=\"nlos_laser_sampling\" \
+               value=\"true\"/><integer name=\"capture_type\" value=\"3\"/>")],
+            &["scene.xml:3:", "exhaustive captures are not read from Mitsuba XML yet"],
+        ),
+        capture_case(
+            "XML capture whose scan is said twice",
+            &[
+                ("<boolean name=\"nlos_laser_sampling\" value=\"true\"/>", "<boolean name=\"nlos_laser_sampling\" \
+                  value=\"true\"/><string name=\"capture_type\" value=\"single\"/>"),
+                ("<point name=\"sensor_origin\"", "<boolean name=\"confocal\" value=\"true\"/><point name=\"sensor_origin\""),
+            ],
+            &["scene.xml:3:", "capture_type says single but the capture meter's confocal is true"],
+        ),
+        capture_case(
+            "XML laser aimed at two places",
+            &[("<point name=\"laser_origin\"", "<point name=\"laser_lookat_3d\" value=\"0, 0, 0\"/><point name=\"laser_origin\"")],
+            &["give laser_lookat_pixel or laser_lookat_3d, not both"],
+        ),
+        capture_case(
+            "XML capture meter with two films' grid",
+            &[("<point name=\"sensor_origin\"", "<integer name=\"original_film_width\" value=\"16\"/><point name=\"sensor_origin\"")],
+            &["give both original_film_width and original_film_height"],
+        ),
+        capture_case(
+            "XML projector of no light",
+            &[("<emitter type=\"projector\"/>", "<emitter type=\"projector\"><rgb name=\"irradiance\" value=\"0\"/></emitter>")],
+            &["scene.xml:4: <emitter type=\"projector\">", "must be non-negative and not zero"],
+        ),
+
         xml_case("XML volumetric integrator", "<integrator type=\"volpath\"/>", &[], &["`volpath` renders media"]),
         xml_case(
             "XML camera unwarp",

@@ -38,6 +38,7 @@ fn a_mitsuba_scene_loads_as_written() {
         max_bounces: Some(5),
         gate: Some("transient:1.94,0.1,20".into()),
         seed: None,
+        capture: None,
     };
     assert_eq!(scene.settings, expected);
     // The camera: at (0, 0, 2) looking down -z, 40 degrees across the smaller (equal) axis.

@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass
-from typing import Optional, Tuple, Union
+from typing import Dict, Optional, Tuple, Union
 
 import numpy as np
 
@@ -207,7 +207,7 @@ class Renderer:
             scene,
             method=method,
             max_bounces=max_bounces,
-            res=(width, height),
+            res=None if res is None else _resolution(res),
             rr_depth=rr_depth,
             samples_per_pass=samples_per_pass,
             connections_per_query=connections_per_query,
@@ -283,21 +283,21 @@ def render(
 
 def capture(
     scene: Union[Scene, str, os.PathLike],
-    scan: str,
-    gate: Union[str, Gate] = "none",
+    scan: Optional[str] = None,
+    gate: Union[str, Gate, None] = None,
     *,
     spp: Optional[int] = None,
     seconds: Optional[float] = None,
-    seed: int = 0,
-    res: Tuple[int, int] = (256, 256),
-    max_bounces: int = 8,
+    seed: Optional[int] = None,
+    res: Optional[Tuple[int, int]] = None,
+    max_bounces: Optional[int] = None,
     method: Optional[str] = None,
-    relay_wall: str = "relay_wall",
+    relay_wall: Optional[str] = None,
     sensor_origin: Optional[Tuple[float, float, float]] = None,
     laser_origin: Optional[Tuple[float, float, float]] = None,
-    laser_spot: Tuple[float, float] = (0.5, 0.5),
+    laser_spot: Optional[Tuple[float, float]] = None,
     laser_grid: Optional[Tuple[int, int]] = None,
-    laser_power: float = 1.0,
+    laser_power: Optional[float] = None,
     count_first_last: bool = False,
     rr_depth: Optional[int] = None,
     samples_per_pass: Optional[int] = None,
@@ -311,33 +311,42 @@ def capture(
     needle_guard: float = 1e-6,
     length_guard: float = 1e-5,
     allow_unsupported_materials: bool = False,
+    parameters: Optional[Dict[str, str]] = None,
 ) -> Tuple[np.ndarray, dict]:
     """Renders a non-line-of-sight capture of `scene`: ``gatetrace render SCENE --nlos SCAN`` with
     the same options (``--relay-wall`` is ``relay_wall=``, ``--time`` is ``seconds=``, ...) and
     defaults, so equal arguments give the command line's capture bit for bit. docs/nlos.md
-    explains captures at length.
+    explains captures at length. A Mitsuba XML scene that describes a capture (an
+    ``nlos_capture_meter`` on its relay wall, a ``projector`` laser) gives every argument left as
+    None: its scan, bins, grid, depth, samples, seed, wall, origins, aim and laser.
 
     Args:
-        scene: a glTF 2.0 file (.gltf, .glb) or a :class:`Scene` (its file is loaded again,
-            prepared for the capture).
+        scene: a glTF 2.0 file (.gltf, .glb), a Mitsuba 3 XML scene, or a :class:`Scene` (its
+            file is loaded again, prepared for the capture).
         scan: ``"single"`` (one laser spot for every sensed point), ``"confocal"`` (each sensed
             point lit on itself) or ``"exhaustive"`` (every spot of `laser_grid` with every
-            sensed point).
+            sensed point); None: the file's capture's (required for other files).
         gate: in the command line's syntax or a :class:`Gate`, lengths in metres of optical path
-            from the laser spot to the sensed point, e.g. ``transient(start, width, bins)``.
-        spp, seconds, seed: samples per pixel (64 when neither is given) or seconds of rendering,
-            and the seed (an exhaustive scan renders laser spot k from a seed of its own).
-        res: the grid of sensed points on the relay wall, (width, height).
+            from the laser spot to the sensed point, e.g. ``transient(start, width, bins)``
+            (None: the file's bins, else ``"none"``).
+        spp, seconds, seed: samples per pixel (None: the file's, else 64 when neither is given)
+            or seconds of rendering, and the seed (None: the file's, else 0; an exhaustive scan
+            renders laser spot k from a seed of its own).
+        res: the grid of sensed points on the relay wall, (width, height) (None: the file's, else
+            (256, 256)).
         max_bounces: most scattering vertices of a path, the laser spot and the sensed point
-            included (at least 2; 3: spot -> hidden point -> sensed point).
+            included (at least 2; 3: spot -> hidden point -> sensed point; None: the file's,
+            else 8).
         method: ``"path"``, ``"direct"``, ``"ellipsoidal"`` or ``"combined"`` (None: ellipsoidal
             with a gate, path without).
-        relay_wall: the relay wall's glTF node (a mesh with TEXCOORD_0 over [0, 1]^2).
-        sensor_origin, laser_origin: positions (x, y, z) in metres (None: the nodes named
-            ``sensor_origin`` and ``laser_origin``, else ``nlos_origin``).
-        laser_spot: ``single``: where the laser is aimed, texture coordinates (u, v) of the wall.
+        relay_wall: the relay wall's node (a glTF mesh with TEXCOORD_0 over [0, 1]^2; None: the
+            file's capture's, else ``"relay_wall"``).
+        sensor_origin, laser_origin: positions (x, y, z) in metres (None: the file's capture's,
+            else the nodes named ``sensor_origin`` and ``laser_origin``, else ``nlos_origin``).
+        laser_spot: ``single``: where the laser is aimed, texture coordinates (u, v) of the wall
+            (None: the file's capture's aim, else (0.5, 0.5)).
         laser_grid: ``exhaustive``: the grid of laser spots, (width, height) (None: `res`).
-        laser_power: the beam's power (W).
+        laser_power: the beam's power (W; None: the file's projector, else 1).
         count_first_last: count the laser -> spot and sensed point -> sensor segments in path
             lengths.
         rr_depth, samples_per_pass, connections_per_query, query_split, query_bottom_nodes,
@@ -347,6 +356,7 @@ def capture(
             transient gate; `band_index` ``"auto"``, ``"on"`` or ``"off"``).
         allow_unsupported_materials: render transmissive materials as opaque instead of
             refusing the scene.
+        parameters: a Mitsuba scene's parameters (name to value; ``render --define``).
 
     Returns (data, metadata): a float32 array of bin-integrated radiance (W m^-2 sr^-1) leaving
     each sensed point towards the sensor origin, in the layout of the command line's .npy:
@@ -361,26 +371,27 @@ def capture(
         _check_count("spp", spp, 1)
     if seconds is not None and not (isinstance(seconds, (int, float)) and seconds > 0):
         raise ValueError(f"seconds={seconds!r}: give a positive number of seconds")
-    _check_count("seed", seed, 0)
-    if seed >= 2**32:
-        raise ValueError(f"seed={seed}: give a number below 2^32")
-    _check_count("max_bounces", max_bounces, 0)
+    if seed is not None:
+        _check_count("seed", seed, 0)
+        if seed >= 2**32:
+            raise ValueError(f"seed={seed}: give a number below 2^32")
+    if max_bounces is not None:
+        _check_count("max_bounces", max_bounces, 0)
     optional_counts = (("rr_depth", rr_depth, 0), ("samples_per_pass", samples_per_pass, 1),
                        ("connections_per_query", connections_per_query, 1), ("target_pilot", target_pilot, 0))
     for name, value, least in optional_counts:
         if value is not None:
             _check_count(name, value, least)
-    width, height = _resolution(res)
     data, pairs = _gatetrace.capture(
         os.fspath(path),
         scan,
-        _spec(gate),
+        None if gate is None else _spec(gate),
         spp=spp,
         seconds=None if seconds is None else float(seconds),
         seed=seed,
         method=method,
         max_bounces=max_bounces,
-        res=(width, height),
+        res=None if res is None else _resolution(res),
         rr_depth=rr_depth,
         samples_per_pass=samples_per_pass,
         connections_per_query=connections_per_query,
@@ -392,14 +403,15 @@ def capture(
         band_index=band_index,
         needle_guard=float(needle_guard),
         length_guard=float(length_guard),
-        relay_wall=relay_wall,
+        relay_wall=None if relay_wall is None else str(relay_wall),
         sensor_origin=None if sensor_origin is None else _point("sensor_origin", sensor_origin, 3),
         laser_origin=None if laser_origin is None else _point("laser_origin", laser_origin, 3),
-        laser_spot=_point("laser_spot", laser_spot, 2),
+        laser_spot=None if laser_spot is None else _point("laser_spot", laser_spot, 2),
         laser_grid=None if laser_grid is None else _resolution(laser_grid, "laser_grid"),
-        laser_power=float(laser_power),
+        laser_power=None if laser_power is None else float(laser_power),
         count_first_last=bool(count_first_last),
         allow_unsupported_materials=bool(allow_unsupported_materials),
+        parameters=None if parameters is None else {str(k): str(v) for k, v in parameters.items()},
     )
     metadata = {key: json.loads(value) for key, value in pairs}
     if "warning" in metadata:

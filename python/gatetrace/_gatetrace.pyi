@@ -78,15 +78,15 @@ class Renderer:
 
 def capture(
     path: Union[str, os.PathLike],
-    scan: str,
-    gate: str = "none",
+    scan: Optional[str] = None,
+    gate: Optional[str] = None,
     *,
     spp: Optional[int] = None,
     seconds: Optional[float] = None,
-    seed: int = 0,
+    seed: Optional[int] = None,
     method: Optional[str] = None,
-    max_bounces: int = 8,
-    res: Tuple[int, int] = (256, 256),
+    max_bounces: Optional[int] = None,
+    res: Optional[Tuple[int, int]] = None,
     rr_depth: Optional[int] = None,
     samples_per_pass: Optional[int] = None,
     connections_per_query: Optional[int] = None,
@@ -98,18 +98,20 @@ def capture(
     band_index: str = "auto",
     needle_guard: float = 1e-6,
     length_guard: float = 1e-5,
-    relay_wall: str = "relay_wall",
+    relay_wall: Optional[str] = None,
     sensor_origin: Optional[Tuple[float, float, float]] = None,
     laser_origin: Optional[Tuple[float, float, float]] = None,
-    laser_spot: Tuple[float, float] = (0.5, 0.5),
+    laser_spot: Optional[Tuple[float, float]] = None,
     laser_grid: Optional[Tuple[int, int]] = None,
-    laser_power: float = 1.0,
+    laser_power: Optional[float] = None,
     count_first_last: bool = False,
     allow_unsupported_materials: bool = False,
+    parameters: Optional[Dict[str, str]] = None,
 ) -> Tuple[npt.NDArray[np.float32], List[Tuple[str, str]]]:
     """An NLOS capture as `gatetrace render PATH --nlos SCAN` renders it (positions in m, laser
-    power in W, seconds of rendering): (data in the command line's .npy layout, metadata and the
-    capture's record as (key, value as JSON text) pairs)."""
+    power in W, seconds of rendering; None: a Mitsuba capture's own setting, else the command
+    line's default): (data in the command line's .npy layout, metadata and the capture's record
+    as (key, value as JSON text) pairs)."""
 
 def describe_gate(spec: str) -> str:
     """What the renderer understands gate `spec` to be; ValueError when it is not a gate."""

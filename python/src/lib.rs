@@ -20,7 +20,9 @@ use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use gatetrace::capture::{CaptureChoices, CaptureProgress, CaptureRequest, prepare_capture, render_capture};
+use gatetrace::capture::{
+    CaptureChoices, CaptureOptions, CaptureProgress, CaptureRequest, prepare_capture, render_capture,
+};
 use gatetrace::film::output::Metadata;
 use gatetrace::film::{Film, Gate};
 use gatetrace::gpu::GpuContext;
@@ -533,24 +535,24 @@ impl CaptureProgress for CaptureSignals {
 /// array in the layout of the command line's .npy, the metadata and the capture's record as (key,
 /// value as JSON text) pairs).
 #[pyfunction]
-#[pyo3(signature = (path, scan, gate="none", *, spp=None, seconds=None, seed=0, method=None, max_bounces=8,
-    res=(256, 256), rr_depth=None, samples_per_pass=None, connections_per_query=None, query_split=1.0,
+#[pyo3(signature = (path, scan=None, gate=None, *, spp=None, seconds=None, seed=None, method=None, max_bounces=None,
+    res=None, rr_depth=None, samples_per_pass=None, connections_per_query=None, query_split=1.0,
     query_bottom_nodes=31, query_weights=None, query_tree="binary", target_pilot=None, band_index="auto", needle_guard=1e-6,
-    length_guard=1e-5, relay_wall=gatetrace::nlos::DEFAULT_RELAY_WALL, sensor_origin=None, laser_origin=None,
-    laser_spot=(0.5, 0.5), laser_grid=None, laser_power=1.0, count_first_last=false,
-    allow_unsupported_materials=false))]
+    length_guard=1e-5, relay_wall=None, sensor_origin=None, laser_origin=None,
+    laser_spot=None, laser_grid=None, laser_power=None, count_first_last=false,
+    allow_unsupported_materials=false, parameters=None))]
 #[allow(clippy::too_many_arguments)]
 fn capture<'py>(
     py: Python<'py>,
     path: PathBuf,
-    scan: &str,
-    gate: &str,
+    scan: Option<&str>,
+    gate: Option<&str>,
     spp: Option<u64>,
     seconds: Option<f64>,
-    seed: u32,
+    seed: Option<u32>,
     method: Option<&str>,
-    max_bounces: u32,
-    res: (u32, u32),
+    max_bounces: Option<u32>,
+    res: Option<(u32, u32)>,
     rr_depth: Option<u32>,
     samples_per_pass: Option<u32>,
     connections_per_query: Option<u32>,
@@ -562,21 +564,44 @@ fn capture<'py>(
     band_index: &str,
     needle_guard: f32,
     length_guard: f32,
-    relay_wall: &str,
+    relay_wall: Option<&str>,
     sensor_origin: Option<[f32; 3]>,
     laser_origin: Option<[f32; 3]>,
-    laser_spot: (f32, f32),
+    laser_spot: Option<(f32, f32)>,
     laser_grid: Option<(u32, u32)>,
-    laser_power: f32,
+    laser_power: Option<f32>,
     count_first_last: bool,
     allow_unsupported_materials: bool,
+    parameters: Option<std::collections::BTreeMap<String, String>>,
 ) -> PyResult<Rendered<'py>> {
-    let scan = [Scan::Single, Scan::Confocal, Scan::Exhaustive]
-        .into_iter()
-        .find(|s| s.name() == scan)
-        .ok_or_else(|| PyValueError::new_err(format!("scan `{scan}`: choose single, confocal or exhaustive")))?;
+    if !path.exists() {
+        return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
+    }
+    // The capture a Mitsuba scene describes, and its film, sampler and depth, give what the
+    // caller left as None (as the command line's options override a file's).
+    let parameters: Vec<(String, String)> = parameters.unwrap_or_default().into_iter().collect();
+    let file = gatetrace::scene::scene_settings(&path, &parameters).map_err(value_error)?;
+    let described = file.capture.as_ref();
+    let scan = match (scan, described) {
+        (Some(scan), _) => [Scan::Single, Scan::Confocal, Scan::Exhaustive]
+            .into_iter()
+            .find(|s| s.name() == scan)
+            .ok_or_else(|| PyValueError::new_err(format!("scan `{scan}`: choose single, confocal or exhaustive")))?,
+        (None, Some(c)) => gatetrace::capture::described_scan(c),
+        (None, None) => {
+            return Err(PyValueError::new_err(format!(
+                "{}: give scan (single, confocal or exhaustive): the file describes no capture",
+                path.display()
+            )));
+        }
+    };
+    let gate = gate.map(str::to_owned).or(file.gate.clone()).unwrap_or_else(|| "none".into());
+    let gate = gate.as_str();
+    let seed = seed.or(file.seed).unwrap_or(0);
+    let max_bounces = max_bounces.or(file.max_bounces).unwrap_or(8);
+    let spp = if seconds.is_none() { spp.or(file.spp) } else { spp };
     let budget = parse_budget(spp, seconds)?;
-    let (width, height) = check_image(res, samples_per_pass)?;
+    let (width, height) = check_image(res.or(file.resolution).unwrap_or((256, 256)), samples_per_pass)?;
     if let Some((w, h)) = laser_grid
         && (w == 0 || h == 0)
     {
@@ -617,23 +642,20 @@ fn capture<'py>(
     if settings.target_pilot_spp != 0 && settings.method != Method::Ellipsoidal {
         return Err(PyValueError::new_err("target_pilot applies to method ellipsoidal only"));
     }
-    let request = CaptureRequest {
-        scan,
-        relay_wall: relay_wall.to_owned(),
+    let options = CaptureOptions {
+        relay_wall: relay_wall.map(str::to_owned),
         sensor_origin: sensor_origin.map(glam_point),
         laser_origin: laser_origin.map(glam_point),
-        laser_spot: glam::Vec2::from(laser_spot),
+        laser_spot: laser_spot.map(glam::Vec2::from),
         laser_grid,
         laser_power,
         count_first_and_last: count_first_last,
         band_index_auto: band_index_choice.is_none(),
     };
+    let request = CaptureRequest::new(scan, described, options);
     request.check(&settings).map_err(value_error)?;
     gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
-    if !path.exists() {
-        return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
-    }
-    let load = LoadOptions { allow_unsupported_materials, ..Default::default() };
+    let load = LoadOptions { allow_unsupported_materials, parameters, ..Default::default() };
     let prepared = py.detach(|| prepare_capture(&path, load, &request, settings)).map_err(value_error)?;
     let ctx = device()?;
     let mut signals = CaptureSignals::default();

@@ -318,6 +318,27 @@ def test_confocal_capture_equals_the_command_line_bit_for_bit(tmp_path):
     assert meta["method"] == "ellipsoidal" and meta["nlos_scan"] == "confocal"
 
 
+PANELS = ROOT / "assets/scenes/nlos_panels.xml"
+
+
+def test_a_mitsuba_capture_takes_the_files_setup_and_equals_the_command_line(tmp_path):
+    # Nothing but the file: its single scan, 8x8 grid, 100 bins, three bounces, projector laser.
+    data, meta = gatetrace.capture(PANELS, spp=16, method="path", seed=5)
+    assert data.shape == (8, 8, 100, 3) and data.sum() > 0
+    assert meta["nlos_scan"] == "single" and meta["max_bounces"] == 3
+    assert meta["laser_power_w"] is None and meta["laser_projector_irradiance_w_m2"] == [1.0, 1.0, 1.0]
+    cli, cli_meta = cli_render(tmp_path, str(PANELS), "--spp", "16", "--method", "path", "--seed", "5")
+    assert np.array_equal(data, cli), f"largest difference {np.abs(data - cli).max()}"
+    for key in ("gate_parameters", "resolution", "sensor_origin", "laser_origin", "laser_grid_xyz", "relay_wall"):
+        assert meta[key] == cli_meta[key], key
+    # Its parameter, and arguments over the file's settings.
+    data, meta = gatetrace.capture(PANELS, parameters={"confocal": "true"}, res=(4, 4), spp=4, method="path", laser_power=2.0)
+    assert data.shape == (4, 4, 100, 3)
+    assert meta["nlos_scan"] == "confocal" and meta["laser_power_w"] == 2.0
+    with pytest.raises(ValueError, match="give scan"):
+        gatetrace.capture(LETTER, gate="transient:0.9,0.02,8", res=(4, 4), max_bounces=3, spp=1)
+
+
 @pytest.mark.parametrize(
     "options, error, words",
     [

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use gatetrace::integrator::Method;
 use gatetrace::nlos::Scan;
-use gatetrace::scene::LoadOptions;
+use gatetrace::scene::{LoadOptions, SceneSettings};
 
 use super::parse::{
     MethodParser, NamesOnly, parse_define, parse_point, parse_resolution, parse_shard, parse_strategy, parse_uv,
@@ -71,10 +71,11 @@ impl ImageArgs {
     }
 
     /// Takes the scene file's render settings (a Mitsuba scene's film, sampler and integrator)
-    /// for the options the command line did not give; returns the samples per pixel it sets.
-    pub fn take_scene_settings(&mut self, scene: &std::path::Path) -> anyhow::Result<Option<u64>> {
+    /// for the options the command line did not give; returns them (the samples per pixel and
+    /// the capture are the caller's to take).
+    pub fn take_scene_settings(&mut self, scene: &std::path::Path) -> anyhow::Result<SceneSettings> {
         let settings = gatetrace::scene::scene_settings(scene, &self.define)?;
-        if let Some(gate) = settings.gate.filter(|_| !self.was_given("gate")) {
+        if let Some(gate) = settings.gate.clone().filter(|_| !self.was_given("gate")) {
             self.gate = gate;
         }
         if let Some(res) = settings.resolution.filter(|_| !self.was_given("res")) {
@@ -86,7 +87,7 @@ impl ImageArgs {
         if let Some(seed) = settings.seed.filter(|_| !self.was_given("seed")) {
             self.seed = seed;
         }
-        Ok(settings.spp)
+        Ok(settings)
     }
 }
 
@@ -191,25 +192,30 @@ pub struct RenderArgs {
     /// (confocal) or every --laser-grid spot (exhaustive).
     #[arg(long, value_name = "SCAN", value_parser = NamesOnly::<Scan>::new())]
     pub nlos: Option<Scan>,
-    /// --nlos: the relay wall's glTF node (a mesh with TEXCOORD_0 over [0, 1]^2)
+    /// --nlos: the relay wall's node (a glTF mesh with TEXCOORD_0 over [0, 1]^2; default: a
+    /// Mitsuba capture's, else relay_wall)
     #[arg(long, default_value = gatetrace::nlos::DEFAULT_RELAY_WALL, value_name = "NODE")]
     pub relay_wall: String,
-    /// --nlos: the sensor's position, X,Y,Z in metres (default: node sensor_origin, nlos_origin).
+    /// --nlos: the sensor's position, X,Y,Z in metres (default: a Mitsuba capture's, else node
+    /// sensor_origin or nlos_origin).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
     pub sensor_origin: Option<glam::Vec3>,
-    /// --nlos: the laser's position, X,Y,Z in metres (default: node laser_origin or nlos_origin).
+    /// --nlos: the laser's position, X,Y,Z in metres (default: a Mitsuba capture's, else node
+    /// laser_origin or nlos_origin).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true)]
     pub laser_origin: Option<glam::Vec3>,
     /// --nlos single: where the laser is aimed, texture coordinates U,V of the relay wall
+    /// (default: a Mitsuba capture's aim, else 0.5,0.5)
     #[arg(long, default_value = "0.5,0.5", value_name = "U,V", value_parser = parse_uv)]
     pub laser_spot: glam::Vec2,
     /// --nlos exhaustive: the grid of laser spots, WIDTHxHEIGHT (default: --res).
     #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
     pub laser_grid: Option<(u32, u32)>,
-    /// --nlos: the laser beam's power (W)
+    /// --nlos: the laser beam's power (W; default 1, or a Mitsuba capture's projector)
     #[arg(long, default_value_t = 1.0, value_name = "WATTS", allow_hyphen_values = true)]
     pub laser_power: f32,
-    /// --nlos: count the laser -> spot and sensed point -> sensor segments in path lengths.
+    /// --nlos: count the laser -> spot and sensed point -> sensor segments in path lengths
+    /// (also when a Mitsuba capture's account_first_and_last_bounces is true).
     #[arg(long)]
     pub count_first_last: bool,
 }

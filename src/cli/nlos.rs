@@ -6,19 +6,28 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Result, ensure};
-use gatetrace::capture::{CaptureProgress, CaptureRequest, prepare_capture, render_capture};
+use gatetrace::capture::{CaptureOptions, CaptureProgress, CaptureRequest, prepare_capture, render_capture};
 use gatetrace::film::output::{OutputFormat, check_writable};
 use gatetrace::gpu::GpuContext;
 use gatetrace::integrator::{Budget, Progress, RenderSettings, film_elements};
 use gatetrace::nlos::Scan;
+use gatetrace::scene::SceneCapture;
 
 use super::args::{OnOff, RenderArgs};
 use super::interrupt;
 use super::report::{print_stats, print_warnings, progress_bar, say};
 
-/// Renders an NLOS capture (`--nlos`) and writes its transients with the sensed points and
-/// laser spots.
-pub fn run(args: &RenderArgs, scan: Scan, scene_path: &Path, base: RenderSettings, budget: Budget) -> Result<()> {
+/// Renders an NLOS capture (`--nlos`, or the one a Mitsuba scene describes: `file`, whose
+/// settings the command line's options override) and writes its transients with the sensed
+/// points and laser spots.
+pub fn run(
+    args: &RenderArgs,
+    scan: Scan,
+    file: Option<&SceneCapture>,
+    scene_path: &Path,
+    base: RenderSettings,
+    budget: Budget,
+) -> Result<()> {
     let stem = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{stem}_nlos.npy")));
     let format = OutputFormat::of(&out)?;
@@ -27,17 +36,19 @@ pub fn run(args: &RenderArgs, scan: Scan, scene_path: &Path, base: RenderSetting
         "--out {}: an exhaustive capture is written as NPY [laser_y, laser_x, grid_y, grid_x, T, 3]; name a .npy file",
         out.display()
     );
-    let request = CaptureRequest {
-        scan,
-        relay_wall: args.relay_wall.clone(),
+    // The file's capture, with the options the command line gave over it.
+    let given = |id: &str| args.was_given(id);
+    let options = CaptureOptions {
+        relay_wall: given("relay_wall").then(|| args.relay_wall.clone()),
         sensor_origin: args.sensor_origin,
         laser_origin: args.laser_origin,
-        laser_spot: args.laser_spot,
+        laser_spot: given("laser_spot").then_some(args.laser_spot),
         laser_grid: args.laser_grid,
-        laser_power: args.laser_power,
+        laser_power: given("laser_power").then_some(args.laser_power),
         count_first_and_last: args.count_first_last,
         band_index_auto: args.band_index == OnOff::Auto,
     };
+    let request = CaptureRequest::new(scan, file, options);
     request.check(&base)?;
     film_elements(&base)?;
     check_writable(&out, args.mkdir)?;

@@ -36,13 +36,16 @@ fn with_lens_options(mut scene: gatetrace::scene::Scene, args: &ImageArgs) -> Re
 /// the frames of a sequence, a shard, or (module nlos) an NLOS capture.
 pub fn run(mut args: RenderArgs) -> Result<()> {
     let scene_path = args.scene.clone().unwrap_or_else(|| PathBuf::from(super::DEFAULT_SCENE));
-    let scene_spp = args.image.take_scene_settings(&scene_path)?;
+    let scene_settings = args.image.take_scene_settings(&scene_path)?;
     if args.spp.is_none() && args.time.is_none() {
-        args.spp = scene_spp;
+        args.spp = scene_settings.spp;
     }
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
+    // A capture the scene file describes is rendered as one; --nlos overrides its scan.
+    let file_capture = scene_settings.capture;
+    let scan = args.nlos.or(file_capture.as_ref().map(capture::described_scan));
     // NLOS captures have defaults of their own (gatetrace::capture).
-    let is_capture = args.nlos.is_some();
+    let is_capture = scan.is_some();
     let choices = capture::CaptureChoices {
         method: args.method,
         connections_per_query: args.connections_per_query,
@@ -136,15 +139,16 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
              ellipsoidal"
         );
         ensure!(
-            args.nlos.is_none() && !sequence && args.anim_time.is_none(),
-            "--shard splits one image: it does not apply to --nlos, --frames, --frame-range or --anim-time"
+            !is_capture && !sequence && args.anim_time.is_none(),
+            "--shard splits one image: it does not apply to NLOS captures (--nlos), --frames, --frame-range or \
+             --anim-time"
         );
         ensure!(
             !args.resume && args.checkpoint_every.is_none(),
             "--shard keeps no checkpoint (--resume, --checkpoint-every): rerun an interrupted shard whole"
         );
     }
-    if let Some(scan) = args.nlos {
+    if let Some(scan) = scan {
         ensure!(
             args.checkpoint_every.is_none() && !args.resume,
             "--checkpoint-every and --resume do not apply to NLOS captures (--nlos) yet: an interrupted capture writes \
@@ -159,7 +163,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
             !sequence && args.anim_time.is_none(),
             "--nlos renders one capture: --frames, --frame-range and --anim-time do not apply to it"
         );
-        return super::nlos::run(&args, scan, &scene_path, settings, budget);
+        return super::nlos::run(&args, scan, file_capture.as_ref(), &scene_path, settings, budget);
     }
     // Every frame's settings and output, checked before any work.
     let mut frames = Vec::new();

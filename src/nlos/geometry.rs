@@ -5,7 +5,7 @@
 use anyhow::{Context as _, Result, bail, ensure};
 use glam::{Vec2, Vec3};
 
-use super::{LaserAim, NlosCapture, Scan};
+use super::{Laser, LaserAim, NlosCapture, Scan};
 use crate::bvh::traverse::trace_closest;
 use crate::gpu::layout::{NONE, WallPoint};
 use crate::scene::{PreparedScene, Scene};
@@ -144,7 +144,6 @@ pub fn wall_points_and_warnings(
         ));
     }
     let mut blocked = Vec::new();
-    let power = Vec3::splat(capture.laser_power);
     let mut spot = |target: &WallTarget| -> Result<WallPoint> {
         let (mut p, on_target) = first_hit(scene, &bvh_position, capture.laser_origin, target);
         if !on_target {
@@ -155,7 +154,7 @@ pub fn wall_points_and_warnings(
                 fmt_point(p.position)
             ));
         }
-        p.power = power;
+        p.power = capture.laser.spot_power(capture.laser_origin, p.position, wall_normal(scene, &p));
         p.length_offset = if capture.count_first_and_last { (p.position - capture.laser_origin).length() } else { 0.0 };
         Ok(p)
     };
@@ -178,17 +177,13 @@ pub fn wall_points_and_warnings(
 }
 
 /// Checks a capture's settings against the scene before any work: the wall exists and is
-/// parameterised, the origins are finite and the laser power positive.
+/// parameterised, the origins are finite and the laser gives power.
 pub fn check_capture(scene: &Scene, capture: &NlosCapture) -> Result<()> {
     wall_point_at(scene, &capture.relay_wall, Vec2::splat(0.5))?;
     for (what, p) in [("sensor origin", capture.sensor_origin), ("laser origin", capture.laser_origin)] {
         ensure!(p.is_finite(), "the {what} {} is not finite", fmt_point(p));
     }
-    ensure!(
-        capture.laser_power.is_finite() && capture.laser_power > 0.0,
-        "laser power {} W must be positive",
-        capture.laser_power
-    );
+    capture.laser.check()?;
     if let LaserAim::Spot(uv) = capture.aim {
         ensure!(
             (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y),
@@ -240,7 +235,12 @@ pub fn capture_record(
     map.insert("relay_wall".into(), json!(capture.relay_wall));
     map.insert("sensor_origin".into(), json!(capture.sensor_origin.to_array()));
     map.insert("laser_origin".into(), json!(capture.laser_origin.to_array()));
-    map.insert("laser_power_w".into(), json!(capture.laser_power));
+    let (power, projector) = match capture.laser {
+        Laser::Beam(power) => (json!(power), json!(null)),
+        Laser::Projector(irradiance) => (json!(null), json!(irradiance.to_array())),
+    };
+    map.insert("laser_power_w".into(), power);
+    map.insert("laser_projector_irradiance_w_m2".into(), projector);
     map.insert("count_first_and_last".into(), json!(capture.count_first_and_last));
     map.insert("sensor_grid_xyz".into(), sensor_xyz);
     map.insert("sensor_grid_normals".into(), sensor_normals);

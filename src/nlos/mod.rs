@@ -13,7 +13,8 @@
 //!   the first surface it hits is the sensed point.
 //! - The laser is a beam of power P (W) from the laser origin towards a target on the wall; the
 //!   first surface it hits is the spot. The spot reflects the beam with the wall's BSDF, so it
-//!   acts as a point light of radiant intensity P f(to laser, w) cos(w) (W sr^-1).
+//!   acts as a point light of radiant intensity P f(to laser, w) cos(w) (W sr^-1). A Mitsuba XML
+//!   capture's laser is mitransient's projector, whose P depends on the spot ([`Laser`]).
 //! - Path lengths run from the laser spot to the sensed point. The laser origin -> spot and
 //!   sensed point -> sensor origin segments are added only with `count_first_and_last`
 //!   (mitransient's `account_first_and_last_bounces`, off by default there and here).
@@ -90,8 +91,50 @@ pub struct NlosCapture {
     pub laser_origin: Vec3,
     /// Where the beam is aimed.
     pub aim: LaserAim,
-    /// Beam power (W).
-    pub laser_power: f32,
+    /// The laser's power at its spot.
+    pub laser: Laser,
     /// Count the laser origin -> spot and sensed point -> sensor origin segments in path lengths.
     pub count_first_and_last: bool,
+}
+
+/// What lights the laser spot: the power the spot receives (W per channel).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Laser {
+    /// A beam of this power (W), whatever the spot's distance and slant.
+    Beam(f32),
+    /// mitransient's `projector` of this irradiance (W m^-2 per channel at 1 m on its axis), as
+    /// its `transient_nlos_path` lights a spot with it: a spot at distance d whose normal makes
+    /// the angle theta with the beam receives pi E cos(theta) / d^2 (W). A Mitsuba XML capture's
+    /// laser.
+    Projector(Vec3),
+}
+
+impl Laser {
+    /// The power (W per channel) a spot at `spot` with unit normal `normal` receives from a laser
+    /// at `origin` (m).
+    pub fn spot_power(&self, origin: Vec3, spot: Vec3, normal: Vec3) -> Vec3 {
+        match *self {
+            Laser::Beam(power) => Vec3::splat(power),
+            Laser::Projector(irradiance) => {
+                let to_origin = origin - spot;
+                let d2 = to_origin.length_squared();
+                let cos = normal.dot(to_origin).abs() / d2.sqrt();
+                if d2 > 0.0 { irradiance * (std::f32::consts::PI * cos / d2) } else { Vec3::ZERO }
+            }
+        }
+    }
+
+    /// Checks that the laser gives a positive, finite power.
+    pub fn check(&self) -> anyhow::Result<()> {
+        match *self {
+            Laser::Beam(power) => {
+                anyhow::ensure!(power.is_finite() && power > 0.0, "laser power {power} W must be positive")
+            }
+            Laser::Projector(e) => anyhow::ensure!(
+                e.is_finite() && e.min_element() >= 0.0 && e.max_element() > 0.0,
+                "the projector's irradiance {e} W m^-2 must be finite, non-negative and positive in some channel"
+            ),
+        }
+        Ok(())
+    }
 }

@@ -45,6 +45,23 @@ impl ThinLens {
 }
 
 impl CameraDesc {
+    /// The camera of a scene loaded for an NLOS capture without one: a pinhole at the centre of
+    /// the triangles' bounds (captures never look through it).
+    pub fn placeholder(triangles: &[super::SceneTriangle]) -> Self {
+        let (lo, hi) = triangles
+            .iter()
+            .flat_map(|t| t.positions)
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        CameraDesc {
+            position: 0.5 * (lo + hi),
+            right: Vec3::X,
+            up: Vec3::Y,
+            forward: Vec3::NEG_Z,
+            yfov: 1.0,
+            lens: None,
+        }
+    }
+
     /// Overrides the lens from the scene file: `aperture_radius` (m; 0 makes a pinhole) and
     /// `focus_distance` (m) replace the file's where given. A radius without any focus distance
     /// is an error whose hint names `focus_option`, the caller's way of giving one (the command

@@ -283,21 +283,7 @@ impl Loader<'_> {
         }
         let camera = match c.camera {
             Some(camera) => camera,
-            None if self.capture => {
-                let (lo, hi) = c
-                    .triangles
-                    .iter()
-                    .flat_map(|t| t.positions)
-                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
-                CameraDesc {
-                    position: 0.5 * (lo + hi),
-                    right: Vec3::X,
-                    up: Vec3::Y,
-                    forward: Vec3::NEG_Z,
-                    yfov: 1.0,
-                    lens: None,
-                }
-            }
+            None if self.capture => CameraDesc::placeholder(&c.triangles),
             None => bail!(
                 "{name}: no camera: gatetrace renders from the first perspective camera node of the scene (an NLOS \
                  capture, --nlos, needs none)"

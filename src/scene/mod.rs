@@ -47,6 +47,32 @@ pub struct SceneSettings {
     pub gate: Option<String>,
     /// Random seed: `--seed`.
     pub seed: Option<u32>,
+    /// The NLOS capture the file describes, which a render of it becomes (`--nlos`).
+    pub capture: Option<SceneCapture>,
+}
+
+/// An NLOS capture a scene file describes (a Mitsuba XML scene's `nlos_capture_meter` on its
+/// relay wall, lit by a `projector`): the defaults of the capture a render of the file becomes,
+/// each overridden by the command line's option (`--nlos`, `--relay-wall`, `--sensor-origin`,
+/// `--laser-origin`, `--laser-spot`, `--laser-power`, `--count-first-last`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneCapture {
+    /// The laser follows the sensed point (a confocal scan); otherwise one spot lights every
+    /// sensed point (a single scan).
+    pub confocal: bool,
+    /// The relay wall's node name.
+    pub relay_wall: String,
+    /// Where the sensor looks at the wall from (m).
+    pub sensor_origin: Vec3,
+    /// Where the laser starts (m).
+    pub laser_origin: Vec3,
+    /// Single scans: the laser's spot, texture coordinates (u, v) of the relay wall.
+    pub laser_spot: Vec2,
+    /// The laser: mitransient's projector of this irradiance (W m^-2 per channel at 1 m on its
+    /// axis; `crate::nlos::Laser::Projector`).
+    pub projector_irradiance: Vec3,
+    /// Count the laser origin -> spot and sensed point -> sensor origin segments in path lengths.
+    pub count_first_and_last: bool,
 }
 
 /// A triangle in world space with its shading attributes, in load order.

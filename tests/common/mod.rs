@@ -410,7 +410,7 @@ pub fn example_capture(
             sensor_origin: origin,
             laser_origin: origin,
             aim,
-            laser_power: 1.0,
+            laser: gatetrace::nlos::Laser::Beam(1.0),
             count_first_and_last: false,
         }),
         query: gatetrace::integrator::QuerySettings { reflection_weights: true, ..Default::default() },

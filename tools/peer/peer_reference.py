@@ -343,8 +343,10 @@ def build_nlos_scene(mi, scene, args):
         "type": "scene",
         "integrator": {
             "type": "transient_nlos_path",
-            "max_depth": args.max_bounces + 1,
-            "rr_depth": args.max_bounces + 2,
+            # Laser sampling connects the last vertex through the spot without counting it: a
+            # path of max_depth d has d scattering vertices, the spot included.
+            "max_depth": args.max_bounces,
+            "rr_depth": args.max_bounces + 1,
             "capture_type": args.nlos,
             "nlos_laser_sampling": True,
             "nlos_hidden_geometry_sampling": args.hidden_geometry_sampling,

@@ -18,10 +18,13 @@
 //! - Sensors: `perspective` and `thinlens`, with `hdrfilm` or mitransient's
 //!   `transient_hdr_film` and a sampler; the integrator `path` or `transient_path`. Their
 //!   resolution, samples, depth and time bins become the render's defaults ([`SceneSettings`]).
+//! - NLOS captures (module `capture`): mitransient's `nlos_capture_meter` on a `rectangle` relay
+//!   wall, a `projector` laser and `transient_nlos_path`, read into [`super::SceneCapture`].
 //!
 //! Lengths are the file's own units, read as metres: a gate or `start_opl` in the file's units
 //! means the same path lengths.
 
+mod capture;
 mod conductors;
 mod materials;
 mod shapes;
@@ -30,7 +33,7 @@ mod xml;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, anyhow, bail};
+use anyhow::{Result, bail};
 use glam::{Mat3, Mat4, Vec3};
 
 pub use shapes::TESSELLATION_ERROR;
@@ -48,16 +51,11 @@ pub fn load_mitsuba(path: &Path, options: &LoadOptions) -> Result<Scene> {
     if options.time.is_some() {
         bail!("{name}: animation times apply to glTF animations; a Mitsuba XML scene is static");
     }
-    if options.capture {
-        bail!(
-            "{name}: NLOS captures (--nlos) from Mitsuba XML scenes (transient_nlos_path, nlos_capture_meter) are not \
-             read yet: describe the capture in glTF (docs/nlos.md)"
-        );
-    }
     let (root, warnings) = xml::read_scene(path, &options.parameters)?;
     let default = default_bsdf();
     let mut b = Builder::new(path, &root, &default)?;
     b.warnings = warnings;
+    b.for_capture = options.capture;
     for child in &root.children {
         match child.tag.as_str() {
             "default" => {}
@@ -84,9 +82,17 @@ pub fn read_settings(path: &Path, parameters: &[(String, String)]) -> Result<Sce
         match child.tag.as_str() {
             "sensor" => b.sensor(child)?,
             "integrator" => b.integrator(child)?,
+            "shape" => {
+                if let Some(meter) = child.children.iter().find(|c| c.tag == "sensor") {
+                    let to_world = Object::new(child).transform("to_world")?;
+                    b.capture_meter(meter, child, &relay_wall_name(child), to_world)?;
+                }
+            }
+            "emitter" if child.attribute("type") == Some("projector") => b.projector(child)?,
             _ => {}
         }
     }
+    b.finish_capture()?;
     Ok(b.settings)
 }
 
@@ -123,6 +129,10 @@ struct Builder<'e> {
     dropped_degenerate: usize,
     settings: SceneSettings,
     integrator_seen: bool,
+    /// What the scene holds of an NLOS capture.
+    capture: capture::CaptureParts<'e>,
+    /// Loading for an NLOS capture ([`LoadOptions::capture`]): no camera or light is needed.
+    for_capture: bool,
 }
 
 impl<'e> Builder<'e> {
@@ -150,6 +160,8 @@ impl<'e> Builder<'e> {
             dropped_degenerate: 0,
             settings: SceneSettings::default(),
             integrator_seen: false,
+            capture: Default::default(),
+            for_capture: false,
         })
     }
 
@@ -324,16 +336,33 @@ impl<'e> Builder<'e> {
                 ));
             }
         }
-        if let Some(c) = e.children.iter().find(|c| c.tag == "sensor") {
-            return Err(c.error("sensors on shapes (NLOS capture meters) are not read yet"));
-        }
-        o.finish(&["bsdf", "ref", "emitter"])?;
+        o.finish(&["bsdf", "ref", "emitter", "sensor"])?;
         let material = self.material(bsdf, radiance)?;
-        self.add_mesh(e, &mesh, to_world, flip, material)
+        let mut sensors = e.children.iter().filter(|c| c.tag == "sensor");
+        let Some(meter) = sensors.next() else {
+            return self.add_mesh(e, &mesh, to_world, flip, material, e.attribute("id").or(e.attribute("name")));
+        };
+        if let Some(second) = sensors.next() {
+            return Err(second.error("a shape carries one sensor"));
+        }
+        if parent != Mat4::IDENTITY {
+            return Err(meter.error("a relay wall in an instance is not read"));
+        }
+        let wall = relay_wall_name(e);
+        self.capture_meter(meter, e, &wall, to_world)?;
+        self.add_mesh(e, &mesh, to_world, flip, material, Some(&wall))
     }
 
-    /// Adds a mesh's triangles in world space (a named node when the shape has an id).
-    fn add_mesh(&mut self, e: &Element, mesh: &shapes::Mesh, to_world: Mat4, flip: bool, material: u32) -> Result<()> {
+    /// Adds a mesh's triangles in world space (a named node when `node` names it).
+    fn add_mesh(
+        &mut self,
+        e: &Element,
+        mesh: &shapes::Mesh,
+        to_world: Mat4,
+        flip: bool,
+        material: u32,
+        node: Option<&str>,
+    ) -> Result<()> {
         let normal_matrix = Mat3::from_mat4(to_world).inverse().transpose();
         let positions: Vec<Vec3> = mesh.positions.iter().map(|&p| to_world.transform_point3(p)).collect();
         if let Some(p) = positions.iter().find(|p| p.abs().max_element() > super::gltf_loader::MAX_COORDINATE) {
@@ -364,7 +393,7 @@ impl<'e> Builder<'e> {
                 self.dropped_degenerate += 1;
             }
         }
-        if let Some(id) = e.attribute("id").or(e.attribute("name")) {
+        if let Some(id) = node {
             self.nodes.push(NamedNode {
                 name: id.to_owned(),
                 position: to_world.transform_point3(Vec3::ZERO),
@@ -439,7 +468,7 @@ impl<'e> Builder<'e> {
                 let position = to_world.transform_point3(Vec3::ZERO);
                 self.point_lights.push(PointLight { position, intensity, spot: Some(spot) });
             }
-            "projector" => return Err(e.error("projector emitters are not rendered yet")),
+            "projector" => self.projector(e)?,
             kind @ ("constant" | "envmap" | "sunsky") => {
                 return Err(e.error(format!("environment lighting (`{kind}`) is not rendered")));
             }
@@ -456,6 +485,9 @@ impl<'e> Builder<'e> {
         }
         let o = Object::new(e);
         let kind = o.kind()?;
+        if kind == "nlos_capture_meter" {
+            return Err(e.error("an nlos_capture_meter belongs inside its relay wall's <shape>"));
+        }
         if !matches!(kind, "perspective" | "thinlens") {
             return Err(e.error(format!("the sensor `{kind}` is not read (perspective and thinlens are)")));
         }
@@ -609,9 +641,7 @@ impl<'e> Builder<'e> {
         let o = Object::new(e);
         match o.kind()? {
             "path" | "transient_path" => {}
-            "transient_nlos_path" => {
-                return Err(e.error("NLOS scenes (transient_nlos_path) are not read yet: describe the capture in glTF"));
-            }
+            "transient_nlos_path" => self.nlos_integrator(&o)?,
             kind @ ("volpath" | "volpathmis" | "prbvolpath" | "transient_prbvolpath") => {
                 return Err(e.error(format!("`{kind}` renders media, which gatetrace does not render yet")));
             }
@@ -633,20 +663,35 @@ impl<'e> Builder<'e> {
         }
         // Russian roulette and block sizes do not change the mean.
         o.ignore(&["rr_depth", "block_size", "gaussian_stddev"]);
+        // A path of depth d has d - 1 scattering vertices; transient_nlos_path's laser sampling
+        // adds the laser spot to the longest (its connection through the spot is not counted).
+        let spot = self.capture.nlos_integrator as i64;
         if let Some(depth) = o.integer("max_depth")? {
             match depth {
                 -1 => self.warn(e, "max_depth -1 (no limit): the render's --max-bounces applies"),
-                d if d >= 1 => self.settings.max_bounces = Some((d - 1) as u32),
+                d if d >= 1 => self.settings.max_bounces = Some((d - 1 + spot) as u32),
                 d => return Err(e.error(format!("max_depth {d} renders nothing"))),
             }
         }
         o.finish(&[])
     }
 
-    fn finish(self) -> Result<Scene> {
+    fn finish(mut self) -> Result<Scene> {
+        let capture = self.finish_capture()?;
         let name = self.name;
-        let camera =
-            self.camera.ok_or_else(|| anyhow!("{name}: no <sensor>: gatetrace renders from a perspective sensor"))?;
+        if let Some(c) = capture.as_ref().filter(|_| !self.for_capture) {
+            bail!(
+                "{name}: the scene describes an NLOS capture (an nlos_capture_meter on `{}`): render it with \
+                 `gatetrace render` (or `gatetrace.capture` in Python); a camera image needs a perspective sensor",
+                c.relay_wall
+            );
+        }
+        let for_capture = self.for_capture;
+        let camera = match self.camera {
+            Some(camera) => camera,
+            None if for_capture => super::CameraDesc::placeholder(&self.triangles),
+            None => bail!("{name}: no <sensor>: gatetrace renders from a perspective sensor"),
+        };
         if self.triangles.is_empty() {
             bail!("{name}: the scene has no triangles");
         }
@@ -660,7 +705,7 @@ impl<'e> Builder<'e> {
         let emissive = self.triangles.iter().any(|t| self.materials[t.material as usize].is_emissive());
         let powered = self.point_lights.iter().any(|l| l.intensity.max_element() > 0.0)
             || self.directional_lights.iter().any(|l| l.irradiance.max_element() > 0.0);
-        if !emissive && !powered {
+        if !emissive && !powered && !for_capture {
             bail!("{name}: no emitter gives light (area emitters on shapes, point and directional emitters)");
         }
         let mut warnings = self.warnings;
@@ -681,6 +726,11 @@ impl<'e> Builder<'e> {
             settings: self.settings,
         })
     }
+}
+
+/// The node name of a relay wall (a shape carrying a capture meter): its id, else `relay_wall`.
+fn relay_wall_name(shape: &Element) -> String {
+    shape.attribute("id").or(shape.attribute("name")).unwrap_or(crate::nlos::DEFAULT_RELAY_WALL).to_owned()
 }
 
 /// Mitsuba's default BSDF (diffuse, reflectance 0.5) as an element.
