@@ -114,11 +114,6 @@ pub struct CaptureRequest {
     pub band_index_auto: bool,
 }
 
-/// The scan of the capture a scene file describes.
-pub fn described_scan(file: &SceneCapture) -> Scan {
-    if file.confocal { Scan::Confocal } else { Scan::Single }
-}
-
 /// What a caller asks of a capture over its defaults (the command line's options, Python's
 /// arguments): each None keeps the setting of the capture the scene file describes, else the
 /// default of [`CaptureRequest::new`].
@@ -132,7 +127,8 @@ pub struct CaptureOptions {
     pub laser_origin: Option<Vec3>,
     /// Single scans: the spot, texture coordinates of the wall (default (0.5, 0.5)).
     pub laser_spot: Option<Vec2>,
-    /// Exhaustive scans: the grid of laser spots, width x height (default: the sensed points').
+    /// Exhaustive scans: the grid of laser spots, width x height (default: the file's, else the
+    /// sensed points').
     pub laser_grid: Option<(u32, u32)>,
     /// A beam of this power (W) as the laser (default: the file's projector, else 1 W).
     pub laser_power: Option<f32>,
@@ -155,7 +151,7 @@ impl CaptureRequest {
             sensor_origin: options.sensor_origin.or(file.map(|f| f.sensor_origin)),
             laser_origin: options.laser_origin.or(file.map(|f| f.laser_origin)),
             laser_spot: options.laser_spot.or(file.map(|f| f.laser_spot)).unwrap_or(Vec2::splat(0.5)),
-            laser_grid: options.laser_grid,
+            laser_grid: options.laser_grid.or(file.and_then(|f| f.laser_grid)),
             laser: match (options.laser_power, file) {
                 (Some(power), _) => Laser::Beam(power),
                 (None, Some(f)) => Laser::Projector(f.projector_irradiance),

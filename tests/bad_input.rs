@@ -564,10 +564,30 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:4: <emitter type=\"projector\">", "misses the relay wall `wall`"],
         ),
         capture_case(
-            "XML exhaustive capture",
+            "XML exhaustive capture without its film's laser grid",
             &[("<boolean name=\"nlos_laser_sampling\" value=\"true\"/>", "<boolean name=\"nlos_laser_sampling\" \
                value=\"true\"/><integer name=\"capture_type\" value=\"3\"/>")],
-            &["scene.xml:3:", "exhaustive captures are not read from Mitsuba XML yet"],
+            &["scene.xml:5:", "needs exhaustive_scan true with laser_scan_width and _height"],
+        ),
+        capture_case(
+            "XML exhaustive capture with laser spots of their own",
+            &[
+                ("<boolean name=\"nlos_laser_sampling\" value=\"true\"/>", "<boolean name=\"nlos_laser_sampling\" \
+                  value=\"true\"/><integer name=\"capture_type\" value=\"3\"/><boolean \
+                  name=\"force_equal_illumination_scanning\" value=\"false\"/>"),
+            ],
+            &["scene.xml:3:", "force_equal_illumination_scanning false"],
+        ),
+        capture_case(
+            "XML exhaustive capture of another laser grid",
+            &[
+                ("<boolean name=\"nlos_laser_sampling\" value=\"true\"/>", "<boolean name=\"nlos_laser_sampling\" \
+                  value=\"true\"/><integer name=\"capture_type\" value=\"3\"/>"),
+                ("<integer name=\"width\" value=\"8\"/>", "<boolean name=\"exhaustive_scan\" value=\"true\"/><integer \
+                  name=\"laser_scan_width\" value=\"4\"/><integer name=\"laser_scan_height\" value=\"4\"/><integer \
+                  name=\"width\" value=\"8\"/>"),
+            ],
+            &["laser grid (4 x 4) must be its grid of sensed points (8 x 8)"],
         ),
         capture_case(
             "XML capture whose scan is said twice",

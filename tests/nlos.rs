@@ -11,7 +11,7 @@
 mod common;
 
 use common::stats::{BatchStats, sidak, t_critical};
-use gatetrace::capture::{CaptureChoices, CaptureOptions, CaptureRequest, described_scan, prepare_capture};
+use gatetrace::capture::{CaptureChoices, CaptureOptions, CaptureRequest, prepare_capture};
 use gatetrace::film::Gate;
 use gatetrace::integrator::{Method, RenderSettings};
 use gatetrace::nlos::{LaserAim, NlosCapture};
@@ -204,7 +204,7 @@ fn xml_capture_agrees_with_peer(scan: &str, method: Method, spp: u32, block: Blo
     let parameters = vec![("confocal".to_owned(), (scan == "confocal").to_string())];
     let file = gatetrace::scene::scene_settings(&path, &parameters).unwrap();
     let capture = file.capture.clone().expect("the file describes a capture");
-    assert_eq!(capture.confocal, scan == "confocal");
+    assert_eq!(capture.scan.name(), scan);
     assert_eq!(capture.laser_spot, Vec2::splat(0.5), "laser_lookat_pixel (4, 4) of the 8x8 film");
     let (width, height) = file.resolution.unwrap();
     let mut settings = RenderSettings {
@@ -217,7 +217,7 @@ fn xml_capture_agrees_with_peer(scan: &str, method: Method, spp: u32, block: Blo
     assert_eq!((width, height, settings.max_bounces), (8, 8, 3));
     CaptureChoices { method: Some(method), ..Default::default() }.apply(&mut settings);
     let load = LoadOptions { parameters, ..Default::default() };
-    let request = CaptureRequest::new(described_scan(&capture), Some(&capture), CaptureOptions::default());
+    let request = CaptureRequest::new(capture.scan, Some(&capture), CaptureOptions::default());
     let prepared = prepare_capture(&path, load, &request, settings).unwrap();
     let settings = RenderSettings { nlos: Some(prepared.capture.clone()), ..prepared.settings.clone() };
     let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, spp);
@@ -302,6 +302,51 @@ fn a_mitsuba_capture_renders_as_described_and_options_override_it() {
     assert_eq!((meta["nlos_scan"].as_str(), &meta["resolution"]), (Some("confocal"), &serde_json::json!([4, 4])));
     let (meta, _, _) = capture("spot", &["--laser-spot", "0.25,0.75"]);
     assert_eq!(meta["laser_grid_xyz"], serde_json::json!([[[-0.25, 0.25, 0.0]]]), "{meta}");
+}
+
+/// An exhaustive scan read from Mitsuba XML (`capture_type` 3, the film's `exhaustive_scan` and
+/// laser grid): every sensed point lit from every laser spot, its spots the sensed points, in the
+/// command line's layout [laser_y, laser_x, grid_y, grid_x, T, 3].
+#[test]
+fn a_mitsuba_exhaustive_capture_lights_every_sensed_point_from_every_spot() {
+    let dir = common::scratch_dir("nlos_xml_exhaustive");
+    let panels = std::fs::read_to_string(common::repo_path("assets/scenes/nlos_panels.xml")).unwrap();
+    let mut xml = panels.clone();
+    for (from, to) in [
+        (
+            "<integer name=\"max_depth\" value=\"3\"/>",
+            "<integer name=\"max_depth\" value=\"3\"/><integer name=\"capture_type\" value=\"3\"/>",
+        ),
+        (
+            "<integer name=\"width\" value=\"8\"/>",
+            "<integer name=\"width\" value=\"3\"/><boolean name=\"exhaustive_scan\" value=\"true\"/><integer \
+             name=\"laser_scan_width\" value=\"3\"/><integer name=\"laser_scan_height\" value=\"2\"/>",
+        ),
+        ("<integer name=\"height\" value=\"8\"/>", "<integer name=\"height\" value=\"2\"/>"),
+    ] {
+        assert!(xml.contains(from), "{from}");
+        xml = xml.replace(from, to);
+    }
+    let scene = dir.join("exhaustive.xml");
+    std::fs::write(&scene, xml).unwrap();
+    let file = gatetrace::scene::scene_settings(&scene, &[]).unwrap().capture.unwrap();
+    assert_eq!((file.scan, file.laser_grid), (gatetrace::nlos::Scan::Exhaustive, Some((3, 2))));
+    let out = dir.join("capture.npy");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_gatetrace"))
+        .args(["render", scene.to_str().unwrap(), "--spp", "256", "--method", "path", "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (shape, data) = gatetrace::film::output::read_npy_f32(&out).unwrap();
+    assert_eq!(shape, vec![2, 3, 2, 3, 100, 3]);
+    // Every laser spot lights the grid.
+    for spot in data.chunks(6 * 100 * 3) {
+        assert!(spot.iter().sum::<f32>() > 0.0);
+    }
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("capture.json")).unwrap()).unwrap();
+    assert_eq!(meta["nlos_scan"], "exhaustive");
+    assert_eq!(meta["laser_grid_xyz"], meta["sensor_grid_xyz"], "the spots are the sensed points");
 }
 
 /// Sensed points lie at the cell centres of the wall's texture coordinates: on the example wall

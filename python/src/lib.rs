@@ -587,7 +587,7 @@ fn capture<'py>(
             .into_iter()
             .find(|s| s.name() == scan)
             .ok_or_else(|| PyValueError::new_err(format!("scan `{scan}`: choose single, confocal or exhaustive")))?,
-        (None, Some(c)) => gatetrace::capture::described_scan(c),
+        (None, Some(c)) => c.scan,
         (None, None) => {
             return Err(PyValueError::new_err(format!(
                 "{}: give scan (single, confocal or exhaustive): the file describes no capture",

@@ -208,7 +208,8 @@ pub struct RenderArgs {
     /// (default: a Mitsuba capture's aim, else 0.5,0.5)
     #[arg(long, default_value = "0.5,0.5", value_name = "U,V", value_parser = parse_uv)]
     pub laser_spot: glam::Vec2,
-    /// --nlos exhaustive: the grid of laser spots, WIDTHxHEIGHT (default: --res).
+    /// --nlos exhaustive: the grid of laser spots, WIDTHxHEIGHT (default: a Mitsuba capture's, else
+    /// --res).
     #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
     pub laser_grid: Option<(u32, u32)>,
     /// --nlos: the laser beam's power (W; default 1, or a Mitsuba capture's projector)

@@ -43,7 +43,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     let gate = Gate::parse(&args.gate).with_context(|| format!("--gate {}", args.gate))?;
     // A capture the scene file describes is rendered as one; --nlos overrides its scan.
     let file_capture = scene_settings.capture;
-    let scan = args.nlos.or(file_capture.as_ref().map(capture::described_scan));
+    let scan = args.nlos.or(file_capture.as_ref().map(|c| c.scan));
     // NLOS captures have defaults of their own (gatetrace::capture).
     let is_capture = scan.is_some();
     let choices = capture::CaptureChoices {

@@ -44,31 +44,7 @@ pub use shells::{
     refine_for_shells,
 };
 
-/// The relay wall's node name when none is given.
-pub const DEFAULT_RELAY_WALL: &str = "relay_wall";
-
-/// How the laser moves during a capture (`--nlos`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Scan {
-    /// One laser spot for the whole grid of sensed points.
-    Single,
-    /// The laser spot follows the sensed point: each pixel is lit at the point it senses.
-    Confocal,
-    /// Every laser spot of a laser grid with every sensed point: one single-scan capture per
-    /// laser spot.
-    Exhaustive,
-}
-
-impl Scan {
-    /// The name on the command line and in metadata.
-    pub fn name(self) -> &'static str {
-        match self {
-            Scan::Single => "single",
-            Scan::Confocal => "confocal",
-            Scan::Exhaustive => "exhaustive",
-        }
-    }
-}
+pub use crate::scene::{DEFAULT_RELAY_WALL, Scan};
 
 /// Where one render's laser spot lies.
 #[derive(Clone, Copy, Debug, PartialEq)]

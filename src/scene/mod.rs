@@ -51,15 +51,42 @@ pub struct SceneSettings {
     pub capture: Option<SceneCapture>,
 }
 
+/// The relay wall's node name when none is given (an NLOS capture's, `crate::nlos`).
+pub const DEFAULT_RELAY_WALL: &str = "relay_wall";
+
+/// How the laser moves during a capture (`--nlos`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Scan {
+    /// One laser spot for the whole grid of sensed points.
+    Single,
+    /// The laser spot follows the sensed point: each pixel is lit at the point it senses.
+    Confocal,
+    /// Every laser spot of a laser grid with every sensed point: one single-scan capture per
+    /// laser spot.
+    Exhaustive,
+}
+
+impl Scan {
+    /// The name on the command line and in metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scan::Single => "single",
+            Scan::Confocal => "confocal",
+            Scan::Exhaustive => "exhaustive",
+        }
+    }
+}
+
 /// An NLOS capture a scene file describes (a Mitsuba XML scene's `nlos_capture_meter` on its
 /// relay wall, lit by a `projector`): the defaults of the capture a render of the file becomes,
 /// each overridden by the command line's option (`--nlos`, `--relay-wall`, `--sensor-origin`,
 /// `--laser-origin`, `--laser-spot`, `--laser-power`, `--count-first-last`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneCapture {
-    /// The laser follows the sensed point (a confocal scan); otherwise one spot lights every
-    /// sensed point (a single scan).
-    pub confocal: bool,
+    /// How the laser moves.
+    pub scan: Scan,
+    /// Exhaustive scans: the grid of laser spots, width x height.
+    pub laser_grid: Option<(u32, u32)>,
     /// The relay wall's node name.
     pub relay_wall: String,
     /// Where the sensor looks at the wall from (m).

@@ -4,8 +4,10 @@
 //!
 //! Both generations of the meter's properties are read. mitransient 1.3.1 places the laser where
 //! its projector stands and aims it from Python (`mitransient.nlos.focus_emitter_at_*`), with
-//! the scan in the integrator's `capture_type` and confocal grids as `original_film_width` /
-//! `_height` over a 1 x 1 film. Its earlier meter, for which mitransient's own examples
+//! the scan in the integrator's `capture_type` (an exhaustive scan's laser spots are its sensed
+//! points, `force_equal_illumination_scanning`, with the film's `exhaustive_scan` and
+//! `laser_scan_width` / `_height`) and confocal grids as `original_film_width` / `_height` over a
+//! 1 x 1 film. Its earlier meter, for which mitransient's own examples
 //! (`nlos_Z.xml`) and TAL's files are written, takes `laser_origin`, `laser_lookat_pixel` (a film
 //! position, (x, y) / film size in the wall's (u, v)) or `laser_lookat_3d`, and `confocal`.
 //! Without an aim the laser points along its projector's axis (its `to_world`'s +z), as
@@ -18,7 +20,7 @@ use glam::{Mat4, Vec2, Vec3};
 
 use super::Builder;
 use super::xml::{Element, Object};
-use crate::scene::{SceneCapture, SceneSettings};
+use crate::scene::{Scan, SceneCapture, SceneSettings};
 
 /// Where a meter aims the laser.
 #[derive(Clone, Copy, Debug)]
@@ -46,6 +48,8 @@ pub(super) struct Meter<'e> {
     count_first_and_last: Option<bool>,
     /// The grid of sensed points (the film's size, or `original_film_*`).
     grid: (u32, u32),
+    /// The film's grid of laser spots (`exhaustive_scan`, `laser_scan_width` / `_height`).
+    laser_grid: Option<(u32, u32)>,
     /// The render settings of its film and sampler (the grid, time bins, samples and seed).
     settings: SceneSettings,
 }
@@ -68,8 +72,8 @@ pub(super) struct CaptureParts<'e> {
     pub projectors: Vec<Projector<'e>>,
     /// The integrator is `transient_nlos_path`.
     pub nlos_integrator: bool,
-    /// `capture_type`: Some(true) confocal, Some(false) single, with the element that says so.
-    pub integrator_confocal: Option<(bool, &'e Element)>,
+    /// `capture_type`, with the element that says so.
+    pub integrator_scan: Option<(Scan, &'e Element)>,
     /// The integrator's `account_first_and_last_bounces`.
     pub integrator_count_first_and_last: Option<bool>,
 }
@@ -111,19 +115,22 @@ impl<'e> Builder<'e> {
                 Ok(_) => "",
                 Err(name) => name,
             };
-            let confocal = match name.to_ascii_lowercase().as_str() {
-                "single" => false,
-                "confocal" => true,
-                "exhaustive" => {
-                    return Err(e.error(
-                        "exhaustive captures are not read from Mitsuba XML yet: set capture_type single and render \
-                         with --nlos exhaustive --laser-grid WxH",
-                    ));
-                }
+            let scan = match name.to_ascii_lowercase().as_str() {
+                "single" => Scan::Single,
+                "confocal" => Scan::Confocal,
+                "exhaustive" => Scan::Exhaustive,
                 _ => return Err(e.error("`capture_type` must be single (1), confocal (2) or exhaustive (3)")),
             };
-            self.capture.integrator_confocal = Some((confocal, e));
+            self.capture.integrator_scan = Some((scan, e));
         }
+        if o.boolean("force_equal_illumination_scanning")? == Some(false) {
+            return Err(e.error(
+                "force_equal_illumination_scanning false lays an exhaustive scan's laser spots by a projector's \
+                 grid of rays, which gatetrace does not read: its laser spots are the sensed points",
+            ));
+        }
+        // Used only where the scanning is not forced equal.
+        o.ignore(&["illumination_scan_fov"]);
         self.capture.integrator_count_first_and_last = o.boolean("account_first_and_last_bounces")?;
         Ok(())
     }
@@ -169,7 +176,7 @@ impl<'e> Builder<'e> {
         let original = (o.integer("original_film_width")?, o.integer("original_film_height")?);
         // The meter's film and sampler are the capture's settings, kept apart from a camera's.
         let camera_settings = std::mem::take(&mut self.settings);
-        let (width, height, _) = self.film(e)?;
+        let (width, height, _, laser_grid) = self.film(e)?;
         let grid = match original {
             (None, None) => (width, height),
             (Some(w), Some(h)) => {
@@ -212,6 +219,7 @@ impl<'e> Builder<'e> {
             confocal,
             count_first_and_last,
             grid,
+            laser_grid,
             settings,
         });
         Ok(())
@@ -284,22 +292,40 @@ impl<'e> Builder<'e> {
                 parts.projectors.len()
             )));
         };
-        let confocal = match (parts.integrator_confocal, meter.confocal) {
-            (Some((a, at)), Some(b)) if a != b => {
-                return Err(at.error(format!(
-                    "capture_type says {} but the capture meter's confocal is {b}",
-                    if a { "confocal" } else { "single" }
-                )));
+        let scan = match (parts.integrator_scan, meter.confocal) {
+            (Some((a, at)), Some(b)) if (a == Scan::Confocal) != b => {
+                return Err(at.error(format!("capture_type says {} but the capture meter's confocal is {b}", a.name())));
             }
             (Some((a, _)), _) => a,
-            (None, b) => b.unwrap_or(false),
+            (None, Some(true)) => Scan::Confocal,
+            (None, _) => Scan::Single,
         };
+        match (scan, meter.laser_grid) {
+            (Scan::Exhaustive, Some(laser)) if laser != meter.grid => {
+                return Err(e.error(format!(
+                    "an exhaustive scan's laser grid ({} x {}) must be its grid of sensed points ({} x {}), as \
+                     force_equal_illumination_scanning asks",
+                    laser.0, laser.1, meter.grid.0, meter.grid.1
+                )));
+            }
+            (Scan::Exhaustive, None) => {
+                return Err(e.error(
+                    "an exhaustive capture's film needs exhaustive_scan true with laser_scan_width and _height",
+                ));
+            }
+            (Scan::Single | Scan::Confocal, Some(_)) => {
+                return Err(e.error("the film's exhaustive_scan needs capture_type exhaustive"));
+            }
+            _ => {}
+        }
         let laser_origin = meter.laser_origin.unwrap_or(projector.position);
         let inverse = meter.wall_to_world.inverse();
         // (u, v) of a point of the wall's plane in its local frame.
         let uv_of = |local: Vec3| Vec2::new(0.5 * (local.x + 1.0), 0.5 * (local.y + 1.0));
         let on_wall = |uv: Vec2| (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y);
         let laser_spot = match meter.aim {
+            // Confocal and exhaustive scans aim at each sensed point.
+            _ if scan != Scan::Single => Vec2::splat(0.5),
             Some(Aim::Pixel(p)) => {
                 let uv = p / Vec2::new(meter.grid.0 as f32, meter.grid.1 as f32);
                 if !on_wall(uv) {
@@ -318,8 +344,6 @@ impl<'e> Builder<'e> {
                 }
                 uv
             }
-            // A confocal scan aims at each sensed point.
-            None if confocal => Vec2::splat(0.5),
             None => {
                 let o = inverse.transform_point3(laser_origin);
                 let d = inverse.transform_vector3(projector.axis);
@@ -336,7 +360,8 @@ impl<'e> Builder<'e> {
             }
         };
         Ok(Some(SceneCapture {
-            confocal,
+            scan,
+            laser_grid: meter.laser_grid,
             relay_wall: meter.wall.clone(),
             sensor_origin: meter.sensor_origin,
             laser_origin,

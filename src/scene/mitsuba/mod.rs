@@ -517,7 +517,10 @@ impl<'e> Builder<'e> {
             o.ignore(&["focus_distance"]);
             None
         };
-        let (width, height, bin_width) = self.film(e)?;
+        let (width, height, bin_width, laser_grid) = self.film(e)?;
+        if laser_grid.is_some() {
+            return Err(e.error("a film with exhaustive_scan belongs to an NLOS capture meter"));
+        }
         if let Some(bin_width) = bin_width.filter(|&w| near_clip > 0.01 * w) {
             self.warn(
                 e,
@@ -561,10 +564,12 @@ impl<'e> Builder<'e> {
     }
 
     /// The sensor's film: its size (Mitsuba's default 768 x 576), and for mitransient's
-    /// `transient_hdr_film` the time bins as a default transient gate, and their width.
-    fn film(&mut self, sensor: &'e Element) -> Result<(u32, u32, Option<f32>)> {
+    /// `transient_hdr_film` the time bins as a default transient gate, their width, and with
+    /// `exhaustive_scan` its grid of laser spots.
+    #[allow(clippy::type_complexity)]
+    fn film(&mut self, sensor: &'e Element) -> Result<(u32, u32, Option<f32>, Option<(u32, u32)>)> {
         let Some(film) = sensor.children.iter().find(|c| c.tag == "film") else {
-            return Ok((768, 576, None));
+            return Ok((768, 576, None, None));
         };
         film.only_attributes(&["type", "id", "name"])?;
         let o = Object::new(film);
@@ -581,7 +586,7 @@ impl<'e> Builder<'e> {
         };
         let (width, height) = (size("width", 768)?, size("height", 576)?);
         o.ignore(&["pixel_format", "component_format", "sample_border", "banner", "file_format"]);
-        let mut bin_width = None;
+        let (mut bin_width, mut laser_grid) = (None, None);
         if kind == "transient_hdr_film" {
             let bins = o.integer("temporal_bins")?.ok_or_else(|| film.error("`temporal_bins` is missing"))?;
             let start = o.float("start_opl")?.ok_or_else(|| film.error("`start_opl` is missing"))?;
@@ -594,6 +599,13 @@ impl<'e> Builder<'e> {
             }
             self.settings.gate = Some(format!("transient:{start},{width},{bins}"));
             bin_width = Some(width);
+            // The laser's grid counts only in an exhaustive scan (mitransient reads it only then).
+            let laser = (o.integer("laser_scan_width")?, o.integer("laser_scan_height")?);
+            if o.boolean("exhaustive_scan")? == Some(true) {
+                laser_grid = Some((size("laser_scan_width", 0)?, size("laser_scan_height", 0)?));
+            } else if laser != (None, None) {
+                self.warn(film, "laser_scan_width and _height count only with exhaustive_scan true");
+            }
         }
         for filter in film.children.iter().filter(|c| c.tag == "rfilter") {
             match filter.attribute("type") {
@@ -607,7 +619,7 @@ impl<'e> Builder<'e> {
         }
         o.finish(&["rfilter"])?;
         self.settings.resolution = Some((width, height));
-        Ok((width, height, bin_width))
+        Ok((width, height, bin_width, laser_grid))
     }
 
     fn sampler(&mut self, sensor: &'e Element) -> Result<()> {
@@ -730,7 +742,7 @@ impl<'e> Builder<'e> {
 
 /// The node name of a relay wall (a shape carrying a capture meter): its id, else `relay_wall`.
 fn relay_wall_name(shape: &Element) -> String {
-    shape.attribute("id").or(shape.attribute("name")).unwrap_or(crate::nlos::DEFAULT_RELAY_WALL).to_owned()
+    shape.attribute("id").or(shape.attribute("name")).unwrap_or(super::DEFAULT_RELAY_WALL).to_owned()
 }
 
 /// Mitsuba's default BSDF (diffuse, reflectance 0.5) as an element.
