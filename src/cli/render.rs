@@ -161,7 +161,8 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         );
         ensure!(
             !sequence && args.anim_time.is_none(),
-            "--nlos renders one capture: --frames, --frame-range and --anim-time do not apply to it"
+            "an NLOS capture (--nlos, or one the scene file describes) has no frames: --frames, --frame-range and \
+             --anim-time do not apply to it"
         );
         return super::nlos::run(&args, scan, file_capture.as_ref(), &scene_path, settings, budget);
     }
