@@ -6,10 +6,12 @@ while rendering. GPU tests: they fail (never skip) without a Vulkan device."""
 import json
 import os
 import signal
+import struct
 import subprocess
 import sys
 import threading
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -288,6 +290,21 @@ def test_nlos_tools_read_a_capture_whose_gate_was_typed_in_ns_and_ps(tmp_path):
     assert done.returncode == 0, done.stderr
     back = np.load(picture)
     assert back.shape == (16, 16) and np.isfinite(back).all() and back.max() == pytest.approx(1.0)
+    # The picture as a PNG, whatever imaging libraries are installed: 4 pixels a voxel, the same
+    # grey levels.
+    png = tmp_path / "picture.png"
+    done = subprocess.run([sys.executable, str(ROOT / "tools/nlos/nlos_backproject.py"), str(capture), "--voxels", "16",
+                           "-o", str(png)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR"
+    width, height, depth, colour = struct.unpack(">IIBB", data[16:26])
+    assert (width, height, depth, colour) == (64, 64, 8, 0)
+    idat = data.index(b"IDAT")
+    size = struct.unpack(">I", data[idat - 4:idat])[0]
+    rows = np.frombuffer(zlib.decompress(data[idat + 4:idat + 4 + size]), dtype=np.uint8).reshape(64, 65)
+    assert (rows[:, 0] == 0).all()
+    assert np.array_equal(rows[::4, 1::4], np.round(back * 255).astype(np.uint8))
 
     import h5py  # a test requirement (pyproject.toml), as tools/nlos/nlos_to_hdf5.py needs it
     hdf5 = tmp_path / "capture.hdf5"

@@ -11,10 +11,13 @@ the hidden side as seen through the wall from the sensor's side.
 
     tools/nlos/nlos_backproject.py CAPTURE.npy [--depth 0.2,0.9] [--voxels 64] [-o picture.png]
 
-Lengths in metres. Needs numpy; writes PNG with Pillow when present, else .npy.
+Lengths in metres. Needs numpy only. Writes an 8-bit grey PNG (4 pixels a voxel), or the
+picture as float32 .npy (peak 1) when the output's name ends in .npy.
 """
 import argparse
 import json
+import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -68,15 +71,27 @@ def main():
     picture = np.clip(filtered, 0, None).max(axis=2).T[::-1]  # rows: v up the page
     picture /= max(picture.max(), 1e-30)
     out = args.out or args.capture.with_name(args.capture.stem + "_backprojection.png")
-    try:
-        from PIL import Image
-        if out.suffix.lower() != ".png":
-            raise ImportError
-        Image.fromarray((picture * 255).astype(np.uint8)).resize((4 * n, 4 * n), Image.NEAREST).save(out)
-    except ImportError:
-        out = out.with_suffix(".npy")
+    if out.suffix.lower() == ".npy":
         np.save(out, picture.astype(np.float32))
+    elif out.suffix.lower() == ".png":
+        grey = np.round(picture * 255).astype(np.uint8).repeat(4, axis=0).repeat(4, axis=1)
+        write_grey_png(out, grey)
+    else:
+        raise SystemExit(f"{out}: name a .png or .npy output")
     print(f"{out}: max over depth {a}..{b} m of the filtered back-projection ({n}^3 voxels)")
+
+
+def write_grey_png(path, grey):
+    """An 8-bit greyscale PNG of the array `grey` [rows, columns] (PNG 1.2: IHDR, one IDAT of
+    unfiltered scanlines, IEND)."""
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    height, width = grey.shape
+    rows = b"".join(b"\x00" + bytes(row) for row in np.ascontiguousarray(grey, dtype=np.uint8))
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    Path(path).write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows, 9))
+                           + chunk(b"IEND", b""))
 
 
 if __name__ == "__main__":
