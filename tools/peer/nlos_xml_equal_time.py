@@ -37,7 +37,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from nlos_xml_reference import prepare  # noqa: E402
+from nlos_xml_reference import load_capture  # noqa: E402
 from peer_reference import use_exact_segment_lengths  # noqa: E402
 
 EXE = HERE.parent.parent / "target" / "release" / "gatetrace"
@@ -61,25 +61,10 @@ class Peer:
         import drjit as dr
         import mitsuba as mi
         import mitransient as mitr
-        self.mi = mi
         use_exact_segment_lengths(mi, dr)
         params = dict(kv.split("=", 1) for kv in args.param)
-        tree, said = prepare(args.scene, grid, None, params, hidden_geometry_sampling)
-        copy = Path(args.scene).with_name(f".{Path(args.scene).stem}.equal_time.xml")
-        tree.write(copy)
-        try:
-            self.scene = mi.load_file(str(copy))
-        finally:
-            os.remove(copy)
+        self.scene = load_capture(mi, mitr, args.scene, grid, None, params, hidden_geometry_sampling)
         self.integrator = self.scene.integrator()
-        wall = next(s for s in self.scene.shapes() if s.sensor() is not None)
-        [laser] = self.scene.emitters()
-        if "laser_origin" in said:
-            p = mi.traverse(laser)
-            p["to_world"] = mi.Transform4f().translate(said["laser_origin"].tolist())
-            p.update()
-        if not said.get("confocal") and "uv" in said:
-            mitr.nlos.focus_emitter_at_relay_wall_uv(mi.Point2f(*[float(x) for x in said["uv"]]), wall, laser)
 
     def render(self, spp, seed):
         start = time.perf_counter()

@@ -106,6 +106,31 @@ def prepare(scene_path, grid, max_bounces, params, hidden_geometry_sampling):
     return tree, said
 
 
+def load_capture(mi, mitr, scene_path, grid, max_bounces, params, hidden_geometry_sampling):
+    """The Mitsuba scene of the capture the file describes (`prepare`), loaded from a copy
+    written beside it (its relative paths hold) and deleted after, its laser moved to the
+    meter's `laser_origin` and focused on its `laser_lookat_pixel` or `laser_lookat_3d`."""
+    tree, said = prepare(scene_path, grid, max_bounces, params, hidden_geometry_sampling)
+    copy = Path(scene_path).with_name(f".{Path(scene_path).stem}.peer.xml")
+    tree.write(copy)
+    try:
+        scene = mi.load_file(str(copy))
+    finally:
+        os.remove(copy)
+    relay_wall = next(s for s in scene.shapes() if s.sensor() is not None)
+    [laser] = scene.emitters()
+    if "laser_origin" in said:
+        params = mi.traverse(laser)
+        params["to_world"] = mi.Transform4f().translate(said["laser_origin"].tolist())
+        params.update()
+    if not said.get("confocal"):
+        if "uv" in said:
+            mitr.nlos.focus_emitter_at_relay_wall_uv(mi.Point2f(*[float(x) for x in said["uv"]]), relay_wall, laser)
+        elif "laser_lookat_3d" in said:
+            mitr.nlos.focus_emitter_at_relay_wall_3dpoint(mi.Point3f(said["laser_lookat_3d"]), relay_wall, laser)
+    return scene
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="Mitsuba 3 XML scene describing an NLOS capture")
@@ -132,26 +157,9 @@ def main(argv=None):
     import mitransient as mitr
 
     use_exact_segment_lengths(mi, dr)
-    tree, said = prepare(args.scene, grid, args.max_bounces, dict(kv.split("=", 1) for kv in args.param),
-                         args.hidden_geometry_sampling == "file")
-    copy = Path(args.scene).with_name(f".{Path(args.scene).stem}.peer.xml")
-    tree.write(copy)
-    try:
-        scene = mi.load_file(str(copy))
-    finally:
-        os.remove(copy)
+    params = dict(kv.split("=", 1) for kv in args.param)
+    scene = load_capture(mi, mitr, args.scene, grid, args.max_bounces, params, args.hidden_geometry_sampling == "file")
     integrator = scene.integrator()
-    relay_wall = next(s for s in scene.shapes() if s.sensor() is not None)
-    [laser] = scene.emitters()
-    if "laser_origin" in said:
-        params = mi.traverse(laser)
-        params["to_world"] = mi.Transform4f().translate(said["laser_origin"].tolist())
-        params.update()
-    if not said.get("confocal"):
-        if "uv" in said:
-            mitr.nlos.focus_emitter_at_relay_wall_uv(mi.Point2f(*[float(x) for x in said["uv"]]), relay_wall, laser)
-        elif "laser_lookat_3d" in said:
-            mitr.nlos.focus_emitter_at_relay_wall_3dpoint(mi.Point3f(said["laser_lookat_3d"]), relay_wall, laser)
     seeds = np.random.SeedSequence(args.seed).generate_state(args.passes, dtype=np.uint32)
     moments = _RunningMoments()
     started = time.time()
