@@ -193,7 +193,6 @@ impl<'e> Builder<'e> {
                 if confocal == Some(false) {
                     return Err(e.error("original_film_width and _height give a confocal grid, but confocal is false"));
                 }
-                self.settings.resolution = Some((w, h));
                 (w, h)
             }
             _ => return Err(e.error("give both original_film_width and original_film_height")),
