@@ -504,3 +504,31 @@ fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
     }
     assert!(inside > 1000 && inside < 3500, "{inside} of 4096 directions inside the cone");
 }
+
+#[test]
+fn double_f32_sums_and_products_are_exact() {
+    // double_float.wesl's two_sum and two_prod (probe_functions 21): hi + lo equals the f64 sum
+    // and product of f32 inputs exactly, over 40 binades and both signs. A compiler that
+    // rewrote their float expressions as real arithmetic (Mesa's NIR does without the opaque
+    // zero) or a fused multiply-add computed unfused would make the error terms 0 and fail here.
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let mut rng = gatetrace::rng::Xorshift64Star(12345);
+    let mut input: Vec<[f32; 4]> = (0..4096)
+        .map(|_| {
+            std::array::from_fn(|_| ((rng.next_f64() - 0.5) * 2f64.powi((rng.next_f64() * 40.0) as i32 - 20)) as f32)
+        })
+        .collect();
+    input.extend([[1.0, 1e-10, 4097.0, 4097.0], [-3.0, 3.0, 0.0, 1e20], [1e30, -1.0, 1e30, 0.5]]);
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 21.0)], &input, input.len());
+    let mut inexact_products = 0;
+    for (x, g) in input.iter().zip(&out) {
+        let (sum, product) = (x[0] as f64 + x[1] as f64, x[2] as f64 * x[3] as f64);
+        assert_eq!(g[0], (x[0] + x[1]), "two_sum({:e}, {:e}) rounds differently", x[0], x[1]);
+        assert_eq!(g[0] as f64 + g[1] as f64, sum, "two_sum({:e}, {:e}) = {:e} + {:e}", x[0], x[1], g[0], g[1]);
+        assert_eq!(g[2], x[2] * x[3], "two_prod({:e}, {:e}) rounds differently", x[2], x[3]);
+        inexact_products += (g[2] as f64 + g[3] as f64 != product) as usize;
+    }
+    assert_eq!(inexact_products, 0, "two_prod inexact on {inexact_products} of {} inputs", input.len());
+}

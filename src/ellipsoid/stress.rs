@@ -71,6 +71,17 @@ pub struct Config {
     pub u: f32,
 }
 
+impl Config {
+    /// The triangle as the device holds it, exactly: v0 and the f32 edges v1 - v0, v2 - v0 (as a
+    /// scene's triangles are stored), their sums taken in f64 (where they are exact).
+    pub fn device_triangle(&self) -> Triangle {
+        let [v0, v1, v2] = self.triangle;
+        let (e1, e2) = (v1 - v0, v2 - v0);
+        let v0 = v0.as_dvec3();
+        Triangle { vertices: [v0, v0 + e1.as_dvec3(), v0 + e2.as_dvec3()] }
+    }
+}
+
 /// The draws of a configuration beyond [`Xorshift64Star`]'s own.
 trait Draws {
     /// A uniform unit vector (rejection from the cube).
@@ -212,13 +223,11 @@ pub fn run_on_device(ctx: &GpuContext, configs: &[Config]) -> Result<Vec<DeviceR
             .flat_map(|c| {
                 let [v0, v1, v2] = c.triangle;
                 let (e1, e2) = (v1 - v0, v2 - v0);
-                // The plane's normal as the scene's triangles get it (f64, octahedral).
-                let n = crate::scene::surface::triangle_normal(c.triangle);
                 [
                     [c.focus_s.x, c.focus_s.y, c.focus_s.z, c.tau_e],
                     [c.focus_c.x, c.focus_c.y, c.focus_c.z, c.u],
-                    [v0.x, v0.y, v0.z, n[0]],
-                    [e1.x, e1.y, e1.z, n[1]],
+                    [v0.x, v0.y, v0.z, 0.0],
+                    [e1.x, e1.y, e1.z, 0.0],
                     [e2.x, e2.y, e2.z, 0.0],
                 ]
             })
@@ -302,9 +311,7 @@ pub fn compare(family: &str, configs: &[Config], device: &[DeviceResult]) -> Rep
             continue;
         }
         let sp = Spheroid { focus_s: c.focus_s.as_dvec3(), focus_c: c.focus_c.as_dvec3(), length: c.tau_e as f64 };
-        // The triangle its f32 vertices define, exactly (the device gets v0 and f32 edges, and the
-        // plane's normal from an f64 cross product, as the scene's triangles do).
-        let tri = Triangle { vertices: c.triangle.map(|v| v.as_dvec3()) };
+        let tri = c.device_triangle();
         let v0 = tri.vertices[0];
         let n = tri.normal();
         let section = sp.section(v0, n);
