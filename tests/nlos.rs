@@ -192,14 +192,9 @@ fn confocal_scan_with_direct_connections_matches_peer() {
     compare_with_peer("confocal", LaserAim::Confocal, Method::Direct, 4096, EACH_BIN);
 }
 
-/// A capture written in Mitsuba XML as mitransient's own examples are (a `projector` laser placed
-/// and aimed by the capture meter's `laser_origin` and `laser_lookat_pixel`, `confocal` a
-/// parameter), read unchanged, its capture as the file describes it, rendered with `method`
-/// against mitransient's render of the same file (tests/data/SCENE_peer; the laser's power comes
-/// from the projector as mitransient's `transient_nlos_path` lights a spot with it: no
-/// rescaling). `scene`: a file of assets/scenes with an 8x8 grid of `bins` bins.
-fn xml_capture_agrees_with_peer(scene: &str, bins: usize, scan: &str, method: Method, spp: u32, block: Block) {
-    let ctx = common::gpu();
+/// The capture of assets/scenes/SCENE.xml (read unchanged but for `confocal`) with `scan`
+/// and `method`: its prepared scene, and settings with the capture's grid, gate and depth.
+fn xml_capture(scene: &str, scan: &str, method: Method) -> (gatetrace::capture::PreparedCapture, RenderSettings) {
     let path = common::repo_path(&format!("assets/scenes/{scene}.xml"));
     let parameters = vec![("confocal".to_owned(), (scan == "confocal").to_string())];
     let file = gatetrace::scene::scene_settings(&path, &parameters).unwrap();
@@ -214,12 +209,24 @@ fn xml_capture_agrees_with_peer(scene: &str, bins: usize, scan: &str, method: Me
         max_bounces: file.max_bounces.unwrap(),
         ..Default::default()
     };
-    assert_eq!((width, height, settings.max_bounces), (8, 8, 3));
     CaptureChoices { method: Some(method), ..Default::default() }.apply(&mut settings);
     let load = LoadOptions { parameters, ..Default::default() };
     let request = CaptureRequest::new(capture.scan, Some(&capture), CaptureOptions::default());
     let prepared = prepare_capture(&path, load, &request, settings).unwrap();
     let settings = RenderSettings { nlos: Some(prepared.capture.clone()), ..prepared.settings.clone() };
+    (prepared, settings)
+}
+
+/// A capture written in Mitsuba XML as mitransient's own examples are (a `projector` laser placed
+/// and aimed by the capture meter's `laser_origin` and `laser_lookat_pixel`, `confocal` a
+/// parameter), read unchanged, its capture as the file describes it, rendered with `method`
+/// against mitransient's render of the same file (tests/data/SCENE_peer; the laser's power comes
+/// from the projector as mitransient's `transient_nlos_path` lights a spot with it: no
+/// rescaling). `scene`: a file of assets/scenes with an 8x8 grid of `bins` bins.
+fn xml_capture_agrees_with_peer(scene: &str, bins: usize, scan: &str, method: Method, spp: u32, block: Block) {
+    let ctx = common::gpu();
+    let (prepared, settings) = xml_capture(scene, scan, method);
+    assert_eq!((settings.width, settings.height, settings.max_bounces), (8, 8, 3));
     let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, spp);
     let batches: Vec<Vec<f32>> = films.into_iter().map(|f| f.data).collect();
     let (shape, peer_mean) = common::reference(&format!("{scene}_peer/{scan}_mean.npy"));
@@ -253,6 +260,53 @@ fn xml_single_capture_with_ellipsoidal_connections_matches_peer() {
 #[test]
 fn xml_confocal_capture_with_direct_connections_matches_peer() {
     xml_capture_agrees_with_peer("nlos_panels", 100, "confocal", Method::Direct, 4096, PANELS_BLOCK);
+}
+
+/// No bin that holds light is starved of samples on the wide object near the wall (the panels,
+/// confocal, 8x8 points, 100 bins of 20 mm, the capture's defaults): every bin that holds more
+/// than 1 % of its point's light in mitransient's capture (tests/data/nlos_panels_peer) gets at
+/// least its share of the point's samples, the smaller of an even share of the bins (1/n) and
+/// its share of the light. Its extra visits come from the band index's masses
+/// (`film::target::visit_tables_from_masses`), which leave out visibility.
+#[test]
+fn the_wide_objects_capture_starves_no_bin_that_holds_light() {
+    use gatetrace::film::target::BAND_EXTRA_VISITS_PER_BIN;
+    let ctx = common::gpu();
+    let (prepared, settings) = xml_capture("nlos_panels", "confocal", Method::Ellipsoidal);
+    let mut tracer = gatetrace::integrator::create_integrator(&ctx, &prepared.scene, &settings).unwrap();
+    tracer.prepare().unwrap();
+    let t = tracer.wavefront().params.target_length;
+    let rows = &tracer.wavefront().target_visits;
+    let (n, bins) = (t.strata as usize, 100);
+    assert_eq!(t.extra, BAND_EXTRA_VISITS_PER_BIN * t.strata, "the band index shares out the extra visits");
+    assert_eq!((tracer.target_pilot_spp(), t.first_bin as usize + n), (0, bins), "no pilot; every bin reachable");
+    let (shape, light) = common::reference("nlos_panels_peer/confocal_mean.npy");
+    assert_eq!(shape, vec![8, 8, bins, 3]);
+    let cycle = (n + t.extra as usize) as f64;
+    let (mut lit, mut starved, mut worst) = (0, Vec::new(), f64::INFINITY);
+    for (pixel, point) in light.chunks(3 * bins).enumerate() {
+        let per_bin: Vec<f64> = point.chunks(3).map(|rgb| rgb.iter().map(|&v| v as f64).sum()).collect();
+        let total: f64 = per_bin.iter().sum();
+        let row = &rows[pixel * (n + 1)..(pixel + 1) * (n + 1)];
+        for j in 0..n {
+            let share = per_bin[t.first_bin as usize + j] / total;
+            if share <= 0.01 {
+                continue;
+            }
+            lit += 1;
+            let samples = (1 + row[j + 1] - row[j]) as f64 / cycle;
+            let ratio = samples / share.min(1.0 / n as f64);
+            worst = worst.min(ratio);
+            if ratio < 1.0 {
+                starved.push((pixel, j, share, samples));
+            }
+        }
+    }
+    eprintln!(
+        "{lit} bins hold more than 1 % of their point's light; the fewest samples for one: {worst:.2}x its share"
+    );
+    assert!(lit > 8 * 8 * 10, "{lit} bins over 1 %");
+    assert!(starved.is_empty(), "starved bins (point, bin, share of light, share of samples): {starved:?}");
 }
 
 /// The staircase (assets/scenes/nlos_staircase.xml), a deep hidden object whose transients span

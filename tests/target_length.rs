@@ -484,6 +484,63 @@ fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
     }
 }
 
+/// The band index's masses share out the extra visits so that no bin is starved: each gets at
+/// least (n + E) min(w, 1/n) visits a cycle (w its share: BAND_UNIFORM_SHARE evenly, the rest by
+/// mass), the rest follows w, and a pixel of no mass gets its visits evenly.
+#[test]
+fn visit_tables_from_masses_floor_every_bin_at_the_lesser_of_even_and_proportional() {
+    use gatetrace::film::target::{BAND_EXTRA_VISITS_PER_BIN, BAND_UNIFORM_SHARE, visit_tables_from_masses};
+    for strata in [1u32, 7, 60, 100, 1700] {
+        let n = strata as usize;
+        let t = gatetrace::gpu::layout::TargetParams { strata, ..Default::default() };
+        let mut rng = gatetrace::rng::Rng::new(5, strata, 1);
+        let mut masses = Vec::new();
+        // A peak and its tail; a peak beside a shoulder of a hundred times less per bin; every
+        // bin equally lit; random masses with dark runs; nothing; NaN and negative masses.
+        masses.extend((0..n).map(|j| if j >= n / 3 { 1.0 / (1.0 + (j - n / 3) as f32).powi(2) } else { 0.0 }));
+        masses.extend((0..n).map(|j| {
+            if j == n / 2 {
+                1.0
+            } else if j > n / 2 {
+                0.01
+            } else {
+                0.0
+            }
+        }));
+        masses.extend(std::iter::repeat_n(1.0, n));
+        masses.extend((0..n).map(|_| if rng.next_f32() < 0.4 { 0.0 } else { rng.next_f32().powi(4) }));
+        masses.extend(std::iter::repeat_n(0.0, n));
+        masses.extend((0..n).map(|j| [f32::NAN, -1.0, 0.0][j % 3]));
+        let (extra, rows) = visit_tables_from_masses(&t, &masses);
+        assert_eq!(extra, BAND_EXTRA_VISITS_PER_BIN * strata);
+        let cycle = (n as f64) + extra as f64;
+        for (pixel, (row, m)) in rows.chunks(n + 1).zip(masses.chunks(n)).enumerate() {
+            assert_eq!((row[0], row[n]), (0, extra), "{n} bins, pixel {pixel}");
+            assert!(row.windows(2).all(|w| w[0] <= w[1]), "{n} bins, pixel {pixel}: rows are cumulative");
+            let weight = |m: f32| if m.is_finite() && m > 0.0 { m as f64 } else { 0.0 };
+            let total: f64 = m.iter().map(|&v| weight(v)).sum();
+            let even = 1.0 / n as f64;
+            for j in 0..n {
+                let w = match total > 0.0 {
+                    true => BAND_UNIFORM_SHARE * even + (1.0 - BAND_UNIFORM_SHARE) * weight(m[j]) / total,
+                    false => even,
+                };
+                let visits = 1.0 + (row[j + 1] - row[j]) as f64;
+                assert!(
+                    visits >= cycle * w.min(even) - 1e-9,
+                    "{n} bins, pixel {pixel}, bin {j}: {visits} visits of {cycle}, share {w}"
+                );
+                // The floors and the rest follow w: no bin gets more than its floor plus its share
+                // of what is left, rounded (and an unlit pixel's bins get E/n each).
+                assert!(visits <= (cycle * w.min(even)).ceil() + cycle * w + 1.0, "{n} bins, pixel {pixel}, bin {j}");
+                if total == 0.0 {
+                    assert!((visits - cycle * even).abs() < 1e-9, "{n} bins, pixel {pixel}, bin {j}: {visits}");
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn wgsl_stratified_target_lengths_match_cpu_twin() {
     use gatetrace::film::gate::gate_bin;

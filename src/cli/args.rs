@@ -135,7 +135,8 @@ pub struct RenderArgs {
     /// (default: reflection for --nlos, else arcs).
     #[arg(long, value_name = "WEIGHTS", value_enum)]
     pub query_weights: Option<QueryWeights>,
-    /// --nlos, ellipsoidal, transient gate: spp of a pilot that shares out the bins (default 256).
+    /// --nlos, ellipsoidal, transient gate: spp of a pilot that shares out the bins' samples
+    /// (default 256; with a band index and --max-bounces 3 its masses do, and no pilot runs).
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     pub target_pilot: Option<u32>,
     /// --nlos, ellipsoidal, transient gate: connect through the band index of three-bounce

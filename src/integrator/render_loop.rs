@@ -134,9 +134,10 @@ impl RenderOutput {
         let needed = self.samples_to_visit_every_bin.filter(|&n| self.film.spp < n)?;
         Some(format!(
             "each sample of a pixel aims its ellipsoidal connections at one of the gate's {} bins in turn, and \
-             {needed} samples per pixel visit every bin once (with the extra visits a pilot gives bins that hold more \
-             light), but this render stopped at {}, so some bins had no sample of their own and are estimated from \
-             samples aimed at others (unbiased, but noisier): render at least --spp {needed}",
+             {needed} samples per pixel visit every bin once (with the extra visits a pilot or the band index \
+             gives bins that hold more light), but this render stopped at {}, so some bins had no sample of their \
+             own and are estimated from samples aimed at others (unbiased, but noisier): render at least --spp \
+             {needed}",
             self.film.bins, self.film.spp
         ))
     }

@@ -8,6 +8,10 @@ use super::BidirectionalTracer;
 use crate::gpu::resources::read_buffer;
 use crate::integrator::Integrator;
 
+/// `RenderParams::max_bounces` of a capture of three-bounce paths (spot, hidden point, sensed
+/// point), the paths the band index's masses describe.
+const THREE_BOUNCE_KERNEL_BOUNCES: u32 = 2;
+
 impl BidirectionalTracer<'_> {
     /// Builds the band index (when one is still to be built) and binds queue_ellipsoid_queries
     /// to it; where its entries do not fit a binding the capture goes on with BVH queries.
@@ -36,7 +40,8 @@ impl BidirectionalTracer<'_> {
 
     /// Shares out the extra visits of each pixel's bins by the band index's masses
     /// (`film::target::visit_tables_from_masses`) when the index is in use, no allocation is,
-    /// and the capture's paths are the three-bounce ones the masses describe (--max-bounces 3;
+    /// and the capture's paths are the three-bounce ones the masses describe (--max-bounces 3,
+    /// which the kernels count as 2: to them the laser spot is a light, `kernel_bounces`;
     /// longer paths arrive later, where a pilot render sees them): the masses are exact where a
     /// pilot's transient is noisy, and cost no samples. Returns whether it did.
     pub(super) fn apply_band_allocation(&mut self) -> bool {
@@ -44,7 +49,7 @@ impl BidirectionalTracer<'_> {
         if self.band_masses.is_empty()
             || t.band_index == 0
             || t.extra != 0
-            || self.wf.params.max_bounces != 3
+            || self.wf.params.max_bounces != THREE_BOUNCE_KERNEL_BOUNCES
             || self.band_masses.len() != (self.wf.params.width * self.wf.params.height) as usize * t.strata as usize
         {
             return false;
