@@ -54,15 +54,17 @@ fn a_mitsuba_scene_loads_as_written() {
     assert!((area(&scene, "block") - block).abs() < 1e-5, "OBJ quads, scaled");
     let slab = 2.0 * (0.3 * 0.04 + 0.3 * 0.2 + 0.04 * 0.2);
     assert!((area(&scene, "slab") - slab).abs() < 1e-5, "cube, scaled");
-    let tolerance = 4.0 * gatetrace::scene::mitsuba::TESSELLATION_ERROR;
+    // Curved shapes have their analytic areas (to f32 sums), their vertices within the
+    // tessellation error of the surface.
     let relative = |got: f32, exact: f32| (got - exact).abs() / exact;
     let pi = std::f32::consts::PI;
-    assert!(relative(area(&scene, "ball"), 4.0 * pi * 0.15 * 0.15) < tolerance, "sphere");
-    assert!(relative(area(&scene, "post"), 2.0 * pi * 0.05 * 0.3) < tolerance, "cylinder");
-    assert!(relative(area(&scene, "plate"), pi * 0.01) < tolerance, "disk");
+    assert!(relative(area(&scene, "ball"), 4.0 * pi * 0.15 * 0.15) < 1e-4, "sphere");
+    assert!(relative(area(&scene, "post"), 2.0 * pi * 0.05 * 0.3) < 1e-4, "cylinder");
+    assert!(relative(area(&scene, "plate"), pi * 0.01) < 1e-4, "disk");
     let ball = &scene.triangles[scene.node("ball").unwrap().triangles.clone()];
+    let error = gatetrace::scene::mitsuba::TESSELLATION_ERROR * 0.15;
     for p in ball.iter().flat_map(|t| t.positions) {
-        assert!((p.distance(Vec3::new(0.2, -0.35, 0.15)) - 0.15).abs() < 1e-5, "sphere vertices lie on it");
+        assert!((p.distance(Vec3::new(0.2, -0.35, 0.15)) - 0.15).abs() < error, "sphere vertices lie near it");
     }
     // The serialized file's second shape (double precision), a pyramid of 0.2 m squared base.
     assert_eq!(count("pyramid"), 6);

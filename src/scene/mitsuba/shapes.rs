@@ -11,6 +11,9 @@ use glam::{Vec2, Vec3};
 
 /// The largest distance (relative to the radius) between a tessellated sphere, disk or cylinder
 /// and the surface it stands for: Mitsuba's analytic shapes become meshes this close to them.
+/// Each mesh is also scaled about its axis or centre to the true surface's area (its vertices a
+/// few 10^-4 outside, its faces' middles inside), so that the light it reflects or emits is the
+/// analytic shape's: an inscribed 100-gon has 6.6e-4 less area than its disk.
 pub const TESSELLATION_ERROR: f32 = 5e-4;
 
 /// A triangle mesh: positions (scene units), optional unit vertex normals, optional texture
@@ -324,13 +327,26 @@ fn circle_segments() -> u32 {
     (std::f32::consts::PI / (1.0 - TESSELLATION_ERROR).acos()).ceil() as u32
 }
 
-/// Mitsuba's `disk`: the unit disk in the plane z = 0, facing +z, as a fan.
+/// Radius of a regular n-gon whose area is the unit disk's: sqrt(pi / (n/2 sin(2 pi / n))).
+fn area_preserving_polygon_radius(n: u32) -> f32 {
+    let n = n as f64;
+    (std::f64::consts::PI / (0.5 * n * (std::f64::consts::TAU / n).sin())).sqrt() as f32
+}
+
+/// Radius of a regular n-gon whose perimeter is the unit circle's: pi / (n sin(pi / n)).
+fn perimeter_preserving_polygon_radius(n: u32) -> f32 {
+    let n = n as f64;
+    (std::f64::consts::PI / (n * (std::f64::consts::PI / n).sin())) as f32
+}
+
+/// Mitsuba's `disk`: the unit disk in the plane z = 0, facing +z, as a fan of the disk's area.
 pub fn disk() -> Mesh {
     let n = circle_segments();
+    let radius = area_preserving_polygon_radius(n);
     let mut mesh = Mesh { positions: vec![Vec3::ZERO], uvs: Some(vec![Vec2::ZERO]), ..Default::default() };
     for k in 0..n {
         let phi = std::f32::consts::TAU * k as f32 / n as f32;
-        mesh.positions.push(Vec3::new(phi.cos(), phi.sin(), 0.0));
+        mesh.positions.push(Vec3::new(phi.cos(), phi.sin(), 0.0) * radius);
         mesh.uvs.as_mut().expect("set above").push(Vec2::new(1.0, k as f32 / n as f32));
         mesh.indices.extend([0, 1 + k, 1 + (k + 1) % n]);
     }
@@ -338,15 +354,16 @@ pub fn disk() -> Mesh {
 }
 
 /// Mitsuba's `cylinder`: the open tube of radius 1 about the z axis from z = 0 to 1, facing
-/// outwards, with normals of the true cylinder.
+/// outwards, of the tube's area, with normals of the true cylinder.
 pub fn cylinder() -> Mesh {
     let n = circle_segments();
+    let radius = perimeter_preserving_polygon_radius(n);
     let mut mesh = Mesh { normals: Some(Vec::new()), uvs: Some(Vec::new()), ..Default::default() };
     for k in 0..=n {
         let phi = std::f32::consts::TAU * k as f32 / n as f32;
         let radial = Vec3::new(phi.cos(), phi.sin(), 0.0);
         for z in [0.0, 1.0] {
-            mesh.positions.push(radial + Vec3::Z * z);
+            mesh.positions.push(radial * radius + Vec3::Z * z);
             mesh.normals.as_mut().expect("set above").push(radial);
             mesh.uvs.as_mut().expect("set above").push(Vec2::new(k as f32 / n as f32, z));
         }
@@ -361,7 +378,7 @@ pub fn cylinder() -> Mesh {
 /// Mitsuba's `sphere` of radius 1 about the origin, facing outwards: an icosahedron subdivided
 /// until every triangle lies within [`TESSELLATION_ERROR`] of the sphere (a flat triangle is
 /// farthest from it at its circumcentre, at most 1 - cos(e / sqrt 3) inside for a longest edge
-/// of angle e), its vertices on the sphere, with the true sphere's normals.
+/// of angle e), then scaled to the sphere's area, with the true sphere's normals.
 pub fn sphere() -> Mesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut positions: Vec<Vec3> = [
@@ -431,7 +448,17 @@ pub fn sphere() -> Mesh {
             Vec2::new(p.y.atan2(p.x) / std::f32::consts::TAU + 0.5, p.z.clamp(-1.0, 1.0).acos() / std::f32::consts::PI)
         })
         .collect();
-    Mesh { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices: faces.into_iter().flatten().collect() }
+    let area: f64 = faces
+        .iter()
+        .map(|&[a, b, c]| {
+            let [a, b, c] = [a, b, c].map(|i| positions[i as usize].as_dvec3());
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    let radius = (4.0 * std::f64::consts::PI / area).sqrt() as f32;
+    let normals = positions.clone();
+    let positions = positions.into_iter().map(|p| p * radius).collect();
+    Mesh { normals: Some(normals), positions, uvs: Some(uvs), indices: faces.into_iter().flatten().collect() }
 }
 
 #[cfg(test)]
@@ -469,9 +496,41 @@ mod tests {
             "sphere: not finer than needed ({worst}, {} triangles)",
             s.indices.len() / 3
         );
+        let farthest_vertex = s.positions.iter().map(|p| (p.length() - 1.0).abs()).fold(0.0f32, f32::max);
+        assert!(farthest_vertex <= TESSELLATION_ERROR, "sphere: vertices {farthest_vertex} off the sphere");
         let d = disk();
         let n = d.positions.len() - 1;
-        let sagitta = 1.0 - (std::f32::consts::PI / n as f32).cos();
-        assert!(sagitta <= TESSELLATION_ERROR && sagitta > 0.5 * TESSELLATION_ERROR, "disk: {sagitta}");
+        let r = d.positions[1].length();
+        let sagitta = 1.0 - r * (std::f32::consts::PI / n as f32).cos();
+        assert!((r - 1.0).abs() <= TESSELLATION_ERROR, "disk: vertices at radius {r}");
+        assert!(sagitta <= TESSELLATION_ERROR && sagitta > 0.1 * TESSELLATION_ERROR, "disk: {sagitta}");
+        let c = cylinder();
+        let r = Vec2::new(c.positions[0].x, c.positions[0].y).length();
+        let sagitta = 1.0 - r * (std::f32::consts::PI / n as f32).cos();
+        assert!((r - 1.0).abs() <= TESSELLATION_ERROR && sagitta <= TESSELLATION_ERROR, "cylinder: {r}, {sagitta}");
+    }
+
+    /// Sum of the triangles' areas, in f64.
+    fn area(mesh: &Mesh) -> f64 {
+        mesh.indices
+            .chunks_exact(3)
+            .map(|t| {
+                let [a, b, c] = [0, 1, 2].map(|k| mesh.positions[t[k] as usize].as_dvec3());
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    }
+
+    /// The meshes have the analytic shapes' areas (the light a surface reflects or emits is in
+    /// proportion), to f32 rounding.
+    #[test]
+    fn curved_primitives_have_the_true_surfaces_areas() {
+        let pi = std::f64::consts::PI;
+        for (mesh, truth, name) in
+            [(sphere(), 4.0 * pi, "sphere"), (disk(), pi, "disk"), (cylinder(), 2.0 * pi, "cylinder")]
+        {
+            let a = area(&mesh);
+            assert!((a / truth - 1.0).abs() < 2e-6, "{name}: area {a}, not {truth}");
+        }
     }
 }
