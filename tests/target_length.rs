@@ -485,11 +485,11 @@ fn visit_tables_follow_the_pilot_and_keep_a_visit_per_bin() {
 }
 
 /// The band index's masses share out the extra visits so that no bin is starved: each gets at
-/// least (n + E) min(w, 1/n) visits a cycle (w its share of the pixel's mass), the rest follows
-/// w, and a pixel of no mass gets its visits evenly.
+/// least (n + E) min(w, 1/n) visits a cycle (w its share: BAND_UNIFORM_SHARE evenly, the rest by
+/// mass), the rest follows w, and a pixel of no mass gets its visits evenly.
 #[test]
 fn visit_tables_from_masses_floor_every_bin_at_the_lesser_of_even_and_proportional() {
-    use gatetrace::film::target::{BAND_EXTRA_VISITS_PER_BIN, visit_tables_from_masses};
+    use gatetrace::film::target::{BAND_EXTRA_VISITS_PER_BIN, BAND_UNIFORM_SHARE, visit_tables_from_masses};
     for strata in [1u32, 7, 60, 100, 1700] {
         let n = strata as usize;
         let t = gatetrace::gpu::layout::TargetParams { strata, ..Default::default() };
@@ -521,7 +521,10 @@ fn visit_tables_from_masses_floor_every_bin_at_the_lesser_of_even_and_proportion
             let total: f64 = m.iter().map(|&v| weight(v)).sum();
             let even = 1.0 / n as f64;
             for j in 0..n {
-                let w = if total > 0.0 { weight(m[j]) / total } else { even };
+                let w = match total > 0.0 {
+                    true => BAND_UNIFORM_SHARE * even + (1.0 - BAND_UNIFORM_SHARE) * weight(m[j]) / total,
+                    false => even,
+                };
                 let visits = 1.0 + (row[j + 1] - row[j]) as f64;
                 assert!(
                     visits >= cycle * w.min(even) - 1e-9,
