@@ -89,9 +89,10 @@ fn band_index_agrees_with_exhaustive_queries(scan: &str, aim: LaserAim, occluder
     // The queries: more samples than bins (300), each bin visited equally (no allocation). The
     // index: a whole cycle of visits per batch (a base visit and 15 extra ones per bin, which
     // its masses share out), so that every bin has a visit in every batch. A batch that ends
-    // within its cycle leaves bins of little mass unvisited (at 320 samples, 20 base visits a
-    // batch), and which bins it visits then decides its group sums: a t test over 16 batches
-    // cannot model that lottery (a group no batch visited failed at |z| = 25).
+    // within its cycle may leave bins of little mass unvisited (at 320 samples, 20 base visits
+    // a batch), and which bins it visits then decides its group sums: a t test over 16 batches
+    // cannot model that lottery (with visits following the masses alone, a group no batch
+    // visited failed at |z| = 25).
     const GROUP: usize = 10;
     const QUERY_SPP: u32 = 320;
     const INDEX_SPP: u32 = 16 * 300;

@@ -327,21 +327,35 @@ fn xml_staircase_single_capture_matches_peer() {
 /// The XML captures of the NLOS benchmark scenes (docs/nlos.md, "Across hidden scenes") render
 /// light in their transients, confocal and single, with every sensed point and laser spot in
 /// view of the origins (no warning), and their `bins`, `bin_width` and `distance` parameters set
-/// what they say.
+/// what they say. The sphere's file reads its mesh from a PLY its `mesh` parameter names (here
+/// an octahedron in the sphere's place, 0.15 m from its centre 0.6 m before the wall).
 #[test]
 fn the_nlos_benchmark_captures_render_as_their_parameters_say() {
     let dir = common::scratch_dir("nlos_benchmark_captures");
-    for (scene, bins, start) in [
-        ("nlos_z", 60, 1.4),
-        ("nlos_panels", 100, 0.7),
-        ("nlos_staircase", 110, 0.7),
-        ("nlos_staircase_boxes", 110, 0.7),
+    let octahedron = dir.join("octahedron.ply");
+    let vertices = ["0.15 0 0.6", "-0.15 0 0.6", "0 0.15 0.6", "0 -0.15 0.6", "0 0 0.75", "0 0 0.45"];
+    let faces = ["0 2 4", "2 1 4", "1 3 4", "3 0 4", "2 0 5", "1 2 5", "3 1 5", "0 3 5"];
+    let ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex 6\nproperty float x\nproperty float y\nproperty float z\n\
+         element face 8\nproperty list uchar uint vertex_indices\nend_header\n{}\n{}\n",
+        vertices.join("\n"),
+        faces.map(|f| format!("3 {f}")).join("\n")
+    );
+    std::fs::write(&octahedron, ply).unwrap();
+    let mesh = format!("mesh={}", octahedron.display());
+    for (scene, bins, start, given) in [
+        ("nlos_z", 60, 1.4, &[][..]),
+        ("nlos_panels", 100, 0.7, &[][..]),
+        ("nlos_staircase", 110, 0.7, &[][..]),
+        ("nlos_staircase_boxes", 110, 0.7, &[][..]),
+        ("nlos_sphere", 60, 0.85, &["-D", mesh.as_str()][..]),
     ] {
         let path = common::repo_path(&format!("assets/scenes/{scene}.xml"));
         let render = |name: &str, extra: &[&str]| -> (serde_json::Value, Vec<usize>, Vec<f32>, String) {
             let out = dir.join(format!("{scene}_{name}.npy"));
             let o = std::process::Command::new(env!("CARGO_BIN_EXE_gatetrace"))
                 .args(["render", path.to_str().unwrap(), "--spp", "32", "--res", "4x4", "-o", out.to_str().unwrap()])
+                .args(given)
                 .args(extra)
                 .output()
                 .unwrap();

@@ -3,7 +3,10 @@
 white, displaced geodesic sphere (radius 0.25 m, resting 5 cm above the floor), as a binary glTF
 (.glb); with --nlos, the NLOS example scene (assets/scenes/nlos_letter.gltf) with the hidden
 letter replaced by such a sphere (node `hidden_sphere`, radius 0.15 m, centred 0.6 m in front of
-the relay wall's centre, still hidden from the origin by the occluder). The sphere is an icosahedron whose faces are cut into f x f triangles (20 f^2 triangles;
+the relay wall's centre, still hidden from the origin by the occluder). An --out ending in .ply
+writes the sphere alone, in the same place, as a binary PLY mesh (metres, no normals) for Mitsuba
+XML scenes: assets/scenes/nlos_sphere.xml reads it with --nlos. The sphere is an icosahedron
+whose faces are cut into f x f triangles (20 f^2 triangles;
 f = 2^k gives the subdivided icospheres of 5,120 / 20,480 / 81,920 / 327,680 / 1,310,720
 triangles), each vertex pushed along its radius by a smooth deterministic bump field of +-4 %,
 so the mesh has curvature at several scales. Flat-shaded (no normals): every triangle's geometric normal. Standard library only.
@@ -11,6 +14,7 @@ so the mesh has curvature at several scales. Flat-shaded (no normals): every tri
     tools/scenes/make_sphere_scene.py --triangles 1300000 --out target/scenes/sphere_1310720.glb
     tools/scenes/make_sphere_scene.py --frequency 16 --out sphere_5120.glb
     tools/scenes/make_sphere_scene.py --nlos --frequency 128 --out target/scenes/nlos_sphere_327680.glb
+    tools/scenes/make_sphere_scene.py --nlos --frequency 128 --out target/scenes/nlos_sphere_327680.ply
 
 The scene's name, the triangle count and the frequency are in the asset's `extras`. The time
 convention, camera and light are the Cornell box's (shortest path 1.9403 m).
@@ -106,6 +110,28 @@ def sphere(frequency, centre=CENTRE, radius=RADIUS):
     return positions, indices
 
 
+def write_ply(path, positions, indices):
+    """The mesh as binary little-endian PLY: float x, y, z per vertex, and a uchar-counted list
+    of uint indices per face (what Mitsuba's and gatetrace's PLY readers take)."""
+    vertices = len(positions) // 3
+    faces = len(indices) // 3
+    header = ("ply\nformat binary_little_endian 1.0\ncomment gatetrace tools/scenes/make_sphere_scene.py\n"
+              f"element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n"
+              f"element face {faces}\nproperty list uchar uint vertex_indices\nend_header\n")
+    if sys.byteorder != "little":
+        positions.byteswap()
+        indices.byteswap()
+    body = bytearray(positions.tobytes())
+    raw = indices.tobytes()
+    for k in range(faces):
+        body.append(3)
+        body.extend(raw[12 * k:12 * k + 12])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as out:
+        out.write(header.encode("ascii"))
+        out.write(body)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     size = parser.add_mutually_exclusive_group(required=True)
@@ -113,13 +139,22 @@ def main():
     size.add_argument("--frequency", type=int, help="cut each icosahedron face into f x f triangles")
     parser.add_argument("--nlos", action="store_true",
                         help="the sphere replaces the NLOS example scene's hidden letter instead")
-    parser.add_argument("--out", required=True, type=Path, help="output .glb file")
+    parser.add_argument("--out", required=True, type=Path,
+                        help="output file: .glb (the whole scene) or .ply (the sphere alone)")
     args = parser.parse_args()
     f = args.frequency if args.frequency else max(1, round(math.sqrt(args.triangles / 20.0)))
     if f < 1 or f > 2048:
         sys.exit(f"make_sphere_scene: frequency {f} must be 1 to 2048 (20 to 84M triangles)")
-    if args.out.suffix != ".glb":
-        sys.exit(f"make_sphere_scene: --out {args.out}: the output is binary glTF, name it .glb")
+    if args.out.suffix not in (".glb", ".ply"):
+        sys.exit(f"make_sphere_scene: --out {args.out}: name it .glb (binary glTF, the whole scene) "
+                 f"or .ply (the sphere alone)")
+    if args.out.suffix == ".ply":
+        centre, radius = (NLOS_CENTRE, NLOS_RADIUS) if args.nlos else (CENTRE, RADIUS)
+        positions, indices = sphere(f, centre, radius)
+        write_ply(args.out, positions, indices)
+        print(f"{args.out}: {len(indices) // 3} sphere triangles (frequency {f}), "
+              f"{len(positions) // 3} vertices")
+        return
 
     doc = json.loads((NLOS if args.nlos else BOX).read_text())
     data = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))

@@ -27,6 +27,17 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// Sum of the triangles' areas (square scene units), in f64.
+    pub fn area(&self) -> f64 {
+        self.indices
+            .chunks_exact(3)
+            .map(|t| {
+                let [a, b, c] = [0, 1, 2].map(|k| self.positions[t[k] as usize].as_dvec3());
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    }
+
     /// Gives a mesh without vertex normals smooth ones, as Mitsuba does for a mesh file without
     /// `face_normals`: at each vertex the sum of its triangles' unit normals weighted by their
     /// angles there, normalised (a vertex whose sum vanishes keeps its triangles' own normals:
@@ -448,17 +459,15 @@ pub fn sphere() -> Mesh {
             Vec2::new(p.y.atan2(p.x) / std::f32::consts::TAU + 0.5, p.z.clamp(-1.0, 1.0).acos() / std::f32::consts::PI)
         })
         .collect();
-    let area: f64 = faces
-        .iter()
-        .map(|&[a, b, c]| {
-            let [a, b, c] = [a, b, c].map(|i| positions[i as usize].as_dvec3());
-            0.5 * (b - a).cross(c - a).length()
-        })
-        .sum();
-    let radius = (4.0 * std::f64::consts::PI / area).sqrt() as f32;
-    let normals = positions.clone();
-    let positions = positions.into_iter().map(|p| p * radius).collect();
-    Mesh { normals: Some(normals), positions, uvs: Some(uvs), indices: faces.into_iter().flatten().collect() }
+    let mut mesh = Mesh {
+        normals: Some(positions.clone()),
+        positions,
+        uvs: Some(uvs),
+        indices: faces.into_iter().flatten().collect(),
+    };
+    let radius = (4.0 * std::f64::consts::PI / mesh.area()).sqrt() as f32;
+    mesh.positions.iter_mut().for_each(|p| *p *= radius);
+    mesh
 }
 
 #[cfg(test)]
@@ -510,17 +519,6 @@ mod tests {
         assert!((r - 1.0).abs() <= TESSELLATION_ERROR && sagitta <= TESSELLATION_ERROR, "cylinder: {r}, {sagitta}");
     }
 
-    /// Sum of the triangles' areas, in f64.
-    fn area(mesh: &Mesh) -> f64 {
-        mesh.indices
-            .chunks_exact(3)
-            .map(|t| {
-                let [a, b, c] = [0, 1, 2].map(|k| mesh.positions[t[k] as usize].as_dvec3());
-                0.5 * (b - a).cross(c - a).length()
-            })
-            .sum()
-    }
-
     /// The meshes have the analytic shapes' areas (the light a surface reflects or emits is in
     /// proportion), to f32 rounding.
     #[test]
@@ -529,7 +527,7 @@ mod tests {
         for (mesh, truth, name) in
             [(sphere(), 4.0 * pi, "sphere"), (disk(), pi, "disk"), (cylinder(), 2.0 * pi, "cylinder")]
         {
-            let a = area(&mesh);
+            let a = mesh.area();
             assert!((a / truth - 1.0).abs() < 2e-6, "{name}: area {a}, not {truth}");
         }
     }
