@@ -195,6 +195,16 @@ fn confocal_scan_with_direct_connections_matches_peer() {
 /// The capture of assets/scenes/SCENE.xml (read unchanged but for `confocal`) with `scan`
 /// and `method`: its prepared scene, and settings with the capture's grid, gate and depth.
 fn xml_capture(scene: &str, scan: &str, method: Method) -> (gatetrace::capture::PreparedCapture, RenderSettings) {
+    xml_capture_with(scene, scan, method, CaptureOptions::default())
+}
+
+/// `xml_capture` with `options` (e.g. `band_index_auto`, as the command line sets it).
+fn xml_capture_with(
+    scene: &str,
+    scan: &str,
+    method: Method,
+    options: CaptureOptions,
+) -> (gatetrace::capture::PreparedCapture, RenderSettings) {
     let path = common::repo_path(&format!("assets/scenes/{scene}.xml"));
     let parameters = vec![("confocal".to_owned(), (scan == "confocal").to_string())];
     let file = gatetrace::scene::scene_settings(&path, &parameters).unwrap();
@@ -211,7 +221,7 @@ fn xml_capture(scene: &str, scan: &str, method: Method) -> (gatetrace::capture::
     };
     CaptureChoices { method: Some(method), ..Default::default() }.apply(&mut settings);
     let load = LoadOptions { parameters, ..Default::default() };
-    let request = CaptureRequest::new(capture.scan, Some(&capture), CaptureOptions::default());
+    let request = CaptureRequest::new(capture.scan, Some(&capture), options);
     let prepared = prepare_capture(&path, load, &request, settings).unwrap();
     let settings = RenderSettings { nlos: Some(prepared.capture.clone()), ..prepared.settings.clone() };
     (prepared, settings)
@@ -222,10 +232,19 @@ fn xml_capture(scene: &str, scan: &str, method: Method) -> (gatetrace::capture::
 /// parameter), read unchanged, its capture as the file describes it, rendered with `method`
 /// against mitransient's render of the same file (tests/data/SCENE_peer; the laser's power comes
 /// from the projector as mitransient's `transient_nlos_path` lights a spot with it: no
-/// rescaling). `scene`: a file of assets/scenes with an 8x8 grid of `bins` bins.
-fn xml_capture_agrees_with_peer(scene: &str, bins: usize, scan: &str, method: Method, spp: u32, block: Block) {
+/// rescaling). `scene`: a file of assets/scenes with an 8x8 grid of `bins` bins. The band index
+/// is on unless `options` leave it to decide (`band_index_auto`).
+fn xml_capture_agrees_with_peer(
+    scene: &str,
+    bins: usize,
+    scan: &str,
+    method: Method,
+    spp: u32,
+    block: Block,
+    options: CaptureOptions,
+) {
     let ctx = common::gpu();
-    let (prepared, settings) = xml_capture(scene, scan, method);
+    let (prepared, settings) = xml_capture_with(scene, scan, method, options);
     assert_eq!((settings.width, settings.height, settings.max_bounces), (8, 8, 3));
     let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, spp);
     let batches: Vec<Vec<f32>> = films.into_iter().map(|f| f.data).collect();
@@ -244,22 +263,54 @@ const PANELS_BLOCK: Block = Block { pixels: 2, bins: 5 };
 
 #[test]
 fn xml_single_capture_matches_peer() {
-    xml_capture_agrees_with_peer("nlos_panels", 100, "single", Method::Path, 4096, PANELS_BLOCK);
+    xml_capture_agrees_with_peer(
+        "nlos_panels",
+        100,
+        "single",
+        Method::Path,
+        4096,
+        PANELS_BLOCK,
+        CaptureOptions::default(),
+    );
 }
 
 #[test]
 fn xml_confocal_capture_matches_peer() {
-    xml_capture_agrees_with_peer("nlos_panels", 100, "confocal", Method::Path, 4096, PANELS_BLOCK);
+    xml_capture_agrees_with_peer(
+        "nlos_panels",
+        100,
+        "confocal",
+        Method::Path,
+        4096,
+        PANELS_BLOCK,
+        CaptureOptions::default(),
+    );
 }
 
 #[test]
 fn xml_single_capture_with_ellipsoidal_connections_matches_peer() {
-    xml_capture_agrees_with_peer("nlos_panels", 100, "single", Method::Ellipsoidal, 1024, PANELS_BLOCK);
+    xml_capture_agrees_with_peer(
+        "nlos_panels",
+        100,
+        "single",
+        Method::Ellipsoidal,
+        1024,
+        PANELS_BLOCK,
+        CaptureOptions::default(),
+    );
 }
 
 #[test]
 fn xml_confocal_capture_with_direct_connections_matches_peer() {
-    xml_capture_agrees_with_peer("nlos_panels", 100, "confocal", Method::Direct, 4096, PANELS_BLOCK);
+    xml_capture_agrees_with_peer(
+        "nlos_panels",
+        100,
+        "confocal",
+        Method::Direct,
+        4096,
+        PANELS_BLOCK,
+        CaptureOptions::default(),
+    );
 }
 
 /// No bin that holds light is starved of samples on the wide object near the wall (the panels,
@@ -316,12 +367,48 @@ const STAIRCASE_BLOCK: Block = Block { pixels: 2, bins: 1 };
 
 #[test]
 fn xml_staircase_confocal_capture_with_ellipsoidal_connections_matches_peer() {
-    xml_capture_agrees_with_peer("nlos_staircase", 110, "confocal", Method::Ellipsoidal, 4096, STAIRCASE_BLOCK);
+    xml_capture_agrees_with_peer(
+        "nlos_staircase",
+        110,
+        "confocal",
+        Method::Ellipsoidal,
+        4096,
+        STAIRCASE_BLOCK,
+        CaptureOptions::default(),
+    );
+}
+
+/// The letter Z (assets/scenes/nlos_z.xml, 6 triangles besides the wall), whose error at fine
+/// bins lies in its arrival onsets, with `ellipsoidal` as the command line renders it (the
+/// band index left to decide: every query searches the letter whole), per block of 2x2 sensed
+/// points and one 20 mm bin.
+#[test]
+fn xml_z_confocal_capture_with_ellipsoidal_connections_matches_peer() {
+    let options = CaptureOptions { band_index_auto: true, ..Default::default() };
+    let (prepared, _) = xml_capture_with("nlos_z", "confocal", Method::Ellipsoidal, options.clone());
+    assert!(prepared.band_index_declined.is_some(), "the Z's 6 triangles take queries");
+    xml_capture_agrees_with_peer(
+        "nlos_z",
+        60,
+        "confocal",
+        Method::Ellipsoidal,
+        4096,
+        Block { pixels: 2, bins: 1 },
+        options,
+    );
 }
 
 #[test]
 fn xml_staircase_single_capture_matches_peer() {
-    xml_capture_agrees_with_peer("nlos_staircase", 110, "single", Method::Path, 4096, PANELS_BLOCK);
+    xml_capture_agrees_with_peer(
+        "nlos_staircase",
+        110,
+        "single",
+        Method::Path,
+        4096,
+        PANELS_BLOCK,
+        CaptureOptions::default(),
+    );
 }
 
 /// The XML captures of the NLOS benchmark scenes (docs/nlos.md, "Across hidden scenes") render
