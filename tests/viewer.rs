@@ -46,6 +46,10 @@ fn screenshot(name: &str, args: &[&str]) -> Shot {
     let dir = common::scratch_dir(name);
     let shot = dir.join("shot.png");
     let res = format!("{W}x{H}");
+    // One X server at a time: `xvfb-run -a` started by parallel tests can pick the same display
+    // number, and the later viewer then finds no X server.
+    static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = XVFB.lock().unwrap_or_else(|e| e.into_inner());
     let o = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 1280x900x24", env!("CARGO_BIN_EXE_gatetrace"), "view", "--res", &res])
         .args(args)
