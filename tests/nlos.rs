@@ -398,6 +398,26 @@ fn xml_z_confocal_capture_with_ellipsoidal_connections_matches_peer() {
     );
 }
 
+/// The staircase built of overlapping boxes (assets/scenes/nlos_staircase_boxes.xml, 60
+/// triangles besides the wall, faces against each other that no light reaches), with
+/// `ellipsoidal` as the command line renders it (queries), per block of 2x2 sensed points and
+/// one 20 mm bin.
+#[test]
+fn xml_staircase_boxes_confocal_capture_with_ellipsoidal_connections_matches_peer() {
+    let options = CaptureOptions { band_index_auto: true, ..Default::default() };
+    let (prepared, _) = xml_capture_with("nlos_staircase_boxes", "confocal", Method::Ellipsoidal, options.clone());
+    assert!(prepared.band_index_declined.is_some(), "the boxes' 60 triangles take queries");
+    xml_capture_agrees_with_peer(
+        "nlos_staircase_boxes",
+        110,
+        "confocal",
+        Method::Ellipsoidal,
+        4096,
+        STAIRCASE_BLOCK,
+        options,
+    );
+}
+
 #[test]
 fn xml_staircase_single_capture_matches_peer() {
     xml_capture_agrees_with_peer(

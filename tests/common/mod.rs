@@ -271,7 +271,7 @@ pub fn soup_scene_with(n: usize, seed: u32, name: &str, normals: bool) -> gatetr
 pub fn sphere_scene(frequency: u32) -> PreparedScene {
     let mut scene = load_gltf(&repo_path("assets/scenes/cornell_box.gltf")).unwrap();
     let white = scene.materials.iter().position(|m| m.name == "white").unwrap() as u32;
-    push_sphere(&mut scene, glam::Vec3::new(0.0, -0.5 + 0.05 + 0.25, -0.05), 0.25, frequency, white);
+    push_sphere(&mut scene, glam::Vec3::new(0.0, -0.5 + 0.05 + 0.25, -0.05), 0.25, frequency, SPHERE_BUMPS, white);
     PreparedScene::new(scene).unwrap()
 }
 
@@ -285,6 +285,12 @@ pub fn nlos_sphere_scene(frequency: u32, occluder: bool) -> PreparedScene {
 
 /// The scene of `nlos_sphere_scene` before its BVH is built.
 pub fn nlos_sphere_scene_unprepared(frequency: u32, occluder: bool) -> gatetrace::scene::Scene {
+    nlos_sphere_scene_with_bumps(frequency, occluder, SPHERE_BUMPS)
+}
+
+/// `nlos_sphere_scene_unprepared` with bumps of +-`bumps` of the radius (0: a convex polyhedron
+/// whose vertices lie on the sphere).
+pub fn nlos_sphere_scene_with_bumps(frequency: u32, occluder: bool, bumps: f32) -> gatetrace::scene::Scene {
     let mut scene = load_gltf(&repo_path("assets/scenes/nlos_letter.gltf")).unwrap();
     if !occluder {
         let range = scene.node("occluder").unwrap().triangles.clone();
@@ -300,7 +306,7 @@ pub fn nlos_sphere_scene_unprepared(frequency: u32, occluder: bool) -> gatetrace
         node.triangles = shift(node.triangles.start)..shift(node.triangles.end);
     }
     let first = scene.triangles.len();
-    push_sphere(&mut scene, glam::Vec3::new(0.0, 0.0, 0.6), 0.15, frequency, material);
+    push_sphere(&mut scene, glam::Vec3::new(0.0, 0.0, 0.6), 0.15, frequency, bumps, material);
     scene.nodes.push(gatetrace::scene::NamedNode {
         name: "hidden_sphere".into(),
         position: glam::Vec3::new(0.0, 0.0, 0.6),
@@ -310,9 +316,19 @@ pub fn nlos_sphere_scene_unprepared(frequency: u32, occluder: bool) -> gatetrace
     scene
 }
 
+/// The relative amplitude of the test spheres' bumps, as tools/scenes/make_sphere_scene.py has it.
+const SPHERE_BUMPS: f32 = 0.04;
+
 /// Appends a geodesic sphere (an icosahedron whose faces are cut into f x f flat triangles,
-/// each vertex pushed along its radius by +-4 % bumps) of `radius` m about `centre`.
-fn push_sphere(scene: &mut gatetrace::scene::Scene, centre: glam::Vec3, radius: f32, frequency: u32, material: u32) {
+/// each vertex pushed along its radius by bumps of +-`bumps` of it) of `radius` m about `centre`.
+fn push_sphere(
+    scene: &mut gatetrace::scene::Scene,
+    centre: glam::Vec3,
+    radius: f32,
+    frequency: u32,
+    bumps: f32,
+    material: u32,
+) {
     use glam::Vec3;
     let p = (1.0 + 5f32.sqrt()) / 2.0;
     let ico: Vec<Vec3> = [
@@ -363,7 +379,7 @@ fn push_sphere(scene: &mut gatetrace::scene::Scene, centre: glam::Vec3, radius: 
     let point = |d: Vec3| {
         let d = d.normalize();
         let bump: f32 = waves.iter().map(|&(w, k, phase, weight)| weight * (k * w.dot(d) + phase).sin()).sum();
-        centre + radius * (1.0 + 0.04 * bump) * d
+        centre + radius * (1.0 + bumps * bump) * d
     };
     let f = frequency as f32;
     for &(a, b, c) in &faces {
