@@ -17,6 +17,7 @@ use gatetrace::integrator::{Method, RenderSettings};
 use gatetrace::nlos::{LaserAim, NlosCapture};
 use gatetrace::scene::{LoadOptions, PreparedScene, load_gltf};
 use glam::{Vec2, Vec3};
+use std::f64::consts::PI;
 
 const ALPHA: f64 = 0.01;
 const BATCHES: usize = 16;
@@ -416,6 +417,84 @@ fn xml_staircase_boxes_confocal_capture_with_ellipsoidal_connections_matches_pee
         STAIRCASE_BLOCK,
         options,
     );
+}
+
+/// The staircase's confocal capture with shell connections, as the file renders it (the band
+/// index on), against a quadrature of every sensed point's whole light with exact visibility:
+/// the steps hide parts of one another from most points, and the part of each triangle a point
+/// sees is cut out exactly (common::quadrature::visible_part: the other triangles projected from
+/// the point onto its plane) before the light over it is integrated, (rho_w / pi)^2 (rho_h / pi)
+/// P cos_w^2 cos_h^2 / d^4 within the gate. Each point's total over the bins is compared
+/// (Student's t over 16 batches, Sidak's correction over the points), and the capture's.
+/// mitransient's reference (tests/data/nlos_staircase_peer) totals 1.6e-4 more than this
+/// quadrature (docs/nlos.md).
+#[test]
+fn xml_staircase_confocal_shell_connections_match_quadrature_with_visibility() {
+    use glam::DVec3;
+    let (prepared, settings) = xml_capture("nlos_staircase", "confocal", Method::Ellipsoidal);
+    assert!(settings.band_index, "the capture connects through the band index");
+    let capture = settings.nlos.clone().unwrap();
+    assert!(!capture.count_first_and_last);
+    let Gate::Transient { start, width, bins } = settings.gate else { panic!("a transient gate") };
+    let (lo, hi) = (start, start + width * bins as f64);
+    // The file's triangles as written (the capture cuts them into pieces for the index).
+    let path = common::repo_path("assets/scenes/nlos_staircase.xml");
+    let load = LoadOptions {
+        capture: true,
+        parameters: vec![("confocal".to_owned(), "true".to_owned())],
+        ..Default::default()
+    };
+    let scene = gatetrace::scene::load_scene_with(&path, &load).unwrap();
+    let wall = scene.node("relay_wall").unwrap().triangles.clone();
+    let material = |m: u32| &scene.materials[m as usize];
+    let wall_tri = &scene.triangles[wall.start];
+    let wall_albedo = material(wall_tri.material).base_color.as_dvec3();
+    let [w0, w1, w2] = wall_tri.positions.map(|p| p.as_dvec3());
+    let wall_normal = (w1 - w0).cross(w2 - w0).normalize();
+    let hidden: Vec<([DVec3; 3], DVec3)> = (0..scene.triangles.len())
+        .filter(|i| !wall.contains(i))
+        .map(|i| {
+            let t = &scene.triangles[i];
+            assert!(!material(t.material).double_sided, "the steps reflect on their front faces only");
+            (t.positions.map(|p| p.as_dvec3()), material(t.material).base_color.as_dvec3())
+        })
+        .collect();
+    let occluders: Vec<[DVec3; 3]> = hidden.iter().map(|h| h.0).collect();
+    let (w, h) = (settings.width, settings.height);
+    let pixels = (w * h) as usize;
+    let points = gatetrace::nlos::wall_points(&prepared.scene, &capture, w, h).unwrap();
+    let reference: Vec<f64> = (0..pixels)
+        .map(|px| {
+            let p = points[px].position.as_dvec3();
+            assert_eq!(p, points[pixels + px].position.as_dvec3(), "confocal: the spot is the sensed point");
+            let power = points[pixels + px].power.as_dvec3();
+            hidden
+                .iter()
+                .map(|&(face, albedo)| {
+                    let n = (face[1] - face[0]).cross(face[2] - face[0]).normalize();
+                    let integral: f64 = common::quadrature::visible_part(face, &occluders, p)
+                        .into_iter()
+                        .map(|piece| {
+                            common::quadrature::triangle_integral(piece, 2, &mut |x| {
+                                let to_p = p - x;
+                                let d = to_p.length();
+                                if !(2.0 * d >= lo && 2.0 * d < hi) {
+                                    return 0.0;
+                                }
+                                let (cos_w, cos_h) = (wall_normal.dot(to_p) / d, n.dot(to_p) / d);
+                                (cos_w * cos_h).powi(2) / d.powi(4)
+                            })
+                        })
+                        .sum();
+                    (power * wall_albedo * wall_albedo * albedo).element_sum() * integral / PI.powi(3)
+                })
+                .sum()
+        })
+        .collect();
+
+    let ctx = common::gpu();
+    let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, 4096);
+    common::quadrature::assert_point_totals_match("staircase, confocal, shell connections", &films, &reference, ALPHA);
 }
 
 #[test]

@@ -346,32 +346,12 @@ fn confocal_scan_with_ellipsoidal_connections_and_fewer_samples_than_bins_matche
     compare_with_quadrature("confocal, 512 spp", LaserAim::Confocal, Method::Ellipsoidal, 512, 25);
 }
 
-/// Points of the 7-point Dunavant rule on a triangle (degree 5): barycentric coordinates and
-/// weights, summing to 1.
-const DUNAVANT: [([f64; 3], f64); 7] = {
-    const A1: f64 = 0.059_715_871_789_770;
-    const B1: f64 = 0.470_142_064_105_115;
-    const A2: f64 = 0.797_426_985_353_087;
-    const B2: f64 = 0.101_286_507_323_456;
-    const W1: f64 = 0.132_394_152_788_506;
-    const W2: f64 = 0.125_939_180_544_827;
-    [
-        ([1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0], 0.225),
-        ([A1, B1, B1], W1),
-        ([B1, A1, B1], W1),
-        ([B1, B1, A1], W1),
-        ([A2, B2, B2], W2),
-        ([B2, A2, B2], W2),
-        ([B2, B2, A2], W2),
-    ]
-};
-
 /// Shell connections (the band index, a capture's default on meshes of more than 64 triangles)
 /// on a convex hidden sphere, which nothing occludes, against a quadrature of each sensed
 /// point's whole three-bounce light: over the triangles that face both foci,
 /// (rho_w / pi)^2 (rho_h / pi) P times the integral of cos_l cos_h' cos_h cos_s / (|h - x_l|^2
 /// |h - x_s|^2) dA, a smooth integrand on each triangle that the Dunavant rule gives to about
-/// 1e-9. The sphere is the band-index tests' 5,120-triangle geodesic sphere without its bumps
+/// 1e-9 (common::quadrature). The sphere is the band-index tests' 5,120-triangle geodesic sphere without its bumps
 /// (radius 0.15 m, 0.6 m from the wall); the gate, 100 bins of 10 mm from 0.85 m, holds all of
 /// its light. Each point's total is compared (Student's t over 16 batches, Sidak's correction
 /// over the points), and the capture's.
@@ -408,13 +388,11 @@ fn shell_connections_match_quadrature_on_a_convex_sphere(scan: &str, aim: LaserA
         let scale = points[pixels + px].power.as_dvec3() * wall_albedo * wall_albedo * sphere_albedo / (PI * PI * PI);
         let mut integral = 0.0;
         for f in &faces {
-            let cross = (f[1] - f[0]).cross(f[2] - f[0]);
-            let (area, n) = (0.5 * cross.length(), cross.normalize());
+            let n = (f[1] - f[0]).cross(f[2] - f[0]).normalize();
             if !(n.dot(spot - f[0]) > 0.0 && n.dot(sensed - f[0]) > 0.0) {
                 continue;
             }
-            for &(b, w) in &DUNAVANT {
-                let h = b[0] * f[0] + b[1] * f[1] + b[2] * f[2];
+            integral += common::quadrature::triangle_integral(*f, 0, &mut |h| {
                 let (to_l, to_s) = (spot - h, sensed - h);
                 let (dl, ds) = (to_l.length(), to_s.length());
                 assert!(
@@ -422,8 +400,8 @@ fn shell_connections_match_quadrature_on_a_convex_sphere(scan: &str, aim: LaserA
                     "the gate holds the light"
                 );
                 let cos_wall = (wall_normal.dot(to_l) / dl).abs() * (wall_normal.dot(to_s) / ds).abs();
-                integral += w * area * cos_wall * (n.dot(to_l) / dl) * (n.dot(to_s) / ds) / (dl * dl * ds * ds);
-            }
+                cos_wall * (n.dot(to_l) / dl) * (n.dot(to_s) / ds) / (dl * dl * ds * ds)
+            });
         }
         *value = (scale * integral).element_sum();
     }
@@ -431,37 +409,12 @@ fn shell_connections_match_quadrature_on_a_convex_sphere(scan: &str, aim: LaserA
     let ctx = common::gpu();
     let settings = RenderSettings { band_index: true, target_pilot_spp: 0, seed: 41, ..base };
     let films = common::render_films(&ctx, &scene, &settings, BATCHES, 3200);
-    let totals: Vec<Vec<f64>> = films
-        .iter()
-        .map(|film| film.data.chunks(film.data.len() / pixels).map(|p| p.iter().map(|&x| x as f64).sum()).collect())
-        .collect();
-    let n = BATCHES as f64;
-    let stats = |values: &dyn Fn(&Vec<f64>) -> f64| {
-        let v: Vec<f64> = totals.iter().map(values).collect();
-        let mean = v.iter().sum::<f64>() / n;
-        (mean, v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / ((n - 1.0) * n))
-    };
-    let limit = t_critical(sidak(ALPHA, pixels + 1), n - 1.0);
-    let mut worst = 0.0f64;
-    for (px, &q) in reference.iter().enumerate() {
-        let (mean, var) = stats(&|t| t[px]);
-        let z = (mean - q) / var.sqrt();
-        worst = worst.max(z.abs());
-        assert!(
-            z.abs() < limit,
-            "{scan}: point {px}: shell connections {mean:.7e} vs quadrature {q:.7e} (|z| {:.2} > {limit:.2})",
-            z.abs()
-        );
-    }
-    let (mean, var) = stats(&|t| t.iter().sum());
-    let q: f64 = reference.iter().sum();
-    let z = (mean - q) / var.sqrt();
-    println!(
-        "{scan}: total {mean:.7} +- {:.7} vs quadrature {q:.7} (ratio {:.6}, z {z:+.2}); worst point |z| {worst:.2} (limit {limit:.2})",
-        var.sqrt(),
-        mean / q
+    common::quadrature::assert_point_totals_match(
+        &format!("{scan} scan, shell connections"),
+        &films,
+        &reference,
+        ALPHA,
     );
-    assert!(z.abs() < limit, "{scan}: total {mean:.7e} vs quadrature {q:.7e} (|z| {:.2} > {limit:.2})", z.abs());
 }
 
 #[test]

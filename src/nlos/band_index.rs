@@ -31,9 +31,9 @@ use crate::scene::PreparedScene;
 /// `nlos_z.xml`'s 6) the queries had less error than shell connections (1/100 at 1 ps on the
 /// letter, 1/82 on the Z at 4 ps; 10 s captures). On the staircases of 20 and 60 triangles
 /// (`nlos_staircase.xml`, `nlos_staircase_boxes.xml`, 4 ps) shell connections had 0.76 and 0.61
-/// of the queries' error, but the staircase's confocal capture with them totals about 1.3e-4
-/// less light than mitransient's reference (docs/nlos.md, "Across hidden scenes"), which is not
-/// yet explained: `--band-index on` takes them there.
+/// of the queries' error (`--band-index on` takes them there); their staircase total, 1e-4 below
+/// mitransient's, matches a quadrature with exact visibility, which the peer exceeds
+/// (docs/nlos.md, "Across hidden scenes").
 pub const AUTO_MIN_TRIANGLES: usize = 64;
 
 /// Most nodes of a cluster's subtree (31: at most 16 leaves of up to 4 triangles).

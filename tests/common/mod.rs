@@ -3,6 +3,7 @@
 
 pub mod gltf_builder;
 pub mod peer;
+pub mod quadrature;
 pub mod stats;
 
 use std::path::{Path, PathBuf};
