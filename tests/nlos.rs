@@ -401,13 +401,14 @@ fn xml_z_confocal_capture_with_ellipsoidal_connections_matches_peer() {
 
 /// The staircase built of overlapping boxes (assets/scenes/nlos_staircase_boxes.xml, 60
 /// triangles besides the wall, faces against each other that no light reaches), with
-/// `ellipsoidal` as the command line renders it (queries), per block of 2x2 sensed points and
-/// one 20 mm bin.
+/// `ellipsoidal` as the command line renders it (shell connections), per block of 2x2 sensed
+/// points and one 20 mm bin.
 #[test]
 fn xml_staircase_boxes_confocal_capture_with_ellipsoidal_connections_matches_peer() {
     let options = CaptureOptions { band_index_auto: true, ..Default::default() };
-    let (prepared, _) = xml_capture_with("nlos_staircase_boxes", "confocal", Method::Ellipsoidal, options.clone());
-    assert!(prepared.band_index_declined.is_some(), "the boxes' 60 triangles take queries");
+    let (prepared, settings) =
+        xml_capture_with("nlos_staircase_boxes", "confocal", Method::Ellipsoidal, options.clone());
+    assert!(prepared.band_index_declined.is_none() && settings.band_index, "the boxes' 60 triangles build an index");
     xml_capture_agrees_with_peer(
         "nlos_staircase_boxes",
         110,

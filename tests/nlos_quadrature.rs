@@ -346,7 +346,7 @@ fn confocal_scan_with_ellipsoidal_connections_and_fewer_samples_than_bins_matche
     compare_with_quadrature("confocal, 512 spp", LaserAim::Confocal, Method::Ellipsoidal, 512, 25);
 }
 
-/// Shell connections (the band index, a capture's default on meshes of more than 64 triangles)
+/// Shell connections (the band index, a capture's default on meshes of more than 16 triangles)
 /// on a convex hidden sphere, which nothing occludes, against a quadrature of each sensed
 /// point's whole three-bounce light: over the triangles that face both foci,
 /// (rho_w / pi)^2 (rho_h / pi) P times the integral of cos_l cos_h' cos_h cos_s / (|h - x_l|^2

@@ -140,7 +140,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     pub target_pilot: Option<u32>,
     /// --nlos, ellipsoidal, transient gate: connect through the band index of three-bounce
-    /// shells (auto: on above 64 hidden triangles)
+    /// shells (auto: on above 16 hidden triangles)
     #[arg(long, value_name = "auto|on|off", default_value = "auto", value_enum)]
     pub band_index: OnOff,
     /// Ellipsoid queries: skip spheroids with tau_e <= d (1 + REL), d the foci's distance

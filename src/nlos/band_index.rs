@@ -26,15 +26,14 @@ use crate::gpu::{GpuContext, Kernel, Resources};
 use crate::scene::PreparedScene;
 
 /// `render --band-index auto` builds the index for scenes of more triangles than this besides
-/// the relay wall (about what one cluster holds): a smaller hidden scene is searched whole by
-/// every ellipsoid query, exactly. On flat letters facing the wall (the example's 8 triangles,
-/// `nlos_z.xml`'s 6) the queries had less error than shell connections (1/100 at 1 ps on the
-/// letter, 1/82 on the Z at 4 ps; 10 s captures). On the staircases of 20 and 60 triangles
-/// (`nlos_staircase.xml`, `nlos_staircase_boxes.xml`, 4 ps) shell connections had 0.76 and 0.61
-/// of the queries' error (`--band-index on` takes them there); their staircase total, 1e-4 below
-/// mitransient's, matches a quadrature with exact visibility, which the peer exceeds
-/// (docs/nlos.md, "Across hidden scenes").
-pub const AUTO_MIN_TRIANGLES: usize = 64;
+/// the relay wall: a smaller hidden scene takes the queries, which search it whole, exactly. On
+/// flat letters facing the wall (the example's 8 triangles, `nlos_z.xml`'s 6) the queries had
+/// less error than shell connections (1/100 at 1 ps on the letter, 1/82 on the Z at 4 ps; 10 s
+/// captures); on the staircases of 20 and 60 triangles (`nlos_staircase.xml`,
+/// `nlos_staircase_boxes.xml`, 4 ps) shell connections had 0.76 and 0.61 of the queries' error
+/// (docs/nlos.md, "Across hidden scenes"). The capture cuts the triangles of such small scenes
+/// into pieces for the index (`crate::nlos::prepare_for_shells`), so that they make clusters.
+pub const AUTO_MIN_TRIANGLES: usize = 16;
 
 /// Most nodes of a cluster's subtree (31: at most 16 leaves of up to 4 triangles).
 pub const CLUSTER_NODES: u32 = 31;
