@@ -367,6 +367,8 @@ impl Capture {
                 serde_json::json!({
                     "closed_meshes_made_one_sided": r.closed_meshes,
                     "triangles_cut_into_pieces": r.refined,
+                    "convex_solids": r.solids,
+                    "buried_pieces_dropped": r.buried,
                     "triangles": r.triangles,
                 }),
             ));

@@ -485,3 +485,78 @@ fn the_command_line_decides_the_band_index_by_the_scene() {
         "{prepared}"
     );
 }
+
+/// The staircase of boxes (`nlos_staircase_boxes.xml`): its five boxes are closed convex opaque
+/// solids, and after the refinement the pieces dropped as buried are exactly within the faces
+/// between the boxes (the lower part of each box's front face, which lies against the box in
+/// front, and the back faces against the box behind), covering most of them, while every other
+/// piece stays. A box holding a path's origin, a box with a face missing, a dented box and glass
+/// boxes are not solids.
+#[test]
+fn buried_pieces_between_boxes_are_dropped_and_nothing_else() {
+    let path = common::repo_path("assets/scenes/nlos_staircase_boxes.xml");
+    let load = gatetrace::scene::LoadOptions { capture: true, ..Default::default() };
+    let scene = gatetrace::scene::load_scene_with(&path, &load).unwrap();
+    let origin = Vec3::new(-0.3, 0.1, 0.6);
+    let wall = scene.node("relay_wall").unwrap().triangles.clone();
+    assert_eq!(scene.triangles.len() - wall.len(), 60, "the test expects five boxes of 12 triangles");
+    let solids = gatetrace::nlos::convex_solids(&scene, "relay_wall", &[origin]);
+    assert_eq!(solids.len(), 5);
+    let mut refined = scene.clone();
+    gatetrace::nlos::refine_for_shells(&mut refined, "relay_wall", 0.0012).unwrap();
+    let mut dropped = refined.clone();
+    let buried = gatetrace::nlos::drop_buried_pieces(&mut dropped, "relay_wall", &solids);
+    assert_eq!(dropped.triangles.len() + buried, refined.triangles.len());
+    assert_eq!(dropped.node("relay_wall").unwrap().triangles.len(), wall.len(), "the relay wall is kept");
+    // Step k spans z in [0.4 + 0.15 k, 0.55 + 0.15 k] and y in [-0.45, -0.45 + 0.15 (k + 1)]:
+    // the plane z = 0.55 + 0.15 k between steps k and k + 1 is buried where y < the top of k.
+    let between =
+        |p: Vec3| (0..4).any(|k| (p.z - (0.55 + 0.15 * k as f32)).abs() < 1e-5 && p.y < -0.3 + 0.15 * k as f32 + 1e-5);
+    let centroid = |t: &gatetrace::scene::SceneTriangle| (t.positions[0] + t.positions[1] + t.positions[2]) / 3.0;
+    let area = |ts: &[gatetrace::scene::SceneTriangle]| ts.iter().map(|t| t.area() as f64).sum::<f64>();
+    // Pieces are told apart by their centroids: the dropped ones are those missing afterwards.
+    let key = |t: &gatetrace::scene::SceneTriangle| centroid(t).to_array().map(f32::to_bits);
+    let kept: std::collections::HashSet<[u32; 3]> = dropped.triangles.iter().map(key).collect();
+    let gone: Vec<gatetrace::scene::SceneTriangle> =
+        refined.triangles.iter().filter(|t| !kept.contains(&key(t))).cloned().collect();
+    assert_eq!(gone.len(), buried);
+    for t in &gone {
+        assert!(t.positions.iter().all(|&p| between(p)), "a dropped piece at {} is not between two boxes", centroid(t));
+    }
+    // The buried faces: 0.6 m wide, 0.15 (k + 1) high, on both sides of each of the four planes.
+    let exact = 2.0 * 0.6 * 0.15 * (1 + 2 + 3 + 4) as f64;
+    let gone_area = area(&gone);
+    let kept_between = dropped.triangles.iter().filter(|t| t.positions.iter().all(|&p| between(p))).count();
+    println!("{buried} pieces dropped, {gone_area:.4} m^2 of {exact:.4} m^2 buried");
+    assert_eq!(kept_between, 0, "every piece wholly between two boxes is dropped");
+    assert!(gone_area <= exact + 1e-4 && gone_area > 0.95 * exact, "{gone_area} m^2 of {exact} m^2 dropped");
+    // Not solids: a box holding an origin, a box with a face missing, a dented box, glass.
+    let boxes =
+        |s: &gatetrace::scene::Scene, origin: Vec3| gatetrace::nlos::convex_solids(s, "relay_wall", &[origin]).len();
+    assert_eq!(boxes(&scene, Vec3::new(0.0, -0.4, 0.45)), 4, "an origin inside the first box");
+    let first = (0..scene.triangles.len()).find(|i| !wall.contains(i)).unwrap();
+    let mut open = scene.clone();
+    open.triangles.drain(first..first + 2);
+    for node in &mut open.nodes {
+        if node.triangles.start > first {
+            node.triangles = node.triangles.start - 2..node.triangles.end - 2;
+        }
+    }
+    assert_eq!(boxes(&open, origin), 4, "a box with a face missing");
+    let mut dented = scene.clone();
+    let corner = dented.triangles[first].positions[0];
+    let centre = (0..12).map(|i| centroid(&scene.triangles[first + i])).sum::<Vec3>() / 12.0;
+    for t in &mut dented.triangles[first..first + 12] {
+        for p in &mut t.positions {
+            if *p == corner {
+                *p = corner.lerp(centre, 0.3);
+            }
+        }
+    }
+    assert_eq!(boxes(&dented, origin), 4, "a box with a corner pushed in");
+    let mut glass = scene.clone();
+    let stone = scene.triangles[first].material as usize;
+    glass.materials[stone].dielectric =
+        Some(gatetrace::scene::Dielectric { eta: 1.5, specular: 1.0, thin: false, alpha: 0.0 });
+    assert_eq!(boxes(&glass, origin), 0, "glass boxes");
+}

@@ -431,15 +431,34 @@ fn xml_staircase_boxes_confocal_capture_with_ellipsoidal_connections_matches_pee
 /// quadrature (docs/nlos.md).
 #[test]
 fn xml_staircase_confocal_shell_connections_match_quadrature_with_visibility() {
+    let prepared = confocal_shell_connections_match_quadrature_with_visibility("nlos_staircase");
+    let shells = prepared.shells.unwrap();
+    assert_eq!((shells.solids, shells.buried), (0, 0), "the risers and treads are open panels");
+}
+
+/// The staircase of boxes as the staircase above: every box's front face lies partly against
+/// the box in front, and those parts (and the boxes' back faces) are dropped before the index
+/// is built (nlos::drop_buried_pieces), which must change no sensed point's light.
+#[test]
+fn xml_staircase_boxes_confocal_shell_connections_match_quadrature_with_visibility() {
+    let prepared = confocal_shell_connections_match_quadrature_with_visibility("nlos_staircase_boxes");
+    let shells = prepared.shells.unwrap();
+    assert_eq!(shells.solids, 5, "the five boxes are closed convex solids");
+    assert!(shells.buried > 0, "the faces between the boxes are buried");
+}
+
+/// Renders `scene`'s confocal capture with shell connections and compares every sensed point's
+/// light with the quadrature with exact visibility; returns the prepared capture.
+fn confocal_shell_connections_match_quadrature_with_visibility(name: &str) -> gatetrace::capture::PreparedCapture {
     use glam::DVec3;
-    let (prepared, settings) = xml_capture("nlos_staircase", "confocal", Method::Ellipsoidal);
+    let (prepared, settings) = xml_capture(name, "confocal", Method::Ellipsoidal);
     assert!(settings.band_index, "the capture connects through the band index");
     let capture = settings.nlos.clone().unwrap();
     assert!(!capture.count_first_and_last);
     let Gate::Transient { start, width, bins } = settings.gate else { panic!("a transient gate") };
     let (lo, hi) = (start, start + width * bins as f64);
     // The file's triangles as written (the capture cuts them into pieces for the index).
-    let path = common::repo_path("assets/scenes/nlos_staircase.xml");
+    let path = common::repo_path(&format!("assets/scenes/{name}.xml"));
     let load = LoadOptions {
         capture: true,
         parameters: vec![("confocal".to_owned(), "true".to_owned())],
@@ -456,7 +475,7 @@ fn xml_staircase_confocal_shell_connections_match_quadrature_with_visibility() {
         .filter(|i| !wall.contains(i))
         .map(|i| {
             let t = &scene.triangles[i];
-            assert!(!material(t.material).double_sided, "the steps reflect on their front faces only");
+            assert!(!material(t.material).double_sided, "the hidden faces reflect on their front sides only");
             (t.positions.map(|p| p.as_dvec3()), material(t.material).base_color.as_dvec3())
         })
         .collect();
@@ -495,7 +514,13 @@ fn xml_staircase_confocal_shell_connections_match_quadrature_with_visibility() {
 
     let ctx = common::gpu();
     let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, 4096);
-    common::quadrature::assert_point_totals_match("staircase, confocal, shell connections", &films, &reference, ALPHA);
+    common::quadrature::assert_point_totals_match(
+        &format!("{name}, confocal, shell connections"),
+        &films,
+        &reference,
+        ALPHA,
+    );
+    prepared
 }
 
 #[test]

@@ -1,5 +1,6 @@
 //! The hidden scene's preparation for the band index's shell connections: closed double-sided
-//! meshes made one-sided, and triangles larger than the bins resolve cut into pieces.
+//! meshes made one-sided, triangles larger than the bins resolve cut into pieces, and the pieces
+//! no light reaches, buried between closed convex solids, dropped.
 
 use anyhow::{Result, ensure};
 use glam::{Vec2, Vec3};
@@ -26,11 +27,16 @@ pub struct ShellPreparation {
     pub refined: usize,
     /// Triangles of the scene afterwards.
     pub triangles: usize,
+    /// Convex opaque solids found among the hidden scene's meshes (`buried_pieces`).
+    pub solids: usize,
+    /// Pieces dropped because no light reaches them: both their sides lie within solids.
+    pub buried: usize,
 }
 
 /// Prepares a capture's scene for the shell connections of the band index (band_index.wesl)
-/// at bins `bin_width` metres wide: `close_surfaces`, then `refine_for_shells`. `outside`: the
-/// points every path starts and ends beyond the hidden scene (the sensor and laser origins).
+/// at bins `bin_width` metres wide: `close_surfaces`, then `refine_for_shells`, then
+/// `drop_buried_pieces` over the `convex_solids` of the scene before its refinement. `outside`:
+/// the points every path starts and ends beyond the hidden scene (the sensor and laser origins).
 pub fn prepare_for_shells(
     scene: &mut Scene,
     relay_wall: &str,
@@ -38,8 +44,12 @@ pub fn prepare_for_shells(
     outside: &[Vec3],
 ) -> Result<ShellPreparation> {
     let closed_meshes = close_surfaces(scene, relay_wall, outside)?;
+    let solids = convex_solids(scene, relay_wall, outside);
     let mut done = refine_for_shells(scene, relay_wall, bin_width)?;
     done.closed_meshes = closed_meshes;
+    done.solids = solids.len();
+    done.buried = drop_buried_pieces(scene, relay_wall, &solids);
+    done.triangles = scene.triangles.len();
     Ok(done)
 }
 
@@ -195,7 +205,7 @@ pub fn refine_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64) ->
         node.triangles = starts[a]..starts[b];
     }
     scene.triangles = triangles;
-    Ok(ShellPreparation { closed_meshes: 0, refined, triangles: scene.triangles.len() })
+    Ok(ShellPreparation { refined, triangles: scene.triangles.len(), ..Default::default() })
 }
 
 /// The k^2 congruent sub-triangles of a triangle as barycentric corners (weights of its three
@@ -210,4 +220,203 @@ fn sub_triangles(k: u32) -> impl Iterator<Item = (Vec3, Vec3, Vec3)> {
             up.chain(down)
         })
     })
+}
+
+/// Most triangles of a mesh `convex_solids` checks for convexity (every vertex against every
+/// face: the check is quadratic).
+pub const MAX_SOLID_TRIANGLES: usize = 4096;
+
+/// A closed convex solid of the scene, wound outwards and opaque: the planes of its faces, each
+/// (unit outward normal, offset: n . x = offset on the face), in f64.
+#[derive(Clone, Debug)]
+pub struct ConvexSolid {
+    /// Face planes (duplicates of a face's two triangles included).
+    pub planes: Vec<(glam::DVec3, f64)>,
+    /// Lower corner of the bounding box (m).
+    pub lo: glam::DVec3,
+    /// Upper corner of the bounding box (m).
+    pub hi: glam::DVec3,
+    /// How far (m) a point may lie outside a plane and still count as on it: 10^-6 of the
+    /// solid's diagonal, well above the f32 rounding of coplanar faces of separate meshes.
+    pub tolerance: f64,
+}
+
+impl ConvexSolid {
+    /// The largest signed distance (m) of `p` from the planes: <= 0 inside or on the solid.
+    pub fn outside_by(&self, p: glam::DVec3) -> f64 {
+        self.planes.iter().map(|&(n, d)| n.dot(p) - d).fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
+/// The hidden scene's closed convex opaque solids, whose insides no path of the capture enters:
+/// meshes found as the triangles joined by edges that exactly two of them share, in opposite
+/// directions (so that solids which touch along an edge stay apart), each watertight and
+/// consistently wound with its normals outwards (positive signed volume), convex (every vertex
+/// on or behind every face's plane; meshes of at most MAX_SOLID_TRIANGLES), made of materials
+/// that transmit nothing, and holding neither the relay wall, a point of `outside` (where
+/// paths start and end), a light nor an emitting triangle. Light that reaches any point inside
+/// such a solid would have had to cross its faces.
+pub fn convex_solids(scene: &Scene, relay_wall: &str, outside: &[Vec3]) -> Vec<ConvexSolid> {
+    use glam::DVec3;
+    use std::collections::HashMap;
+    let wall = scene.node(relay_wall).map(|n| n.triangles.clone()).unwrap_or(0..0);
+    let n = scene.triangles.len();
+    let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    // Every triangle's edges as (undirected edge, triangle, direction), sorted so that the
+    // triangles of an edge lie together.
+    type Edge = ([u32; 3], [u32; 3]);
+    let mut edges: Vec<(Edge, usize, bool)> = Vec::with_capacity(3 * n);
+    for (i, t) in scene.triangles.iter().enumerate() {
+        if wall.contains(&i) {
+            continue;
+        }
+        let [a, b, c] = t.positions.map(key);
+        for (u, v) in [(a, b), (b, c), (c, a)] {
+            edges.push(((u.min(v), u.max(v)), i, u < v));
+        }
+    }
+    edges.sort_unstable_by_key(|x| x.0);
+    // Union-find over the edges two triangles share in opposite directions and no other holds.
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for group in edges.chunk_by(|x, y| x.0 == y.0) {
+        if let [(_, a, da), (_, b, db)] = *group
+            && da != db
+        {
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            parent[ra] = rb;
+        }
+    }
+    let mut meshes: HashMap<usize, Vec<usize>> = HashMap::new();
+    for i in (0..n).filter(|i| !wall.contains(i)) {
+        let r = root(&mut parent, i);
+        meshes.entry(r).or_default().push(i);
+    }
+    let wall_points: Vec<DVec3> =
+        scene.triangles[wall].iter().flat_map(|t| t.positions.map(|p| p.as_dvec3())).collect();
+    let emitters: Vec<DVec3> = scene
+        .triangles
+        .iter()
+        .filter(|t| scene.materials[t.material as usize].is_emissive())
+        .flat_map(|t| t.positions.map(|p| p.as_dvec3()))
+        .chain(scene.point_lights.iter().map(|l| l.position.as_dvec3()))
+        .chain(outside.iter().map(|p| p.as_dvec3()))
+        .collect();
+    let mut solids = Vec::new();
+    let mut roots: Vec<usize> = meshes.keys().copied().collect();
+    roots.sort_unstable();
+    for r in roots {
+        let mesh = &meshes[&r];
+        if mesh.len() < 4 || mesh.len() > MAX_SOLID_TRIANGLES {
+            continue;
+        }
+        let opaque = mesh.iter().all(|&i| scene.materials[scene.triangles[i].material as usize].dielectric.is_none());
+        // Watertight and consistently wound within the mesh: each directed edge once, its
+        // reverse once.
+        let mut own: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+        let mut volume = 0.0f64;
+        for &i in mesh {
+            let [a, b, c] = scene.triangles[i].positions;
+            volume += a.as_dvec3().dot(b.as_dvec3().cross(c.as_dvec3()));
+            for (u, v) in [(a, b), (b, c), (c, a)] {
+                *own.entry((key(u), key(v))).or_insert(0) += 1;
+            }
+        }
+        let closed = own.iter().all(|(&(u, v), &k)| k == 1 && own.get(&(v, u)) == Some(&1));
+        if !opaque || !closed || !(volume > 0.0) {
+            continue;
+        }
+        let points: Vec<DVec3> =
+            mesh.iter().flat_map(|&i| scene.triangles[i].positions.map(|p| p.as_dvec3())).collect();
+        let (lo, hi) =
+            points.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let tolerance = 1e-6 * (hi - lo).length();
+        let planes: Vec<(DVec3, f64)> = mesh
+            .iter()
+            .filter_map(|&i| {
+                let [a, b, c] = scene.triangles[i].positions.map(|p| p.as_dvec3());
+                let normal = (b - a).cross(c - a).try_normalize()?;
+                Some((normal, normal.dot(a)))
+            })
+            .collect();
+        let solid = ConvexSolid { planes, lo, hi, tolerance };
+        let convex = points.iter().all(|&p| solid.outside_by(p) <= tolerance);
+        // Nothing a path starts from, and no light, within or on it.
+        let holds = |p: &DVec3| solid.outside_by(*p) <= tolerance;
+        if convex && !wall_points.iter().any(holds) && !emitters.iter().any(holds) {
+            solids.push(solid);
+        }
+    }
+    solids
+}
+
+/// Drops the hidden scene's triangles (pieces, after `refine_for_shells`) that no light reaches:
+/// those of which a thin slab on each side lies within one of the closed convex opaque
+/// `solids` (the other side's solid may be another, or the piece's own mesh). For each side
+/// s = +-1 some solid holds the piece's vertices and their offsets by s delta n (n the piece's
+/// unit normal, delta 10 times the solid's tolerance or a thousandth of the piece's longest edge
+/// if larger), and its centroid's offset strictly inside; by convexity every point just off the
+/// piece on that side is then inside the solid. A path reaching such a piece from either side
+/// would have entered a solid across faces that stay (a face of a solid with a side outside
+/// every solid is never dropped), which no path does, so the pieces carry no light: dropping
+/// them changes no capture, while shell connections stop drawing points whose shadow rays find
+/// them dark (the lower parts of the staircase of boxes' risers, each against the box in front,
+/// `nlos_staircase_boxes.xml`). The relay wall is kept. Returns the pieces dropped.
+pub fn drop_buried_pieces(scene: &mut Scene, relay_wall: &str, solids: &[ConvexSolid]) -> usize {
+    use glam::DVec3;
+    if solids.is_empty() {
+        return 0;
+    }
+    let wall = scene.node(relay_wall).map(|n| n.triangles.clone()).unwrap_or(0..0);
+    let buried = |t: &crate::scene::SceneTriangle| -> bool {
+        let v = t.positions.map(|p| p.as_dvec3());
+        let Some(normal) = (v[1] - v[0]).cross(v[2] - v[0]).try_normalize() else {
+            return false;
+        };
+        let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
+        let longest = v[0].distance(v[1]).max(v[0].distance(v[2])).max(v[1].distance(v[2]));
+        let centroid = (v[0] + v[1] + v[2]) / 3.0;
+        let held = |side: f64| {
+            solids.iter().any(|s| {
+                let reach = DVec3::splat(s.tolerance);
+                if (lo - reach).cmpgt(s.hi).any() || (hi + reach).cmplt(s.lo).any() {
+                    return false;
+                }
+                let delta = side * (10.0 * s.tolerance).max(1e-3 * longest);
+                v.iter().all(|&p| s.outside_by(p) <= s.tolerance && s.outside_by(p + delta * normal) <= s.tolerance)
+                    && s.outside_by(centroid + delta * normal) < -s.tolerance
+            })
+        };
+        held(1.0) && held(-1.0)
+    };
+    let keep: Vec<bool> = scene.triangles.iter().enumerate().map(|(i, t)| wall.contains(&i) || !buried(t)).collect();
+    let dropped = keep.iter().filter(|&&k| !k).count();
+    if dropped == 0 {
+        return 0;
+    }
+    // New index of each triangle's place (the kept ones before it), for the nodes' ranges.
+    let mut starts = Vec::with_capacity(keep.len() + 1);
+    let mut kept = 0;
+    for &k in &keep {
+        starts.push(kept);
+        kept += k as usize;
+    }
+    starts.push(kept);
+    for node in &mut scene.nodes {
+        let (a, b) = (node.triangles.start, node.triangles.end);
+        if let Some(texcoords) = &mut node.texcoords {
+            let mut k = keep[a..b].iter();
+            texcoords.retain(|_| *k.next().unwrap());
+        }
+        node.triangles = starts[a]..starts[b];
+    }
+    let mut k = keep.iter();
+    scene.triangles.retain(|_| *k.next().unwrap());
+    dropped
 }
