@@ -11,13 +11,26 @@ use glam::Vec3;
 use gatetrace::film::{Film, Gate};
 use gatetrace::integrator::{BidirectionalTracer, Integrator, Method};
 use gatetrace::nlos::LaserAim;
-use gatetrace::nlos::band_index::{CLUSTER_NODES, clusters, interpolation_bound, strip_point, tent_cdf};
+use gatetrace::nlos::band_index::{
+    CLUSTER_NODES, SMALL_CLUSTER_NODES, SMALL_CLUSTERS_UP_TO, cluster_nodes, clusters, interpolation_bound,
+    strip_point, tent_cdf,
+};
 
 #[test]
 fn clusters_partition_the_triangles_into_small_subtrees() {
     let scene = common::nlos_sphere_scene(16, false);
+    assert_eq!(cluster_nodes(scene.triangles.len()), SMALL_CLUSTER_NODES, "a small scene takes small clusters");
+    assert_eq!(cluster_nodes(SMALL_CLUSTERS_UP_TO + 1), CLUSTER_NODES);
+    for max_nodes in [SMALL_CLUSTER_NODES, CLUSTER_NODES] {
+        clusters_partition(&scene, max_nodes);
+    }
+}
+
+/// `clusters(.., max_nodes)` of the scene's BVH partition its triangles into subtrees of at most
+/// `max_nodes` nodes (or single leaves), in node order.
+fn clusters_partition(scene: &gatetrace::scene::PreparedScene, max_nodes: u32) {
     let nodes = &scene.bvh.nodes;
-    let clusters = clusters(nodes, CLUSTER_NODES);
+    let clusters = clusters(nodes, max_nodes);
     assert!(clusters.len() > 50, "only {} clusters", clusters.len());
     let mut covered = vec![0u32; scene.triangles.len()];
     let mut next_root = 0;
@@ -26,10 +39,10 @@ fn clusters_partition_the_triangles_into_small_subtrees() {
         assert!(root >= next_root, "clusters must follow each other in node order");
         for i in next_root..root {
             let n = &nodes[i as usize];
-            assert!(n.leaf == 0 && n.skip - i > CLUSTER_NODES, "node {i} lies in no cluster");
+            assert!(n.leaf == 0 && n.skip - i > max_nodes, "node {i} lies in no cluster");
         }
         assert_eq!(end, nodes[root as usize].skip, "a cluster is its root's whole subtree");
-        assert!(end - root <= CLUSTER_NODES || nodes[root as usize].leaf != 0, "cluster at {root} too large");
+        assert!(end - root <= max_nodes || nodes[root as usize].leaf != 0, "cluster at {root} too large");
         // Its leaves address exactly [first, last), with no gap.
         let leaf_triangles: u32 =
             nodes[root as usize..end as usize].iter().filter_map(|n| n.leaf_range()).map(|r| r.len() as u32).sum();

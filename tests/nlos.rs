@@ -73,12 +73,23 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
         .map(|film| film.data.iter().enumerate().map(|(i, &v)| (v as f64 * scale(i)) as f32).collect())
         .collect();
     let name = format!("{name} ({})", method.name());
-    agrees_with_peer(&name, Dims { side: 16, bins: 100 }, &scaled, &peer_mean, &peer_var, block);
+    agrees_with_peer(&name, Dims { side: 16, bins: 100 }, &scaled, &peer_mean, &peer_var, block, None);
 }
 
 /// Holds `batches` of a capture against the peer's mean and variance of its mean: the total
-/// energy, and every block of bins the peer's samples reached.
-fn agrees_with_peer(name: &str, dims: Dims, batches: &[Vec<f32>], peer_mean: &[f32], peer_var: &[f32], block: Block) {
+/// energy, and every block of bins the peer's samples reached. `total_elsewhere` names the test
+/// that holds the total against an exact quadrature instead, where the peer's own total lies
+/// above that quadrature by more than its noise allows (its z-test against the peer is then
+/// printed, and only the 1 % bound asserted).
+fn agrees_with_peer(
+    name: &str,
+    dims: Dims,
+    batches: &[Vec<f32>],
+    peer_mean: &[f32],
+    peer_var: &[f32],
+    block: Block,
+    total_elsewhere: Option<&str>,
+) {
     assert_eq!(batches.len(), BATCHES);
     let mut stats = BatchStats::new(peer_mean.len());
     let mut totals = Vec::new();
@@ -110,7 +121,10 @@ fn agrees_with_peer(name: &str, dims: Dims, batches: &[Vec<f32>], peer_mean: &[f
     let z = (ours - peer) / (ours_var + peer_v).sqrt();
     println!("{name}: total energy ours {ours:.6} peer {peer:.6} ratio {:.5} z {z:+.2}", ours / peer);
     assert!((ours / peer - 1.0).abs() < 0.01, "{name}: total energy ours {ours} vs peer {peer}");
-    assert!(z.abs() < t_critical(ALPHA, (BATCHES - 1) as f64), "{name}: total energy z = {z:.2}");
+    match total_elsewhere {
+        None => assert!(z.abs() < t_critical(ALPHA, (BATCHES - 1) as f64), "{name}: total energy z = {z:.2}"),
+        Some(test) => println!("{name}: the peer's total lies above the quadrature; {test} holds the total"),
+    }
 
     // Every block both sides' samples reached. Where one side's did not, its mean and variance
     // are both 0, and a z-score against that variance is meaningless: the other side, precise,
@@ -228,6 +242,14 @@ fn xml_capture_with(
     (prepared, settings)
 }
 
+/// (scene, scan, test): peer references whose total light lies above an exact quadrature of the
+/// same capture by more than their noise, and the test that holds our total against the
+/// quadrature instead. The staircase's confocal reference totals 11.6376 +- 0.0006 where the
+/// quadrature with exact visibility gives 11.635789 (3.0 standard errors; the peer's excess
+/// holds without occlusion too, on the convex sphere: docs/nlos.md).
+const PEER_TOTALS_ABOVE_QUADRATURE: [(&str, &str, &str); 1] =
+    [("nlos_staircase", "confocal", "xml_staircase_confocal_shell_connections_match_quadrature_with_visibility")];
+
 /// A capture written in Mitsuba XML as mitransient's own examples are (a `projector` laser placed
 /// and aimed by the capture meter's `laser_origin` and `laser_lookat_pixel`, `confocal` a
 /// parameter), read unchanged, its capture as the file describes it, rendered with `method`
@@ -253,7 +275,8 @@ fn xml_capture_agrees_with_peer(
     let (_, peer_var) = common::reference(&format!("{scene}_peer/{scan}_var.npy"));
     assert_eq!(shape, vec![8, 8, bins, 3]);
     let name = format!("{scene}.xml {scan} ({})", method.name());
-    agrees_with_peer(&name, Dims { side: 8, bins }, &batches, &peer_mean, &peer_var, block);
+    let total_elsewhere = PEER_TOTALS_ABOVE_QUADRATURE.iter().find(|(s, c, _)| *s == scene && *c == scan).map(|t| t.2);
+    agrees_with_peer(&name, Dims { side: 8, bins }, &batches, &peer_mean, &peer_var, block, total_elsewhere);
 }
 
 /// The panels' captures are compared over blocks of 2x2 sensed points x 5 bins (100 mm) with

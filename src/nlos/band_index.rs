@@ -1,5 +1,5 @@
 //! The band index of an NLOS capture (shaders/lib/band_index.wesl): per pixel and per bin of
-//! a transient gate, the clusters of the BVH (subtrees of at most [`CLUSTER_NODES`] nodes)
+//! a transient gate, the clusters of the BVH (subtrees of at most [`cluster_nodes`] nodes)
 //! whose triangles reach into the bin's shell of three-bounce path lengths, each with its mass
 //! there (the area of its triangles' strips, each weighted by the contribution per unit area
 //! at its centroid). `ellipsoidal`'s connections between a pixel's laser spot and its sensed
@@ -35,8 +35,28 @@ use crate::scene::PreparedScene;
 /// into pieces for the index (`crate::nlos::prepare_for_shells`), so that they make clusters.
 pub const AUTO_MIN_TRIANGLES: usize = 16;
 
-/// Most nodes of a cluster's subtree (31: at most 16 leaves of up to 4 triangles).
+/// Most nodes of a cluster's subtree in scenes of more than SMALL_CLUSTERS_UP_TO triangles (31:
+/// at most 16 leaves of up to 4 triangles).
 pub const CLUSTER_NODES: u32 = 31;
+
+/// Most nodes of a cluster's subtree in scenes of at most SMALL_CLUSTERS_UP_TO triangles (7: at
+/// most 4 leaves, 16 triangles). A shell connection weighs every triangle of its cluster, so
+/// smaller clusters cost less per sample, while the index holds more entries and takes longer
+/// to build. 3 s captures (confocal 16x16, 4 ps bins) had 0.77, 0.79 and 0.84 of the error with
+/// 31-node clusters on the panels, the staircase and the boxes (5,976 to 28,266 triangles once
+/// prepared), but the 327,680-triangle sphere's 34,545 clusters took 2.6 s to index where 9,734
+/// took 2.0 s, and a 3 s capture then had 28 times the error (docs/nlos.md, "Across hidden
+/// scenes").
+pub const SMALL_CLUSTER_NODES: u32 = 7;
+
+/// Scenes of at most this many triangles (the relay wall's and the pieces' included) make
+/// clusters of SMALL_CLUSTER_NODES nodes.
+pub const SMALL_CLUSTERS_UP_TO: usize = 65_536;
+
+/// Most nodes of a cluster's subtree for a prepared scene of `triangles` triangles.
+pub fn cluster_nodes(triangles: usize) -> u32 {
+    if triangles <= SMALL_CLUSTERS_UP_TO { SMALL_CLUSTER_NODES } else { CLUSTER_NODES }
+}
 
 /// Loop iterations one invocation of a build pass may spend on one batch of clusters (bounded
 /// from the clusters' sizes, well below lavapipe's 65,535, after which it ends an invocation's
@@ -156,7 +176,7 @@ impl BandIndex {
         constants: &[(&'static str, f64)],
         limit: u64,
     ) -> Result<Self> {
-        let clusters = clusters(&scene.bvh.nodes, CLUSTER_NODES);
+        let clusters = clusters(&scene.bvh.nodes, cluster_nodes(scene.triangles.len()));
         let cells = params.width as u64 * params.height as u64 * params.target_length.strata as u64;
         placeholders(ctx, r)?;
         r.storage_init(ctx, "band_clusters", &clusters)?;
