@@ -27,7 +27,7 @@ pub struct ShellPreparation {
     pub refined: usize,
     /// Triangles of the scene afterwards.
     pub triangles: usize,
-    /// Convex opaque solids found among the hidden scene's meshes (`buried_pieces`).
+    /// Closed convex opaque solids found among the hidden scene's meshes (`convex_solids`).
     pub solids: usize,
     /// Pieces dropped because no light reaches them: both their sides lie within solids.
     pub buried: usize,
@@ -90,19 +90,7 @@ pub fn close_surfaces(scene: &mut Scene, relay_wall: &str, outside: &[Vec3]) -> 
         if outside.iter().any(|&p| inside(p)) || (wall_lo.cmple(hi).all() && wall_hi.cmpge(lo).all()) {
             continue;
         }
-        // Watertight and consistently wound: each directed edge once, its reverse once.
-        let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
-        let mut edges: HashMap<([u32; 3], [u32; 3]), i32> = HashMap::with_capacity(3 * range.len());
-        let mut volume = 0.0f64;
-        for t in &scene.triangles[range.clone()] {
-            let [a, b, c] = t.positions;
-            volume += a.as_dvec3().dot(b.as_dvec3().cross(c.as_dvec3()));
-            for (u, v) in [(a, b), (b, c), (c, a)] {
-                *edges.entry((key(u), key(v))).or_insert(0) += 1;
-            }
-        }
-        let closed = edges.iter().all(|(&(u, v), &n)| n == 1 && edges.get(&(v, u)) == Some(&1));
-        if !closed || !(volume > 0.0) {
+        if !closed_outwards(scene.triangles[range.clone()].iter().map(|t| t.positions)) {
             continue;
         }
         for t in &mut scene.triangles[range.clone()] {
@@ -121,6 +109,27 @@ pub fn close_surfaces(scene: &mut Scene, relay_wall: &str, outside: &[Vec3]) -> 
         changed += 1;
     }
     Ok(changed)
+}
+
+/// True when `triangles` form a watertight mesh, consistently wound with its normals outwards:
+/// each directed edge (vertices compared bit for bit) once and its reverse once, and a positive
+/// signed volume.
+fn closed_outwards(triangles: impl Iterator<Item = [Vec3; 3]>) -> bool {
+    use std::collections::HashMap;
+    let mut edges: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+    let mut volume = 0.0f64;
+    for [a, b, c] in triangles {
+        volume += a.as_dvec3().dot(b.as_dvec3().cross(c.as_dvec3()));
+        for (u, v) in [(a, b), (b, c), (c, a)] {
+            *edges.entry((vertex_key(u), vertex_key(v))).or_insert(0) += 1;
+        }
+    }
+    volume > 0.0 && edges.iter().all(|(&(u, v), &n)| n == 1 && edges.get(&(v, u)) == Some(&1))
+}
+
+/// A vertex's position bit for bit, to find the edges triangles share.
+fn vertex_key(p: Vec3) -> [u32; 3] {
+    [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
 }
 
 /// Cuts the triangles of a capture's hidden scene into pieces small enough for the shell
@@ -261,7 +270,6 @@ pub fn convex_solids(scene: &Scene, relay_wall: &str, outside: &[Vec3]) -> Vec<C
     use std::collections::HashMap;
     let wall = scene.node(relay_wall).map(|n| n.triangles.clone()).unwrap_or(0..0);
     let n = scene.triangles.len();
-    let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
     // Every triangle's edges as (undirected edge, triangle, direction), sorted so that the
     // triangles of an edge lie together.
     type Edge = ([u32; 3], [u32; 3]);
@@ -270,7 +278,7 @@ pub fn convex_solids(scene: &Scene, relay_wall: &str, outside: &[Vec3]) -> Vec<C
         if wall.contains(&i) {
             continue;
         }
-        let [a, b, c] = t.positions.map(key);
+        let [a, b, c] = t.positions.map(vertex_key);
         for (u, v) in [(a, b), (b, c), (c, a)] {
             edges.push(((u.min(v), u.max(v)), i, u < v));
         }
@@ -317,19 +325,7 @@ pub fn convex_solids(scene: &Scene, relay_wall: &str, outside: &[Vec3]) -> Vec<C
             continue;
         }
         let opaque = mesh.iter().all(|&i| scene.materials[scene.triangles[i].material as usize].dielectric.is_none());
-        // Watertight and consistently wound within the mesh: each directed edge once, its
-        // reverse once.
-        let mut own: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
-        let mut volume = 0.0f64;
-        for &i in mesh {
-            let [a, b, c] = scene.triangles[i].positions;
-            volume += a.as_dvec3().dot(b.as_dvec3().cross(c.as_dvec3()));
-            for (u, v) in [(a, b), (b, c), (c, a)] {
-                *own.entry((key(u), key(v))).or_insert(0) += 1;
-            }
-        }
-        let closed = own.iter().all(|(&(u, v), &k)| k == 1 && own.get(&(v, u)) == Some(&1));
-        if !opaque || !closed || !(volume > 0.0) {
+        if !opaque || !closed_outwards(mesh.iter().map(|&i| scene.triangles[i].positions)) {
             continue;
         }
         let points: Vec<DVec3> =
