@@ -614,7 +614,12 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:4: <emitter type=\"projector\">", "must be non-negative and not zero"],
         ),
 
-        xml_case("XML volumetric integrator", "<integrator type=\"volpath\"/>", &[], &["`volpath` renders media"]),
+        xml_case(
+            "XML integrator of another kind",
+            "<integrator type=\"bdpt\"/>",
+            &[],
+            &["scene.xml:5: <integrator type=\"bdpt\">", "the integrator `bdpt` is not read"],
+        ),
         xml_case(
             "XML camera unwarp",
             "<integrator type=\"transient_path\"><boolean name=\"camera_unwarp\" value=\"true\"/></integrator>",
@@ -664,7 +669,34 @@ fn cases() -> Vec<(Case, Setup)> {
             plain(&["render", "--res", "8x8", "-D", "spp=4", "--out", "{out}"]),
             &["cornell_box.gltf", "parameters (here `spp`) apply to Mitsuba XML scenes"],
         ),
-        xml_case("XML medium", "<medium type=\"homogeneous\"/>", &[], &["<medium type=\"homogeneous\">", "participating media"]),
+        xml_case(
+            "XML medium of an unknown kind",
+            "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"heterogeneous\" name=\"interior\"/></shape>",
+            &[],
+            &["scene.xml:5: <medium type=\"heterogeneous\" name=\"interior\">", "the medium `heterogeneous` is not rendered"],
+        ),
+        xml_case(
+            "XML medium of coloured extinction",
+            "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\">\
+             <rgb name=\"sigma_t\" value=\"1, 2, 3\"/></medium></shape>",
+            &[],
+            &["<medium type=\"homogeneous\" name=\"interior\">", "sigma_t differs between channels"],
+        ),
+        xml_case(
+            "XML emitter on a null surface",
+            "<shape type=\"cube\"><bsdf type=\"null\"/><emitter type=\"area\"/></shape>",
+            &[],
+            &["<bsdf type=\"null\">", "area emitter on a `null` surface"],
+        ),
+        case(
+            "XML medium with a bidirectional method",
+            |d| {
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            plain(&["render", "{dir}/scene.xml", "--res", "8x8", "--spp", "1", "--method", "direct", "--out", "{out}"]),
+            &["scene.xml", "participating media", "--method path"],
+        ),
         case(
             "XML field of view of zero",
             |d| {

@@ -21,14 +21,15 @@ fn wgsl_structs_match_rust_structs() {
         WideNode { origin, exponents, planes_xy, planes_z, parent, subtree, children }
         NodeSurface { centroid, area, light_area, spread }
         Material { base_color, base_color_texture, emission, flags, metallic, alpha, eta, plastic_table,
-                   specular, plastic_internal_reflectance, plastic_specular_weight, reserved0, conductor_eta, reserved1,
+                   specular, plastic_internal_reflectance, plastic_specular_weight, interior_medium, conductor_eta, exterior_medium,
                    conductor_k, reserved2 }
         TextureInfo { offset, width, height, wrap }
+        Medium { albedo, sigma_t, g, reserved0, reserved1, reserved2 }
         Light { position, kind, emission, triangle, direction, area, select_pdf, flags, cos_outer, cos_inner }
         Camera { position, tan_half_fov_y, right, aspect, up, lens_radius, forward, focus_distance }
         GateParams { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }
         TargetParams { lo, hi, cells, strata, first_bin, stride, seed, extra, extra_stride, film_first_sample, band_index, reserved2 }
-        RenderParams { camera, gate, target_length, light_bounds_min, image_area, light_bounds_max, reserved3, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
+        RenderParams { camera, gate, target_length, light_bounds_min, image_area, light_bounds_max, camera_medium, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
                        family_ratio, reserved1, reserved2 }
         WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, tracers_per_pixel, reserved1, reserved2 }
         PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, origin_triangle, dimension, traversal,

@@ -344,3 +344,54 @@ fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
     let settings = RenderSettings { method: Method::Auto, ..transient };
     assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
 }
+
+/// Fog (`assets/scenes/fog_box.xml`: a cube of homogeneous fog bounded by a `null` surface in
+/// the Cornell box; extinction 4 m^-1, a coloured albedo, Henyey-Greenstein g = 0.5) agrees with
+/// mitransient's `transient_prbvolpath` rendering the same file, steady and as a transient, with
+/// `path`. Its two ways of reaching the light, next-event estimation alone (through the fog's
+/// surface, attenuated by the fog) and phase and BSDF sampling alone, agree bin by bin. The
+/// bidirectional methods refuse the scene with what to do instead, and `auto` takes `path` alone.
+#[test]
+fn fog_agrees_with_mitransient_with_path() {
+    let ctx = common::gpu();
+    let scene = load_scene_with(&common::repo_path("assets/scenes/fog_box.xml"), &LoadOptions::default()).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!(scene.settings.max_bounces, Some(7));
+    assert_eq!(scene.media.len(), 1);
+    let fog = &scene.media[0];
+    assert_eq!((fog.sigma_t, fog.g), (4.0, 0.5));
+    assert!(fog.albedo.abs_diff_eq(Vec3::new(0.9, 0.7, 0.4), 1e-6));
+    assert_eq!(scene.camera_medium, None);
+    let scene = PreparedScene::new(scene).unwrap();
+    let transient = path_agrees_with_peer(&ctx, &scene, "fog_box", 7, 17);
+    let strategy = |light_strategy, seed| {
+        let settings = RenderSettings { light_strategy, seed, ..transient.clone() };
+        common::render_films(&ctx, &scene, &settings, 16, 256)
+    };
+    let next_event = strategy(gatetrace::integrator::LightStrategy::NextEvent, 19);
+    let sampled = strategy(gatetrace::integrator::LightStrategy::Bsdf, 23);
+    // Per bin and channel over the image (sampling alone reaches the small lamp too rarely for
+    // blocks of pixels).
+    let groups = 20 * 3;
+    let z = common::compare_films(&next_event, &sampled, groups, |i| Some(i % groups));
+    let limit = t_critical(sidak(common::peer::ALPHA, groups), 15.0);
+    for (g, (xa, xb, score)) in z.iter().enumerate() {
+        println!("fog, bin {} channel {}: next-event {xa:.6}, sampled {xb:.6}, z {score:+.2}", g / 3, g % 3);
+        assert!(
+            score.abs() < limit,
+            "bin {} channel {}: {xa} against {xb} (z = {score:.2}, limit {limit:.2})",
+            g / 3,
+            g % 3
+        );
+    }
+    for method in [Method::Direct, Method::Ellipsoidal, Method::Combined] {
+        let settings = RenderSettings { method, ..transient.clone() };
+        let error = gatetrace::integrator::create_integrator(&ctx, &scene, &settings)
+            .err()
+            .unwrap_or_else(|| panic!("{method:?} must refuse participating media"));
+        let text = format!("{error:#}");
+        assert!(text.contains("participating media") && text.contains("--method path"), "{text}");
+    }
+    let settings = RenderSettings { method: Method::Auto, ..transient };
+    assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
+}

@@ -97,6 +97,8 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         plastic: None,
         dielectric: None,
         conductor_index: None,
+        media: Default::default(),
+        null: false,
     };
     let tri = |a: [f32; 3], b: [f32; 3], c: [f32; 3], m: u32| SceneTriangle {
         positions: [a.into(), b.into(), c.into()],
@@ -121,6 +123,8 @@ fn light_test_scene() -> gatetrace::scene::Scene {
         nodes: Vec::new(),
         warnings: Vec::new(),
         settings: Default::default(),
+        media: Vec::new(),
+        camera_medium: None,
     }
 }
 

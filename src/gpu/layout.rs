@@ -32,6 +32,13 @@ pub const MATERIAL_CONDUCTOR_INDEX: u32 = 32;
 /// `roughdielectric`): GGX microfacets of `alpha`, reflecting and refracting as Walter et al.
 /// (2007); not a delta BSDF.
 pub const MATERIAL_ROUGH: u32 = 64;
+/// [`Material::flags`]: no surface at all (Mitsuba's `null` BSDF), only the boundary between
+/// `exterior_medium` and `interior_medium`, which rays cross without a vertex.
+pub const MATERIAL_NULL: u32 = 128;
+/// [`Material::flags`]: the surface declares the media on its sides (`interior_medium`,
+/// `exterior_medium`; [`NONE`]: vacuum), and a ray leaving it travels in the one on the side it
+/// leaves. Without it, a ray leaving the surface stays in the medium it came through.
+pub const MATERIAL_MEDIUM_TRANSITION: u32 = 256;
 /// [`TextureInfo::wrap`]: u clamps to the edge instead of repeating.
 pub const TEXTURE_CLAMP_U: u32 = 1;
 /// [`TextureInfo::wrap`]: v clamps to the edge instead of repeating.
@@ -190,7 +197,8 @@ pub struct Material {
     /// Emitted radiance (W m^-2 sr^-1).
     pub emission: Vec3,
     /// [`MATERIAL_DOUBLE_SIDED`] | [`MATERIAL_PLASTIC`] | [`MATERIAL_PLASTIC_NONLINEAR`] |
-    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`] | [`MATERIAL_CONDUCTOR_INDEX`] | [`MATERIAL_ROUGH`].
+    /// [`MATERIAL_DIELECTRIC`] | [`MATERIAL_THIN`] | [`MATERIAL_CONDUCTOR_INDEX`] | [`MATERIAL_ROUGH`] |
+    /// [`MATERIAL_NULL`] | [`MATERIAL_MEDIUM_TRANSITION`].
     pub flags: u32,
     /// Weight of the conductor lobe (glTF metallic factor, 0..1); 0 for a plastic.
     pub metallic: f32,
@@ -208,15 +216,37 @@ pub struct Material {
     pub plastic_internal_reflectance: f32,
     /// A plastic's coat: specular weight of its lobe choice, s / (s + mean albedo).
     pub plastic_specular_weight: f32,
-    /// Padding.
-    pub reserved0: u32,
+    /// With [`MATERIAL_MEDIUM_TRANSITION`]: the medium behind the triangles' front faces (an
+    /// index of the media table), or [`NONE`] for vacuum.
+    pub interior_medium: u32,
     /// With [`MATERIAL_CONDUCTOR_INDEX`]: the real part of the conductor's complex index of
     /// refraction (RGB), relative to the outside.
     pub conductor_eta: Vec3,
-    /// Padding.
-    pub reserved1: u32,
+    /// With [`MATERIAL_MEDIUM_TRANSITION`]: the medium in front of them, or [`NONE`] for vacuum.
+    pub exterior_medium: u32,
     /// With [`MATERIAL_CONDUCTOR_INDEX`]: its imaginary part, the extinction coefficient (RGB).
     pub conductor_k: Vec3,
+    /// Padding.
+    pub reserved2: u32,
+}
+
+/// A homogeneous participating medium (`shaders/lib/medium.wesl`; `scene::MediumDesc` as
+/// loaded): light travelling a distance t through it is attenuated by exp(-sigma_t t), and a
+/// share `albedo` of what it loses is scattered by the Henyey-Greenstein phase function of mean
+/// cosine `g`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct Medium {
+    /// Single-scattering albedo sigma_s / sigma_t (linear RGB, 0..1).
+    pub albedo: Vec3,
+    /// Extinction coefficient (m^-1), the same in every channel.
+    pub sigma_t: f32,
+    /// Mean cosine of the scattering angle (-1..1; 0 isotropic, > 0 forward).
+    pub g: f32,
+    /// Padding.
+    pub reserved0: u32,
+    /// Padding.
+    pub reserved1: u32,
     /// Padding.
     pub reserved2: u32,
 }
@@ -365,8 +395,8 @@ pub struct RenderParams {
     pub image_area: f32,
     /// Upper corner of the bounds of every light (m).
     pub light_bounds_max: Vec3,
-    /// Padding.
-    pub reserved3: u32,
+    /// The medium the camera stands in (an index of the media table), or [`NONE`] for vacuum.
+    pub camera_medium: u32,
     /// Image width (pixels).
     pub width: u32,
     /// Image height (pixels).
@@ -434,7 +464,8 @@ pub struct PathState {
     pub bsdf_pdf: f32,
     /// Product of f cos / pdf so far.
     pub throughput: Vec3,
-    /// Scattering vertices so far.
+    /// Scattering vertices so far (low 16 bits) and, in scenes with media, the medium the next
+    /// ray travels through (high 16 bits: its index + 1, 0 for vacuum).
     pub depth: u32,
     /// Triangle under `origin`, or [`NONE`].
     pub origin_triangle: u32,

@@ -166,7 +166,7 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 /// `ellipsoidal` is left out (alone it cannot sample the paths through glass); a scene with a
 /// rough dielectric, or an NLOS capture of glass, takes `path` alone, which only it renders.
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
-    if scene.has_rough_dielectric() || (scene.has_dielectric() && settings.nlos.is_some()) {
+    if scene.has_rough_dielectric() || scene.scene.has_media() || (scene.has_dielectric() && settings.nlos.is_some()) {
         return vec![Method::Path];
     }
     let mut methods = vec![Method::Path, Method::Direct];
@@ -211,7 +211,10 @@ pub fn choose(
             chosen: only,
             candidates: Vec::new(),
             pilot_resolution: (0, 0),
-            reason: format!("{} is the only method that renders this scene (it holds glass): no pilot", only.name()),
+            reason: format!(
+                "{} is the only method that renders this scene (it holds rough glass or participating media): no pilot",
+                only.name()
+            ),
             pilot_seconds: 0.0,
         });
     }

@@ -166,6 +166,13 @@ impl<'a> BidirectionalTracer<'a> {
         check_tracer_settings(settings)?;
         // The method the user asked for: a combined render's, for either half.
         let method = if family.is_some() { Method::Combined.name() } else { settings.method.name() };
+        if scene.scene.has_media() {
+            anyhow::bail!(
+                "{}: the scene has participating media, which `{method}` does not render yet (its connections do \
+                 not carry transmittance): render it with --method path",
+                scene.scene.source
+            );
+        }
         if scene.has_rough_dielectric() {
             anyhow::bail!(
                 "the scene has a rough dielectric (`roughdielectric`), which `{method}` does not render yet \

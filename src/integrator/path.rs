@@ -111,6 +111,7 @@ const MAX_SHADOW_RESUMES: u32 = 8;
 impl<'a> PathTracer<'a> {
     /// Uploads the scene, creates the wavefront state and builds the specialised kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
+        check_media(scene, settings)?;
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let params = super::render_params(scene, settings);
         let resumable = scene.wide.traversals_can_stop();
@@ -311,6 +312,26 @@ impl Integrator for PathTracer<'_> {
         }
         Ok(moved)
     }
+}
+
+/// Errors for participating media `path` does not render yet: in NLOS captures, and with a camera
+/// standing in a medium in a scene with glass (whose inside would hold the camera's medium: media
+/// are bounded by null surfaces only).
+fn check_media(scene: &PreparedScene, settings: &RenderSettings) -> Result<()> {
+    if !scene.scene.has_media() {
+        return Ok(());
+    }
+    let name = &scene.scene.source;
+    anyhow::ensure!(
+        settings.nlos.is_none(),
+        "{name}: NLOS captures of scenes with participating media are not rendered yet"
+    );
+    anyhow::ensure!(
+        scene.scene.camera_medium.is_none() || !scene.has_dielectric(),
+        "{name}: the camera stands in a medium and the scene holds glass: a dielectric does not bound media yet (bound \
+         them with `null` surfaces only)"
+    );
+    Ok(())
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use super::wavefront::{FILM_ELEMENT_BYTES, film_elements, target_cdf, upload_gat
 use super::{Method, RenderSettings};
 use crate::film::target::TargetSampler;
 use crate::gpu::layout::{
-    MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, NONE, RenderParams, TargetParams, TriangleShading, WaveParams,
+    MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, Medium, NONE, RenderParams, TargetParams, TriangleShading, WaveParams,
 };
 use crate::gpu::resources::ChunkLayout;
 use crate::gpu::{GpuContext, Resources};
@@ -35,6 +35,7 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         node_count: scene.bvh.nodes.len() as u32,
         ray_epsilon: scene.ray_epsilon,
         one: 1.0,
+        camera_medium: scene.scene.camera_medium.unwrap_or(NONE),
         ..Default::default()
     }
 }
@@ -103,6 +104,12 @@ pub fn upload_scene(
     r.uniform_slice_init(ctx, "small_scene_normals", &padded_table(&small_normals, max_small));
     r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
+    // One unused entry in scenes without media (a binding cannot be empty).
+    let mut media: Vec<Medium> = scene.scene.media.iter().map(|m| m.to_gpu()).collect();
+    if media.is_empty() {
+        media.push(Medium::default());
+    }
+    r.storage_init(ctx, "media", &media)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;
     r.storage_init(ctx, "lights", &scene.lights.lights)?;
@@ -134,6 +141,7 @@ pub fn upload_scene(
         ("HAS_GLOSSY", flag(scene.has_glossy())),
         ("HAS_PLASTIC", flag(scene.has_plastic())),
         ("HAS_DIELECTRIC", flag(scene.has_dielectric())),
+        ("HAS_MEDIA", flag(scene.scene.has_media())),
         ("TRIANGLES_PER_CHUNK", triangles.per_chunk as f64),
         ("TRIANGLE_SHADING_PER_CHUNK", triangle_shading.per_chunk as f64),
         ("BVH_NODES_PER_CHUNK", bvh_nodes.per_chunk as f64),

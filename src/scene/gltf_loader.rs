@@ -275,6 +275,8 @@ impl Loader<'_> {
             plastic: None,
             dielectric: None,
             conductor_index: None,
+            media: Default::default(),
+            null: false,
         });
 
         let mut c = Collected::default();
@@ -329,6 +331,8 @@ impl Loader<'_> {
             nodes: c.nodes,
             warnings: self.warnings.take(),
             settings: Default::default(),
+            media: Vec::new(),
+            camera_medium: None,
         })
     }
 

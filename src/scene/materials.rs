@@ -5,11 +5,11 @@ use glam::{Vec2, Vec3};
 
 use std::collections::HashMap;
 
-use super::{Scene, TextureData, plastic};
+use super::{MediumInterface, Scene, TextureData, plastic};
 use crate::gpu::layout::{
-    MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_DOUBLE_SIDED, MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR,
-    MATERIAL_ROUGH, MATERIAL_THIN, MIN_ALPHA, Material, NONE, TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST,
-    TextureInfo,
+    MATERIAL_CONDUCTOR_INDEX, MATERIAL_DIELECTRIC, MATERIAL_DOUBLE_SIDED, MATERIAL_MEDIUM_TRANSITION, MATERIAL_NULL,
+    MATERIAL_PLASTIC, MATERIAL_PLASTIC_NONLINEAR, MATERIAL_ROUGH, MATERIAL_THIN, MIN_ALPHA, Material, NONE,
+    TEXTURE_CLAMP_U, TEXTURE_CLAMP_V, TEXTURE_NEAREST, TextureInfo,
 };
 pub use crate::gpu::packing::{pack2x16float, unpack2x16float};
 
@@ -86,6 +86,14 @@ pub fn gpu_materials_and_textures(scene: &Scene) -> (Vec<Material>, Vec<TextureI
                 material.flags |= MATERIAL_CONDUCTOR_INDEX;
                 material.conductor_eta = eta;
                 material.conductor_k = k;
+            }
+            material.interior_medium = m.media.interior.unwrap_or(NONE);
+            material.exterior_medium = m.media.exterior.unwrap_or(NONE);
+            if m.media != MediumInterface::default() {
+                material.flags |= MATERIAL_MEDIUM_TRANSITION;
+            }
+            if m.null {
+                material.flags |= MATERIAL_NULL | MATERIAL_DOUBLE_SIDED;
             }
             if let Some(d) = m.dielectric {
                 material.flags |= MATERIAL_DIELECTRIC | MATERIAL_DOUBLE_SIDED | if d.thin { MATERIAL_THIN } else { 0 };

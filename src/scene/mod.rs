@@ -9,6 +9,7 @@ pub mod formats;
 pub mod gltf_loader;
 pub mod lights;
 pub mod materials;
+pub mod medium;
 pub mod mitsuba;
 pub mod plastic;
 pub mod prepared;
@@ -18,6 +19,7 @@ use glam::{Vec2, Vec3};
 
 pub use camera::{CameraDesc, ThinLens};
 pub use gltf_loader::{LoadOptions, load_gltf, load_gltf_at, load_gltf_for_capture, load_gltf_with};
+pub use medium::{MediumDesc, MediumInterface};
 pub use prepared::PreparedScene;
 
 /// Loads a scene file as `options` say: a Mitsuba 3 XML scene (recognised by its content) with
@@ -148,6 +150,14 @@ pub struct MaterialDesc {
     /// The complex index of refraction (eta, k; RGB) of the conductor lobe, whose Fresnel term is
     /// then the exact one (times `base_color`) instead of Schlick's from `base_color`.
     pub conductor_index: Option<(Vec3, Vec3)>,
+    /// The media on its two sides as the scene declares them: where it declares any, a ray
+    /// leaving the surface, scattered or passing through, travels in the one on the side it
+    /// leaves (vacuum where one is not declared); where it declares none (the default), the ray
+    /// stays in the medium it came through.
+    pub media: MediumInterface,
+    /// No surface at all (Mitsuba's `null` BSDF), only the boundary between its two media, which
+    /// rays cross without a vertex; its other members are then unused.
+    pub null: bool,
 }
 
 /// A smooth dielectric interface, such as glass (Mitsuba's `dielectric`): light is reflected
@@ -324,9 +334,18 @@ pub struct Scene {
     pub warnings: Vec<String>,
     /// Render settings the file carries (defaults of a render).
     pub settings: SceneSettings,
+    /// Participating media, which materials bound (`MaterialDesc::media`, `MaterialDesc::null`).
+    pub media: Vec<MediumDesc>,
+    /// The medium the camera stands in (an index of `media`), None for vacuum.
+    pub camera_medium: Option<u32>,
 }
 
 impl Scene {
+    /// True when light travels through a participating medium somewhere in the scene.
+    pub fn has_media(&self) -> bool {
+        !self.media.is_empty()
+    }
+
     /// The first node named `name`.
     pub fn node(&self, name: &str) -> Option<&NamedNode> {
         self.nodes.iter().find(|n| n.name == name)

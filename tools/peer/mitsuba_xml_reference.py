@@ -6,7 +6,9 @@ with the peer.
     tools/peer/mitsuba_xml_reference.py SCENE.xml OUT_DIR [--res N] [--spp S] [--passes P]
         [--param NAME=VALUE ...] [--key KEY] [--variant llvm_ad_rgb]
 
-The scene must use mitransient's `transient_path` integrator and a `transient_hdr_film`.
+The scene must use one of mitransient's integrators `transient_path` (surfaces) or
+`transient_prbvolpath` (surfaces and participating media), which is rendered as the file sets it,
+and a `transient_hdr_film`.
 `--param` values replace the file's `<default>`s (`res` is set from --res); `--res`, `--spp`
 go to `mi.load_file` as the parameters `res` and `spp`. The film's width and height must
 therefore read `$res`.
@@ -46,7 +48,7 @@ def main(argv=None):
 
     import mitsuba as mi
     mi.set_variant(args.variant)
-    import mitransient  # noqa: F401  (registers transient_path and transient_hdr_film)
+    import mitransient  # noqa: F401  (registers transient_path, transient_prbvolpath and transient_hdr_film)
 
     params = dict(kv.split("=", 1) for kv in args.param)
     params.update(res=str(args.res), spp=str(args.spp))

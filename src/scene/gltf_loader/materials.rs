@@ -103,6 +103,8 @@ impl Loader<'_> {
             plastic: None,
             dielectric: None,
             conductor_index: None,
+            media: Default::default(),
+            null: false,
         })
     }
 }

@@ -182,7 +182,11 @@ impl<'e> Builder<'e> {
                     name,
                 }
             }
-            "null" => return Err(e.error("the `null` BSDF bounds media, which are not rendered yet")),
+            "null" => {
+                return Err(
+                    e.error("a `null` BSDF stands directly on a shape (which then bounds media or is not there)")
+                );
+            }
             other => return Err(e.error(format!("the BSDF `{other}` is not rendered by gatetrace"))),
         };
         Ok(surface)

@@ -27,6 +27,7 @@
 mod capture;
 mod conductors;
 mod materials;
+mod media;
 mod sensors;
 mod shapes;
 mod xml;
@@ -41,8 +42,8 @@ pub use shapes::TESSELLATION_ERROR;
 use xml::{Element, Object};
 
 use super::{
-    CameraDesc, DirectionalLight, LoadOptions, MaterialDesc, NamedNode, PointLight, Scene, SceneSettings,
-    SceneTriangle, TextureData,
+    CameraDesc, DirectionalLight, LoadOptions, MaterialDesc, MediumDesc, MediumInterface, NamedNode, PointLight, Scene,
+    SceneSettings, SceneTriangle, TextureData,
 };
 
 /// Loads a Mitsuba 3 XML scene (see the module's header).
@@ -64,8 +65,7 @@ pub fn load_mitsuba(path: &Path, options: &LoadOptions) -> Result<Scene> {
             "sensor" => b.sensor(child)?,
             "integrator" => b.integrator(child)?,
             // Read where a shape refers to them.
-            "bsdf" | "texture" => {}
-            "medium" => return Err(child.error("participating media are not rendered yet")),
+            "bsdf" | "texture" | "medium" => {}
             other => return Err(child.error(format!("<{other}> is not understood at the top of a scene"))),
         }
     }
@@ -119,7 +119,7 @@ struct Builder<'e> {
     /// Texture index per texture element address.
     texture_of: HashMap<usize, u32>,
     /// Material index per (BSDF element address, emitted radiance bits).
-    material_of: HashMap<(usize, [u32; 3]), u32>,
+    material_of: HashMap<(usize, [u32; 3], MediumInterface), u32>,
     triangles: Vec<SceneTriangle>,
     point_lights: Vec<PointLight>,
     directional_lights: Vec<DirectionalLight>,
@@ -133,6 +133,11 @@ struct Builder<'e> {
     capture: capture::CaptureParts<'e>,
     /// Loading for an NLOS capture ([`LoadOptions::capture`]): no camera or light is needed.
     for_capture: bool,
+    /// Media as read, each `<medium>` element's index by its address.
+    media: Vec<MediumDesc>,
+    medium_of: HashMap<usize, u32>,
+    /// The medium the sensor stands in.
+    camera_medium: Option<u32>,
 }
 
 impl<'e> Builder<'e> {
@@ -162,6 +167,9 @@ impl<'e> Builder<'e> {
             integrator_seen: false,
             capture: Default::default(),
             for_capture: false,
+            media: Vec::new(),
+            medium_of: HashMap::new(),
+            camera_medium: None,
         })
     }
 
@@ -186,6 +194,8 @@ impl<'e> Builder<'e> {
         for c in &shape.children {
             let bsdf = match c.tag.as_str() {
                 "bsdf" => c,
+                // A shape's media are references named for their side.
+                "ref" if matches!(c.attribute("name"), Some("interior" | "exterior")) => continue,
                 "ref" => self.resolve(c, "bsdf")?,
                 _ => continue,
             };
@@ -196,29 +206,52 @@ impl<'e> Builder<'e> {
         Ok(found)
     }
 
-    /// The material index of a shape's BSDF with its emitted radiance.
-    fn material(&mut self, bsdf: Option<&'e Element>, radiance: Vec3) -> Result<u32> {
+    /// The material index of a shape's BSDF with its emitted radiance and the media on its two
+    /// sides (a `null` BSDF: no surface, only their boundary).
+    fn material(&mut self, bsdf: Option<&'e Element>, radiance: Vec3, media: MediumInterface) -> Result<u32> {
         let bsdf = bsdf.unwrap_or(self.default_bsdf);
-        let key = (bsdf as *const Element as usize, radiance.to_array().map(f32::to_bits));
+        let key = (bsdf as *const Element as usize, radiance.to_array().map(f32::to_bits), media);
         if let Some(&m) = self.material_of.get(&key) {
             return Ok(m);
         }
-        let s = self.surface(bsdf)?;
-        if let Some((_, map)) = s.texture {
-            self.uv_maps.insert(self.materials.len() as u32, map);
-        }
-        self.materials.push(MaterialDesc {
-            name: s.name,
-            base_color: s.base_color,
-            base_color_texture: s.texture.map(|(t, _)| t),
-            emission: radiance,
-            double_sided: s.double_sided,
-            metallic: s.metallic,
-            roughness: s.roughness,
-            plastic: s.plastic,
-            dielectric: s.dielectric,
-            conductor_index: s.conductor_index,
-        });
+        let desc = if bsdf.attribute("type") == Some("null") {
+            bsdf.only_attributes(&["type", "id", "name"])?;
+            Object::new(bsdf).finish(&[])?;
+            MaterialDesc {
+                name: "null".into(),
+                base_color: Vec3::ZERO,
+                base_color_texture: None,
+                emission: Vec3::ZERO,
+                double_sided: true,
+                metallic: 0.0,
+                roughness: 1.0,
+                plastic: None,
+                dielectric: None,
+                conductor_index: None,
+                media,
+                null: true,
+            }
+        } else {
+            let s = self.surface(bsdf)?;
+            if let Some((_, map)) = s.texture {
+                self.uv_maps.insert(self.materials.len() as u32, map);
+            }
+            MaterialDesc {
+                name: s.name,
+                base_color: s.base_color,
+                base_color_texture: s.texture.map(|(t, _)| t),
+                emission: radiance,
+                double_sided: s.double_sided,
+                metallic: s.metallic,
+                roughness: s.roughness,
+                plastic: s.plastic,
+                dielectric: s.dielectric,
+                conductor_index: s.conductor_index,
+                media,
+                null: false,
+            }
+        };
+        self.materials.push(desc);
         let m = self.materials.len() as u32 - 1;
         self.material_of.insert(key, m);
         Ok(m)
@@ -336,8 +369,18 @@ impl<'e> Builder<'e> {
                 ));
             }
         }
-        o.finish(&["bsdf", "ref", "emitter", "sensor"])?;
-        let material = self.material(bsdf, radiance)?;
+        o.finish(&["bsdf", "ref", "emitter", "sensor", "medium"])?;
+        let media = self.shape_media(e)?;
+        if let Some(null) = bsdf.filter(|b| b.attribute("type") == Some("null")) {
+            if radiance != Vec3::ZERO {
+                return Err(null.error("an area emitter on a `null` surface (which is not there) is not rendered"));
+            }
+            if media == MediumInterface::default() {
+                // Nothing there and no medium bounded: the shape changes nothing.
+                return Ok(());
+            }
+        }
+        let material = self.material(bsdf, radiance, media)?;
         let mut sensors = e.children.iter().filter(|c| c.tag == "sensor");
         let Some(meter) = sensors.next() else {
             return self.add_mesh(e, &mesh, to_world, flip, material, e.attribute("id").or(e.attribute("name")));
@@ -525,6 +568,8 @@ impl<'e> Builder<'e> {
             nodes: self.nodes,
             warnings,
             settings: self.settings,
+            media: self.media,
+            camera_medium: self.camera_medium,
         })
     }
 }

@@ -69,7 +69,8 @@ impl<'e> Builder<'e> {
             );
         }
         self.sampler(e)?;
-        o.finish(&["film", "sampler"])?;
+        self.camera_medium = self.sensor_medium(e)?;
+        o.finish(&["film", "sampler", "medium", "ref"])?;
         let (w, h) = (width as f32, height as f32);
         let tan = (0.5 * fov.to_radians()).tan();
         let tan_y = match fov_axis {
@@ -189,12 +190,15 @@ impl<'e> Builder<'e> {
         }
         let o = Object::new(e);
         match o.kind()? {
-            "path" | "transient_path" => {}
+            // The volumetric path tracers render the same light as the surface ones where no medium is.
+            "path" | "transient_path" | "volpath" | "volpathmis" | "prbvolpath" | "transient_prbvolpath" => {}
             "transient_nlos_path" => self.nlos_integrator(&o)?,
-            kind @ ("volpath" | "volpathmis" | "prbvolpath" | "transient_prbvolpath") => {
-                return Err(e.error(format!("`{kind}` renders media, which gatetrace does not render yet")));
+            other => {
+                return Err(e.error(format!(
+                    "the integrator `{other}` is not read (path, transient_path, volpath, prbvolpath and \
+                     transient_prbvolpath are)"
+                )));
             }
-            other => return Err(e.error(format!("the integrator `{other}` is not read (path and transient_path are)"))),
         }
         let refuse_true = |key: &str, why: &str| -> Result<()> {
             match o.boolean(key)? {

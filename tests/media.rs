@@ -1,0 +1,146 @@
+//! Participating media (src/scene/medium.rs, shaders/lib/medium.wesl): the WGSL phase function
+//! and its sampling against their CPU twins and against the phase function's own distribution,
+//! and light through an absorbing medium against its closed form. Renders of scattering media
+//! against mitransient are in tests/mitsuba.rs (`fog_agrees_with_mitransient_with_path`).
+
+mod common;
+
+use common::stats::{chi2_test, sidak, t_critical};
+use gatetrace::film::Gate;
+use gatetrace::integrator::{PathTracer, RenderSettings};
+use gatetrace::rng::Rng;
+use gatetrace::scene::medium::{hg_phase, sample_hg};
+use gatetrace::scene::{LoadOptions, PreparedScene, load_scene_with};
+use glam::Vec3;
+
+/// The probe's direction of travel for polar angle `theta` (its azimuth fixed).
+fn direction(theta: f32) -> Vec3 {
+    Vec3::new(theta.sin() * 0.6, theta.sin() * 0.8, theta.cos())
+}
+
+#[test]
+fn wgsl_phase_sampling_matches_its_twin_and_its_density() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
+    let mut rng = Rng::new(5, 0, 0);
+    let gs = [-0.6f32, 0.0, 0.5, 0.9];
+    let input: Vec<[f32; 4]> =
+        (0..8192).map(|i| [rng.next_f32(), rng.next_f32(), gs[i % 4], 3.0 * rng.next_f32()]).collect();
+    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 22.0)], &input, input.len());
+    for (i, (x, g)) in input.iter().zip(&out).enumerate() {
+        let (w, pdf) = sample_hg(direction(x[3]), x[2], [x[0], x[1]]);
+        let gpu = Vec3::new(g[0], g[1], g[2]);
+        assert!(gpu.abs_diff_eq(w, 2e-5), "record {i}: GPU direction {gpu} vs CPU {w}");
+        assert!((g[3] - pdf).abs() <= 1e-4 * pdf, "record {i}: GPU pdf {} vs CPU {pdf}", g[3]);
+        // The density is the phase function at the sampled cosine.
+        let mu = gpu.dot(direction(x[3]).normalize());
+        assert!((g[3] - hg_phase(mu, x[2])).abs() <= 2e-3 * g[3] + 1e-6, "record {i}: pdf {} at mu {mu}", g[3]);
+    }
+    // The sampled cosines follow the phase function: chi-square over 40 cells of mu for each g.
+    for &g in &gs {
+        let n = 40;
+        let input: Vec<[f32; 4]> =
+            (0..100_000).map(|_| [rng.next_f32(), rng.next_f32(), g, 3.0 * rng.next_f32()]).collect();
+        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 22.0)], &input, input.len());
+        let mut observed = vec![0.0; n];
+        for (x, o) in input.iter().zip(&out) {
+            let mu = Vec3::new(o[0], o[1], o[2]).dot(direction(x[3]).normalize()).clamp(-1.0, 1.0);
+            observed[(((mu + 1.0) * 0.5 * n as f32) as usize).min(n - 1)] += 1.0;
+        }
+        let expected: Vec<f64> = (0..n)
+            .map(|c| {
+                // 2 pi times the phase function integrated over the cell (midpoint rule, 200 steps).
+                let (lo, width) = (-1.0 + 2.0 * c as f64 / n as f64, 2.0 / n as f64);
+                let steps = 200;
+                (0..steps)
+                    .map(|k| {
+                        let mu = lo + width * (k as f64 + 0.5) / steps as f64;
+                        2.0 * std::f64::consts::PI * hg_phase(mu as f32, g) as f64 * width / steps as f64
+                    })
+                    .sum::<f64>()
+                    * input.len() as f64
+            })
+            .collect();
+        let (stat, dof, p) = chi2_test(&observed, &expected);
+        println!("g {g}: chi-square {stat:.1} over {dof} dof, p {p:.3}");
+        assert!(p > 1e-3, "g {g}: the sampled cosines do not follow the phase function (p = {p})");
+    }
+}
+
+/// A camera looking through a slab of purely absorbing medium (albedo 0, extinction 1.5 m^-1,
+/// 1 m thick between two `null` faces) at an emitter of radiance 1: each pixel sees exp(-1.5 d),
+/// d the ray's length in the slab (1 / cos of its angle to the axis), all of it at the path length
+/// of the straight ray (a transient of two bins around 3 m).
+#[test]
+fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
+    let dir = common::scratch_dir("absorbing_slab");
+    let xml = r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="4"/>
+        <float name="near_clip" value="1e-5"/>
+        <transform name="to_world"><lookat origin="0, 0, 2" target="0, 0, 0" up="0, 1, 0"/></transform>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><translate z="-1"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+    </shape>
+    <shape type="cube">
+        <transform name="to_world"><scale value="0.5"/></transform>
+        <bsdf type="null"/>
+        <medium type="homogeneous" name="interior">
+            <float name="sigma_t" value="1.5"/>
+            <rgb name="albedo" value="0"/>
+        </medium>
+    </shape>
+</scene>"#;
+    let path = dir.join("slab.xml");
+    std::fs::write(&path, xml).unwrap();
+    let scene = PreparedScene::new(load_scene_with(&path, &LoadOptions::default()).unwrap()).unwrap();
+    let ctx = common::gpu();
+    let (w, h) = (8u32, 8u32);
+    let settings = RenderSettings {
+        width: w,
+        height: h,
+        gate: Gate::parse("transient:2.95,0.1,2").unwrap(),
+        seed: 3,
+        ..Default::default()
+    };
+    let films = common::render_films(&ctx, &scene, &settings, 8, 1024);
+    // The image mean of each bin and channel over the 8 films, against the exact mean over the
+    // image: the slab's transmittance averaged over each pixel (16 x 16 points of it).
+    let tan = (2f64).to_radians().tan();
+    let mut exact = 0.0;
+    for p in 0..(w * h) {
+        let (px, py) = (p % w, p / w);
+        let mut sum = 0.0;
+        for k in 0..256 {
+            let x = (2.0 * (px as f64 + (k % 16) as f64 / 16.0 + 1.0 / 32.0) / w as f64 - 1.0) * tan;
+            let y = (2.0 * (py as f64 + (k / 16) as f64 / 16.0 + 1.0 / 32.0) / h as f64 - 1.0) * tan;
+            sum += (-1.5 * (1.0 + x * x + y * y).sqrt()).exp();
+        }
+        exact += sum / 256.0;
+    }
+    exact /= (w * h) as f64;
+    let means: Vec<Vec<f64>> = films
+        .iter()
+        .map(|f| {
+            let mut m = vec![0.0; 6];
+            for (i, v) in f.data.iter().enumerate() {
+                m[i % 6] += *v as f64 / (w * h) as f64;
+            }
+            m
+        })
+        .collect();
+    let limit = t_critical(sidak(0.001, 3), (films.len() - 1) as f64);
+    for c in 0..3 {
+        let x: Vec<f64> = means.iter().map(|m| m[c]).collect();
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (x.len() - 1) as f64 / x.len() as f64;
+        let z = (mean - exact) / var.sqrt();
+        println!("channel {c}: {mean:.6} against exp(-sigma_t d) {exact:.6}, z {z:+.2}");
+        assert!(z.abs() < limit, "channel {c}: {mean} against {exact} (z = {z:.2}, limit {limit:.2})");
+        let late: f64 = means.iter().map(|m| m[3 + c]).sum();
+        assert_eq!(late, 0.0, "channel {c}: light outside the straight ray's bin");
+    }
+}
