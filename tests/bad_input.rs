@@ -689,6 +689,12 @@ fn cases() -> Vec<(Case, Setup)> {
             &["<bsdf type=\"null\">", "area emitter on a `null` surface"],
         ),
         case(
+            "fog of no extinction",
+            none,
+            plain(&["render", "--res", "8x8", "--spp", "1", "--fog", "0,0.9", "--out", "{out}"]),
+            &["--fog", "the extinction 0 m^-1 is not positive"],
+        ),
+        case(
             "XML medium with a bidirectional method",
             |d| {
                 let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";

@@ -68,70 +68,44 @@ fn wgsl_phase_sampling_matches_its_twin_and_its_density() {
     }
 }
 
-/// A camera looking through a slab of purely absorbing medium (albedo 0, extinction 1.5 m^-1,
-/// 1 m thick between two `null` faces) at an emitter of radiance 1: each pixel sees exp(-1.5 d),
-/// d the ray's length in the slab (1 / cos of its angle to the axis), all of it at the path length
-/// of the straight ray (a transient of two bins around 3 m).
-#[test]
-fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
-    let dir = common::scratch_dir("absorbing_slab");
-    let xml = r#"<scene version="3.0.0">
-    <sensor type="perspective">
-        <float name="fov" value="4"/>
-        <float name="near_clip" value="1e-5"/>
-        <transform name="to_world"><lookat origin="0, 0, 2" target="0, 0, 0" up="0, 1, 0"/></transform>
-    </sensor>
-    <shape type="rectangle">
-        <transform name="to_world"><translate z="-1"/></transform>
-        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
-    </shape>
-    <shape type="cube">
-        <transform name="to_world"><scale value="0.5"/></transform>
-        <bsdf type="null"/>
-        <medium type="homogeneous" name="interior">
-            <float name="sigma_t" value="1.5"/>
-            <rgb name="albedo" value="0"/>
-        </medium>
-    </shape>
-</scene>"#;
-    let path = dir.join("slab.xml");
-    std::fs::write(&path, xml).unwrap();
-    let scene = PreparedScene::new(load_scene_with(&path, &LoadOptions::default()).unwrap()).unwrap();
-    let ctx = common::gpu();
-    let (w, h) = (8u32, 8u32);
-    let settings = RenderSettings {
-        width: w,
-        height: h,
-        gate: Gate::parse("transient:2.95,0.1,2").unwrap(),
-        seed: 3,
-        ..Default::default()
-    };
-    let films = common::render_films(&ctx, &scene, &settings, 8, 1024);
-    // The image mean of each bin and channel over the 8 films, against the exact mean over the
-    // image: the slab's transmittance averaged over each pixel (16 x 16 points of it).
-    let tan = (2f64).to_radians().tan();
-    let mut exact = 0.0;
-    for p in 0..(w * h) {
-        let (px, py) = (p % w, p / w);
-        let mut sum = 0.0;
-        for k in 0..256 {
-            let x = (2.0 * (px as f64 + (k % 16) as f64 / 16.0 + 1.0 / 32.0) / w as f64 - 1.0) * tan;
-            let y = (2.0 * (py as f64 + (k / 16) as f64 / 16.0 + 1.0 / 32.0) / h as f64 - 1.0) * tan;
-            sum += (-1.5 * (1.0 + x * x + y * y).sqrt()).exp();
-        }
-        exact += sum / 256.0;
-    }
-    exact /= (w * h) as f64;
-    let means: Vec<Vec<f64>> = films
+/// The image mean over 8 films of each of the transient's two bins and three channels,
+/// [bin 0: r, g, b, bin 1: r, g, b], per film.
+fn film_means(films: &[gatetrace::film::Film]) -> Vec<Vec<f64>> {
+    films
         .iter()
         .map(|f| {
+            let pixels = (f.width * f.height) as f64;
             let mut m = vec![0.0; 6];
             for (i, v) in f.data.iter().enumerate() {
-                m[i % 6] += *v as f64 / (w * h) as f64;
+                m[i % 6] += *v as f64 / pixels;
             }
             m
         })
-        .collect();
+        .collect()
+}
+
+/// The mean over the image of exp(-sigma_t d) for a square image of `w` pixels a side and field
+/// of view `fov_deg` (degrees) looking straight at a plane `distance` (m) away, d the distance a
+/// ray travels in the medium: `depth` (m) along the axis, over the cosine of the ray's angle (each
+/// pixel averaged over 16 x 16 points).
+fn mean_transmittance(w: u32, fov_deg: f64, sigma_t: f64, depth: f64) -> f64 {
+    let tan = (0.5 * fov_deg).to_radians().tan();
+    let mut total = 0.0;
+    for p in 0..(w * w) {
+        let (px, py) = (p % w, p / w);
+        for k in 0..256 {
+            let x = (2.0 * (px as f64 + (k % 16) as f64 / 16.0 + 1.0 / 32.0) / w as f64 - 1.0) * tan;
+            let y = (2.0 * (py as f64 + (k / 16) as f64 / 16.0 + 1.0 / 32.0) / w as f64 - 1.0) * tan;
+            total += (-sigma_t * depth * (1.0 + x * x + y * y).sqrt()).exp() / 256.0;
+        }
+    }
+    total / (w * w) as f64
+}
+
+/// Each channel's image mean in the first bin agrees with `exact` (Student's t over the films,
+/// Sidak over the channels), and the second bin holds no light.
+fn assert_first_bin_is(films: &[gatetrace::film::Film], exact: f64) {
+    let means = film_means(films);
     let limit = t_critical(sidak(0.001, 3), (films.len() - 1) as f64);
     for c in 0..3 {
         let x: Vec<f64> = means.iter().map(|m| m[c]).collect();
@@ -142,5 +116,108 @@ fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
         assert!(z.abs() < limit, "channel {c}: {mean} against {exact} (z = {z:.2}, limit {limit:.2})");
         let late: f64 = means.iter().map(|m| m[3 + c]).sum();
         assert_eq!(late, 0.0, "channel {c}: light outside the straight ray's bin");
+    }
+}
+
+/// A lamp of radiance 1 filling the view of a camera 3 m from it, with the straight rays' path
+/// lengths in the first of two 0.1 m bins from 2.95 m.
+fn lamp_scene(medium: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="4"/>
+        <float name="near_clip" value="1e-5"/>
+        <transform name="to_world"><lookat origin="0, 0, 2" target="0, 0, 0" up="0, 1, 0"/></transform>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><translate z="-1"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+    </shape>
+    {medium}
+</scene>"#
+    )
+}
+
+fn render_lamp(name: &str, xml: &str, fog: Option<&str>) -> Vec<gatetrace::film::Film> {
+    let dir = common::scratch_dir(name);
+    let path = dir.join("scene.xml");
+    std::fs::write(&path, xml).unwrap();
+    let fog = fog.map(|f| gatetrace::scene::MediumDesc::parse_fog(f).unwrap());
+    let scene =
+        PreparedScene::new(load_scene_with(&path, &LoadOptions { fog, ..Default::default() }).unwrap()).unwrap();
+    let settings = RenderSettings {
+        width: 8,
+        height: 8,
+        gate: Gate::parse("transient:2.95,0.1,2").unwrap(),
+        seed: 3,
+        ..Default::default()
+    };
+    common::render_films(&common::gpu(), &scene, &settings, 8, 1024)
+}
+
+/// A camera standing in a purely absorbing fog (albedo 0, extinction 0.4 m^-1; `LoadOptions::fog`,
+/// `render --fog`) looking at a lamp 3 m away sees exp(-0.4 d), d the whole ray's length: camera
+/// rays start in the camera's medium.
+#[test]
+fn a_camera_in_an_absorbing_fog_sees_a_lamp_attenuated_over_the_whole_ray() {
+    let films = render_lamp("absorbing_fog", &lamp_scene(""), Some("0.4,0,0"));
+    assert_first_bin_is(&films, mean_transmittance(8, 4.0, 0.4, 3.0));
+}
+
+/// A camera looking through a slab of purely absorbing medium (albedo 0, extinction 1.5 m^-1,
+/// 1 m thick between two `null` faces) at an emitter of radiance 1: each pixel sees exp(-1.5 d),
+/// d the ray's length in the slab (1 / cos of its angle to the axis), all of it at the path length
+/// of the straight ray (a transient of two bins around 3 m).
+#[test]
+fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
+    let slab = r#"<shape type="cube">
+        <transform name="to_world"><scale value="0.5"/></transform>
+        <bsdf type="null"/>
+        <medium type="homogeneous" name="interior">
+            <float name="sigma_t" value="1.5"/>
+            <rgb name="albedo" value="0"/>
+        </medium>
+    </shape>"#;
+    let films = render_lamp("absorbing_slab", &lamp_scene(slab), None);
+    assert_first_bin_is(&films, mean_transmittance(8, 4.0, 1.5, 1.0));
+}
+
+/// A white furnace of fog: a camera inside a closed box whose walls emit radiance 1 inwards and
+/// reflect nothing, filled with fog that absorbs nothing (albedo 1, extinction 1.5 m^-1, g = 0.6;
+/// `LoadOptions::fog`). Every path scatters until it reaches a wall, so every pixel sees radiance 1
+/// whatever the fog does (the bounce limit cuts a share below 10^-9), with emission reached by
+/// light sampling from the fog and by phase sampling, weighed against each other.
+#[test]
+fn a_white_furnace_of_fog_shows_the_walls_radiance() {
+    let xml = r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="65"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="60"/>
+        <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, -1" up="0, 1, 0"/></transform>
+    </sensor>
+    <shape type="cube">
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+    </shape>
+</scene>"#;
+    let dir = common::scratch_dir("fog_furnace");
+    let path = dir.join("scene.xml");
+    std::fs::write(&path, xml).unwrap();
+    let fog = Some(gatetrace::scene::MediumDesc::parse_fog("1.5,1,0.6").unwrap());
+    let scene = load_scene_with(&path, &LoadOptions { fog, ..Default::default() }).unwrap();
+    let max_bounces = scene.settings.max_bounces.unwrap();
+    let scene = PreparedScene::new(scene).unwrap();
+    let settings = RenderSettings { width: 8, height: 8, max_bounces, seed: 5, ..Default::default() };
+    let films = common::render_films(&common::gpu(), &scene, &settings, 8, 256);
+    let limit = t_critical(sidak(0.001, 3), (films.len() - 1) as f64);
+    for c in 0..3 {
+        let x: Vec<f64> =
+            films.iter().map(|f| f.data.iter().skip(c).step_by(3).map(|&v| v as f64).sum::<f64>() / 64.0).collect();
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (x.len() - 1) as f64 / x.len() as f64;
+        let z = (mean - 1.0) / var.sqrt();
+        println!("channel {c}: {mean:.6} (standard error {:.6}), z {z:+.2}", var.sqrt());
+        assert!(z.abs() < limit, "channel {c}: {mean} against 1 (z = {z:.2}, limit {limit:.2})");
     }
 }

@@ -10,7 +10,8 @@ use gatetrace::nlos::Scan;
 use gatetrace::scene::{LoadOptions, SceneSettings};
 
 use super::parse::{
-    MethodParser, NamesOnly, parse_define, parse_point, parse_resolution, parse_shard, parse_strategy, parse_uv,
+    MethodParser, NamesOnly, parse_define, parse_fog, parse_point, parse_resolution, parse_shard, parse_strategy,
+    parse_uv,
 };
 
 /// What both render and view render: the scene, its camera's lens, the gate, the image and
@@ -27,6 +28,11 @@ pub struct ImageArgs {
     /// A Mitsuba XML scene's parameter: VALUE replaces the file's default for $NAME (repeatable).
     #[arg(long, short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Fill the scene with homogeneous fog: extinction SIGMA_T (m^-1; a visibility V in metres is
+    /// about 3.9 / V), single-scattering ALBEDO (0..1, default 0.9) and Henyey-Greenstein mean
+    /// cosine G (default 0.8, forward); rendered by --method path{n}
+    #[arg(long, value_name = "SIGMA_T[,ALBEDO[,G]]", value_parser = parse_fog)]
+    pub fog: Option<gatetrace::scene::MediumDesc>,
     /// Pathlength importance W, lengths in metres of optical path or with a ps/ns/mm suffix: none;
     /// box:A..B (W = 1 on [A, B)); gaussian:MU,SIGMA; cw:FREQ_HZ,PHASE_DEG[,CODE] (signed);
     /// table:FILE.csv (length,weight rows); transient:START,WIDTH,BINS (a cube of BINS images){n}
@@ -230,6 +236,7 @@ impl RenderArgs {
             capture: false,
             allow_unsupported_materials: self.allow_unsupported_materials,
             parameters: self.define.clone(),
+            fog: self.fog.clone(),
         }
     }
 }

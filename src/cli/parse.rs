@@ -128,6 +128,10 @@ pub fn parse_define(s: &str) -> Result<(String, String), String> {
     Ok((name.to_owned(), value.to_owned()))
 }
 
+pub fn parse_fog(s: &str) -> Result<gatetrace::scene::MediumDesc, String> {
+    gatetrace::scene::MediumDesc::parse_fog(s).map_err(|e| format!("{e:#}"))
+}
+
 pub fn parse_strategy(s: &str) -> Result<(u32, u32), String> {
     parse_pair(s, "S,T")
 }

@@ -376,6 +376,20 @@ fn render_one(
     let secs = output.elapsed.as_secs_f64();
     let mut metadata = render_metadata(ctx, scene_path, gate_spec, settings, &output);
     metadata.push(("camera".into(), scene.scene.camera.describe().into()));
+    if scene.scene.has_media() {
+        let media: Vec<_> = scene
+            .scene
+            .media
+            .iter()
+            .map(|m| {
+                serde_json::json!({
+                    "name": m.name, "sigma_t_per_m": m.sigma_t, "albedo": m.albedo.to_array(), "hg_g": m.g,
+                })
+            })
+            .collect();
+        metadata.push(("media".into(), media.into()));
+        metadata.push(("camera_medium".into(), scene.scene.camera_medium.into()));
+    }
     if let Some((index, plan)) = frame {
         metadata.push(("frame".into(), index.into()));
         metadata.push(("frames".into(), plan.count.into()));

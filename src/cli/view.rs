@@ -70,6 +70,7 @@ pub fn run(mut args: ViewArgs) -> Result<()> {
         scene,
         allow_unsupported_materials: image.allow_unsupported_materials,
         parameters: image.define.clone(),
+        fog: image.fog.clone(),
         width: image.res.0,
         height: image.res.1,
         method: args.method,

@@ -43,6 +43,9 @@ pub struct LoadOptions {
     /// A Mitsuba XML scene's parameters (name, value): each replaces the file's `<default>` for
     /// `$name` (`mitsuba -D name=value`; `render --define`). A glTF file takes none.
     pub parameters: Vec<(String, String)>,
+    /// A homogeneous fog filling all space (`Scene::add_fog`; `render --fog`), applied by
+    /// `load_scene_with`.
+    pub fog: Option<super::MediumDesc>,
 }
 
 /// Loads a `.gltf` or `.glb` file in its rest pose (animations not applied).

@@ -30,6 +30,29 @@ impl MediumDesc {
     }
 }
 
+impl MediumDesc {
+    /// A fog given as `SIGMA_T[,ALBEDO[,G]]`: extinction sigma_t (m^-1, positive), albedo (0..1,
+    /// default 0.9) and the phase function's mean cosine g (-1 < g < 1, default 0.8, forward as
+    /// droplets scatter), as `--fog` takes it.
+    pub fn parse_fog(spec: &str) -> anyhow::Result<Self> {
+        let numbers: Vec<f32> = spec
+            .split(',')
+            .map(|x| x.trim().parse::<f32>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<_>>()
+            .ok_or_else(|| anyhow::anyhow!("`{spec}` is not SIGMA_T[,ALBEDO[,G]] (numbers)"))?;
+        let (sigma_t, albedo, g) = match numbers[..] {
+            [s] => (s, 0.9, 0.8),
+            [s, a] => (s, a, 0.8),
+            [s, a, g] => (s, a, g),
+            _ => anyhow::bail!("`{spec}` is not SIGMA_T[,ALBEDO[,G]]: at most three numbers"),
+        };
+        anyhow::ensure!(sigma_t > 0.0, "fog `{spec}`: the extinction {sigma_t} m^-1 is not positive");
+        anyhow::ensure!((0.0..=1.0).contains(&albedo), "fog `{spec}`: the albedo {albedo} is not within [0, 1]");
+        anyhow::ensure!(g > -1.0 && g < 1.0, "fog `{spec}`: g {g} is not within (-1, 1)");
+        Ok(MediumDesc { name: format!("fog {spec}"), sigma_t, albedo: Vec3::splat(albedo), g })
+    }
+}
+
 /// The media on the two sides of a surface, indices into `Scene::media` (None: vacuum).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct MediumInterface {

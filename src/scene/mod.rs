@@ -24,9 +24,17 @@ pub use prepared::PreparedScene;
 
 /// Loads a scene file as `options` say: a Mitsuba 3 XML scene (recognised by its content) with
 /// the `mitsuba` loader, anything else as glTF 2.0 (which refuses other formats with what they
-/// are and how to convert them).
+/// are and how to convert them); with `options.fog`, filled with that fog.
 pub fn load_scene_with(path: &std::path::Path, options: &LoadOptions) -> anyhow::Result<Scene> {
-    if formats::is_mitsuba_xml(path) { mitsuba::load_mitsuba(path, options) } else { load_gltf_with(path, options) }
+    let mut scene = if formats::is_mitsuba_xml(path) {
+        mitsuba::load_mitsuba(path, options)?
+    } else {
+        load_gltf_with(path, options)?
+    };
+    if let Some(fog) = &options.fog {
+        scene.add_fog(fog.clone())?;
+    }
+    Ok(scene)
 }
 
 /// The render settings the scene file at `path` carries ([`SceneSettings`]; none for glTF) with
@@ -344,6 +352,19 @@ impl Scene {
     /// True when light travels through a participating medium somewhere in the scene.
     pub fn has_media(&self) -> bool {
         !self.media.is_empty()
+    }
+
+    /// Fills all space with `fog` (the camera's medium, which no surface of a scene without
+    /// media changes: every ray travels in it). A scene with media of its own is refused.
+    pub fn add_fog(&mut self, fog: MediumDesc) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            !self.has_media(),
+            "{}: the scene has participating media of its own; a fog fills scenes without any",
+            self.source
+        );
+        self.media.push(fog);
+        self.camera_medium = Some(0);
+        Ok(())
     }
 
     /// The first node named `name`.

@@ -39,6 +39,8 @@ pub struct ViewOptions {
     pub allow_unsupported_materials: bool,
     /// See [`gatetrace::scene::LoadOptions::parameters`].
     pub parameters: Vec<(String, String)>,
+    /// See [`gatetrace::scene::LoadOptions::fog`].
+    pub fog: Option<gatetrace::scene::MediumDesc>,
     /// Image size (pixels).
     pub width: u32,
     /// Image size (pixels).
@@ -83,6 +85,7 @@ pub fn run_viewer(options: ViewOptions) -> Result<()> {
     let load = LoadOptions {
         allow_unsupported_materials: options.allow_unsupported_materials,
         parameters: options.parameters.clone(),
+        fog: options.fog.clone(),
         ..Default::default()
     };
     let mut scene = load_scene_with(&options.scene, &load)?;

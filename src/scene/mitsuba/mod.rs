@@ -138,6 +138,8 @@ struct Builder<'e> {
     medium_of: HashMap<usize, u32>,
     /// The medium the sensor stands in.
     camera_medium: Option<u32>,
+    /// The integrator, when it is mitransient's transient_prbvolpath.
+    transient_prbvolpath: Option<&'e Element>,
 }
 
 impl<'e> Builder<'e> {
@@ -170,6 +172,7 @@ impl<'e> Builder<'e> {
             media: Vec::new(),
             medium_of: HashMap::new(),
             camera_medium: None,
+            transient_prbvolpath: None,
         })
     }
 
@@ -553,6 +556,13 @@ impl<'e> Builder<'e> {
             bail!("{name}: no emitter gives light (area emitters on shapes, point and directional emitters)");
         }
         let mut warnings = self.warnings;
+        if let (Some(integrator), Some(_)) = (self.transient_prbvolpath, self.camera_medium) {
+            warnings.push(format!(
+                "{}: the sensor stands in a medium: gatetrace starts camera rays in it, while mitransient 1.3.1's \
+                 transient_prbvolpath starts them in vacuum whatever the sensor's medium",
+                integrator.at()
+            ));
+        }
         if self.dropped_degenerate > 0 {
             warnings.push(format!("{name}: dropped {} zero-area triangles", self.dropped_degenerate));
         }

@@ -189,6 +189,9 @@ impl<'e> Builder<'e> {
             return Err(e.error("a scene takes one integrator"));
         }
         let o = Object::new(e);
+        if o.kind()? == "transient_prbvolpath" {
+            self.transient_prbvolpath = Some(e);
+        }
         match o.kind()? {
             // The volumetric path tracers render the same light as the surface ones where no medium is.
             "path" | "transient_path" | "volpath" | "volpathmis" | "prbvolpath" | "transient_prbvolpath" => {}
