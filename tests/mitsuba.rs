@@ -113,6 +113,38 @@ fn a_mitsuba_scene_loads_as_written() {
     assert_eq!(largest_uv, 4.0, "to_uv scales the floor's uv by 4");
 }
 
+/// Next-event estimation alone and BSDF (and phase) sampling alone (`LightStrategy`) render
+/// `transient` (20 bins) alike: 16 films of `spp` each (seeds `seed`, `seed` + 1), compared per
+/// bin and channel over the image (sampling alone reaches a small lamp too rarely for blocks of
+/// pixels: many hold none of its samples in a bin at all), Sidak-corrected.
+fn light_strategies_agree_per_bin(
+    label: &str,
+    ctx: &gatetrace::gpu::GpuContext,
+    scene: &PreparedScene,
+    transient: &RenderSettings,
+    spp: u32,
+    seed: u32,
+) {
+    use gatetrace::integrator::LightStrategy;
+    let films = |light_strategy, seed| {
+        let settings = RenderSettings { light_strategy, seed, ..transient.clone() };
+        common::render_films(ctx, scene, &settings, 16, spp)
+    };
+    let (a, b) = (films(LightStrategy::NextEvent, seed), films(LightStrategy::Bsdf, seed + 1));
+    let groups = 20 * 3;
+    let z = common::compare_films(&a, &b, groups, |i| Some(i % groups));
+    let limit = t_critical(sidak(common::peer::ALPHA, groups), 15.0);
+    for (g, (xa, xb, score)) in z.iter().enumerate() {
+        println!("{label}, bin {} channel {}: next-event {xa:.6}, sampled {xb:.6}, z {score:+.2}", g / 3, g % 3);
+        assert!(
+            score.abs() < limit,
+            "{label}: bin {} channel {}: {xa} against {xb} (z = {score:.2}, limit {limit:.2})",
+            g / 3,
+            g % 3
+        );
+    }
+}
+
 /// Renders `scene` with `path` (at most `max_bounces` bounces, seeds from `seed`) as the peer
 /// data in tests/data/NAME_peer hold it: steady 64×64 (8 × 64 spp) against `steady`, and a
 /// transient 16×16 of 20 bins of 0.1 m from 1.94 m (8 × 512 spp) against `transient_16x16`.
@@ -302,7 +334,6 @@ fn glass_agrees_with_mitransient_with_path_direct_and_combined() {
 /// `path` alone.
 #[test]
 fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
-    use gatetrace::integrator::LightStrategy;
     let ctx = common::gpu();
     let scene =
         load_scene_with(&common::repo_path("assets/scenes/rough_glass_box.xml"), &LoadOptions::default()).unwrap();
@@ -314,24 +345,7 @@ fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
     check_image("rough_glass_box_steady", &films, "rough_glass_box_peer/steady");
     let transient =
         RenderSettings { width: 16, height: 16, gate: Gate::parse("transient:1.94,0.1,20").unwrap(), ..steady };
-    let next_event = RenderSettings { light_strategy: LightStrategy::NextEvent, seed: 18, ..transient.clone() };
-    let bsdf = RenderSettings { light_strategy: LightStrategy::Bsdf, seed: 19, ..transient.clone() };
-    let (a, b) =
-        (common::render_films(&ctx, &scene, &next_event, 16, 512), common::render_films(&ctx, &scene, &bsdf, 16, 512));
-    // Per bin and channel over the image (BSDF sampling alone reaches the small lamp too rarely
-    // for blocks of pixels: many hold none of its samples in a bin at all).
-    let groups = 20 * 3;
-    let z = common::compare_films(&a, &b, groups, |i| Some(i % groups));
-    let limit = t_critical(sidak(common::peer::ALPHA, groups), 15.0);
-    for (g, (xa, xb, score)) in z.iter().enumerate() {
-        println!("rough glass, bin {} channel {}: next-event {xa:.6}, BSDF {xb:.6}, z {score:+.2}", g / 3, g % 3);
-        assert!(
-            score.abs() < limit,
-            "bin {} channel {}: {xa} against {xb} (z = {score:.2}, limit {limit:.2})",
-            g / 3,
-            g % 3
-        );
-    }
+    light_strategies_agree_per_bin("rough glass", &ctx, &scene, &transient, 512, 18);
     for method in [Method::Direct, Method::Ellipsoidal, Method::Combined] {
         let error =
             gatetrace::integrator::create_integrator(&ctx, &scene, &RenderSettings { method, ..transient.clone() })
@@ -364,26 +378,7 @@ fn fog_agrees_with_mitransient_with_path() {
     assert_eq!(scene.camera_medium, None);
     let scene = PreparedScene::new(scene).unwrap();
     let transient = path_agrees_with_peer(&ctx, &scene, "fog_box", 7, 17);
-    let strategy = |light_strategy, seed| {
-        let settings = RenderSettings { light_strategy, seed, ..transient.clone() };
-        common::render_films(&ctx, &scene, &settings, 16, 256)
-    };
-    let next_event = strategy(gatetrace::integrator::LightStrategy::NextEvent, 19);
-    let sampled = strategy(gatetrace::integrator::LightStrategy::Bsdf, 23);
-    // Per bin and channel over the image (sampling alone reaches the small lamp too rarely for
-    // blocks of pixels).
-    let groups = 20 * 3;
-    let z = common::compare_films(&next_event, &sampled, groups, |i| Some(i % groups));
-    let limit = t_critical(sidak(common::peer::ALPHA, groups), 15.0);
-    for (g, (xa, xb, score)) in z.iter().enumerate() {
-        println!("fog, bin {} channel {}: next-event {xa:.6}, sampled {xb:.6}, z {score:+.2}", g / 3, g % 3);
-        assert!(
-            score.abs() < limit,
-            "bin {} channel {}: {xa} against {xb} (z = {score:.2}, limit {limit:.2})",
-            g / 3,
-            g % 3
-        );
-    }
+    light_strategies_agree_per_bin("fog", &ctx, &scene, &transient, 256, 19);
     for method in [Method::Direct, Method::Ellipsoidal, Method::Combined] {
         let settings = RenderSettings { method, ..transient.clone() };
         let error = gatetrace::integrator::create_integrator(&ctx, &scene, &settings)

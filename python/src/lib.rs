@@ -73,10 +73,13 @@ impl Scene {
     /// through the surface (KHR_materials_transmission, KHR_materials_volume, ...) as opaque
     /// surfaces instead of refusing the scene (`render --allow-unsupported-materials`).
     /// `parameters` (name to value) replace a Mitsuba scene's `<default>`s (`render --define`).
+    /// `fog` = [sigma_t, albedo, g] (1 to 3 numbers: extinction in m^-1, albedo 0..1 (default 0.9),
+    /// Henyey-Greenstein g (default 0.8)) fills a scene without media with homogeneous fog
+    /// (`render --fog`), which only the path tracer renders.
     /// FileNotFoundError when the file does not exist; ValueError when it cannot be used.
     #[staticmethod]
     #[pyo3(signature = (path, *, aperture_radius=None, focus_distance=None, allow_unsupported_materials=false,
-        parameters=None))]
+        parameters=None, fog=None))]
     fn load(
         py: Python<'_>,
         path: PathBuf,
@@ -84,13 +87,20 @@ impl Scene {
         focus_distance: Option<f32>,
         allow_unsupported_materials: bool,
         parameters: Option<std::collections::BTreeMap<String, String>>,
+        fog: Option<Vec<f32>>,
     ) -> PyResult<Self> {
         if !path.exists() {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file", path.display())));
         }
         let load = || -> anyhow::Result<PreparedScene> {
             let parameters = parameters.unwrap_or_default().into_iter().collect();
-            let options = LoadOptions { allow_unsupported_materials, parameters, ..Default::default() };
+            let fog = fog
+                .map(|f| {
+                    let spec: Vec<String> = f.iter().map(|x| x.to_string()).collect();
+                    gatetrace::scene::MediumDesc::parse_fog(&spec.join(",")).map_err(|e| e.context("fog"))
+                })
+                .transpose()?;
+            let options = LoadOptions { allow_unsupported_materials, parameters, fog, ..Default::default() };
             let mut scene = load_scene_with(&path, &options)?;
             scene
                 .camera

@@ -50,6 +50,18 @@ def test_one_call_render_equals_the_command_line_bit_for_bit(tmp_path):
     assert np.array_equal(image, cli), f"largest difference {np.abs(image - cli).max()}"
 
 
+def test_a_fog_equals_the_command_lines_bit_for_bit(tmp_path):
+    renderer = gatetrace.Renderer(gatetrace.Scene.load(BOX, fog=[0.5, 0.9, 0.7]), res=(32, 24), max_bounces=4)
+    image, meta = renderer.render("none", spp=16, seed=3)
+    cli, cli_meta = cli_render(tmp_path, str(BOX), "--fog", "0.5,0.9,0.7", "--spp", "16", "--res", "32x24",
+                               "--max-bounces", "4", "--seed", "3")
+    assert image.mean() > 0
+    assert np.array_equal(image, cli), f"largest difference {np.abs(image - cli).max()}"
+    clear, _ = gatetrace.Renderer(gatetrace.Scene.load(BOX), res=(32, 24), max_bounces=4).render("none", spp=16, seed=3)
+    assert image.mean() < clear.mean()
+    assert cli_meta["media"][0]["sigma_t_per_m"] == 0.5 and cli_meta["camera_medium"] == 0
+
+
 def test_transient_cube_equals_the_command_line_and_has_the_documented_layout(tmp_path):
     renderer = gatetrace.Renderer(gatetrace.Scene.load(BOX), res=(32, 24), max_bounces=4)
     gate = gatetrace.transient(1.9, 0.1, 6)
@@ -130,6 +142,7 @@ def test_bidirectional_methods_agree_with_path_on_the_image_mean():
         (lambda: gatetrace.Scene.load(ROOT / "no/such/scene.gltf"), FileNotFoundError, "no such file"),
         (lambda: gatetrace.Scene.load(ROOT / "README.md"), ValueError, "README.md"),
         (lambda: gatetrace.Scene.load(BOX, aperture_radius=0.01), ValueError, "focus_distance="),
+        (lambda: gatetrace.Scene.load(BOX, fog=[0.0]), ValueError, "extinction"),
         (lambda: gatetrace.Scene.load(BOX, aperture_radius=0.01, focus_distance=-1.0), ValueError, "-1 m"),
         (lambda: gatetrace.Renderer(BOX, method="bidirectional"), ValueError, "method"),
         (lambda: gatetrace.Renderer(BOX, res=(0, 64)), ValueError, "res"),
