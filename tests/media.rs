@@ -221,3 +221,46 @@ fn a_white_furnace_of_fog_shows_the_walls_radiance() {
         assert!(z.abs() < limit, "channel {c}: {mean} against 1 (z = {z:.2}, limit {limit:.2})");
     }
 }
+
+/// The absorbing slab again, as a glTF scene: a cube whose material's `extras.medium` makes it the
+/// boundary of an absorbing medium (docs/scenes.md) between the camera and the lamp, against the
+/// same closed form; a medium without an extinction is refused, naming the material.
+#[test]
+fn a_gltf_material_with_a_medium_bounds_it() {
+    use common::gltf_builder::{Camera, Material, Mesh, Scene, quad_z, write_json};
+    // A unit cube about the origin, wound outwards.
+    let positions: Vec<[f32; 3]> =
+        (0..8).map(|i| [(i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5]).collect();
+    let indices = vec![
+        0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5,
+    ];
+    let cube = Mesh { positions, normals: None, uvs: None, indices, material: Some(1) };
+    let scene = Scene {
+        meshes: vec![quad_z(1.0, -1.0, true, 0), cube],
+        materials: vec![Material::emitter(1.0), Material::diffuse([0.5; 3])],
+        camera: Some(Camera { position: [0.0, 0.0, 2.0], rotation: [0.0, 0.0, 0.0, 1.0], yfov: 4f32.to_radians() }),
+        point_lights: vec![],
+    };
+    let dir = common::scratch_dir("gltf_medium");
+    let mut doc = scene.to_json();
+    doc["materials"][1]["name"] = "slab".into();
+    doc["materials"][1]["extras"] = serde_json::json!({"medium": {"sigma_t": 1.5, "albedo": 0.0}});
+    let path = write_json(&dir, "slab.gltf", &doc);
+    let loaded = load_scene_with(&path, &LoadOptions::default()).unwrap();
+    assert_eq!(loaded.media.len(), 1);
+    assert!(loaded.materials[1].null && loaded.materials[1].media.interior == Some(0));
+    let prepared = PreparedScene::new(loaded).unwrap();
+    let settings = RenderSettings {
+        width: 8,
+        height: 8,
+        gate: Gate::parse("transient:2.95,0.1,2").unwrap(),
+        seed: 4,
+        ..Default::default()
+    };
+    let films = common::render_films(&common::gpu(), &prepared, &settings, 8, 1024);
+    assert_first_bin_is(&films, mean_transmittance(8, 4.0, 1.5, 1.0));
+    doc["materials"][1]["extras"] = serde_json::json!({"medium": {"albedo": 0.5}});
+    let path = write_json(&dir, "no_extinction.gltf", &doc);
+    let error = format!("{:#}", load_scene_with(&path, &LoadOptions::default()).unwrap_err());
+    assert!(error.contains("no_extinction.gltf") && error.contains("`slab`") && error.contains("sigma_t"), "{error}");
+}

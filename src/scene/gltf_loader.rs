@@ -250,9 +250,10 @@ impl Loader<'_> {
             .ok_or_else(|| anyhow!("{name}: the file has no scene"))?;
         let mut textures = Vec::new();
         let mut texture_of_image = std::collections::HashMap::new();
+        let mut media = Vec::new();
         let mut materials = Vec::new();
         for m in doc.materials() {
-            materials.push(self.material(&m, &mut textures, &mut texture_of_image)?);
+            materials.push(self.material(&m, &mut textures, &mut texture_of_image, &mut media)?);
         }
         // Extensions declared but found on no material (where `material` reports them): on
         // textures, meshes or nodes, or nowhere.
@@ -334,7 +335,7 @@ impl Loader<'_> {
             nodes: c.nodes,
             warnings: self.warnings.take(),
             settings: Default::default(),
-            media: Vec::new(),
+            media,
             camera_medium: None,
         })
     }

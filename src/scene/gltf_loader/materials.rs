@@ -1,11 +1,12 @@
 //! glTF materials: base colour, metallic and roughness, emission (with
-//! KHR_materials_emissive_strength), sides, and base-colour textures decoded from sRGB.
+//! KHR_materials_emissive_strength), sides, base-colour textures decoded from sRGB, and
+//! participating media (a material's `extras.medium`).
 
 use anyhow::{Context as _, Result, anyhow, bail};
 use glam::Vec3;
 
 use super::{Loader, TRANSMISSIVE_EXTENSIONS};
-use crate::scene::{MaterialDesc, TextureData};
+use crate::scene::{MaterialDesc, MediumDesc, MediumInterface, TextureData};
 
 impl Loader<'_> {
     pub(super) fn material(
@@ -13,6 +14,7 @@ impl Loader<'_> {
         m: &gltf::Material,
         textures: &mut Vec<TextureData>,
         texture_of_image: &mut std::collections::HashMap<(usize, bool, bool), u32>,
+        media: &mut Vec<MediumDesc>,
     ) -> Result<MaterialDesc> {
         let name = self.name;
         let label = match (m.name(), m.index()) {
@@ -39,6 +41,23 @@ impl Loader<'_> {
                      Scene.load(..., allow_unsupported_materials=True))"
                 );
             }
+        }
+        if let Some(medium) = medium_extras(m).with_context(|| format!("{name}: {label}: extras.medium"))? {
+            media.push(MediumDesc { name: format!("{name}: {label}"), ..medium });
+            return Ok(MaterialDesc {
+                name: m.name().unwrap_or("").to_owned(),
+                base_color: Vec3::ZERO,
+                base_color_texture: None,
+                emission: Vec3::ZERO,
+                double_sided: true,
+                metallic: 0.0,
+                roughness: 1.0,
+                plastic: None,
+                dielectric: None,
+                conductor_index: None,
+                media: MediumInterface { interior: Some(media.len() as u32 - 1), exterior: None },
+                null: true,
+            });
         }
         let pbr = m.pbr_metallic_roughness();
         let [r, g, b, _] = pbr.base_color_factor();
@@ -151,4 +170,41 @@ fn decode_srgb_image(data: &gltf::image::Data) -> Result<TextureData> {
 /// sRGB transfer function, encoded [0, 1] to linear.
 pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// The homogeneous medium a material's `extras.medium` describes, which makes the material no
+/// surface at all, only the boundary of that medium (inside its closed, outward-wound meshes; in
+/// front of them vacuum): `{"medium": {"sigma_t": S, "albedo": A, "g": G}}`, S the extinction
+/// (m^-1, positive), A the single-scattering albedo (a number or [r, g, b], 0..1, default 0.9), G
+/// the Henyey-Greenstein mean cosine (-1..1, default 0). None without one.
+fn medium_extras(m: &gltf::Material) -> Result<Option<MediumDesc>> {
+    let Some(raw) = m.extras() else { return Ok(None) };
+    let value: serde_json::Value = serde_json::from_str(raw.get())?;
+    let Some(medium) = value.get("medium") else { return Ok(None) };
+    let number = |key: &str| -> Result<Option<f32>> {
+        match medium.get(key) {
+            None => Ok(None),
+            Some(v) => v.as_f64().map(|x| Some(x as f32)).ok_or_else(|| anyhow!("`{key}` is {v}, not a number")),
+        }
+    };
+    let sigma_t = number("sigma_t")?.ok_or_else(|| anyhow!("`sigma_t` (the extinction, m^-1) is missing"))?;
+    if !(sigma_t > 0.0 && sigma_t.is_finite()) {
+        bail!("sigma_t {sigma_t} is not a positive extinction (m^-1)");
+    }
+    let albedo = match medium.get("albedo") {
+        None => Vec3::splat(0.9),
+        Some(serde_json::Value::Array(a)) if a.len() == 3 => {
+            let c: Option<Vec<f32>> = a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect();
+            Vec3::from_slice(&c.ok_or_else(|| anyhow!("`albedo` {a:?} is not three numbers"))?)
+        }
+        Some(v) => Vec3::splat(v.as_f64().ok_or_else(|| anyhow!("`albedo` is {v}, not a number or [r, g, b]"))? as f32),
+    };
+    if !(albedo.min_element() >= 0.0 && albedo.max_element() <= 1.0) {
+        bail!("albedo {albedo} is not within [0, 1]");
+    }
+    let g = number("g")?.unwrap_or(0.0);
+    if !(g > -1.0 && g < 1.0) {
+        bail!("g {g} is not within (-1, 1)");
+    }
+    Ok(Some(MediumDesc { name: String::new(), sigma_t, albedo, g }))
 }
