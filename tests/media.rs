@@ -145,6 +145,11 @@ fn render_lamp(name: &str, xml: &str, fog: Option<&str>) -> Vec<gatetrace::film:
     let fog = fog.map(|f| gatetrace::scene::MediumDesc::parse_fog(f).unwrap());
     let scene =
         PreparedScene::new(load_scene_with(&path, &LoadOptions { fog, ..Default::default() }).unwrap()).unwrap();
+    lamp_films(&scene)
+}
+
+/// 8 films of 1,024 samples per pixel of an 8 x 8 lamp scene, in two bins of 0.1 m from 2.95 m.
+fn lamp_films(scene: &PreparedScene) -> Vec<gatetrace::film::Film> {
     let settings = RenderSettings {
         width: 8,
         height: 8,
@@ -152,7 +157,7 @@ fn render_lamp(name: &str, xml: &str, fog: Option<&str>) -> Vec<gatetrace::film:
         seed: 3,
         ..Default::default()
     };
-    common::render_films(&common::gpu(), &scene, &settings, 8, 1024)
+    common::render_films(&common::gpu(), scene, &settings, 8, 1024)
 }
 
 /// A camera standing in a purely absorbing fog (albedo 0, extinction 0.4 m^-1; `LoadOptions::fog`,
@@ -249,15 +254,7 @@ fn a_gltf_material_with_a_medium_bounds_it() {
     let loaded = load_scene_with(&path, &LoadOptions::default()).unwrap();
     assert_eq!(loaded.media.len(), 1);
     assert!(loaded.materials[1].null && loaded.materials[1].media.interior == Some(0));
-    let prepared = PreparedScene::new(loaded).unwrap();
-    let settings = RenderSettings {
-        width: 8,
-        height: 8,
-        gate: Gate::parse("transient:2.95,0.1,2").unwrap(),
-        seed: 4,
-        ..Default::default()
-    };
-    let films = common::render_films(&common::gpu(), &prepared, &settings, 8, 1024);
+    let films = lamp_films(&PreparedScene::new(loaded).unwrap());
     assert_first_bin_is(&films, mean_transmittance(8, 4.0, 1.5, 1.0));
     doc["materials"][1]["extras"] = serde_json::json!({"medium": {"albedo": 0.5}});
     let path = write_json(&dir, "no_extinction.gltf", &doc);

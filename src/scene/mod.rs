@@ -201,6 +201,25 @@ pub struct PlasticCoat {
 }
 
 impl MaterialDesc {
+    /// A `null` material named `name`: no surface, only the boundary between the `media` on its
+    /// two sides.
+    pub fn null_boundary(name: String, media: MediumInterface) -> Self {
+        MaterialDesc {
+            name,
+            base_color: Vec3::ZERO,
+            base_color_texture: None,
+            emission: Vec3::ZERO,
+            double_sided: true,
+            metallic: 0.0,
+            roughness: 1.0,
+            plastic: None,
+            dielectric: None,
+            conductor_index: None,
+            media,
+            null: true,
+        }
+    }
+
     /// True when the material emits (any emission channel above zero).
     pub fn is_emissive(&self) -> bool {
         self.emission.max_element() > 0.0

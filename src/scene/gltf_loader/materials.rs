@@ -44,20 +44,8 @@ impl Loader<'_> {
         }
         if let Some(medium) = medium_extras(m).with_context(|| format!("{name}: {label}: extras.medium"))? {
             media.push(MediumDesc { name: format!("{name}: {label}"), ..medium });
-            return Ok(MaterialDesc {
-                name: m.name().unwrap_or("").to_owned(),
-                base_color: Vec3::ZERO,
-                base_color_texture: None,
-                emission: Vec3::ZERO,
-                double_sided: true,
-                metallic: 0.0,
-                roughness: 1.0,
-                plastic: None,
-                dielectric: None,
-                conductor_index: None,
-                media: MediumInterface { interior: Some(media.len() as u32 - 1), exterior: None },
-                null: true,
-            });
+            let interface = MediumInterface { interior: Some(media.len() as u32 - 1), exterior: None };
+            return Ok(MaterialDesc::null_boundary(m.name().unwrap_or("").to_owned(), interface));
         }
         let pbr = m.pbr_metallic_roughness();
         let [r, g, b, _] = pbr.base_color_factor();

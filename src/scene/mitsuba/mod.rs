@@ -220,20 +220,7 @@ impl<'e> Builder<'e> {
         let desc = if bsdf.attribute("type") == Some("null") {
             bsdf.only_attributes(&["type", "id", "name"])?;
             Object::new(bsdf).finish(&[])?;
-            MaterialDesc {
-                name: "null".into(),
-                base_color: Vec3::ZERO,
-                base_color_texture: None,
-                emission: Vec3::ZERO,
-                double_sided: true,
-                metallic: 0.0,
-                roughness: 1.0,
-                plastic: None,
-                dielectric: None,
-                conductor_index: None,
-                media,
-                null: true,
-            }
+            MaterialDesc::null_boundary("null".into(), media)
         } else {
             let s = self.surface(bsdf)?;
             if let Some((_, map)) = s.texture {
