@@ -695,6 +695,15 @@ fn cases() -> Vec<(Case, Setup)> {
             &["--fog", "the extinction 0 m^-1 is not positive"],
         ),
         case(
+            "fog around glass that declares no media",
+            |d| {
+                let body = "<shape type=\"sphere\" id=\"ball\"><bsdf type=\"dielectric\"/></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            plain(&["render", "{dir}/scene.xml", "--res", "8x8", "--spp", "1", "--fog", "0.5", "--out", "{out}"]),
+            &["scene.xml", "the glass `", "declares no media", "`interior` and `exterior`"],
+        ),
+        case(
             "XML medium with a bidirectional method",
             |d| {
                 let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";

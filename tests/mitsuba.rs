@@ -390,3 +390,22 @@ fn fog_agrees_with_mitransient_with_path() {
     let settings = RenderSettings { method: Method::Auto, ..transient };
     assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
 }
+
+/// A medium bounded by glass (`assets/scenes/murky_glass_box.xml`: a water sphere of index 1.33
+/// holding a scattering medium, extinction 6 m^-1, g = 0.6) agrees with mitransient's
+/// `transient_prbvolpath` rendering the same file, steady and as a transient, with `path`: light
+/// refracts into the medium, scatters there, and every stretch inside, from the surface to a
+/// scattering vertex and between two of them, counts the index times its distance.
+#[test]
+fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
+    let ctx = common::gpu();
+    let scene =
+        load_scene_with(&common::repo_path("assets/scenes/murky_glass_box.xml"), &LoadOptions::default()).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!((scene.settings.max_bounces, scene.media.len()), (Some(31), 1));
+    let ball = &scene.materials[scene.triangles[scene.node("murky ball").unwrap().triangles.start].material as usize];
+    assert!(!ball.null && (ball.dielectric.unwrap().eta - 1.33).abs() < 1e-6);
+    assert_eq!((ball.media.interior, ball.media.exterior), (Some(0), None));
+    let scene = PreparedScene::new(scene).unwrap();
+    path_agrees_with_peer(&ctx, &scene, "murky_glass_box", 31, 23);
+}

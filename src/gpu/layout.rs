@@ -474,7 +474,9 @@ pub struct PathState {
     /// Where the closest-hit traversal of the path's ray resumes in a later round (a resume
     /// position, `bvh::wide::resume_position`); 0 while it has not started or has finished.
     pub traversal: u32,
-    /// Side of `origin_triangle` the ray leaves: +1 front, -1 back, 0 at the pinhole and point lights.
+    /// Its sign: the side of `origin_triangle` the ray leaves (+ front, - back; 0 at the pinhole
+    /// and point lights). Its magnitude: the index of refraction the ray travels through (1 in
+    /// air). A vertex in a medium has no triangle and keeps the index (positive).
     pub side: f32,
 }
 

@@ -315,8 +315,9 @@ impl Integrator for PathTracer<'_> {
 }
 
 /// Errors for participating media `path` does not render yet: in NLOS captures, and with a camera
-/// standing in a medium in a scene with glass (whose inside would hold the camera's medium: media
-/// are bounded by null surfaces only).
+/// standing in a medium in a scene with glass that declares no media of its own (its inside would
+/// hold the camera's medium, as in Mitsuba, where water or glass holds none). Thin panes pass the
+/// medium on unchanged and need none.
 fn check_media(scene: &PreparedScene, settings: &RenderSettings) -> Result<()> {
     if !scene.scene.has_media() {
         return Ok(());
@@ -326,11 +327,22 @@ fn check_media(scene: &PreparedScene, settings: &RenderSettings) -> Result<()> {
         settings.nlos.is_none(),
         "{name}: NLOS captures of scenes with participating media are not rendered yet"
     );
-    anyhow::ensure!(
-        scene.scene.camera_medium.is_none() || !scene.has_dielectric(),
-        "{name}: the camera stands in a medium and the scene holds glass: a dielectric does not bound media yet (bound \
-         them with `null` surfaces only)"
-    );
+    if scene.scene.camera_medium.is_some() {
+        let undeclared = |m: &crate::scene::MaterialDesc| {
+            m.dielectric.is_some_and(|d| !d.thin) && m.media == crate::scene::medium::MediumInterface::default()
+        };
+        let materials = &scene.scene.materials;
+        if let Some(glass) = scene.scene.triangles.iter().position(|t| undeclared(&materials[t.material as usize])) {
+            // The shape's name where the scene names it, else the material's.
+            let shape = scene.scene.nodes.iter().find(|n| n.triangles.contains(&glass)).map(|n| &n.name);
+            let material = &materials[scene.scene.triangles[glass].material as usize].name;
+            anyhow::bail!(
+                "{name}: the camera stands in a medium and the glass `{}` declares no media: its inside would hold \
+                 the camera's medium (declare the shape's `interior` and `exterior` media, or leave out the fog)",
+                shape.filter(|s| !s.is_empty()).unwrap_or(material)
+            );
+        }
+    }
     Ok(())
 }
 
