@@ -323,6 +323,34 @@ fn glass_agrees_with_mitransient_with_path_direct_and_combined() {
     assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path, Method::Direct]);
 }
 
+/// Glass and plastic with every method (`assets/scenes/glass_plastic_box.xml`: a BK7 sphere, a
+/// rough-plastic block and a checkerboard floor in the Cornell box) agree with mitransient
+/// rendering the same file: `path` and `direct` steady and as transients, and the combined
+/// method (ellipsoidal connections, with direct ones for the paths through glass that no spheroid
+/// vertex can join; gated renders only) as a transient.
+#[test]
+fn glass_and_plastic_agree_with_mitransient_with_every_method() {
+    let ctx = common::gpu();
+    let scene =
+        load_scene_with(&common::repo_path("assets/scenes/glass_plastic_box.xml"), &LoadOptions::default()).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let material =
+        |node: &str| &scene.materials[scene.triangles[scene.node(node).unwrap().triangles.start].material as usize];
+    assert!(material("glass ball").dielectric.is_some() && material("plastic block").plastic.is_some());
+    assert!(material("floor").base_color_texture.is_some());
+    let scene = PreparedScene::new(scene).unwrap();
+    let transient = path_agrees_with_peer(&ctx, &scene, "glass_plastic_box", 7, 29);
+    let direct = RenderSettings { method: Method::Direct, seed: 31, ..transient.clone() };
+    let films = common::render_films(&ctx, &scene, &direct, 8, 256);
+    check_transient("glass_plastic_box_transient_direct", &films, "glass_plastic_box_peer/transient_16x16", 20);
+    let steady = RenderSettings { width: 64, height: 64, gate: Gate::None, seed: 32, ..direct };
+    let films = common::render_films(&ctx, &scene, &steady, 8, 16);
+    check_image("glass_plastic_box_steady_direct", &films, "glass_plastic_box_peer/steady");
+    let combined = RenderSettings { method: Method::Combined, seed: 33, ..transient };
+    let films = common::render_films(&ctx, &scene, &combined, 8, 256);
+    check_transient("glass_plastic_box_transient_combined", &films, "glass_plastic_box_peer/transient_16x16", 20);
+}
+
 /// Rough glass (`assets/scenes/rough_glass_box.xml`: the glass box's sphere frosted, GGX alpha
 /// 0.2). Its steady image agrees with mitransient rendering the same file. In time it is checked
 /// against itself: next-event estimation alone (light reaching a vertex through the frosted
