@@ -187,6 +187,29 @@ fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
     assert_first_bin_is(&films, mean_transmittance(8, 4.0, 1.5, 1.0));
 }
 
+/// A null boundary lying on a surface: the absorbing slab of the test above with its back face in
+/// the lamp's plane (a block of fog resting on the lamp). A ray meets the null face and the lamp
+/// at the same distance; the lamp is taken (bvh.wesl NULL_SURFACES), so every pixel still sees
+/// exp(-1.5 d), with the scene's triangles tested one by one (14 of them) and through the BVH (a
+/// sphere out of view adds hundreds).
+#[test]
+fn a_null_boundary_on_a_surface_yields_to_the_surface() {
+    let slab = r#"<shape type="cube">
+        <transform name="to_world"><scale value="0.5"/><translate z="-0.5"/></transform>
+        <bsdf type="null"/>
+        <medium type="homogeneous" name="interior">
+            <float name="sigma_t" value="1.5"/>
+            <rgb name="albedo" value="0"/>
+        </medium>
+    </shape>"#;
+    let sphere =
+        r#"<shape type="sphere"><point name="center" x="0" y="0" z="5"/><float name="radius" value="0.1"/></shape>"#;
+    for (name, extra) in [("tie_small_scene", ""), ("tie_bvh", sphere)] {
+        let films = render_lamp(name, &lamp_scene(&format!("{slab}{extra}")), None);
+        assert_first_bin_is(&films, mean_transmittance(8, 4.0, 1.5, 1.0));
+    }
+}
+
 /// A white furnace of fog: a camera inside a closed box whose walls emit radiance 1 inwards and
 /// reflect nothing, filled with fog that absorbs nothing (albedo 1, extinction 1.5 m^-1, g = 0.6;
 /// `LoadOptions::fog`). Every path scatters until it reaches a wall, so every pixel sees radiance 1

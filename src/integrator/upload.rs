@@ -142,6 +142,7 @@ pub fn upload_scene(
         ("HAS_PLASTIC", flag(scene.has_plastic())),
         ("HAS_DIELECTRIC", flag(scene.has_dielectric())),
         ("HAS_MEDIA", flag(scene.scene.has_media())),
+        ("NULL_SURFACES", flag(scene.has_null_surfaces())),
         ("TRIANGLES_PER_CHUNK", triangles.per_chunk as f64),
         ("TRIANGLE_SHADING_PER_CHUNK", triangle_shading.per_chunk as f64),
         ("BVH_NODES_PER_CHUNK", bvh_nodes.per_chunk as f64),

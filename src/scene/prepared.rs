@@ -9,8 +9,8 @@ use super::materials::gpu_materials_and_textures;
 use crate::bvh::Bvh;
 use crate::bvh::wide::WideBvh;
 use crate::gpu::layout::{
-    MATERIAL_DIELECTRIC, MATERIAL_PLASTIC, MATERIAL_ROUGH, Material, NONE, NodeSurface, SHADING_HAS_NORMALS,
-    TextureInfo, Triangle, TriangleShading,
+    MATERIAL_DIELECTRIC, MATERIAL_NULL, MATERIAL_PLASTIC, MATERIAL_ROUGH, Material, NONE, NodeSurface,
+    SHADING_HAS_NORMALS, TextureInfo, Triangle, TriangleShading,
 };
 
 /// Everything the kernels read about a scene.
@@ -142,6 +142,12 @@ impl PreparedScene {
     /// True when some material is a dielectric ([`MATERIAL_DIELECTRIC`]), smooth or rough.
     pub fn has_dielectric(&self) -> bool {
         self.materials.iter().any(|m| m.flags & MATERIAL_DIELECTRIC != 0)
+    }
+
+    /// True when some material is a null surface ([`MATERIAL_NULL`]: a boundary of media only),
+    /// which closest hits treat specially (`bvh.wesl` NULL_SURFACES).
+    pub fn has_null_surfaces(&self) -> bool {
+        self.materials.iter().any(|m| m.flags & MATERIAL_NULL != 0)
     }
 
     /// True when some material is a rough dielectric ([`MATERIAL_ROUGH`]): only `path` renders it.
