@@ -169,21 +169,28 @@ fn a_camera_in_an_absorbing_fog_sees_a_lamp_attenuated_over_the_whole_ray() {
     assert_first_bin_is(&films, mean_transmittance(8, 4.0, 0.4, 3.0));
 }
 
+/// A cube 1 m wide (moved by `moved`, transform elements) of purely absorbing medium (albedo 0,
+/// extinction 1.5 m^-1) bounded by a `null` surface.
+fn absorbing_slab(moved: &str) -> String {
+    format!(
+        r#"<shape type="cube">
+        <transform name="to_world"><scale value="0.5"/>{moved}</transform>
+        <bsdf type="null"/>
+        <medium type="homogeneous" name="interior">
+            <float name="sigma_t" value="1.5"/>
+            <rgb name="albedo" value="0"/>
+        </medium>
+    </shape>"#
+    )
+}
+
 /// A camera looking through a slab of purely absorbing medium (albedo 0, extinction 1.5 m^-1,
 /// 1 m thick between two `null` faces) at an emitter of radiance 1: each pixel sees exp(-1.5 d),
 /// d the ray's length in the slab (1 / cos of its angle to the axis), all of it at the path length
 /// of the straight ray (a transient of two bins around 3 m).
 #[test]
 fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
-    let slab = r#"<shape type="cube">
-        <transform name="to_world"><scale value="0.5"/></transform>
-        <bsdf type="null"/>
-        <medium type="homogeneous" name="interior">
-            <float name="sigma_t" value="1.5"/>
-            <rgb name="albedo" value="0"/>
-        </medium>
-    </shape>"#;
-    let films = render_lamp("absorbing_slab", &lamp_scene(slab), None);
+    let films = render_lamp("absorbing_slab", &lamp_scene(&absorbing_slab("")), None);
     assert_first_bin_is(&films, mean_transmittance(8, 4.0, 1.5, 1.0));
 }
 
@@ -194,14 +201,7 @@ fn light_through_an_absorbing_slab_is_attenuated_by_its_transmittance() {
 /// sphere out of view adds hundreds).
 #[test]
 fn a_null_boundary_on_a_surface_yields_to_the_surface() {
-    let slab = r#"<shape type="cube">
-        <transform name="to_world"><scale value="0.5"/><translate z="-0.5"/></transform>
-        <bsdf type="null"/>
-        <medium type="homogeneous" name="interior">
-            <float name="sigma_t" value="1.5"/>
-            <rgb name="albedo" value="0"/>
-        </medium>
-    </shape>"#;
+    let slab = absorbing_slab(r#"<translate z="-0.5"/>"#);
     let sphere =
         r#"<shape type="sphere"><point name="center" x="0" y="0" z="5"/><float name="radius" value="0.1"/></shape>"#;
     for (name, extra) in [("tie_small_scene", ""), ("tie_bvh", sphere)] {
