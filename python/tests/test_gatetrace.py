@@ -113,6 +113,8 @@ def test_a_gate_sweep_on_one_renderer_builds_kernels_once_and_equals_fresh_rende
         fresh = gatetrace.Renderer(scene, res=(32, 32), max_bounces=4).render(
             gatetrace.box(starts[i], starts[i] + 0.05), spp=8, seed=3)[0]
         assert np.array_equal(images[i], fresh), f"gate {i}"
+    # The device keeps the kernels it built: fresh renderers with the same settings build none.
+    assert gatetrace.kernels_built() == built, "a fresh renderer rebuilt the kernels"
     # A gate of another kind needs other kernels, built on the same renderer, once: renders of
     # the steady state after it reuse them.
     steady, _ = renderer.render("none", spp=2)

@@ -26,6 +26,8 @@ pub struct GpuContext {
     /// GPU time per stage, when enabled (`enable_profiling`); kernels built afterwards record
     /// their dispatches into it.
     pub profiler: Option<super::profiler::SharedProfiler>,
+    /// The kernels built on this device so far, reused by later renders.
+    pub kernels: super::kernels::KernelCache,
     /// Why the device was lost, once it has been (the driver's reason and message).
     lost: std::sync::Arc<std::sync::Mutex<Option<String>>>,
     /// The first error the device reported outside an error scope (running out of memory for
@@ -75,7 +77,19 @@ impl GpuContext {
             };
             record.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(message);
         }));
-        Ok(Self { instance, adapter, device, queue, adapter_info, limits, features, profiler: None, lost, uncaptured })
+        Ok(Self {
+            instance,
+            adapter,
+            device,
+            queue,
+            adapter_info,
+            limits,
+            features,
+            profiler: None,
+            kernels: Default::default(),
+            lost,
+            uncaptured,
+        })
     }
 
     /// Why the device was lost (a driver reset, a hung kernel, an unplugged GPU), if it was.

@@ -61,13 +61,27 @@ pub fn kernel_variant(name: &str, feature: Option<&str>) -> &'static KernelSourc
         .unwrap_or_else(|| panic!("no kernel named `{name}` with feature {feature:?} in shaders/"))
 }
 
-/// Compute pipelines built in this process so far (every [`Kernel`]): the Python package's
-/// tests check that a gate sweep on one renderer builds none after its first render.
+/// Compute pipelines built in this process so far (each [`Kernel`] not found in its device's
+/// [`KernelCache`]): the Python package's tests check that a gate sweep on one renderer builds
+/// none after its first render.
 static KERNELS_BUILT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// How many compute pipelines (kernels) this process has built so far.
 pub fn kernels_built() -> u64 {
     KERNELS_BUILT.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// What tells two builds of a kernel apart: its source (name and feature), its pipeline label
+/// and the specialisation constants it declares, as f64 bits.
+type KernelKey = (&'static str, Option<&'static str>, String, Vec<(String, u64)>);
+
+/// The kernels one device has built, so that a process builds each specialisation once: the
+/// renders of `equal-time` and `bench`, a viewer's rebuilt tracers and the Python package's
+/// renderers reuse the pipelines of earlier renders instead of building them again (on CPU
+/// Vulkan about 1 s per render of an ellipsoidal method even with the driver's disk cache).
+#[derive(Default)]
+pub struct KernelCache {
+    built: std::sync::Mutex<std::collections::HashMap<KernelKey, (wgpu::ComputePipeline, wgpu::BindGroupLayout)>>,
 }
 
 /// A compute pipeline with its bind-group layout.
@@ -109,6 +123,28 @@ impl Kernel {
             Some(v) => format!("{name}({v})"),
             None => name.to_owned(),
         };
+        let key: KernelKey =
+            (name, source.feature, label.clone(), used.iter().map(|&(k, v)| (k.to_owned(), v.to_bits())).collect());
+        let cached = ctx.kernels.built.lock().unwrap_or_else(|e| e.into_inner()).get(&key).cloned();
+        let (pipeline, bind_group_layout) = match cached {
+            Some(built) => built,
+            None => {
+                let built = Self::build(ctx, source, &label, &used);
+                // Two threads that built the same kernel at once keep the first one's.
+                ctx.kernels.built.lock().unwrap_or_else(|e| e.into_inner()).entry(key).or_insert(built).clone()
+            }
+        };
+        Self { label, source, pipeline, bind_group_layout, profiler: ctx.profiler.clone() }
+    }
+
+    /// Compiles the pipeline of `source` specialised with `used` (the constants it declares).
+    fn build(
+        ctx: &GpuContext,
+        source: &'static KernelSource,
+        label: &str,
+        used: &[(&str, f64)],
+    ) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
+        let name = source.name;
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(name),
             source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(source.wgsl)),
@@ -133,25 +169,25 @@ impl Kernel {
             .collect();
         let bind_group_layout = ctx
             .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(&label), entries: &entries });
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
         let layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(&label),
+            label: Some(label),
             bind_group_layouts: &[Some(&bind_group_layout)],
             immediate_size: 0,
         });
         let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(&label),
+            label: Some(label),
             layout: Some(&layout),
             module: &module,
             entry_point: Some(name),
             compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &used,
+                constants: used,
                 zero_initialize_workgroup_memory: false,
             },
             cache: None,
         });
         KERNELS_BUILT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        Self { label, source, pipeline, bind_group_layout, profiler: ctx.profiler.clone() }
+        (pipeline, bind_group_layout)
     }
 
     /// A bind group with every binding of the kernel taken from `resources` by name.
