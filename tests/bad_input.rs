@@ -671,9 +671,9 @@ fn cases() -> Vec<(Case, Setup)> {
         ),
         xml_case(
             "XML medium of an unknown kind",
-            "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"heterogeneous\" name=\"interior\"/></shape>",
+            "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"fog\" name=\"interior\"/></shape>",
             &[],
-            &["scene.xml:5: <medium type=\"heterogeneous\" name=\"interior\">", "the medium `heterogeneous` is not rendered"],
+            &["scene.xml:5: <medium type=\"fog\" name=\"interior\">", "the medium `fog` is not rendered"],
         ),
         xml_case(
             "XML medium of coloured extinction",
@@ -702,6 +702,20 @@ fn cases() -> Vec<(Case, Setup)> {
             },
             plain(&["render", "{dir}/scene.xml", "--res", "8x8", "--spp", "1", "--fog", "0.5", "--out", "{out}"]),
             &["scene.xml", "the glass `", "declares no media", "`interior` and `exterior`"],
+        ),
+        case(
+            "XML heterogeneous medium whose grid file is cut short",
+            |d| {
+                gatetrace::scene::medium::write_vol(&d.join("smoke.vol"), [2, 2, 2], &[0.5; 8]).unwrap();
+                let bytes = std::fs::read(d.join("smoke.vol")).unwrap();
+                std::fs::write(d.join("smoke.vol"), &bytes[..bytes.len() - 4]).unwrap();
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"heterogeneous\" name=\"interior\">\
+                            <volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" value=\"smoke.vol\"/>\
+                            </volume></medium></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:", "<volume type=\"gridvolume\" name=\"sigma_t\">", "smoke.vol", "bytes where a 2 x 2 x 2 grid"],
         ),
         case(
             "XML medium with a bidirectional method",

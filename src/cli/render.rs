@@ -382,9 +382,14 @@ fn render_one(
             .media
             .iter()
             .map(|m| {
-                serde_json::json!({
+                let mut d = serde_json::json!({
                     "name": m.name, "sigma_t_per_m": m.sigma_t, "albedo": m.albedo.to_array(), "hg_g": m.g,
-                })
+                });
+                // A heterogeneous medium: sigma_t is the majorant, which the grid's values scale.
+                if let Some(grid) = &m.grid {
+                    d["grid_resolution"] = grid.resolution.to_vec().into();
+                }
+                d
             })
             .collect();
         metadata.push(("media".into(), media.into()));

@@ -230,25 +230,35 @@ pub struct Material {
     pub reserved2: u32,
 }
 
-/// A homogeneous participating medium (`shaders/lib/medium.wesl`; `scene::MediumDesc` as
-/// loaded): light travelling a distance t through it is attenuated by exp(-sigma_t t), and a
-/// share `albedo` of what it loses is scattered by the Henyey-Greenstein phase function of mean
-/// cosine `g`.
+/// A participating medium (`shaders/lib/medium.wesl`; `scene::MediumDesc` as loaded): light
+/// travelling a distance t through it is attenuated by exp(-integral of sigma_t), and a share
+/// `albedo` of what it loses is scattered by the Henyey-Greenstein phase function of mean cosine
+/// `g`. Homogeneous (`grid` = [`NONE`]): sigma_t is the extinction everywhere. Heterogeneous:
+/// the extinction at a point is sigma_t (the majorant) times the grid's value there, a share in
+/// [0, 1], and zero outside the grid's box.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct Medium {
     /// Single-scattering albedo sigma_s / sigma_t (linear RGB, 0..1).
     pub albedo: Vec3,
-    /// Extinction coefficient (m^-1), the same in every channel.
+    /// Extinction coefficient (m^-1), the same in every channel; a grid's largest.
     pub sigma_t: f32,
     /// Mean cosine of the scattering angle (-1..1; 0 isotropic, > 0 forward).
     pub g: f32,
+    /// First value of the medium's grid in `medium_densities` (x fastest, then y, then z), or
+    /// [`NONE`] for a homogeneous medium.
+    pub grid: u32,
+    /// 1 when grid lookups take the nearest value, 0 when they interpolate trilinearly (values at
+    /// the voxels' centres, clamped at the box's faces).
+    pub grid_nearest: u32,
     /// Padding.
     pub reserved0: u32,
+    /// Voxels along x, y and z.
+    pub grid_resolution: [u32; 3],
     /// Padding.
     pub reserved1: u32,
-    /// Padding.
-    pub reserved2: u32,
+    /// Rows of the affine map from world space (m) to the grid's unit cube.
+    pub world_to_grid: [[f32; 4]; 3],
 }
 
 /// Where one texture's texels lie in the texel buffer.

@@ -104,12 +104,21 @@ pub fn upload_scene(
     r.uniform_slice_init(ctx, "small_scene_normals", &padded_table(&small_normals, max_small));
     r.storage_init(ctx, "triangle_normals", &scene.normals)?;
     r.storage_init(ctx, "materials", &scene.materials)?;
-    // One unused entry in scenes without media (a binding cannot be empty).
-    let mut media: Vec<Medium> = scene.scene.media.iter().map(|m| m.to_gpu()).collect();
+    // One unused entry in scenes without media or grids (a binding cannot be empty).
+    let mut densities = Vec::new();
+    let mut media = Vec::new();
+    for m in &scene.scene.media {
+        media.push(m.to_gpu(densities.len() as u32));
+        densities.extend_from_slice(m.grid.as_ref().map_or(&[][..], |g| &g.values));
+    }
     if media.is_empty() {
         media.push(Medium::default());
     }
+    if densities.is_empty() {
+        densities.push(0.0f32);
+    }
     r.storage_init(ctx, "media", &media)?;
+    r.storage_init(ctx, "medium_densities", &densities)?;
     r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
     r.storage_init(ctx, "texels", &scene.texels)?;
     r.storage_init(ctx, "lights", &scene.lights.lights)?;
@@ -142,6 +151,7 @@ pub fn upload_scene(
         ("HAS_PLASTIC", flag(scene.has_plastic())),
         ("HAS_DIELECTRIC", flag(scene.has_dielectric())),
         ("HAS_MEDIA", flag(scene.scene.has_media())),
+        ("HAS_GRID_MEDIA", flag(scene.scene.media.iter().any(|m| m.grid.is_some()))),
         ("NULL_SURFACES", flag(scene.has_null_surfaces())),
         ("TRIANGLES_PER_CHUNK", triangles.per_chunk as f64),
         ("TRIANGLE_SHADING_PER_CHUNK", triangle_shading.per_chunk as f64),

@@ -1,33 +1,147 @@
-//! Participating media: homogeneous media bounded by `null` surfaces (Mitsuba's `null` BSDF with
-//! an `interior` medium) or around the camera, and the CPU twin of `shaders/lib/medium.wesl`
-//! (the Henyey-Greenstein phase function, its sampling, transmittance).
+//! Participating media: homogeneous media and heterogeneous ones on a grid of voxels (Mitsuba's
+//! `heterogeneous` medium over a `gridvolume`), bounded by `null` surfaces (Mitsuba's `null` BSDF
+//! with an `interior` medium) or around the camera, and the CPU twin of `shaders/lib/medium.wesl`
+//! (the Henyey-Greenstein phase function, its sampling, transmittance, grid lookups).
 //!
 //! Conventions: a phase function is written in terms of mu, the cosine between the direction a
 //! ray travelled in and the direction it leaves in, so mu = 1 is no deflection; a positive mean
 //! cosine g scatters forward (Mitsuba's and pbrt's `hg` alike).
 
-use glam::Vec3;
+use anyhow::{Context as _, Result};
+use glam::{Mat4, Vec3};
 
-use crate::gpu::layout::Medium;
+use crate::gpu::layout::{Medium, NONE};
 
-/// A homogeneous medium as loaded.
+/// A medium as loaded.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MediumDesc {
     /// Where it was declared (file and element), for messages.
     pub name: String,
-    /// Extinction coefficient sigma_t (m^-1), the same in every channel.
+    /// Extinction coefficient sigma_t (m^-1), the same in every channel; with a grid, its
+    /// largest (the majorant), which the grid's values scale.
     pub sigma_t: f32,
     /// Single-scattering albedo sigma_s / sigma_t (linear RGB, 0..1).
     pub albedo: Vec3,
     /// Mean cosine of the Henyey-Greenstein phase function (-1 < g < 1; 0: isotropic).
     pub g: f32,
+    /// The extinction's shares of `sigma_t` on a grid (a heterogeneous medium), None where it is
+    /// the same everywhere.
+    pub grid: Option<DensityGrid>,
 }
 
 impl MediumDesc {
-    /// The medium in the kernels' layout.
-    pub fn to_gpu(&self) -> Medium {
-        Medium { albedo: self.albedo, sigma_t: self.sigma_t, g: self.g, ..Default::default() }
+    /// The medium in the kernels' layout, its grid's values starting at `grid_offset` in
+    /// `medium_densities`.
+    pub fn to_gpu(&self, grid_offset: u32) -> Medium {
+        let mut m = Medium { albedo: self.albedo, sigma_t: self.sigma_t, g: self.g, grid: NONE, ..Default::default() };
+        if let Some(grid) = &self.grid {
+            m.grid = grid_offset;
+            m.grid_nearest = grid.nearest as u32;
+            m.grid_resolution = grid.resolution;
+            let rows = grid.world_to_grid.transpose();
+            m.world_to_grid = [rows.x_axis.to_array(), rows.y_axis.to_array(), rows.z_axis.to_array()];
+        }
+        m
     }
+
+    /// The extinction (m^-1) at world point `p`: sigma_t, times the grid's value there for a
+    /// heterogeneous medium (twin of `medium_extinction`).
+    pub fn extinction(&self, p: Vec3) -> f32 {
+        self.sigma_t * self.grid.as_ref().map_or(1.0, |g| g.share(p))
+    }
+}
+
+/// The extinction of a heterogeneous medium on a grid of voxels spanning a box: the unit cube
+/// that `world_to_grid` maps world space onto. Values are shares of the medium's majorant, in
+/// [0, 1]; outside the box the medium holds nothing.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DensityGrid {
+    /// Voxels along x, y and z.
+    pub resolution: [u32; 3],
+    /// One value per voxel, x fastest, then y, then z.
+    pub values: Vec<f32>,
+    /// Affine map from world space (m) to the grid's unit cube.
+    pub world_to_grid: Mat4,
+    /// Lookups take the nearest voxel's value (else trilinear interpolation between the voxels'
+    /// centres, clamped at the box's faces, as Mitsuba's `gridvolume` does by default).
+    pub nearest: bool,
+}
+
+impl DensityGrid {
+    /// The share of the majorant at world point `p` (twin of `grid_share` in medium.wesl).
+    pub fn share(&self, p: Vec3) -> f32 {
+        let u = self.world_to_grid.transform_point3(p);
+        if u.min_element() < 0.0 || u.max_element() > 1.0 {
+            return 0.0;
+        }
+        let res = self.resolution;
+        let at = |x: i64, y: i64, z: i64| -> f32 {
+            let c = |i: i64, n: u32| i.clamp(0, n as i64 - 1) as usize;
+            let (x, y, z) = (c(x, res[0]), c(y, res[1]), c(z, res[2]));
+            self.values[(z * res[1] as usize + y) * res[0] as usize + x]
+        };
+        let scaled = u * Vec3::new(res[0] as f32, res[1] as f32, res[2] as f32);
+        if self.nearest {
+            let i = scaled.floor();
+            return at(i.x as i64, i.y as i64, i.z as i64);
+        }
+        let p = scaled - 0.5;
+        let i = p.floor();
+        let f = p - i;
+        let (x, y, z) = (i.x as i64, i.y as i64, i.z as i64);
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        let c00 = lerp(at(x, y, z), at(x + 1, y, z), f.x);
+        let c10 = lerp(at(x, y + 1, z), at(x + 1, y + 1, z), f.x);
+        let c01 = lerp(at(x, y, z + 1), at(x + 1, y, z + 1), f.x);
+        let c11 = lerp(at(x, y + 1, z + 1), at(x + 1, y + 1, z + 1), f.x);
+        lerp(lerp(c00, c10, f.y), lerp(c01, c11, f.y), f.z)
+    }
+}
+
+/// A grid of one channel read from a file in Mitsuba's volume format (`.vol`: "VOL", version
+/// 3, encoding 1 (f32), the resolution, the channel count, a bounding box, then the values
+/// little-endian, x fastest): (resolution, values).
+pub fn read_vol(path: &std::path::Path) -> Result<([u32; 3], Vec<f32>)> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read the volume {}", path.display()))?;
+    let name = path.display();
+    anyhow::ensure!(
+        bytes.len() >= 48 && &bytes[..3] == b"VOL",
+        "{name}: not a volume file (it does not start with VOL)"
+    );
+    anyhow::ensure!(bytes[3] == 3, "{name}: volume format version {} (3 is read)", bytes[3]);
+    let word = |i: usize| i32::from_le_bytes(bytes[4 + 4 * i..8 + 4 * i].try_into().unwrap());
+    anyhow::ensure!(word(0) == 1, "{name}: encoding {} (1, 32-bit floats, is read)", word(0));
+    let (x, y, z, channels) = (word(1), word(2), word(3), word(4));
+    anyhow::ensure!(x > 0 && y > 0 && z > 0, "{name}: resolution {x} x {y} x {z} is not positive");
+    anyhow::ensure!(channels == 1, "{name}: {channels} channels (an extinction grid has one)");
+    let count = x as usize * y as usize * z as usize;
+    let expected = 48 + 4 * count;
+    anyhow::ensure!(
+        bytes.len() == expected,
+        "{name}: {} bytes where a {x} x {y} x {z} grid of one channel takes {expected}",
+        bytes.len()
+    );
+    let values: Vec<f32> = bytes[48..].chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+    if let Some(bad) = values.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+        anyhow::bail!("{name}: value {bad} ({}) is not a finite non-negative number", values[bad]);
+    }
+    Ok(([x as u32, y as u32, z as u32], values))
+}
+
+/// Writes a one-channel grid in Mitsuba's volume format (see [`read_vol`]), with the unit cube as
+/// its bounding box.
+pub fn write_vol(path: &std::path::Path, resolution: [u32; 3], values: &[f32]) -> Result<()> {
+    let mut bytes = b"VOL\x03".to_vec();
+    for w in [1, resolution[0] as i32, resolution[1] as i32, resolution[2] as i32, 1] {
+        bytes.extend_from_slice(&w.to_le_bytes());
+    }
+    for b in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0] {
+        bytes.extend_from_slice(&b.to_le_bytes());
+    }
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
 }
 
 impl MediumDesc {
@@ -49,7 +163,7 @@ impl MediumDesc {
         anyhow::ensure!(sigma_t > 0.0, "fog `{spec}`: the extinction {sigma_t} m^-1 is not positive");
         anyhow::ensure!((0.0..=1.0).contains(&albedo), "fog `{spec}`: the albedo {albedo} is not within [0, 1]");
         anyhow::ensure!(g > -1.0 && g < 1.0, "fog `{spec}`: g {g} is not within (-1, 1)");
-        Ok(MediumDesc { name: format!("fog {spec}"), sigma_t, albedo: Vec3::splat(albedo), g })
+        Ok(MediumDesc { name: format!("fog {spec}"), sigma_t, albedo: Vec3::splat(albedo), g, grid: None })
     }
 }
 
@@ -115,6 +229,38 @@ mod tests {
             assert!((total - 1.0).abs() < 1e-3, "g {g}: integral {total}");
             assert!((mean - g as f64).abs() < 2e-3, "g {g}: mean cosine {mean}");
         }
+    }
+
+    /// A grid written and read back keeps its values; lookups interpolate between the voxels'
+    /// centres, clamp at the box's faces and give zero outside; nearest lookups take the voxel.
+    #[test]
+    fn a_density_grid_reads_back_and_interpolates_between_voxel_centres() {
+        let dir = std::env::temp_dir().join(format!("gatetrace_vol_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("ramp.vol");
+        let values = [0.0, 1.0, 0.5, 0.25, 0.8, 0.6, 0.2, 0.4];
+        write_vol(&path, [2, 2, 2], &values).unwrap();
+        let (resolution, read) = read_vol(&path).unwrap();
+        assert_eq!((resolution, read.as_slice()), ([2, 2, 2], &values[..]));
+        // The box [-1, 1]^3.
+        let world_to_grid = Mat4::from_scale(Vec3::splat(0.5)) * Mat4::from_translation(Vec3::ONE);
+        let mut grid = DensityGrid { resolution, values: read, world_to_grid, nearest: false };
+        // Voxel centres (+-0.5), the midpoint between them, clamped faces, outside.
+        assert_eq!(grid.share(Vec3::new(-0.5, -0.5, -0.5)), 0.0);
+        assert_eq!(grid.share(Vec3::new(0.5, -0.5, -0.5)), 1.0);
+        assert!((grid.share(Vec3::new(0.0, -0.5, -0.5)) - 0.5).abs() < 1e-6);
+        assert_eq!(grid.share(Vec3::new(0.9, -0.9, -0.9)), 1.0);
+        let mean: f32 = values.iter().sum::<f32>() / 8.0;
+        assert!((grid.share(Vec3::ZERO) - mean).abs() < 1e-6);
+        assert_eq!(grid.share(Vec3::new(1.01, 0.0, 0.0)), 0.0);
+        grid.nearest = true;
+        assert_eq!(grid.share(Vec3::new(0.1, 0.9, 0.9)), 0.4);
+        assert_eq!(grid.share(Vec3::new(-0.1, -0.9, -0.9)), 0.0);
+        // A file of the wrong size is refused, naming it.
+        std::fs::write(&path, &std::fs::read(&path).unwrap()[..60]).unwrap();
+        let e = read_vol(&path).unwrap_err().to_string();
+        assert!(e.contains("ramp.vol") && e.contains("bytes"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Inverting the distribution: mu is -1 at u = 0, 1 at u = 1, and increasing.

@@ -194,5 +194,5 @@ fn medium_extras(m: &gltf::Material) -> Result<Option<MediumDesc>> {
     if !(g > -1.0 && g < 1.0) {
         bail!("g {g} is not within (-1, 1)");
     }
-    Ok(Some(MediumDesc { name: String::new(), sigma_t, albedo, g }))
+    Ok(Some(MediumDesc { name: String::new(), sigma_t, albedo, g, grid: None }))
 }

@@ -1,4 +1,5 @@
-//! Participating media of Mitsuba scenes: `homogeneous` media with a `hg` or `isotropic` phase
+//! Participating media of Mitsuba scenes: `homogeneous` media, and `heterogeneous` ones whose
+//! extinction is a `gridvolume` (a `.vol` file of one channel), with a `hg` or `isotropic` phase
 //! function, bounded by shapes with a `null` BSDF (their `interior` and `exterior` media) or
 //! around the sensor.
 
@@ -6,7 +7,15 @@ use anyhow::Result;
 
 use super::Builder;
 use super::xml::{Element, Object};
+use crate::scene::medium::{DensityGrid, read_vol};
 use crate::scene::{MediumDesc, MediumInterface};
+
+/// A heterogeneous medium's `<volume>` child: a constant, or a grid with the largest value it
+/// declares (`max_value`) or holds.
+enum Volume {
+    Constant(glam::Vec3),
+    Grid(DensityGrid, f32),
+}
 
 impl<'e> Builder<'e> {
     /// The index of the medium a `<medium>` element describes (each element read once).
@@ -18,11 +27,36 @@ impl<'e> Builder<'e> {
         e.only_attributes(&["type", "id", "name"])?;
         let o = Object::new(e);
         let kind = o.kind()?;
-        if kind != "homogeneous" {
-            return Err(e.error(format!("the medium `{kind}` is not rendered (homogeneous media are)")));
+        if kind != "homogeneous" && kind != "heterogeneous" {
+            return Err(
+                e.error(format!("the medium `{kind}` is not rendered (homogeneous and heterogeneous media are)"))
+            );
         }
         let scale = o.float("scale")?.unwrap_or(1.0);
-        let sigma = o.color("sigma_t")?.unwrap_or(glam::Vec3::ONE) * scale;
+        // A heterogeneous medium's sigma_t and albedo may be <volume> children.
+        let mut volumes = std::collections::HashMap::new();
+        for v in e.children.iter().filter(|c| c.tag == "volume") {
+            if kind != "heterogeneous" {
+                return Err(v.error("a homogeneous medium takes no <volume> (a heterogeneous one does)"));
+            }
+            let name = v.required("name")?;
+            if name != "sigma_t" && name != "albedo" {
+                return Err(v.error(format!("a medium's volume is `sigma_t` or `albedo`, not `{name}`")));
+            }
+            if volumes.insert(name, self.volume(v)?).is_some() {
+                return Err(v.error(format!("a second `{name}`")));
+            }
+        }
+        let (sigma, mut grid) = match volumes.remove("sigma_t") {
+            Some(Volume::Grid(grid, max)) => {
+                if !(max > 0.0) {
+                    return Err(e.error("the sigma_t grid holds no extinction anywhere (its largest value is 0)"));
+                }
+                (glam::Vec3::splat(max * scale), Some(grid))
+            }
+            Some(Volume::Constant(c)) => (c * scale, None),
+            None => (o.color("sigma_t")?.unwrap_or(glam::Vec3::ONE) * scale, None),
+        };
         if sigma.max_element() - sigma.min_element() > 1e-6 * sigma.max_element() {
             return Err(e.error(format!(
                 "sigma_t differs between channels ({sigma}): give one extinction coefficient (m^-1) for all three"
@@ -32,7 +66,18 @@ impl<'e> Builder<'e> {
         if !(sigma_t > 0.0 && sigma_t.is_finite()) {
             return Err(e.error(format!("sigma_t x scale = {sigma_t} is not a positive extinction coefficient (m^-1)")));
         }
-        let albedo = o.color("albedo")?.unwrap_or(glam::Vec3::splat(0.75));
+        // The grid's values as shares of the largest, the majorant sigma_t.
+        if let Some(grid) = &mut grid {
+            let max = sigma_t / scale;
+            grid.values.iter_mut().for_each(|v| *v /= max);
+        }
+        let albedo = match volumes.remove("albedo") {
+            Some(Volume::Constant(c)) => c,
+            Some(Volume::Grid(..)) => {
+                return Err(e.error("an albedo on a grid is not rendered: give one albedo (<rgb> or <float>)"));
+            }
+            None => o.color("albedo")?.unwrap_or(glam::Vec3::splat(0.75)),
+        };
         if albedo.min_element() < 0.0 || albedo.max_element() > 1.0 {
             return Err(e.error(format!("albedo {albedo} is not within [0, 1]")));
         }
@@ -62,11 +107,61 @@ impl<'e> Builder<'e> {
                 return Err(second.error("a medium takes one phase function"));
             }
         }
-        o.finish(&["phase"])?;
-        self.media.push(MediumDesc { name: e.at(), sigma_t, albedo, g });
+        o.finish(&["phase", "volume"])?;
+        self.media.push(MediumDesc { name: e.at(), sigma_t, albedo, g, grid });
         let m = self.media.len() as u32 - 1;
         self.medium_of.insert(key, m);
         Ok(m)
+    }
+
+    /// A heterogeneous medium's `<volume>`: `constvolume` (its `value`) or `gridvolume` (its
+    /// `filename`, a `.vol` file of one channel, over the unit cube placed by `to_world`;
+    /// `filter_type` trilinear or nearest; `wrap_mode` clamp; `max_value`, a majorant at least
+    /// the grid's largest value).
+    fn volume(&self, v: &'e Element) -> Result<Volume> {
+        v.only_attributes(&["type", "name"])?;
+        let o = Object::new(v);
+        let volume = match o.kind()? {
+            "constvolume" => Volume::Constant(o.color("value")?.unwrap_or(glam::Vec3::ONE)),
+            "gridvolume" | "grid" => {
+                let file = o.string("filename")?.ok_or_else(|| v.error("`filename` is missing"))?;
+                let (resolution, values) =
+                    read_vol(&self.base.join(file)).map_err(|err| v.error(format!("{err:#}")))?;
+                let nearest = match o.string("filter_type")?.unwrap_or("trilinear") {
+                    "trilinear" => false,
+                    "nearest" => true,
+                    other => return Err(v.error(format!("filter_type `{other}` is not trilinear or nearest"))),
+                };
+                match o.string("wrap_mode")?.unwrap_or("clamp") {
+                    "clamp" => {}
+                    other => return Err(v.error(format!("wrap_mode `{other}` is not rendered (clamp is)"))),
+                }
+                if o.boolean("use_grid_bbox")?.unwrap_or(false) {
+                    return Err(v.error("use_grid_bbox is not read: place the grid's unit cube with to_world"));
+                }
+                let to_world = o.transform("to_world")?;
+                if !(to_world.determinant().abs() > 0.0) {
+                    return Err(v.error("to_world flattens the grid's box (its determinant is 0)"));
+                }
+                let largest = values.iter().fold(0.0f32, |a, &b| a.max(b));
+                let max = match o.float("max_value")? {
+                    Some(m) if m < largest => {
+                        return Err(v.error(format!(
+                            "max_value {m} is below the grid's largest value {largest}: it must bound the grid"
+                        )));
+                    }
+                    Some(m) => m,
+                    None => largest,
+                };
+                o.ignore(&["raw", "accel"]);
+                Volume::Grid(DensityGrid { resolution, values, world_to_grid: to_world.inverse(), nearest }, max)
+            }
+            other => {
+                return Err(v.error(format!("the volume `{other}` is not rendered (constvolume and gridvolume are)")));
+            }
+        };
+        o.finish(&[])?;
+        Ok(volume)
     }
 
     /// The media on a shape's two sides: its `<medium name="interior|exterior">` children and
