@@ -224,12 +224,9 @@ fn a_white_furnace_of_fog_shows_the_walls_radiance() {
         <float name="fov" value="60"/>
         <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, -1" up="0, 1, 0"/></transform>
     </sensor>
-    <shape type="cube">
-        <boolean name="flip_normals" value="true"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
-    </shape>
-</scene>"#;
+"#
+    .to_owned()
+        + FURNACE_WALLS;
     let dir = common::scratch_dir("fog_furnace");
     let path = dir.join("scene.xml");
     std::fs::write(&path, xml).unwrap();
@@ -237,6 +234,15 @@ fn a_white_furnace_of_fog_shows_the_walls_radiance() {
     let scene = load_scene_with(&path, &LoadOptions { fog, ..Default::default() }).unwrap();
     assert_furnace_is_white(scene, 5);
 }
+
+/// The walls of the white furnaces, closing their scenes: a cube about the origin, 2 m wide, whose
+/// inside emits radiance 1 and reflects nothing.
+const FURNACE_WALLS: &str = r#"<shape type="cube">
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+    </shape>
+</scene>"#;
 
 /// Renders a white furnace (`scene`: the camera in a non-absorbing medium inside walls that emit
 /// radiance 1 and reflect nothing) at 8 x 8 pixels, 8 films of 256 samples per pixel from `seed`,
@@ -368,12 +374,9 @@ fn a_white_furnace_of_heterogeneous_fog_shows_the_walls_radiance() {
         <transform name="to_world"><lookat origin="0, 0, 0.8" target="0, 0, -1" up="0, 1, 0"/></transform>
         <ref id="fog"/>
     </sensor>
-    <shape type="cube">
-        <boolean name="flip_normals" value="true"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
-        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
-    </shape>
-</scene>"#;
+"#
+    .to_owned()
+        + FURNACE_WALLS;
     let path = dir.join("scene.xml");
     std::fs::write(&path, xml).unwrap();
     let scene = load_scene_with(&path, &LoadOptions::default()).unwrap();

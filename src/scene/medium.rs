@@ -43,12 +43,6 @@ impl MediumDesc {
         }
         m
     }
-
-    /// The extinction (m^-1) at world point `p`: sigma_t, times the grid's value there for a
-    /// heterogeneous medium (twin of `medium_extinction`).
-    pub fn extinction(&self, p: Vec3) -> f32 {
-        self.sigma_t * self.grid.as_ref().map_or(1.0, |g| g.share(p))
-    }
 }
 
 /// The extinction of a heterogeneous medium on a grid of voxels spanning a box: the unit cube

@@ -47,11 +47,13 @@ impl<'e> Builder<'e> {
                 return Err(v.error(format!("a second `{name}`")));
             }
         }
-        let (sigma, mut grid) = match volumes.remove("sigma_t") {
-            Some(Volume::Grid(grid, max)) => {
+        let (sigma, grid) = match volumes.remove("sigma_t") {
+            Some(Volume::Grid(mut grid, max)) => {
                 if !(max > 0.0) {
                     return Err(e.error("the sigma_t grid holds no extinction anywhere (its largest value is 0)"));
                 }
+                // The values as shares of the largest: the majorant sigma_t is max x scale.
+                grid.values.iter_mut().for_each(|v| *v /= max);
                 (glam::Vec3::splat(max * scale), Some(grid))
             }
             Some(Volume::Constant(c)) => (c * scale, None),
@@ -65,11 +67,6 @@ impl<'e> Builder<'e> {
         let sigma_t = sigma.x;
         if !(sigma_t > 0.0 && sigma_t.is_finite()) {
             return Err(e.error(format!("sigma_t x scale = {sigma_t} is not a positive extinction coefficient (m^-1)")));
-        }
-        // The grid's values as shares of the largest, the majorant sigma_t.
-        if let Some(grid) = &mut grid {
-            let max = sigma_t / scale;
-            grid.values.iter_mut().for_each(|v| *v /= max);
         }
         let albedo = match volumes.remove("albedo") {
             Some(Volume::Constant(c)) => c,
