@@ -718,6 +718,34 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:", "<volume type=\"gridvolume\" name=\"sigma_t\">", "smoke.vol", "bytes where a 2 x 2 x 2 grid"],
         ),
         case(
+            "XML albedo grid over a constant extinction",
+            |d| {
+                gatetrace::scene::medium::write_vol(&d.join("albedo.vol"), [2, 2, 2], &[0.5; 8]).unwrap();
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"heterogeneous\" name=\"interior\">\
+                            <float name=\"sigma_t\" value=\"2\"/>\
+                            <volume type=\"gridvolume\" name=\"albedo\"><string name=\"filename\" value=\"albedo.vol\"/>\
+                            </volume></medium></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:", "<volume type=\"gridvolume\" name=\"albedo\">", "give sigma_t as a gridvolume too"],
+        ),
+        case(
+            "XML albedo grid on other voxels than the extinction's",
+            |d| {
+                gatetrace::scene::medium::write_vol(&d.join("smoke.vol"), [2, 2, 2], &[0.5; 8]).unwrap();
+                gatetrace::scene::medium::write_vol(&d.join("albedo.vol"), [4, 2, 1], &[0.5; 8]).unwrap();
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"heterogeneous\" name=\"interior\">\
+                            <volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" value=\"smoke.vol\"/>\
+                            </volume>\
+                            <volume type=\"gridvolume\" name=\"albedo\"><string name=\"filename\" value=\"albedo.vol\"/>\
+                            </volume></medium></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:", "the albedo grid (4 x 2 x 1) must share the sigma_t grid's voxels (2 x 2 x 2)"],
+        ),
+        case(
             "XML medium with a bidirectional method",
             |d| {
                 let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";

@@ -24,7 +24,7 @@ fn wgsl_structs_match_rust_structs() {
                    specular, plastic_internal_reflectance, plastic_specular_weight, interior_medium, conductor_eta, exterior_medium,
                    conductor_k, reserved2 }
         TextureInfo { offset, width, height, wrap }
-        Medium { albedo, sigma_t, g, grid, grid_nearest, reserved0, grid_resolution, reserved1, world_to_grid }
+        Medium { albedo, sigma_t, g, grid, grid_nearest, albedo_grid, grid_resolution, reserved1, world_to_grid }
         Light { position, kind, emission, triangle, direction, area, select_pdf, flags, cos_outer, cos_inner }
         Camera { position, tan_half_fov_y, right, aspect, up, lens_radius, forward, focus_distance }
         GateParams { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }

@@ -384,9 +384,15 @@ fn a_white_furnace_of_heterogeneous_fog_shows_the_walls_radiance() {
     assert_furnace_is_white(scene, 7);
 }
 
-/// A fog box whose medium is `medium` (an XML `<medium name="interior">`), lit by the Cornell
-/// box's light, as a transient of 12 bins of 0.1 m from 1.94 m: 8 films of 16 x 16 pixels.
-fn fog_box_transient(name: &str, medium: &str, files: &[(&str, &[f32])]) -> Vec<gatetrace::film::Film> {
+/// A fog box whose medium is `medium` (an XML `<medium name="interior">`, its grids `files` of
+/// 2 x 2 x 2 voxels), lit by the Cornell box's light, as a transient of 12 bins of 0.1 m from
+/// 1.94 m: 8 films of 16 x 16 pixels, paths of at most `max_bounces` vertices.
+fn fog_box_transient(
+    name: &str,
+    medium: &str,
+    files: &[(&str, &[f32])],
+    max_bounces: u32,
+) -> Vec<gatetrace::film::Film> {
     let dir = common::scratch_dir(name);
     for (file, values) in files {
         gatetrace::scene::medium::write_vol(&dir.join(file), [2, 2, 2], values).unwrap();
@@ -406,7 +412,7 @@ fn fog_box_transient(name: &str, medium: &str, files: &[(&str, &[f32])]) -> Vec<
     let settings = RenderSettings {
         width: 16,
         height: 16,
-        max_bounces: 8,
+        max_bounces,
         gate: Gate::parse("transient:1.94,0.1,12").unwrap(),
         seed: 11,
         ..Default::default()
@@ -435,7 +441,115 @@ fn null_collisions_count_in_the_path_length() {
             <float name="scale" value="8"/>
             <rgb name="albedo" value="0.9"/>
         </medium>"#;
-    let a = fog_box_transient("half_homogeneous", homogeneous, &[]);
-    let b = fog_box_transient("half_grid", gridded, &[("half.vol", &[0.5; 8])]);
+    let a = fog_box_transient("half_homogeneous", homogeneous, &[], 8);
+    let b = fog_box_transient("half_grid", gridded, &[("half.vol", &[0.5; 8])], 8);
     common::assert_films_agree("homogeneous against a grid at half its majorant", &a, &b, 8, 0.001);
+}
+
+/// The fog box's heterogeneous medium (its extinction the grid `density.vol`, nearest voxels,
+/// scale 8 m^-1) with albedo `albedo`: an XML element, an `<rgb>` or a `<volume>`.
+fn fog_box_grid_medium(albedo: &str) -> String {
+    let volume = |name: &str, file: &str| {
+        format!(
+            r#"<volume type="gridvolume" name="{name}">
+                <string name="filename" value="{file}"/>
+                <string name="filter_type" value="nearest"/>
+                <transform name="to_world"><translate value="-0.5, -0.5, -0.5"/><scale value="0.5"/>
+                    <translate value="0.05, -0.2, 0.05"/></transform>
+            </volume>"#
+        )
+    };
+    let albedo = match albedo.strip_suffix(".vol") {
+        Some(_) => volume("albedo", albedo),
+        None => format!(r#"<rgb name="albedo" value="{albedo}"/>"#),
+    };
+    format!(
+        r#"<medium type="heterogeneous" name="interior">
+            {}
+            <float name="scale" value="8"/>
+            {albedo}
+        </medium>"#,
+        volume("sigma_t", "density.vol")
+    )
+}
+
+/// Extinction of the fog box's grid (shares of its largest, 8 m^-1), voxel by voxel (x fastest).
+const FOG_BOX_DENSITY: [f32; 8] = [0.9, 0.3, 1.0, 0.5, 0.2, 0.8, 0.6, 0.4];
+
+/// An albedo grid holding one value everywhere renders exactly as that albedo given once: the
+/// same random numbers make the same paths, and each collision's albedo is looked up on the
+/// grid (after the extinction's values in `medium_densities`).
+#[test]
+fn an_albedo_grid_of_one_value_is_that_albedo() {
+    let one =
+        fog_box_transient("albedo_constant", &fog_box_grid_medium("0.7"), &[("density.vol", &FOG_BOX_DENSITY)], 8);
+    let grid = fog_box_transient(
+        "albedo_grid",
+        &fog_box_grid_medium("albedo.vol"),
+        &[("density.vol", &FOG_BOX_DENSITY), ("albedo.vol", &[0.7; 8])],
+        8,
+    );
+    let total = |films: &[gatetrace::film::Film]| films.iter().flat_map(|f| &f.data).map(|&v| v as f64).sum::<f64>();
+    println!("total radiance: one albedo {}, albedo grid {}", total(&one), total(&grid));
+    assert!(total(&one) > 0.0);
+    for (a, b) in one.iter().zip(&grid) {
+        assert!(a.data == b.data, "an albedo grid of 0.7 everywhere rendered another image than albedo 0.7");
+    }
+}
+
+/// With one scattering vertex a path's weight is linear in the albedo where it scatters, and the
+/// albedo steers no sampling: with the same seed the four renders trace the same paths, so the
+/// images with the albedo grid 1 on the fog's x < 0.05 half (0 on the other) and on the other
+/// half add up to those with albedo 1 and 0 everywhere, to rounding. And the light the two halves
+/// scatter falls on different sides of the image.
+#[test]
+fn an_albedo_grid_weighs_each_collision_by_the_albedo_where_it_lies() {
+    let left: Vec<f32> = (0..8).map(|i| if i % 2 == 0 { 1.0 } else { 0.0 }).collect();
+    let right: Vec<f32> = left.iter().map(|a| 1.0 - a).collect();
+    let render = |name: &str, albedo: &[f32]| {
+        fog_box_transient(
+            name,
+            &fog_box_grid_medium("albedo.vol"),
+            &[("density.vol", &FOG_BOX_DENSITY), ("albedo.vol", albedo)],
+            1,
+        )
+    };
+    let renders = [
+        render("albedo_left", &left),
+        render("albedo_right", &right),
+        render("albedo_one", &[1.0; 8]),
+        render("albedo_zero", &[0.0; 8]),
+    ];
+    // Per film: the radiance summed over bins and channels, in the image's left and right halves.
+    let halves = |films: &[gatetrace::film::Film]| -> Vec<[f64; 2]> {
+        films
+            .iter()
+            .map(|f| {
+                let per_pixel = f.data.len() / 256;
+                let mut sums = [0.0; 2];
+                for (i, v) in f.data.iter().enumerate() {
+                    let x = (i / per_pixel) % 16;
+                    sums[(x >= 8) as usize] += *v as f64;
+                }
+                sums
+            })
+            .collect()
+    };
+    let h: Vec<Vec<[f64; 2]>> = renders.iter().map(|r| halves(r)).collect();
+    let total = |k: usize| h[k].iter().map(|s| s[0] + s[1]).sum::<f64>();
+    let difference = total(0) + total(1) - total(2) - total(3);
+    println!("left + right - one - zero = {difference:.3e} (one: {:.6})", total(2));
+    assert!(difference.abs() <= 1e-5 * total(2), "left + right - one - zero = {difference} (one: {})", total(2));
+    // The light each half scatters: its image less the albedo-0 image, and its share on the
+    // image's left.
+    let side = |k: usize, s: usize| h[k].iter().zip(&h[3]).map(|(x, zero)| x[s] - zero[s]).sum::<f64>();
+    let share = |k: usize| side(k, 0) / (side(k, 0) + side(k, 1));
+    let scattered = side(2, 0) + side(2, 1);
+    println!(
+        "scattered light on the image's left: from x < 0.05 {:.3}, from x > 0.05 {:.3} (all scattered {scattered:.5})",
+        share(0),
+        share(1)
+    );
+    assert!(scattered > 0.0);
+    assert!((share(0) - share(1)).abs() > 0.3, "both halves scatter light onto the same side of the image");
 }

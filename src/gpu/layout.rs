@@ -251,8 +251,9 @@ pub struct Medium {
     /// 1 when grid lookups take the nearest value, 0 when they interpolate trilinearly (values at
     /// the voxels' centres, clamped at the box's faces).
     pub grid_nearest: u32,
-    /// Padding.
-    pub reserved0: u32,
+    /// First value of the albedo grid in `medium_densities` (the same voxels as the extinction's,
+    /// looked up alike, times `albedo`), or [`NONE`] where `albedo` holds everywhere.
+    pub albedo_grid: u32,
     /// Voxels along x, y and z.
     pub grid_resolution: [u32; 3],
     /// Padding.

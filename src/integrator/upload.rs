@@ -109,7 +109,7 @@ pub fn upload_scene(
     let mut media = Vec::new();
     for m in &scene.scene.media {
         media.push(m.to_gpu(densities.len() as u32));
-        densities.extend_from_slice(m.grid.as_ref().map_or(&[][..], |g| &g.values));
+        densities.extend(m.grid.iter().flat_map(|g| g.densities()));
     }
     if media.is_empty() {
         media.push(Medium::default());

@@ -20,7 +20,8 @@ pub struct MediumDesc {
     /// Extinction coefficient sigma_t (m^-1), the same in every channel; with a grid, its
     /// largest (the majorant), which the grid's values scale.
     pub sigma_t: f32,
-    /// Single-scattering albedo sigma_s / sigma_t (linear RGB, 0..1).
+    /// Single-scattering albedo sigma_s / sigma_t (linear RGB, 0..1); with an albedo grid
+    /// (`DensityGrid::albedo`), the factor on its values (1).
     pub albedo: Vec3,
     /// Mean cosine of the Henyey-Greenstein phase function (-1 < g < 1; 0: isotropic).
     pub g: f32,
@@ -31,11 +32,22 @@ pub struct MediumDesc {
 
 impl MediumDesc {
     /// The medium in the kernels' layout, its grid's values starting at `grid_offset` in
-    /// `medium_densities`.
+    /// `medium_densities`, followed by its albedo grid's ([`DensityGrid::densities`]).
     pub fn to_gpu(&self, grid_offset: u32) -> Medium {
-        let mut m = Medium { albedo: self.albedo, sigma_t: self.sigma_t, g: self.g, grid: NONE, ..Default::default() };
+        let mut m = Medium {
+            albedo: self.albedo,
+            sigma_t: self.sigma_t,
+            g: self.g,
+            grid: NONE,
+            albedo_grid: NONE,
+            ..Default::default()
+        };
         if let Some(grid) = &self.grid {
             m.grid = grid_offset;
+            m.albedo_grid = match grid.albedo {
+                Some(_) => grid_offset + grid.values.len() as u32,
+                None => NONE,
+            };
             m.grid_nearest = grid.nearest as u32;
             m.grid_resolution = grid.resolution;
             let rows = grid.world_to_grid.transpose();
@@ -59,11 +71,32 @@ pub struct DensityGrid {
     /// Lookups take the nearest voxel's value (else trilinear interpolation between the voxels'
     /// centres, clamped at the box's faces, as Mitsuba's `gridvolume` does by default).
     pub nearest: bool,
+    /// The single-scattering albedo (0..1, the same in every channel) on the same voxels, looked
+    /// up alike; None where the medium has one albedo.
+    pub albedo: Option<Vec<f32>>,
 }
 
 impl DensityGrid {
     /// The share of the majorant at world point `p` (twin of `grid_share` in medium.wesl).
     pub fn share(&self, p: Vec3) -> f32 {
+        self.lookup(&self.values, p)
+    }
+
+    /// The albedo grid's value at world point `p`, None without one (twin of `medium_albedo`'s
+    /// lookup in medium.wesl).
+    pub fn albedo_at(&self, p: Vec3) -> Option<f32> {
+        self.albedo.as_ref().map(|a| self.lookup(a, p))
+    }
+
+    /// What the kernels read in `medium_densities`: the extinction's shares, then the albedos.
+    pub fn densities(&self) -> impl Iterator<Item = f32> + '_ {
+        self.values.iter().chain(self.albedo.iter().flatten()).copied()
+    }
+
+    /// `values` (one per voxel, x fastest) at world point `p`: the nearest voxel's, or
+    /// interpolated trilinearly between the voxels' centres, clamped at the box's faces; zero
+    /// outside the box (twin of `grid_lookup` in medium.wesl).
+    fn lookup(&self, values: &[f32], p: Vec3) -> f32 {
         let u = self.world_to_grid.transform_point3(p);
         if u.min_element() < 0.0 || u.max_element() > 1.0 {
             return 0.0;
@@ -72,7 +105,7 @@ impl DensityGrid {
         let at = |x: i64, y: i64, z: i64| -> f32 {
             let c = |i: i64, n: u32| i.clamp(0, n as i64 - 1) as usize;
             let (x, y, z) = (c(x, res[0]), c(y, res[1]), c(z, res[2]));
-            self.values[(z * res[1] as usize + y) * res[0] as usize + x]
+            values[(z * res[1] as usize + y) * res[0] as usize + x]
         };
         let scaled = u * Vec3::new(res[0] as f32, res[1] as f32, res[2] as f32);
         if self.nearest {
@@ -107,7 +140,7 @@ pub fn read_vol(path: &std::path::Path) -> Result<([u32; 3], Vec<f32>)> {
     anyhow::ensure!(word(0) == 1, "{name}: encoding {} (1, 32-bit floats, is read)", word(0));
     let (x, y, z, channels) = (word(1), word(2), word(3), word(4));
     anyhow::ensure!(x > 0 && y > 0 && z > 0, "{name}: resolution {x} x {y} x {z} is not positive");
-    anyhow::ensure!(channels == 1, "{name}: {channels} channels (an extinction grid has one)");
+    anyhow::ensure!(channels == 1, "{name}: {channels} channels (grids of one channel are read)");
     let count = x as usize * y as usize * z as usize;
     let expected = 48 + 4 * count;
     anyhow::ensure!(
@@ -238,7 +271,7 @@ mod tests {
         assert_eq!((resolution, read.as_slice()), ([2, 2, 2], &values[..]));
         // The box [-1, 1]^3.
         let world_to_grid = Mat4::from_scale(Vec3::splat(0.5)) * Mat4::from_translation(Vec3::ONE);
-        let mut grid = DensityGrid { resolution, values: read, world_to_grid, nearest: false };
+        let mut grid = DensityGrid { resolution, values: read, world_to_grid, nearest: false, albedo: None };
         // Voxel centres (+-0.5), the midpoint between them, clamped faces, outside.
         assert_eq!(grid.share(Vec3::new(-0.5, -0.5, -0.5)), 0.0);
         assert_eq!(grid.share(Vec3::new(0.5, -0.5, -0.5)), 1.0);
@@ -250,6 +283,16 @@ mod tests {
         grid.nearest = true;
         assert_eq!(grid.share(Vec3::new(0.1, 0.9, 0.9)), 0.4);
         assert_eq!(grid.share(Vec3::new(-0.1, -0.9, -0.9)), 0.0);
+        // An albedo grid on the same voxels is looked up alike and follows the extinction's values
+        // in what the kernels read.
+        assert_eq!(grid.albedo_at(Vec3::ZERO), None);
+        grid.albedo = Some(values.iter().map(|v| 1.0 - v).collect());
+        assert_eq!(grid.albedo_at(Vec3::new(0.1, 0.9, 0.9)), Some(0.6));
+        assert_eq!(grid.albedo_at(Vec3::new(1.01, 0.0, 0.0)), Some(0.0));
+        grid.nearest = false;
+        assert!((grid.albedo_at(Vec3::ZERO).unwrap() - (1.0 - mean)).abs() < 1e-6);
+        let densities: Vec<f32> = grid.densities().collect();
+        assert_eq!((densities.len(), densities[8], densities[9]), (16, 1.0, 0.0));
         // A file of the wrong size is refused, naming it.
         std::fs::write(&path, &std::fs::read(&path).unwrap()[..60]).unwrap();
         let e = read_vol(&path).unwrap_err().to_string();

@@ -1,5 +1,6 @@
 //! Participating media of Mitsuba scenes: `homogeneous` media, and `heterogeneous` ones whose
-//! extinction is a `gridvolume` (a `.vol` file of one channel), with a `hg` or `isotropic` phase
+//! extinction, and optionally albedo on the same voxels, is a `gridvolume` (a `.vol` file of one
+//! channel), with a `hg` or `isotropic` phase
 //! function, bounded by shapes with a `null` BSDF (their `interior` and `exterior` media) or
 //! around the sensor.
 
@@ -47,7 +48,7 @@ impl<'e> Builder<'e> {
                 return Err(v.error(format!("a second `{name}`")));
             }
         }
-        let (sigma, grid) = match volumes.remove("sigma_t") {
+        let (sigma, mut grid) = match volumes.remove("sigma_t") {
             Some(Volume::Grid(mut grid, max)) => {
                 if !(max > 0.0) {
                     return Err(e.error("the sigma_t grid holds no extinction anywhere (its largest value is 0)"));
@@ -70,8 +71,31 @@ impl<'e> Builder<'e> {
         }
         let albedo = match volumes.remove("albedo") {
             Some(Volume::Constant(c)) => c,
-            Some(Volume::Grid(..)) => {
-                return Err(e.error("an albedo on a grid is not rendered: give one albedo (<rgb> or <float>)"));
+            Some(Volume::Grid(albedos, _)) => {
+                let at = e.children.iter().find(|c| c.tag == "volume" && c.attribute("name") == Some("albedo"));
+                let at = at.unwrap_or(e);
+                let Some(extinction) = grid.as_mut() else {
+                    return Err(at.error(
+                        "an albedo grid is read on the voxels of a sigma_t grid: give sigma_t as a gridvolume too",
+                    ));
+                };
+                let same_box = albedos.world_to_grid.abs_diff_eq(extinction.world_to_grid, 1e-5);
+                if albedos.resolution != extinction.resolution || !same_box || albedos.nearest != extinction.nearest {
+                    return Err(at.error(format!(
+                        "the albedo grid ({} x {} x {}) must share the sigma_t grid's voxels ({} x {} x {}), to_world and filter_type",
+                        albedos.resolution[0],
+                        albedos.resolution[1],
+                        albedos.resolution[2],
+                        extinction.resolution[0],
+                        extinction.resolution[1],
+                        extinction.resolution[2]
+                    )));
+                }
+                if let Some(bad) = albedos.values.iter().position(|&a| a > 1.0) {
+                    return Err(at.error(format!("albedo {} (value {bad}) is not within [0, 1]", albedos.values[bad])));
+                }
+                extinction.albedo = Some(albedos.values);
+                glam::Vec3::ONE
             }
             None => o.color("albedo")?.unwrap_or(glam::Vec3::splat(0.75)),
         };
@@ -151,7 +175,8 @@ impl<'e> Builder<'e> {
                     None => largest,
                 };
                 o.ignore(&["raw", "accel"]);
-                Volume::Grid(DensityGrid { resolution, values, world_to_grid: to_world.inverse(), nearest }, max)
+                let world_to_grid = to_world.inverse();
+                Volume::Grid(DensityGrid { resolution, values, world_to_grid, nearest, albedo: None }, max)
             }
             other => {
                 return Err(v.error(format!("the volume `{other}` is not rendered (constvolume and gridvolume are)")));
