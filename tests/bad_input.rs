@@ -298,13 +298,13 @@ fn cases() -> Vec<(Case, Setup)> {
             &["<bsdf type=\"roughdielectric\" id=\"p\">", "anisotropic roughness (alpha_u, alpha_v) is not rendered"],
         ),
         case(
-            "XML rough glass rendered by direct connections",
+            "XML rough glass rendered by ellipsoidal connections",
             |d| {
                 let glass = "<shape type=\"sphere\"><bsdf type=\"roughdielectric\"/></shape>";
                 std::fs::write(d.join("scene.xml"), xml_with(glass)).unwrap()
             },
-            render("{dir}/scene.xml", &["--method", "direct"]),
-            &["rough dielectric (`roughdielectric`)", "`direct` does not render yet", "--method path"],
+            render("{dir}/scene.xml", &["--method", "ellipsoidal", "--gate", "box:2..2.1"]),
+            &["rough dielectric (`roughdielectric`)", "`ellipsoidal` does not render yet", "--method direct or path"],
         ),
         case(
             "XML glass rendered by ellipsoidal connections",

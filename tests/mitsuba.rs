@@ -352,14 +352,15 @@ fn glass_and_plastic_agree_with_mitransient_with_every_method() {
 }
 
 /// Rough glass (`assets/scenes/rough_glass_box.xml`: the glass box's sphere frosted, GGX alpha
-/// 0.2). Its steady image agrees with mitransient rendering the same file. In time it is checked
+/// 0.2). Its steady image agrees with mitransient rendering the same file, with `path` and with
+/// `direct` (connections ending at the frosted surface on either side). In time it is checked
 /// against itself: next-event estimation alone (light reaching a vertex through the frosted
 /// surface counts the medium beyond it) and BSDF sampling alone (the refracted ray's own length)
-/// agree bin by bin. (mitransient 1.3.1 counts a next-event connection through a rough
-/// dielectric in the medium the path arrived through, so its transient of this scene holds the
-/// light that leaves the sphere towards the lamp about 0.3 m late; its steady image is right.)
-/// The connection methods refuse the scene with what to do instead, and `auto` renders it with
-/// `path` alone.
+/// agree bin by bin, and `direct` agrees with `path` bin by bin. (mitransient 1.3.1 counts a
+/// next-event connection through a rough dielectric in the medium the path arrived through, so
+/// its transient of this scene holds the light that leaves the sphere towards the lamp about
+/// 0.3 m late; its steady image is right.) `ellipsoidal` and `combined` refuse the scene with
+/// what to do instead, and `auto` measures `path` and `direct`.
 #[test]
 fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
     let ctx = common::gpu();
@@ -372,19 +373,26 @@ fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
     let films = common::render_films(&ctx, &scene, &steady, 8, 64);
     check_image("rough_glass_box_steady", &films, "rough_glass_box_peer/steady");
     let transient =
-        RenderSettings { width: 16, height: 16, gate: Gate::parse("transient:1.94,0.1,20").unwrap(), ..steady };
+        RenderSettings { width: 16, height: 16, gate: Gate::parse("transient:1.94,0.1,20").unwrap(), ..steady.clone() };
     light_strategies_agree_per_bin("rough glass", &ctx, &scene, &transient, 512, 18);
-    for method in [Method::Direct, Method::Ellipsoidal, Method::Combined] {
+    let direct = RenderSettings { method: Method::Direct, seed: 19, ..steady.clone() };
+    let films = common::render_films(&ctx, &scene, &direct, 8, 16);
+    check_image("rough_glass_box_steady_direct", &films, "rough_glass_box_peer/steady");
+    let path = common::render_films(&ctx, &scene, &RenderSettings { seed: 20, ..transient.clone() }, 8, 512);
+    let direct = RenderSettings { method: Method::Direct, seed: 21, ..transient.clone() };
+    let films = common::render_films(&ctx, &scene, &direct, 8, 256);
+    common::assert_films_agree("rough glass, direct against path", &films, &path, 4, 0.001);
+    for method in [Method::Ellipsoidal, Method::Combined] {
         let error =
             gatetrace::integrator::create_integrator(&ctx, &scene, &RenderSettings { method, ..transient.clone() })
                 .err()
-                .expect("connections through rough glass are refused");
+                .expect("spheroid vertices on rough glass are refused");
         let text = format!("{error:#}");
-        assert!(text.contains("rough dielectric") && text.contains("--method path"), "{text}");
+        assert!(text.contains("rough dielectric") && text.contains("--method direct or path"), "{text}");
         assert!(text.contains(&format!("`{}` does not render", method.name())), "{text}");
     }
     let settings = RenderSettings { method: Method::Auto, ..transient };
-    assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
+    assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path, Method::Direct]);
 }
 
 /// Fog (`assets/scenes/fog_box.xml`: a cube of homogeneous fog bounded by a `null` surface in

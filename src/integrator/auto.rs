@@ -162,15 +162,17 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 }
 
 /// The methods `auto` measures for `settings` and `scene`: `path` and `direct` always, and
-/// `ellipsoidal` where there is a gate (it has no steady state). In a scene with a dielectric
-/// `ellipsoidal` is left out (alone it cannot sample the paths through glass); a scene with a
-/// rough dielectric, or an NLOS capture of glass, takes `path` alone, which only it renders.
+/// `ellipsoidal` where there is a gate (it has no steady state). In a scene with a dielectric,
+/// smooth or rough, `ellipsoidal` is left out (alone it cannot sample the paths through glass,
+/// nor place a vertex on rough glass); a scene with media, or an NLOS capture of glass, takes
+/// `path` alone, which only it renders.
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
-    if scene.has_rough_dielectric() || scene.scene.has_media() || (scene.has_dielectric() && settings.nlos.is_some()) {
+    let glass = scene.has_dielectric() || scene.has_rough_dielectric();
+    if scene.scene.has_media() || (glass && settings.nlos.is_some()) {
         return vec![Method::Path];
     }
     let mut methods = vec![Method::Path, Method::Direct];
-    if !matches!(settings.gate, Gate::None) && !scene.has_dielectric() {
+    if !matches!(settings.gate, Gate::None) && !glass {
         methods.push(Method::Ellipsoidal);
     }
     methods

@@ -173,10 +173,13 @@ impl<'a> BidirectionalTracer<'a> {
                 scene.scene.source
             );
         }
-        if scene.has_rough_dielectric() {
+        // Direct connections end at a rough dielectric's vertices on either side; a spheroid's
+        // vertex there would join segments in two media, which its length does not account for.
+        if scene.has_rough_dielectric() && (settings.method != Method::Direct || family.is_some()) {
             anyhow::bail!(
                 "the scene has a rough dielectric (`roughdielectric`), which `{method}` does not render yet \
-                 (connections through a surface that transmits are not built): render it with --method path"
+                 (a spheroid's vertex on a surface that transmits would join segments in two media): render it \
+                 with --method direct or path"
             );
         }
         if scene.has_dielectric() {
