@@ -304,7 +304,7 @@ fn cases() -> Vec<(Case, Setup)> {
                 std::fs::write(d.join("scene.xml"), xml_with(glass)).unwrap()
             },
             render("{dir}/scene.xml", &["--method", "ellipsoidal", "--gate", "box:2..2.1"]),
-            &["rough dielectric (`roughdielectric`)", "`ellipsoidal` does not render yet", "--method direct or path"],
+            &["dielectric (glass)", "`ellipsoidal` alone would leave them out", "--method combined"],
         ),
         case(
             "XML glass rendered by ellipsoidal connections",

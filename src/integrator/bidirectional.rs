@@ -173,15 +173,6 @@ impl<'a> BidirectionalTracer<'a> {
                 scene.scene.source
             );
         }
-        // Direct connections end at a rough dielectric's vertices on either side; a spheroid's
-        // vertex there would join segments in two media, which its length does not account for.
-        if scene.has_rough_dielectric() && (settings.method != Method::Direct || family.is_some()) {
-            anyhow::bail!(
-                "the scene has a rough dielectric (`roughdielectric`), which `{method}` does not render yet \
-                 (a spheroid's vertex on a surface that transmits would join segments in two media): render it \
-                 with --method direct or path"
-            );
-        }
         if scene.has_dielectric() {
             if settings.nlos.is_some() {
                 anyhow::bail!(
@@ -190,8 +181,8 @@ impl<'a> BidirectionalTracer<'a> {
                 );
             }
             // A path seen or lit only through glass has no vertex a spheroid can place (none lies
-            // next to a delta vertex): ellipsoidal connections alone would leave it out. A
-            // combined render's direct half samples those paths.
+            // next to a delta vertex, nor on or next to rough glass): ellipsoidal connections
+            // alone would leave it out. A combined render's direct half samples those paths.
             if settings.method == Method::Ellipsoidal && family.is_none() {
                 anyhow::bail!(
                     "the scene has a dielectric (glass) material: paths seen or lit through it have no ellipsoidal \

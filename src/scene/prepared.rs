@@ -150,8 +150,8 @@ impl PreparedScene {
         self.materials.iter().any(|m| m.flags & MATERIAL_NULL != 0)
     }
 
-    /// True when some material is a rough dielectric ([`MATERIAL_ROUGH`]): only `path` and `direct`
-    /// render it.
+    /// True when some material is a rough dielectric ([`MATERIAL_ROUGH`]): `ellipsoidal` alone does
+    /// not render it.
     pub fn has_rough_dielectric(&self) -> bool {
         self.materials.iter().any(|m| m.flags & MATERIAL_ROUGH != 0)
     }
