@@ -718,6 +718,18 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:", "<volume type=\"gridvolume\" name=\"sigma_t\">", "smoke.vol", "bytes where a 2 x 2 x 2 grid"],
         ),
         case(
+            "XML extinction grid of three channels",
+            |d| {
+                gatetrace::scene::medium::write_vol(&d.join("smoke.vol"), [2, 2, 2], &[0.5; 24]).unwrap();
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"heterogeneous\" name=\"interior\">\
+                            <volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" value=\"smoke.vol\"/>\
+                            </volume></medium></shape>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
+            render("{dir}/scene.xml", &[]),
+            &["scene.xml:", "<medium type=\"heterogeneous\" name=\"interior\">", "the sigma_t grid has 3 channels"],
+        ),
+        case(
             "XML albedo grid over a constant extinction",
             |d| {
                 gatetrace::scene::medium::write_vol(&d.join("albedo.vol"), [2, 2, 2], &[0.5; 8]).unwrap();

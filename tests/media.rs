@@ -476,24 +476,36 @@ fn fog_box_grid_medium(albedo: &str) -> String {
 /// Extinction of the fog box's grid (shares of its largest, 8 m^-1), voxel by voxel (x fastest).
 const FOG_BOX_DENSITY: [f32; 8] = [0.9, 0.3, 1.0, 0.5, 0.2, 0.8, 0.6, 0.4];
 
-/// An albedo grid holding one value everywhere renders exactly as that albedo given once: the
-/// same random numbers make the same paths, and each collision's albedo is looked up on the
-/// grid (after the extinction's values in `medium_densities`).
+/// An albedo grid holding one value everywhere renders exactly as that albedo given once, a grey
+/// one of one channel and a coloured one of three: the same random numbers make the same paths,
+/// and each collision's albedo is looked up on the grid (after the extinction's values in
+/// `medium_densities`, three values a voxel).
 #[test]
 fn an_albedo_grid_of_one_value_is_that_albedo() {
-    let one =
-        fog_box_transient("albedo_constant", &fog_box_grid_medium("0.7"), &[("density.vol", &FOG_BOX_DENSITY)], 8);
-    let grid = fog_box_transient(
-        "albedo_grid",
-        &fog_box_grid_medium("albedo.vol"),
-        &[("density.vol", &FOG_BOX_DENSITY), ("albedo.vol", &[0.7; 8])],
-        8,
-    );
-    let total = |films: &[gatetrace::film::Film]| films.iter().flat_map(|f| &f.data).map(|&v| v as f64).sum::<f64>();
-    println!("total radiance: one albedo {}, albedo grid {}", total(&one), total(&grid));
-    assert!(total(&one) > 0.0);
-    for (a, b) in one.iter().zip(&grid) {
-        assert!(a.data == b.data, "an albedo grid of 0.7 everywhere rendered another image than albedo 0.7");
+    let colour = [0.9f32, 0.6, 0.3];
+    let cases: [(&str, Vec<f32>); 2] = [("0.7", vec![0.7; 8]), ("0.9, 0.6, 0.3", colour.repeat(8))];
+    for (k, (albedo, grid_values)) in cases.iter().enumerate() {
+        let one = fog_box_transient(
+            &format!("albedo_constant_{k}"),
+            &fog_box_grid_medium(albedo),
+            &[("density.vol", &FOG_BOX_DENSITY)],
+            8,
+        );
+        let grid = fog_box_transient(
+            &format!("albedo_grid_{k}"),
+            &fog_box_grid_medium("albedo.vol"),
+            &[("density.vol", &FOG_BOX_DENSITY), ("albedo.vol", grid_values)],
+            8,
+        );
+        let total = |films: &[gatetrace::film::Film], c: usize| {
+            films.iter().flat_map(|f| f.data.iter().skip(c).step_by(3)).map(|&v| v as f64).sum::<f64>()
+        };
+        let totals = |films: &[gatetrace::film::Film]| [0, 1, 2].map(|c| total(films, c));
+        println!("albedo {albedo}: one albedo {:?}, albedo grid {:?}", totals(&one), totals(&grid));
+        assert!(total(&one, 0) > 0.0);
+        for (a, b) in one.iter().zip(&grid) {
+            assert!(a.data == b.data, "an albedo grid of {albedo} everywhere rendered another image than that albedo");
+        }
     }
 }
 

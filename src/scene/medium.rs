@@ -71,21 +71,22 @@ pub struct DensityGrid {
     /// Lookups take the nearest voxel's value (else trilinear interpolation between the voxels'
     /// centres, clamped at the box's faces, as Mitsuba's `gridvolume` does by default).
     pub nearest: bool,
-    /// The single-scattering albedo (0..1, the same in every channel) on the same voxels, looked
-    /// up alike; None where the medium has one albedo.
+    /// The single-scattering albedo (linear RGB, 0..1) on the same voxels, three values a voxel,
+    /// looked up alike; None where the medium has one albedo.
     pub albedo: Option<Vec<f32>>,
 }
 
 impl DensityGrid {
     /// The share of the majorant at world point `p` (twin of `grid_share` in medium.wesl).
     pub fn share(&self, p: Vec3) -> f32 {
-        self.lookup(&self.values, p)
+        self.lookup(|i| self.values[i], p)
     }
 
     /// The albedo grid's value at world point `p`, None without one (twin of `medium_albedo`'s
     /// lookup in medium.wesl).
-    pub fn albedo_at(&self, p: Vec3) -> Option<f32> {
-        self.albedo.as_ref().map(|a| self.lookup(a, p))
+    pub fn albedo_at(&self, p: Vec3) -> Option<Vec3> {
+        let a = self.albedo.as_ref()?;
+        Some(Vec3::from_array(std::array::from_fn(|c| self.lookup(|i| a[3 * i + c], p))))
     }
 
     /// What the kernels read in `medium_densities`: the extinction's shares, then the albedos.
@@ -93,10 +94,10 @@ impl DensityGrid {
         self.values.iter().chain(self.albedo.iter().flatten()).copied()
     }
 
-    /// `values` (one per voxel, x fastest) at world point `p`: the nearest voxel's, or
-    /// interpolated trilinearly between the voxels' centres, clamped at the box's faces; zero
-    /// outside the box (twin of `grid_lookup` in medium.wesl).
-    fn lookup(&self, values: &[f32], p: Vec3) -> f32 {
+    /// The value of voxel `i` (x fastest, then y, then z; `value`) at world point `p`: the
+    /// nearest voxel's, or interpolated trilinearly between the voxels' centres, clamped at the
+    /// box's faces; zero outside the box (twin of `grid_lookup` in medium.wesl).
+    fn lookup(&self, value: impl Fn(usize) -> f32, p: Vec3) -> f32 {
         let u = self.world_to_grid.transform_point3(p);
         if u.min_element() < 0.0 || u.max_element() > 1.0 {
             return 0.0;
@@ -105,7 +106,7 @@ impl DensityGrid {
         let at = |x: i64, y: i64, z: i64| -> f32 {
             let c = |i: i64, n: u32| i.clamp(0, n as i64 - 1) as usize;
             let (x, y, z) = (c(x, res[0]), c(y, res[1]), c(z, res[2]));
-            values[(z * res[1] as usize + y) * res[0] as usize + x]
+            value((z * res[1] as usize + y) * res[0] as usize + x)
         };
         let scaled = u * Vec3::new(res[0] as f32, res[1] as f32, res[2] as f32);
         if self.nearest {
@@ -125,10 +126,10 @@ impl DensityGrid {
     }
 }
 
-/// A grid of one channel read from a file in Mitsuba's volume format (`.vol`: "VOL", version
-/// 3, encoding 1 (f32), the resolution, the channel count, a bounding box, then the values
-/// little-endian, x fastest): (resolution, values).
-pub fn read_vol(path: &std::path::Path) -> Result<([u32; 3], Vec<f32>)> {
+/// A grid read from a file in Mitsuba's volume format (`.vol`: "VOL", version 3, encoding 1
+/// (f32), the resolution, the channel count, a bounding box, then the values little-endian,
+/// channels innermost, then x, y, z): (resolution, channels (1 or 3), values).
+pub fn read_vol(path: &std::path::Path) -> Result<([u32; 3], u32, Vec<f32>)> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read the volume {}", path.display()))?;
     let name = path.display();
     anyhow::ensure!(
@@ -140,26 +141,28 @@ pub fn read_vol(path: &std::path::Path) -> Result<([u32; 3], Vec<f32>)> {
     anyhow::ensure!(word(0) == 1, "{name}: encoding {} (1, 32-bit floats, is read)", word(0));
     let (x, y, z, channels) = (word(1), word(2), word(3), word(4));
     anyhow::ensure!(x > 0 && y > 0 && z > 0, "{name}: resolution {x} x {y} x {z} is not positive");
-    anyhow::ensure!(channels == 1, "{name}: {channels} channels (grids of one channel are read)");
-    let count = x as usize * y as usize * z as usize;
+    anyhow::ensure!(channels == 1 || channels == 3, "{name}: {channels} channels (grids of 1 or 3 are read)");
+    let count = x as usize * y as usize * z as usize * channels as usize;
     let expected = 48 + 4 * count;
     anyhow::ensure!(
         bytes.len() == expected,
-        "{name}: {} bytes where a {x} x {y} x {z} grid of one channel takes {expected}",
+        "{name}: {} bytes where a {x} x {y} x {z} grid of {channels} channel(s) takes {expected}",
         bytes.len()
     );
     let values: Vec<f32> = bytes[48..].chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
     if let Some(bad) = values.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
         anyhow::bail!("{name}: value {bad} ({}) is not a finite non-negative number", values[bad]);
     }
-    Ok(([x as u32, y as u32, z as u32], values))
+    Ok(([x as u32, y as u32, z as u32], channels as u32, values))
 }
 
-/// Writes a one-channel grid in Mitsuba's volume format (see [`read_vol`]), with the unit cube as
-/// its bounding box.
+/// Writes a grid in Mitsuba's volume format (see [`read_vol`]), with the unit cube as its
+/// bounding box: one channel, or as many as `values` holds per voxel.
 pub fn write_vol(path: &std::path::Path, resolution: [u32; 3], values: &[f32]) -> Result<()> {
+    let voxels = resolution.iter().map(|&r| r as usize).product::<usize>().max(1);
+    let channels = (values.len() / voxels).max(1) as i32;
     let mut bytes = b"VOL\x03".to_vec();
-    for w in [1, resolution[0] as i32, resolution[1] as i32, resolution[2] as i32, 1] {
+    for w in [1, resolution[0] as i32, resolution[1] as i32, resolution[2] as i32, channels] {
         bytes.extend_from_slice(&w.to_le_bytes());
     }
     for b in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0] {
@@ -267,8 +270,8 @@ mod tests {
         let path = dir.join("ramp.vol");
         let values = [0.0, 1.0, 0.5, 0.25, 0.8, 0.6, 0.2, 0.4];
         write_vol(&path, [2, 2, 2], &values).unwrap();
-        let (resolution, read) = read_vol(&path).unwrap();
-        assert_eq!((resolution, read.as_slice()), ([2, 2, 2], &values[..]));
+        let (resolution, channels, read) = read_vol(&path).unwrap();
+        assert_eq!((resolution, channels, read.as_slice()), ([2, 2, 2], 1, &values[..]));
         // The box [-1, 1]^3.
         let world_to_grid = Mat4::from_scale(Vec3::splat(0.5)) * Mat4::from_translation(Vec3::ONE);
         let mut grid = DensityGrid { resolution, values: read, world_to_grid, nearest: false, albedo: None };
@@ -286,13 +289,18 @@ mod tests {
         // An albedo grid on the same voxels is looked up alike and follows the extinction's values
         // in what the kernels read.
         assert_eq!(grid.albedo_at(Vec3::ZERO), None);
-        grid.albedo = Some(values.iter().map(|v| 1.0 - v).collect());
-        assert_eq!(grid.albedo_at(Vec3::new(0.1, 0.9, 0.9)), Some(0.6));
-        assert_eq!(grid.albedo_at(Vec3::new(1.01, 0.0, 0.0)), Some(0.0));
+        grid.albedo = Some(values.iter().flat_map(|v| [1.0 - v, 0.5, *v]).collect());
+        assert_eq!(grid.albedo_at(Vec3::new(0.1, 0.9, 0.9)), Some(Vec3::new(0.6, 0.5, 0.4)));
+        assert_eq!(grid.albedo_at(Vec3::new(1.01, 0.0, 0.0)), Some(Vec3::ZERO));
         grid.nearest = false;
-        assert!((grid.albedo_at(Vec3::ZERO).unwrap() - (1.0 - mean)).abs() < 1e-6);
+        let a = grid.albedo_at(Vec3::ZERO).unwrap();
+        assert!((a - Vec3::new(1.0 - mean, 0.5, mean)).abs().max_element() < 1e-6, "{a}");
         let densities: Vec<f32> = grid.densities().collect();
-        assert_eq!((densities.len(), densities[8], densities[9]), (16, 1.0, 0.0));
+        assert_eq!((densities.len(), densities[8], densities[9], densities[10]), (32, 1.0, 0.5, 0.0));
+        // Three channels written and read back.
+        write_vol(&path, [2, 2, 2], grid.albedo.as_ref().unwrap()).unwrap();
+        let (resolution, channels, read) = read_vol(&path).unwrap();
+        assert_eq!((resolution, channels, &read), ([2, 2, 2], 3, grid.albedo.as_ref().unwrap()));
         // A file of the wrong size is refused, naming it.
         std::fs::write(&path, &std::fs::read(&path).unwrap()[..60]).unwrap();
         let e = read_vol(&path).unwrap_err().to_string();

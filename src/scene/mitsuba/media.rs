@@ -1,6 +1,6 @@
 //! Participating media of Mitsuba scenes: `homogeneous` media, and `heterogeneous` ones whose
-//! extinction, and optionally albedo on the same voxels, is a `gridvolume` (a `.vol` file of one
-//! channel), with a `hg` or `isotropic` phase
+//! extinction (a `gridvolume`: a `.vol` file of one channel), and optionally albedo on the same
+//! voxels (one channel or three), is a grid, with a `hg` or `isotropic` phase
 //! function, bounded by shapes with a `null` BSDF (their `interior` and `exterior` media) or
 //! around the sensor.
 
@@ -11,11 +11,12 @@ use super::xml::{Element, Object};
 use crate::scene::medium::{DensityGrid, read_vol};
 use crate::scene::{MediumDesc, MediumInterface};
 
-/// A heterogeneous medium's `<volume>` child: a constant, or a grid with the largest value it
-/// declares (`max_value`) or holds.
+/// A heterogeneous medium's `<volume>` child: a constant, or a grid (its values in
+/// `DensityGrid::values`, `channels` per voxel) with the largest value it declares
+/// (`max_value`) or holds.
 enum Volume {
     Constant(glam::Vec3),
-    Grid(DensityGrid, f32),
+    Grid { grid: DensityGrid, max: f32, channels: u32 },
 }
 
 impl<'e> Builder<'e> {
@@ -49,7 +50,13 @@ impl<'e> Builder<'e> {
             }
         }
         let (sigma, mut grid) = match volumes.remove("sigma_t") {
-            Some(Volume::Grid(mut grid, max)) => {
+            Some(Volume::Grid { channels, .. }) if channels != 1 => {
+                return Err(e.error(format!(
+                    "the sigma_t grid has {channels} channels: an extinction that differs between channels is not \
+                     rendered (give a grid of one channel)"
+                )));
+            }
+            Some(Volume::Grid { mut grid, max, .. }) => {
                 if !(max > 0.0) {
                     return Err(e.error("the sigma_t grid holds no extinction anywhere (its largest value is 0)"));
                 }
@@ -71,7 +78,7 @@ impl<'e> Builder<'e> {
         }
         let albedo = match volumes.remove("albedo") {
             Some(Volume::Constant(c)) => c,
-            Some(Volume::Grid(albedos, _)) => {
+            Some(Volume::Grid { grid: albedos, channels, .. }) => {
                 let at = e.children.iter().find(|c| c.tag == "volume" && c.attribute("name") == Some("albedo"));
                 let at = at.unwrap_or(e);
                 let Some(extinction) = grid.as_mut() else {
@@ -94,7 +101,12 @@ impl<'e> Builder<'e> {
                 if let Some(bad) = albedos.values.iter().position(|&a| a > 1.0) {
                     return Err(at.error(format!("albedo {} (value {bad}) is not within [0, 1]", albedos.values[bad])));
                 }
-                extinction.albedo = Some(albedos.values);
+                // Three values a voxel (RGB); one channel is grey.
+                let rgb = match channels {
+                    3 => albedos.values,
+                    _ => albedos.values.iter().flat_map(|&a| [a; 3]).collect(),
+                };
+                extinction.albedo = Some(rgb);
                 glam::Vec3::ONE
             }
             None => o.color("albedo")?.unwrap_or(glam::Vec3::splat(0.75)),
@@ -136,7 +148,7 @@ impl<'e> Builder<'e> {
     }
 
     /// A heterogeneous medium's `<volume>`: `constvolume` (its `value`) or `gridvolume` (its
-    /// `filename`, a `.vol` file of one channel, over the unit cube placed by `to_world`;
+    /// `filename`, a `.vol` file of one or three channels, over the unit cube placed by `to_world`;
     /// `filter_type` trilinear or nearest; `wrap_mode` clamp; `max_value`, a majorant at least
     /// the grid's largest value).
     fn volume(&self, v: &'e Element) -> Result<Volume> {
@@ -146,7 +158,7 @@ impl<'e> Builder<'e> {
             "constvolume" => Volume::Constant(o.color("value")?.unwrap_or(glam::Vec3::ONE)),
             "gridvolume" | "grid" => {
                 let file = o.string("filename")?.ok_or_else(|| v.error("`filename` is missing"))?;
-                let (resolution, values) =
+                let (resolution, channels, values) =
                     read_vol(&self.base.join(file)).map_err(|err| v.error(format!("{err:#}")))?;
                 let nearest = match o.string("filter_type")?.unwrap_or("trilinear") {
                     "trilinear" => false,
@@ -176,7 +188,11 @@ impl<'e> Builder<'e> {
                 };
                 o.ignore(&["raw", "accel"]);
                 let world_to_grid = to_world.inverse();
-                Volume::Grid(DensityGrid { resolution, values, world_to_grid, nearest, albedo: None }, max)
+                Volume::Grid {
+                    grid: DensityGrid { resolution, values, world_to_grid, nearest, albedo: None },
+                    max,
+                    channels,
+                }
             }
             other => {
                 return Err(v.error(format!("the volume `{other}` is not rendered (constvolume and gridvolume are)")));
