@@ -449,10 +449,11 @@ fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
 }
 
 /// A heterogeneous medium (`assets/scenes/smoke_box/scene.xml`: a puff of smoke whose
-/// extinction, up to 40 m^-1, is a grid of 12^3 voxels over a turned box, bounded by a `null`
-/// cube) agrees with mitransient's `transient_prbvolpath` rendering the same file, steady
-/// (32×32), with `path`: delta tracking for free flights, ratio tracking for shadow rays,
-/// trilinear lookups clamped at the box's faces, and the grid placed by its `to_world`. Not in
+/// extinction, up to 40 m^-1, is a grid of 12^3 voxels over a turned box, its albedo an RGB grid
+/// on the same voxels, bounded by a `null` cube) agrees with mitransient's
+/// `transient_prbvolpath` rendering the same file, steady (32×32), with `path`: delta tracking
+/// for free flights, ratio tracking for shadow rays, trilinear lookups clamped at the box's
+/// faces, the albedo where each scattering lies, and the grids placed by their `to_world`. Not in
 /// time: mitransient 1.3.1 leaves the stretches before rejected (null) collisions out of its
 /// path lengths (tests/media.rs `null_collisions_count_in_the_path_length` checks gatetrace's).
 #[test]
@@ -464,6 +465,7 @@ fn a_heterogeneous_medium_agrees_with_mitransient_with_path() {
     assert_eq!((scene.settings.max_bounces, scene.media.len()), (Some(31), 1));
     let grid = scene.media[0].grid.as_ref().expect("the smoke is on a grid");
     assert_eq!((grid.resolution, scene.media[0].sigma_t), ([12, 12, 12], 40.0));
+    assert_eq!(grid.albedo.as_ref().map(Vec::len), Some(3 * 12 * 12 * 12));
     let scene = PreparedScene::new(scene).unwrap();
     let steady = RenderSettings { width: 32, height: 32, max_bounces: 31, seed: 41, ..Default::default() };
     let films = common::render_films(&ctx, &scene, &steady, 8, 64);

@@ -1,11 +1,14 @@
 #!/usr/bin/env python3
-"""Write the smoke puff of assets/scenes/smoke_box.xml: a grid of 12 x 12 x 12 extinction values
-in Mitsuba's volume format (.vol, one channel), a lumpy ball that fades to zero at the grid's
-faces (so that the box's faces, wherever they lie, hold no extinction).
+"""Write the smoke puff of assets/scenes/smoke_box/scene.xml: a grid of 12 x 12 x 12 extinction
+values in Mitsuba's volume format (.vol, one channel), a lumpy ball that fades to zero at the
+grid's faces (so that the box's faces, wherever they lie, hold no extinction), and its albedo on
+the same voxels (albedo.vol beside it, three channels): warm (0.95, 0.75, 0.45) at the bottom
+to cool (0.55, 0.75, 0.95) at the top, with a little variation across.
 
     tools/scenes/make_smoke_volume.py [--out assets/scenes/smoke_box/smoke.vol] [--res 12]
 
-Values are in [0, 1]; the scene's medium scales them (`scale`, m^-1). Standard library only.
+Extinction values are in [0, 1]; the scene's medium scales them (`scale`, m^-1). Standard
+library only.
 """
 import argparse
 import math
@@ -32,8 +35,21 @@ def smoke(res):
     return [v / top for v in values]
 
 
-def write_vol(path, res, values):
-    header = b"VOL" + bytes([3]) + struct.pack("<5i", 1, res, res, res, 1) + struct.pack("<6f", 0, 0, 0, 1, 1, 1)
+def albedo(res):
+    """RGB triples, x fastest, then y, then z."""
+    values = []
+    for z in range(res):
+        for y in range(res):
+            for x in range(res):
+                h = (y + 0.5) / res
+                wobble = 0.05 * math.sin(4.0 * (x + 0.5) / res + 3.0 * (z + 0.5) / res)
+                warm, cool = (0.95, 0.75, 0.45), (0.55, 0.75, 0.95)
+                values.extend(min(1.0, max(0.0, w + (c - w) * h + wobble)) for w, c in zip(warm, cool))
+    return values
+
+
+def write_vol(path, res, values, channels=1):
+    header = b"VOL" + bytes([3]) + struct.pack("<5i", 1, res, res, res, channels) + struct.pack("<6f", 0, 0, 0, 1, 1, 1)
     path.write_bytes(header + struct.pack(f"<{len(values)}f", *values))
 
 
@@ -42,8 +58,10 @@ def main():
     p.add_argument("--out", default=str(Path(__file__).resolve().parents[2] / "assets/scenes/smoke_box/smoke.vol"))
     p.add_argument("--res", type=int, default=12, help="voxels along each axis")
     args = p.parse_args()
-    write_vol(Path(args.out), args.res, smoke(args.res))
-    print(f"wrote {args.out}: {args.res}^3 voxels")
+    out = Path(args.out)
+    write_vol(out, args.res, smoke(args.res))
+    write_vol(out.with_name("albedo.vol"), args.res, albedo(args.res), channels=3)
+    print(f"wrote {out} and {out.with_name('albedo.vol')}: {args.res}^3 voxels")
 
 
 if __name__ == "__main__":
