@@ -267,7 +267,8 @@ fn assert_furnace_is_white(scene: gatetrace::scene::Scene, seed: u32) {
 
 /// The absorbing slab again, as a glTF scene: a cube whose material's `extras.medium` makes it the
 /// boundary of an absorbing medium (docs/scenes.md) between the camera and the lamp, against the
-/// same closed form; a medium without an extinction is refused, naming the material.
+/// same closed form, homogeneous and on a grid (`extras.medium.grid`); a medium without an
+/// extinction, and a grid without its box, are refused, naming the material.
 #[test]
 fn a_gltf_material_with_a_medium_bounds_it() {
     use common::gltf_builder::{Camera, Material, Mesh, Scene, quad_z, write_json};
@@ -298,6 +299,32 @@ fn a_gltf_material_with_a_medium_bounds_it() {
     let path = write_json(&dir, "no_extinction.gltf", &doc);
     let error = format!("{:#}", load_scene_with(&path, &LoadOptions::default()).unwrap_err());
     assert!(error.contains("no_extinction.gltf") && error.contains("`slab`") && error.contains("sigma_t"), "{error}");
+    // On a grid (`extras.medium.grid`): the graded slab of
+    // light_through_a_graded_grid_medium_is_attenuated_by_its_transmittance, its voxels over the
+    // cube's box, with an albedo grid of three channels read alongside.
+    let values = [0.1, 0.4, 1.0, 0.25, 0.6];
+    gatetrace::scene::medium::write_vol(&dir.join("graded.vol"), [1, 1, 5], &values).unwrap();
+    gatetrace::scene::medium::write_vol(&dir.join("albedo.vol"), [1, 1, 5], &[0.0; 15]).unwrap();
+    for filter in ["trilinear", "nearest"] {
+        let grid = serde_json::json!({"uri": "graded.vol", "min": [-0.5, -0.5, -0.5], "max": [0.5, 0.5, 0.5],
+            "filter": filter, "albedo": "albedo.vol"});
+        doc["materials"][1]["extras"] = serde_json::json!({"medium": {"sigma_t": 1.5, "grid": grid}});
+        let path = write_json(&dir, "graded.gltf", &doc);
+        let loaded = load_scene_with(&path, &LoadOptions::default()).unwrap();
+        let grid = loaded.media[0].grid.as_ref().expect("a grid medium");
+        assert_eq!(
+            (grid.resolution, grid.nearest, grid.albedo.as_ref().map(Vec::len)),
+            ([1, 1, 5], filter == "nearest", Some(15))
+        );
+        let films = lamp_films(&PreparedScene::new(loaded).unwrap());
+        println!("grid, filter {filter}:");
+        let mean = 1.5 * values.iter().sum::<f32>() as f64 / values.len() as f64;
+        assert_first_bin_is(&films, mean_transmittance(8, 4.0, mean, 1.0));
+    }
+    doc["materials"][1]["extras"] = serde_json::json!({"medium": {"sigma_t": 1.5, "grid": {"uri": "graded.vol"}}});
+    let path = write_json(&dir, "no_box.gltf", &doc);
+    let error = format!("{:#}", load_scene_with(&path, &LoadOptions::default()).unwrap_err());
+    assert!(error.contains("no_box.gltf") && error.contains("`slab`") && error.contains("`min`"), "{error}");
 }
 
 /// A heterogeneous medium's `sigma_t` grid (a `.vol` file written to `dir`): `values` along z

@@ -87,6 +87,7 @@ pub fn load_gltf_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
     };
     Loader {
         name: &name,
+        base,
         buffers: &buffers,
         images: &images,
         pose,
@@ -210,6 +211,8 @@ fn check_buffer_ranges(doc: &gltf::Document) -> Result<(), String> {
 
 struct Loader<'a> {
     name: &'a str,
+    /// The directory the file's relative paths start from (its buffers, images and grids).
+    base: &'a Path,
     buffers: &'a [gltf::buffer::Data],
     images: &'a [gltf::image::Data],
     /// Local transforms of animated nodes at the requested time (node index -> matrix).

@@ -42,7 +42,7 @@ impl Loader<'_> {
                 );
             }
         }
-        if let Some(medium) = medium_extras(m).with_context(|| format!("{name}: {label}: extras.medium"))? {
+        if let Some(medium) = medium_extras(m, self.base).with_context(|| format!("{name}: {label}: extras.medium"))? {
             media.push(MediumDesc { name: format!("{name}: {label}"), ..medium });
             let interface = MediumInterface { interior: Some(media.len() as u32 - 1), exterior: None };
             return Ok(MaterialDesc::null_boundary(m.name().unwrap_or("").to_owned(), interface));
@@ -160,12 +160,14 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }
 
-/// The homogeneous medium a material's `extras.medium` describes, which makes the material no
-/// surface at all, only the boundary of that medium (inside its closed, outward-wound meshes; in
-/// front of them vacuum): `{"medium": {"sigma_t": S, "albedo": A, "g": G}}`, S the extinction
-/// (m^-1, positive), A the single-scattering albedo (a number or [r, g, b], 0..1, default 0.9), G
-/// the Henyey-Greenstein mean cosine (-1..1, default 0). None without one.
-fn medium_extras(m: &gltf::Material) -> Result<Option<MediumDesc>> {
+/// The medium a material's `extras.medium` describes, which makes the material no surface at
+/// all, only the boundary of that medium (inside its closed, outward-wound meshes; in front of
+/// them vacuum): `{"medium": {"sigma_t": S, "albedo": A, "g": G, "grid": {...}}}`, S the
+/// extinction (m^-1, positive), A the single-scattering albedo (a number or [r, g, b], 0..1,
+/// default 0.9), G the Henyey-Greenstein mean cosine (-1..1, default 0). With `grid` (see
+/// [`grid_extras`]) the medium is heterogeneous: its extinction is S times the grid's value.
+/// Relative paths start at `base`. None without one.
+fn medium_extras(m: &gltf::Material, base: &std::path::Path) -> Result<Option<MediumDesc>> {
     let Some(raw) = m.extras() else { return Ok(None) };
     let value: serde_json::Value = serde_json::from_str(raw.get())?;
     let Some(medium) = value.get("medium") else { return Ok(None) };
@@ -194,5 +196,80 @@ fn medium_extras(m: &gltf::Material) -> Result<Option<MediumDesc>> {
     if !(g > -1.0 && g < 1.0) {
         bail!("g {g} is not within (-1, 1)");
     }
-    Ok(Some(MediumDesc { name: String::new(), sigma_t, albedo, g, grid: None }))
+    let mut desc = MediumDesc { name: String::new(), sigma_t, albedo, g, grid: None };
+    if let Some(grid) = medium.get("grid") {
+        grid_extras(&mut desc, grid, base).context("grid")?;
+    }
+    Ok(Some(desc))
+}
+
+/// A heterogeneous medium's grids from `extras.medium.grid`: `{"uri": "smoke.vol", "min": [x, y,
+/// z], "max": [x, y, z], "filter": "trilinear" | "nearest", "albedo": "albedo.vol"}`: a `.vol`
+/// file of one channel (Mitsuba's volume format) whose voxels span the world-space box from
+/// `min` to `max` (m; the file's own bounding box is not read), looked up with `filter` (default
+/// trilinear), and optionally an albedo grid of one or three channels on the same voxels, which
+/// then replaces the medium's albedo. The medium's `sigma_t` scales the grid's values.
+fn grid_extras(medium: &mut MediumDesc, grid: &serde_json::Value, base: &std::path::Path) -> Result<()> {
+    use crate::scene::medium::{DensityGrid, read_vol};
+    let corner = |key: &str| -> Result<Vec3> {
+        let v = grid.get(key).ok_or_else(|| anyhow!("`{key}` (the box's {key} corner, m) is missing"))?;
+        let c: Option<Vec<f32>> = v
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .map(|a| a.iter().filter_map(|x| x.as_f64().map(|x| x as f32)).collect::<Vec<_>>());
+        match c {
+            Some(c) if c.len() == 3 && c.iter().all(|x| x.is_finite()) => Ok(Vec3::from_slice(&c)),
+            _ => bail!("`{key}` is {v}, not three numbers"),
+        }
+    };
+    let file = |key: &str| -> Result<Option<std::path::PathBuf>> {
+        match grid.get(key) {
+            None => Ok(None),
+            Some(v) => Ok(Some(base.join(v.as_str().ok_or_else(|| anyhow!("`{key}` is {v}, not a file name"))?))),
+        }
+    };
+    let uri = file("uri")?.ok_or_else(|| anyhow!("`uri` (the .vol file of the extinction) is missing"))?;
+    let (lo, hi) = (corner("min")?, corner("max")?);
+    if !(hi - lo).cmpgt(Vec3::ZERO).all() {
+        bail!("the box from min {lo} to max {hi} is empty");
+    }
+    let nearest = match grid.get("filter").map(|f| f.as_str()) {
+        None | Some(Some("trilinear")) => false,
+        Some(Some("nearest")) => true,
+        Some(_) => bail!("`filter` is {}, not \"trilinear\" or \"nearest\"", grid["filter"]),
+    };
+    let (resolution, channels, mut values) = read_vol(&uri)?;
+    if channels != 1 {
+        bail!("{}: {channels} channels: an extinction grid has one", uri.display());
+    }
+    let max = values.iter().fold(0.0f32, |a, &b| a.max(b));
+    if !(max > 0.0) {
+        bail!("{}: the grid holds no extinction anywhere (its largest value is 0)", uri.display());
+    }
+    values.iter_mut().for_each(|v| *v /= max);
+    let world_to_grid = glam::Mat4::from_scale(1.0 / (hi - lo)) * glam::Mat4::from_translation(-lo);
+    let mut density = DensityGrid { resolution, values, world_to_grid, nearest, albedo: None };
+    if let Some(path) = file("albedo")? {
+        let (r, channels, a) = read_vol(&path)?;
+        if r != resolution {
+            bail!(
+                "{}: the albedo grid ({} x {} x {}) must have the extinction grid's voxels ({} x {} x {})",
+                path.display(),
+                r[0],
+                r[1],
+                r[2],
+                resolution[0],
+                resolution[1],
+                resolution[2]
+            );
+        }
+        if let Some(bad) = a.iter().position(|&x| x > 1.0) {
+            bail!("{}: albedo {} (value {bad}) is not within [0, 1]", path.display(), a[bad]);
+        }
+        density.albedo = Some(if channels == 3 { a } else { a.iter().flat_map(|&x| [x; 3]).collect() });
+        medium.albedo = Vec3::ONE;
+    }
+    medium.sigma_t *= max;
+    medium.grid = Some(density);
+    Ok(())
 }
