@@ -755,7 +755,7 @@ fn cases() -> Vec<(Case, Setup)> {
                 std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
             },
             render("{dir}/scene.xml", &[]),
-            &["scene.xml:", "the albedo grid (4 x 2 x 1) must share the sigma_t grid's voxels (2 x 2 x 2)"],
+            &["scene.xml:", "the albedo grid (4 x 2 x 1) must share the extinction grid's voxels (2 x 2 x 2)"],
         ),
         case(
             "XML medium with a bidirectional method",

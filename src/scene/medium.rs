@@ -89,6 +89,27 @@ impl DensityGrid {
         Some(Vec3::from_array(std::array::from_fn(|c| self.lookup(|i| a[3 * i + c], p))))
     }
 
+    /// Sets the albedo from a grid of `channels` values a voxel (1: grey, 3: RGB) on `resolution`
+    /// voxels, which must be this grid's; every value must lie within [0, 1].
+    pub fn set_albedo(&mut self, resolution: [u32; 3], channels: u32, values: Vec<f32>) -> Result<()> {
+        let (r, own) = (resolution, self.resolution);
+        anyhow::ensure!(
+            r == own,
+            "the albedo grid ({} x {} x {}) must share the extinction grid's voxels ({} x {} x {})",
+            r[0],
+            r[1],
+            r[2],
+            own[0],
+            own[1],
+            own[2]
+        );
+        if let Some(bad) = values.iter().position(|&a| a > 1.0) {
+            anyhow::bail!("albedo {} (value {bad}) is not within [0, 1]", values[bad]);
+        }
+        self.albedo = Some(if channels == 3 { values } else { values.iter().flat_map(|&a| [a; 3]).collect() });
+        Ok(())
+    }
+
     /// What the kernels read in `medium_densities`: the extinction's shares, then the albedos.
     pub fn densities(&self) -> impl Iterator<Item = f32> + '_ {
         self.values.iter().chain(self.albedo.iter().flatten()).copied()

@@ -251,22 +251,7 @@ fn grid_extras(medium: &mut MediumDesc, grid: &serde_json::Value, base: &std::pa
     let mut density = DensityGrid { resolution, values, world_to_grid, nearest, albedo: None };
     if let Some(path) = file("albedo")? {
         let (r, channels, a) = read_vol(&path)?;
-        if r != resolution {
-            bail!(
-                "{}: the albedo grid ({} x {} x {}) must have the extinction grid's voxels ({} x {} x {})",
-                path.display(),
-                r[0],
-                r[1],
-                r[2],
-                resolution[0],
-                resolution[1],
-                resolution[2]
-            );
-        }
-        if let Some(bad) = a.iter().position(|&x| x > 1.0) {
-            bail!("{}: albedo {} (value {bad}) is not within [0, 1]", path.display(), a[bad]);
-        }
-        density.albedo = Some(if channels == 3 { a } else { a.iter().flat_map(|&x| [x; 3]).collect() });
+        density.set_albedo(r, channels, a).with_context(|| path.display().to_string())?;
         medium.albedo = Vec3::ONE;
     }
     medium.sigma_t *= max;

@@ -87,26 +87,12 @@ impl<'e> Builder<'e> {
                     ));
                 };
                 let same_box = albedos.world_to_grid.abs_diff_eq(extinction.world_to_grid, 1e-5);
-                if albedos.resolution != extinction.resolution || !same_box || albedos.nearest != extinction.nearest {
-                    return Err(at.error(format!(
-                        "the albedo grid ({} x {} x {}) must share the sigma_t grid's voxels ({} x {} x {}), to_world and filter_type",
-                        albedos.resolution[0],
-                        albedos.resolution[1],
-                        albedos.resolution[2],
-                        extinction.resolution[0],
-                        extinction.resolution[1],
-                        extinction.resolution[2]
-                    )));
+                if !same_box || albedos.nearest != extinction.nearest {
+                    return Err(at.error("the albedo grid must share the sigma_t grid's to_world and filter_type"));
                 }
-                if let Some(bad) = albedos.values.iter().position(|&a| a > 1.0) {
-                    return Err(at.error(format!("albedo {} (value {bad}) is not within [0, 1]", albedos.values[bad])));
-                }
-                // Three values a voxel (RGB); one channel is grey.
-                let rgb = match channels {
-                    3 => albedos.values,
-                    _ => albedos.values.iter().flat_map(|&a| [a; 3]).collect(),
-                };
-                extinction.albedo = Some(rgb);
+                extinction
+                    .set_albedo(albedos.resolution, channels, albedos.values)
+                    .map_err(|err| at.error(format!("{err:#}")))?;
                 glam::Vec3::ONE
             }
             None => o.color("albedo")?.unwrap_or(glam::Vec3::splat(0.75)),
