@@ -170,6 +170,9 @@ class Renderer:
         query_split, query_bottom_nodes, query_weights, query_tree: ``ellipsoidal``'s ellipsoid
             queries, as ``render --query-split``, ``--query-bottom-nodes``, ``--query-weights``
             and ``--query-tree`` (``"binary"`` or ``"wide"``).
+        medium_connections: ``path`` in homogeneous media behind a box or transient gate: also
+            place scattering vertices where a ray meets the spheroid of a length drawn from the
+            gate, as ``render --medium-connections`` (False: off).
     """
 
     def __init__(
@@ -186,6 +189,7 @@ class Renderer:
         query_bottom_nodes: int = 31,
         query_weights: str = "arcs",
         query_tree: str = "binary",
+        medium_connections: bool = False,
     ):
         if not isinstance(scene, Scene):
             scene = Scene.load(scene)
@@ -215,6 +219,7 @@ class Renderer:
             query_bottom_nodes=query_bottom_nodes,
             query_weights=query_weights,
             query_tree=query_tree,
+            medium_connections=bool(medium_connections),
         )
 
     def render(

@@ -67,6 +67,7 @@ class Renderer:
         query_bottom_nodes: int = 31,
         query_weights: str = "arcs",
         query_tree: str = "binary",
+        medium_connections: bool = False,
     ) -> None: ...
     def render(
         self, gate: str, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0

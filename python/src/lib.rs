@@ -265,7 +265,7 @@ impl Renderer {
     #[new]
     #[pyo3(signature = (scene, *, method="path", max_bounces=8, res=(256, 256), rr_depth=None, samples_per_pass=None,
         connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="arcs",
-        query_tree="binary"))]
+        query_tree="binary", medium_connections=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: PyRef<'_, Scene>,
@@ -279,6 +279,7 @@ impl Renderer {
         query_bottom_nodes: u32,
         query_weights: &str,
         query_tree: &str,
+        medium_connections: bool,
     ) -> PyResult<Self> {
         let method = parse_method(method)?;
         let (width, height) = check_image(res, samples_per_pass)?;
@@ -300,6 +301,7 @@ impl Renderer {
                 wide,
                 ..Default::default()
             },
+            medium_connections,
             ..Default::default()
         };
         gatetrace::integrator::film_elements(&settings).map_err(value_error)?;

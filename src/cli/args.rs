@@ -149,6 +149,10 @@ pub struct RenderArgs {
     /// shells (auto: on above 16 hidden triangles)
     #[arg(long, value_name = "auto|on|off", default_value = "auto", value_enum)]
     pub band_index: OnOff,
+    /// path, homogeneous media, box or transient gate: also place scattering vertices where a
+    /// ray meets the spheroid of a length drawn from the gate (medium connections)
+    #[arg(long, value_name = "on|off", default_value = "off", value_enum)]
+    pub medium_connections: Switch,
     /// Ellipsoid queries: skip spheroids with tau_e <= d (1 + REL), d the foci's distance
     #[arg(long, default_value_t = 1e-6, value_name = "REL")]
     pub needle_guard: f32,
@@ -263,6 +267,13 @@ pub enum QueryWeights {
 pub enum QueryTree {
     Binary,
     Wide,
+}
+
+/// A switch (render --medium-connections).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Switch {
+    On,
+    Off,
 }
 
 /// A switch that may decide by itself (render --band-index).

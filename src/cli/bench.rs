@@ -197,7 +197,8 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
 /// default `DEFAULT_CONNECTIONS_PER_QUERY`),
 /// `exhaustive` (exhaustive ellipsoid queries), `split=R` or `bottom=N` (the stochastic
 /// descent's settings, see `QuerySettings`), `reflection` (picks weighed by arcs times the
-/// reflection factor), `wide` (queries over the wide BVH), e.g. `ellipsoidal:4:exhaustive`.
+/// reflection factor), `wide` (queries over the wide BVH), e.g. `ellipsoidal:4:exhaustive`; for
+/// path `medium-connections=on` (render --medium-connections on).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Variant {
     /// Sampling method.
@@ -206,6 +207,8 @@ pub struct Variant {
     pub connections_per_query: u32,
     /// How ellipsoid queries traverse the BVH (ellipsoidal only).
     pub query: gatetrace::integrator::QuerySettings,
+    /// Medium connections (path; see `RenderSettings::medium_connections`).
+    pub medium_connections: bool,
 }
 
 impl Variant {
@@ -217,8 +220,21 @@ impl Variant {
         let method = Method::parse(&name.to_ascii_lowercase())
             .map_err(|_| anyhow::anyhow!("`{s}` is not a method: path, direct, ellipsoidal or ellipsoidal:OPTION"))?;
         let connections_per_query = gatetrace::integrator::bidirectional::default_connections_per_query(method);
-        let mut variant = Self { method, connections_per_query, query: Default::default() };
+        let mut variant = Self {
+            method,
+            connections_per_query,
+            query: Default::default(),
+            medium_connections: RenderSettings::default().medium_connections,
+        };
         for option in parts {
+            if method == Method::Path {
+                variant.medium_connections = match option {
+                    "medium-connections=on" => true,
+                    "medium-connections=off" => false,
+                    _ => anyhow::bail!("`{s}`: `{option}` is not an option of path (medium-connections=on|off)"),
+                };
+                continue;
+            }
             anyhow::ensure!(
                 matches!(method, Method::Ellipsoidal | Method::Auto),
                 "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
@@ -253,6 +269,9 @@ impl Variant {
         {
             name += &format!(":{}", self.connections_per_query);
         }
+        if self.medium_connections != RenderSettings::default().medium_connections {
+            name += if self.medium_connections { ":medium-connections=on" } else { ":medium-connections=off" };
+        }
         if matches!(self.method, Method::Ellipsoidal | Method::Auto) {
             let default = gatetrace::integrator::QuerySettings::default();
             if self.query.split == 0.0 {
@@ -279,6 +298,7 @@ impl Variant {
             method: self.method,
             connections_per_query: self.connections_per_query,
             query: self.query,
+            medium_connections: self.medium_connections,
             ..base.clone()
         }
     }

@@ -22,7 +22,8 @@ pub struct EqualTimeArgs {
     /// (or auto, for its ellipsoidal candidate) with options after colons: K (render
     /// --connections-per-query), exhaustive (render --query-split 0), split=R, bottom=N,
     /// reflection (render --query-weights reflection) or wide (render --query-tree wide), e.g.
-    /// ellipsoidal:4:exhaustive.
+    /// ellipsoidal:4:exhaustive; and path:medium-connections=on (render --medium-connections
+    /// on).
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<Variant>,
     /// Gates to compare at, separated by ; (same syntax as render --gate).

@@ -18,7 +18,7 @@ use gatetrace::integrator::{
 };
 use gatetrace::scene::{PreparedScene, load_scene_with};
 
-use super::args::{ImageArgs, OnOff, QueryTree, QueryWeights, RenderArgs};
+use super::args::{ImageArgs, OnOff, QueryTree, QueryWeights, RenderArgs, Switch};
 use super::interrupt;
 use super::report::{print_stats, print_warnings, progress_bar, say};
 
@@ -119,6 +119,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         target_pilot_spp: args.target_pilot.unwrap_or(0),
         band_index: false,
         ellipsoidal_share: args.ellipsoidal_share,
+        medium_connections: args.medium_connections == Switch::On,
     };
     // A capture's own defaults, and its band index (`auto` is decided once the scene is loaded:
     // capture::prepare_capture).

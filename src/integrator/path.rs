@@ -42,7 +42,7 @@
 use anyhow::Result;
 
 use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves, target_slots_per_wave};
-use super::{Integrator, RenderSettings, Wavefront};
+use super::{Integrator, LightStrategy, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
@@ -116,15 +116,18 @@ impl<'a> PathTracer<'a> {
         let params = super::render_params(scene, settings);
         let resumable = scene.wide.traversals_can_stop();
         let sum_per_path = settings.gate.kind() != crate::film::GateKind::Transient && !resumable;
+        let medium_connections = uses_medium_connections(scene, settings);
+        // Emission, next-event estimation, and a medium connection.
+        let contributions_per_slot = if medium_connections { 3 } else { 2 };
         let whole_paths = sum_per_path && !crate::bvh::small_scene_triangles(&scene.triangles).is_empty();
 
         // Slots per wave: within the largest per-slot buffer's binding.
         let largest_per_slot =
             if whole_paths { 3 * 4 } else { size_of::<PathState>().max(size_of::<ShadowRay>()) as u64 };
-        // Per-slot state: a path state, a hit, two queue entries, a shadow ray, two
+        // Per-slot state: a path state, a hit, two queue entries, a shadow ray, the
         // contributions and the path's radiance.
         let bytes_per_slot = (size_of::<PathState>() + size_of::<Hit>() + 8 + size_of::<ShadowRay>()) as u64
-            + 2 * size_of::<Contribution>() as u64
+            + contributions_per_slot * size_of::<Contribution>() as u64
             + 12;
         let target = target_slots_per_wave(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, bytes_per_slot);
         let (samples_per_pass, slots_per_wave) = plan_waves(settings, limit / largest_per_slot, target)?;
@@ -141,14 +144,20 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
         let contribution_slots = if sum_per_path { 1 } else { slots };
-        r.storage_zeroed(ctx, "contributions", 2 * size_of::<Contribution>() as u64 * contribution_slots, none)?;
+        r.storage_zeroed(
+            ctx,
+            "contributions",
+            contributions_per_slot * size_of::<Contribution>() as u64 * contribution_slots,
+            none,
+        )?;
         let path_radiance_bytes = if sum_per_path { 3 * 4 * slots_per_wave } else { 4 };
         r.storage_zeroed(ctx, "path_radiance", path_radiance_bytes, none)?;
         // trace_shadow_rays can clear light-tracing splats; the path tracer has none.
         r.storage_zeroed(ctx, "splats", size_of::<Splat>() as u64, none)?;
         let vertices_per_round = if sum_per_path { VERTICES_PER_ROUND_SUMMING } else { 1 };
         constants.push(("LIGHT_STRATEGY", settings.light_strategy as u32 as f64));
-        constants.push(("CONTRIBUTIONS_PER_SLOT", 2.0));
+        constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
+        constants.push(("MEDIUM_CONNECTIONS", medium_connections as u32 as f64));
         constants.push(("SUM_PER_PATH", sum_per_path as u32 as f64));
         constants.push(("VERTICES_PER_ROUND", vertices_per_round as f64));
 
@@ -318,6 +327,18 @@ impl Integrator for PathTracer<'_> {
 /// standing in a medium in a scene with glass that declares no media of its own (its inside would
 /// hold the camera's medium, as in Mitsuba, where water or glass holds none). Thin panes pass the
 /// medium on unchanged and need none.
+/// Whether a render takes medium connections (the MEDIUM_CONNECTIONS override of `extend_paths`):
+/// asked for, in a scene with a homogeneous medium, on a box or transient gate, with MIS between
+/// the light strategies, outside NLOS captures.
+pub fn uses_medium_connections(scene: &PreparedScene, settings: &RenderSettings) -> bool {
+    use crate::film::GateKind;
+    settings.medium_connections
+        && scene.scene.media.iter().any(|m| m.grid.is_none())
+        && matches!(settings.gate.kind(), GateKind::Box | GateKind::Transient)
+        && settings.light_strategy == LightStrategy::Mis
+        && settings.nlos.is_none()
+}
+
 fn check_media(scene: &PreparedScene, settings: &RenderSettings) -> Result<()> {
     if !scene.scene.has_media() {
         return Ok(());

@@ -118,6 +118,11 @@ pub struct RenderSettings {
     /// (dimensionless, 1 / [`super::combined::MAX_SHARE`] ..= MAX_SHARE); None: a render's pilot
     /// chooses it (see [`super::combined::allocate`]), an integrator built directly takes 1.
     pub ellipsoidal_share: Option<f64>,
+    /// `path` in scenes with homogeneous media on a box or transient gate: also place scattering
+    /// vertices where a flight's ray meets the spheroid of a target length drawn from the gate
+    /// (medium connections, docs/design.md section 4.1; `render --medium-connections`). Off by
+    /// default: free flights alone place them.
+    pub medium_connections: bool,
 }
 
 /// The two numerical guards of ellipsoidal connections, relative (dimensionless). Each leaves
@@ -159,6 +164,7 @@ impl Default for RenderSettings {
             target_pilot_spp: 0,
             band_index: false,
             ellipsoidal_share: None,
+            medium_connections: false,
         }
     }
 }

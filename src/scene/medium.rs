@@ -261,9 +261,44 @@ pub fn transmittance(sigma_t: f32, t: f32) -> f32 {
     (-sigma_t * t).exp()
 }
 
+/// The f64 oracle of a medium connection's placement (the kernels' `spheroid_crossing`, docs/design.md
+/// section 4.1): where the ray from `o` along unit `w` meets the spheroid of foci `o` and `y` and
+/// length `r` (m), and how fast the length grows there: (t (m), dtau/dt), from the f32 inputs
+/// widened exactly and `w` normalised, by the textbook formulas in f64: t = (r^2 - |p|^2) /
+/// (2 (r + p . w)) with p = o - y, and 1 - w . (y - z) / |y - z|; None where r <= |o - y|.
+pub fn medium_connection_oracle(o: Vec3, w: Vec3, y: Vec3, r: f32) -> Option<(f64, f64)> {
+    let (o, w, y, r) = (o.as_dvec3(), w.as_dvec3().normalize(), y.as_dvec3(), r as f64);
+    let p = o - y;
+    if r <= p.length() {
+        return None;
+    }
+    let t = (r * r - p.length_squared()) / (2.0 * (r + p.dot(w)));
+    let z = o + t * w;
+    Some((t, 1.0 - w.dot((y - z).normalize())))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The oracle's vertex lies on the spheroid (t + |y - z| = r), and its rate is the
+    /// derivative of the length along the ray (central differences).
+    #[test]
+    fn medium_connections_place_their_vertex_on_the_spheroid() {
+        let mut rng = crate::rng::Rng::new(17, 0, 0);
+        let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+        for _ in 0..1000 {
+            let (o, y, w) = (v(), v(), v().normalize());
+            let r = (o - y).length() + 0.05 + v().x.abs();
+            let (t, rate) = medium_connection_oracle(o, w, y, r).unwrap();
+            let length = |t: f64| t + (y.as_dvec3() - (o.as_dvec3() + t * w.as_dvec3())).length();
+            assert!(t > 0.0 && (length(t) - r as f64).abs() < 1e-12 * r as f64, "length {} against {r}", length(t));
+            let h = 1e-6;
+            let derivative = (length(t + h) - length(t - h)) / (2.0 * h);
+            assert!((derivative - rate).abs() < 1e-6, "dtau/dt {derivative} against {rate}");
+        }
+        assert_eq!(medium_connection_oracle(Vec3::ZERO, Vec3::X, Vec3::Y, 0.9), None);
+    }
 
     /// The phase function integrates to one over the sphere and has mean cosine g.
     #[test]
