@@ -291,7 +291,8 @@ mod tests {
             let (o, y, w) = (v(), v(), v().normalize());
             let r = (o - y).length() + 0.05 + v().x.abs();
             let (t, rate) = medium_connection_oracle(o, w, y, r).unwrap();
-            let length = |t: f64| t + (y.as_dvec3() - (o.as_dvec3() + t * w.as_dvec3())).length();
+            // Along the unit direction the oracle takes (w / |w| in f64).
+            let length = |t: f64| t + (y.as_dvec3() - (o.as_dvec3() + t * w.as_dvec3().normalize())).length();
             assert!(t > 0.0 && (length(t) - r as f64).abs() < 1e-12 * r as f64, "length {} against {r}", length(t));
             let h = 1e-6;
             let derivative = (length(t + h) - length(t - h)) / (2.0 * h);
