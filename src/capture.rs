@@ -322,6 +322,9 @@ pub fn render_capture(
         if let Some(warning) = output.truncated_traversals_warning() {
             progress.warning(&warning);
         }
+        if let Some(why) = &output.band_index_off {
+            progress.warning(&format!("the band index is off ({why}): connections descend the whole BVH"));
+        }
         if progress.render_ended(k, aims.len()).is_break() {
             return Ok(None);
         }

@@ -214,6 +214,53 @@ fn a_cluster_of_large_triangles_over_fine_bins_is_filled_in_ranges_of_strata() {
     }
 }
 
+/// A build whose count pass predicts it past the render's time budget stops there (from its
+/// first dispatch where that predicts three times the budget; from its measured rate past the
+/// first dispatch otherwise; after a single dispatch, at twice its time), and not before.
+#[test]
+fn the_build_clock_stops_a_build_that_would_outlast_its_budget() {
+    use gatetrace::nlos::band_index::BuildClock;
+    use std::time::{Duration, Instant};
+    let second_ago = Instant::now() - Duration::from_secs(1);
+    // One dispatch of ten took a second: 20 s predicted, past three times 0.5 s.
+    let why = BuildClock::new(second_ago, 0.5, 100).count_done(10).expect("a build of 20 s within 0.5 s");
+    assert!(why.contains("0.5 s budget"), "{why}");
+    // ... but within three times 10 s: the build goes on, and the next dispatch, done at once,
+    // measures a rate that ends it within the budget.
+    let mut clock = BuildClock::new(second_ago, 10.0, 100);
+    assert_eq!(clock.count_done(10), None);
+    assert_eq!(clock.count_done(10), None);
+    // A count pass of a single dispatch that took a second: a build of 2 s.
+    assert!(BuildClock::new(second_ago, 1.5, 10).count_done(10).is_some());
+    assert_eq!(BuildClock::new(second_ago, 2.5, 10).count_done(10), None);
+}
+
+/// A render whose time budget the band index's build would outlast goes without the index (its
+/// captures are unbiased either way: the tests above), says why, and leaves the build to the
+/// next render, which here renders by samples and builds it.
+#[test]
+fn a_build_past_the_time_budget_waits_for_the_next_render() {
+    let ctx = common::gpu();
+    let scene = common::nlos_sphere_scene(8, false);
+    let gate = Gate::Transient { start: 0.85, width: 0.0024, bins: 300 };
+    let settings = gatetrace::integrator::RenderSettings {
+        seed: 5,
+        band_index: true,
+        ..common::example_capture(4, 4, gate, LaserAim::Confocal, Method::Ellipsoidal)
+    };
+    let mut tracer = BidirectionalTracer::new(&ctx, &scene, &settings).unwrap();
+    tracer.set_time_budget(Some(1e-6));
+    tracer.render_samples(1).unwrap();
+    let why = tracer.band_index_off().expect("a build within a microsecond");
+    assert!(why.contains("budget"), "{why}");
+    assert_eq!(tracer.band_index_report(), Some(format!("off: {why}")));
+    tracer.set_time_budget(None);
+    tracer.render_samples(1).unwrap();
+    assert_eq!(tracer.band_index_off(), None);
+    let report = tracer.band_index_report().unwrap();
+    assert!(report.contains("entries"), "the band index was not built: {report}");
+}
+
 /// A random triangle and two foci in metres: edges from 0.1 mm to 40 cm, foci 0.2 to 2 m away
 /// (some pairs coincide, as a confocal scan's), so that the bound eps spans its range.
 fn random_piece(rng: &mut gatetrace::rng::Rng) -> ([Vec3; 3], Vec3, Vec3) {

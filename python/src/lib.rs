@@ -402,6 +402,7 @@ impl Renderer {
                 stats: None,
                 target_pilot_spp: tracer.target_pilot_spp(),
                 band_index: tracer.band_index_report(),
+                band_index_off: tracer.band_index_off(),
                 samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
                 choice: None,
                 allocation: None,

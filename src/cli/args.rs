@@ -142,11 +142,13 @@ pub struct RenderArgs {
     #[arg(long, value_name = "WEIGHTS", value_enum)]
     pub query_weights: Option<QueryWeights>,
     /// --nlos, ellipsoidal, transient gate: spp of a pilot that shares out the bins' samples
-    /// (default 256; with a band index and --max-bounces 3 its masses do, and no pilot runs).
+    /// (default 256; with a band index and --max-bounces 3 its masses do, and no pilot runs;
+    /// with --time it stops after an eighth of the budget).
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     pub target_pilot: Option<u32>,
     /// --nlos, ellipsoidal, transient gate: connect through the band index of three-bounce
-    /// shells (auto: on above 16 hidden triangles)
+    /// shells (auto: on above 16 hidden triangles; with --time, not where its build would
+    /// outlast the budget)
     #[arg(long, value_name = "auto|on|off", default_value = "auto", value_enum)]
     pub band_index: OnOff,
     /// path, homogeneous media, box or transient gate: also place scattering vertices where a

@@ -132,9 +132,17 @@ pub struct BidirectionalTracer<'a> {
     target_pilot_pending: bool,
     /// The film's target lengths follow a pilot render's extra visits.
     target_pilot_ran: bool,
+    /// Samples per pixel the last pilot render traced: `target_pilot_spp`, or fewer where a time
+    /// budget cut it short (`run_target_pilot`).
+    target_pilot_traced: u32,
     /// The band index of an NLOS capture, while it is still to be built (before the pilot and
     /// the first pass).
     band_index: Option<crate::nlos::band_index::BandIndex>,
+    /// The time budget (s) of the render about to start, which the band index's build must not
+    /// outlast (`Integrator::set_time_budget`); None: no limit.
+    time_budget: Option<f64>,
+    /// The band index whose build a render's time budget cut short: the next render tries again.
+    band_index_deferred: Option<crate::nlos::band_index::BandIndex>,
     /// What became of the band index: built (its figures) or why not; None when not asked for.
     band_index_result: Option<std::result::Result<crate::nlos::band_index::BandIndexSummary, String>>,
     /// The built band index's masses per pixel and stratum (empty without one): they share out
@@ -434,7 +442,10 @@ impl<'a> BidirectionalTracer<'a> {
             target_pilot_spp,
             target_pilot_pending: target_pilot_spp > 0,
             target_pilot_ran: false,
+            target_pilot_traced: 0,
             band_index,
+            time_budget: None,
+            band_index_deferred: None,
             band_index_result,
             band_masses: Vec::new(),
             binding_limit: limit,
@@ -537,12 +548,23 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn target_pilot_spp(&self) -> u32 {
-        if self.target_pilot_ran { self.target_pilot_spp } else { 0 }
+        if self.target_pilot_ran { self.target_pilot_traced } else { 0 }
     }
 
     fn samples_to_visit_every_bin(&self) -> Option<u64> {
         let t = &self.wf.params.target_length;
         (t.strata > 0).then(|| crate::film::target::samples_to_visit_every_bin(t))
+    }
+
+    fn set_time_budget(&mut self, seconds: Option<f64>) {
+        self.time_budget = seconds;
+        if let Some(index) = self.band_index_deferred.take() {
+            self.band_index = Some(index);
+        }
+    }
+
+    fn band_index_off(&self) -> Option<String> {
+        self.band_index_result.as_ref()?.as_ref().err().cloned()
     }
 
     fn band_index_report(&self) -> Option<String> {
@@ -612,6 +634,7 @@ impl Integrator for BidirectionalTracer<'_> {
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
         self.target_pilot_pending = flags[0] != 0;
         self.target_pilot_ran = flags[1] != 0;
+        self.target_pilot_traced = self.target_pilot_spp;
         Ok(())
     }
 

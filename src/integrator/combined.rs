@@ -262,6 +262,11 @@ impl Integrator for CombinedTracer<'_> {
         self.ellipsoidal.samples_to_visit_every_bin()
     }
 
+    fn set_time_budget(&mut self, seconds: Option<f64>) {
+        self.direct.set_time_budget(seconds);
+        self.ellipsoidal.set_time_budget(seconds);
+    }
+
     fn prepare(&mut self) -> Result<()> {
         self.direct.prepare()?;
         self.ellipsoidal.prepare()

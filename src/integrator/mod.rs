@@ -107,6 +107,15 @@ pub trait Integrator: Send {
     fn band_index_report(&self) -> Option<String> {
         None
     }
+    /// Why an NLOS capture that asked for the band index goes without it, if it does.
+    fn band_index_off(&self) -> Option<String> {
+        None
+    }
+    /// The time budget (s) of the render about to start, None for a render by samples (called
+    /// before `prepare`): work before the first pass that would outlast it is left out where the
+    /// render can go without it (the band index's build,
+    /// [`crate::nlos::band_index::BuildClock`]), and tried again at the next render.
+    fn set_time_budget(&mut self, _seconds: Option<f64>) {}
     /// Samples per pixel after which every bin of a transient gate's stratified target lengths
     /// has had one (`film::target::samples_to_visit_every_bin`); None for other methods and gates.
     fn samples_to_visit_every_bin(&self) -> Option<u64> {

@@ -98,6 +98,9 @@ pub struct RenderOutput {
     /// Samples per pixel of the pilot render traced before the film's and discarded (see
     /// `RenderSettings::target_pilot_spp`).
     pub target_pilot_spp: u32,
+    /// Why a capture that asked for the band index went without it (see
+    /// [`Integrator::band_index_off`]).
+    pub band_index_off: Option<String>,
     /// What became of the band index (see [`Integrator::band_index_report`]).
     pub band_index: Option<String>,
     /// Samples per pixel a stratified render needs before every bin has had one (see
@@ -153,6 +156,7 @@ impl RenderOutput {
             stats: None,
             target_pilot_spp: 0,
             band_index: None,
+            band_index_off: None,
             samples_to_visit_every_bin: None,
             choice: None,
             allocation: None,
@@ -175,6 +179,7 @@ pub fn trace_budget(
     let mut flow = ControlFlow::Continue(());
     match budget {
         Budget::Samples(n) => {
+            tracer.set_time_budget(None);
             let target = tracer.samples_done() + n;
             while tracer.samples_done() < target && flow.is_continue() {
                 let next = (target - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
@@ -184,6 +189,7 @@ pub fn trace_budget(
             }
         }
         Budget::Time(t) => {
+            tracer.set_time_budget(Some(t.as_secs_f64()));
             PassSizer::default().render_for(tracer, t.as_secs_f64(), |tracer, _| {
                 passes += 1;
                 flow = after_pass(tracer, passes)?;
@@ -364,6 +370,7 @@ pub fn render_resumable(
         stats,
         target_pilot_spp,
         band_index: tracer.band_index_report(),
+        band_index_off: tracer.band_index_off(),
         samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
         choice,
         allocation,
