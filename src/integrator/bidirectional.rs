@@ -127,19 +127,17 @@ pub struct BidirectionalTracer<'a> {
     /// Samples per pixel of a pilot render that shapes the target lengths' extra visits
     /// (`RenderSettings::target_pilot_spp`; 0 where the gate is not stratified or the
     /// per-pixel tables do not fit a binding).
-    target_pilot_spp: u32,
+    target_pilot_asked: u32,
     /// The pilot render is still to run (before the next pass).
     target_pilot_pending: bool,
-    /// The film's target lengths follow a pilot render's extra visits.
-    target_pilot_ran: bool,
-    /// Samples per pixel the last pilot render traced: `target_pilot_spp`, or fewer where a time
-    /// budget cut it short (`run_target_pilot`).
+    /// Samples per pixel of the pilot render whose extra visits the film's target lengths
+    /// follow: `target_pilot_asked`, or fewer where a time budget cut it short
+    /// (`run_target_pilot`); 0: none.
     target_pilot_traced: u32,
     /// The band index of an NLOS capture, while it is still to be built (before the pilot and
     /// the first pass).
     band_index: Option<crate::nlos::band_index::BandIndex>,
-    /// The time budget (s) of the render about to start, which the band index's build must not
-    /// outlast (`Integrator::set_time_budget`); None: no limit.
+    /// The render's time budget (s), which the band index's build must not outlast; None: none.
     time_budget: Option<f64>,
     /// The band index whose build a render's time budget cut short: the next render tries again.
     band_index_deferred: Option<crate::nlos::band_index::BandIndex>,
@@ -439,9 +437,8 @@ impl<'a> BidirectionalTracer<'a> {
             stats,
             query_work: [0; QUERY_COUNTERS],
             method: settings.method,
-            target_pilot_spp,
+            target_pilot_asked: target_pilot_spp,
             target_pilot_pending: target_pilot_spp > 0,
-            target_pilot_ran: false,
             target_pilot_traced: 0,
             band_index,
             time_budget: None,
@@ -548,7 +545,7 @@ impl Integrator for BidirectionalTracer<'_> {
     }
 
     fn target_pilot_spp(&self) -> u32 {
-        if self.target_pilot_ran { self.target_pilot_traced } else { 0 }
+        self.target_pilot_traced
     }
 
     fn samples_to_visit_every_bin(&self) -> Option<u64> {
@@ -558,9 +555,7 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn set_time_budget(&mut self, seconds: Option<f64>) {
         self.time_budget = seconds;
-        if let Some(index) = self.band_index_deferred.take() {
-            self.band_index = Some(index);
-        }
+        self.band_index = self.band_index.take().or(self.band_index_deferred.take());
     }
 
     fn band_index_off(&self) -> Option<String> {
@@ -570,12 +565,8 @@ impl Integrator for BidirectionalTracer<'_> {
     fn band_index_report(&self) -> Option<String> {
         match self.band_index_result.as_ref()? {
             Ok(b) => Some(format!(
-                "{} clusters, {} entries over bins of {} strata, built in {:.2} s ({} dispatches){}",
-                b.clusters,
-                b.entries,
-                b.ratio,
-                b.seconds,
-                b.batches,
+                "{}{}",
+                b.describe(),
                 if self.wf.params.target_length.band_index == 0 { "; off after a change of gate" } else { "" }
             )),
             Err(why) => Some(format!("off: {why}")),
@@ -616,7 +607,7 @@ impl Integrator for BidirectionalTracer<'_> {
             self.wf.film_element_count() as usize,
         )?;
         state.push("splat_film", &splats);
-        state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_ran as u32]);
+        state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_traced]);
         Ok(state)
     }
 
@@ -633,8 +624,7 @@ impl Integrator for BidirectionalTracer<'_> {
         );
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
         self.target_pilot_pending = flags[0] != 0;
-        self.target_pilot_ran = flags[1] != 0;
-        self.target_pilot_traced = self.target_pilot_spp;
+        self.target_pilot_traced = flags[1];
         Ok(())
     }
 
@@ -648,7 +638,7 @@ impl Integrator for BidirectionalTracer<'_> {
         self.wf.restart(seed, &["splat_film"]);
         // As a new tracer: the pilot (where the gate's tables fit) shapes the extra visits again.
         self.target_pilot_pending = self.target_pilot_fits();
-        self.target_pilot_ran = false;
+        self.target_pilot_traced = 0;
     }
 
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
@@ -657,7 +647,7 @@ impl Integrator for BidirectionalTracer<'_> {
             // The extra visits were shaped for the old gate (wf.set_gate dropped them).
             // A new pilot shapes them again where the new gate's tables fit the buffer.
             self.target_pilot_pending = self.target_pilot_fits();
-            self.target_pilot_ran = false;
+            self.target_pilot_traced = 0;
             self.reset_film();
         }
         Ok(moved)

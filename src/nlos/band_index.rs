@@ -148,6 +148,16 @@ pub struct BandIndexSummary {
     pub seconds: f64,
 }
 
+impl BandIndexSummary {
+    /// The figures in words, for the render's metadata.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} clusters, {} entries over bins of {} strata, built in {:.2} s ({} dispatches)",
+            self.clusters, self.entries, self.ratio, self.seconds, self.batches
+        )
+    }
+}
+
 /// Why a capture goes without its band index.
 #[derive(Clone, Debug)]
 pub enum BuildStop {

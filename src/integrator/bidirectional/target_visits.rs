@@ -41,7 +41,6 @@ impl BidirectionalTracer<'_> {
                     Err(stop.why().to_owned())
                 }
             };
-        let wf = &mut self.wf;
         if let (Ok(_), Some(kernels), Some(groups)) =
             (&result, &self.stages.ellipsoidal, &mut self.bindings.ellipsoidal)
         {
@@ -97,16 +96,15 @@ impl BidirectionalTracer<'_> {
         let start = std::time::Instant::now();
         let limit = self.time_budget.map(|seconds| seconds * PILOT_BUDGET_SHARE);
         let mut traced = 0;
-        while traced < self.target_pilot_spp {
+        while traced < self.target_pilot_asked {
             if limit.is_some_and(|limit| start.elapsed().as_secs_f64() >= limit) {
                 break;
             }
             let pass = if limit.is_some() { PILOT_PASS } else { u32::MAX };
-            let n = (self.target_pilot_spp - traced).min(pass).min(self.samples_per_pass());
+            let n = (self.target_pilot_asked - traced).min(pass).min(self.samples_per_pass());
             self.render_pass(n)?;
             traced += n;
         }
-        self.target_pilot_traced = traced;
         if traced == 0 {
             return Ok(());
         }
@@ -119,14 +117,14 @@ impl BidirectionalTracer<'_> {
         self.wf.target_visits = rows;
         // Writes the parameters with a new seed and the film's first sample.
         self.reset_film();
-        self.target_pilot_ran = true;
+        self.target_pilot_traced = traced;
         Ok(())
     }
 
     /// Whether the render has a target pilot and the current gate's visit tables fit the buffer
     /// built for them.
     pub(super) fn target_pilot_fits(&self) -> bool {
-        self.target_pilot_spp > 0 && self.visit_tables_fit()
+        self.target_pilot_asked > 0 && self.visit_tables_fit()
     }
 
     /// Whether the render keeps visit tables and the current gate's (strata + 1 counts per
