@@ -172,8 +172,9 @@ fn remap0(x: f32) -> f32 {
 }
 
 /// The power-heuristic weight of strategy (s, t = path.len() - s) for `path` (x_0 on a light,
-/// the last vertex the pinhole), computed as `connect_direct` does: strategies whose connection
-/// would end at a delta vertex are left out, and the zero densities that mark delta steps count
+/// the last vertex the pinhole), as `connect_direct` computes it (term by term here; the kernel
+/// takes the ratios away from the connection from per-slot sums, docs/design.md section 4.2):
+/// strategies whose connection would end at a delta vertex are left out, and the zero densities that mark delta steps count
 /// as 1 (PBRT's BDPT). Only for strategies that can sample the path (neither x_{s-1} nor x_s
 /// a delta vertex).
 pub fn mis_weight(path: &[Vertex], s: usize) -> f32 {
