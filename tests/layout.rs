@@ -68,3 +68,22 @@ fn wgsl_structs_match_rust_structs() {
         assert!(rust_names.contains(&name.as_str()), "WGSL struct {name} has no Rust twin in src/gpu/layout.rs");
     }
 }
+
+/// connect_direct's per-slot MIS ratio sums hold one entry per subpath vertex in private arrays
+/// of MAX_SUBPATH_VERTICES entries: the host's longest subpath (MAX_BOUNCES + 2 vertices) must
+/// fit, read from the composed kernel's constant.
+#[test]
+fn connect_direct_holds_the_longest_subpath() {
+    let source = gatetrace::gpu::kernels::kernel_source("connect_direct");
+    let module = naga::front::wgsl::parse_str(source.wgsl).expect("connect_direct parses");
+    let (_, constant) = module
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some("MAX_SUBPATH_VERTICES"))
+        .expect("connect_direct declares MAX_SUBPATH_VERTICES");
+    let value = match module.global_expressions[constant.init] {
+        naga::Expression::Literal(naga::Literal::U32(v)) => v,
+        ref e => panic!("MAX_SUBPATH_VERTICES is not a u32 literal: {e:?}"),
+    };
+    assert_eq!(value, gatetrace::integrator::bidirectional::MAX_BOUNCES + 2);
+}
