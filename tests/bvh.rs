@@ -186,6 +186,38 @@ fn wide_bvh_is_a_conservative_collapse() {
     }
 }
 
+#[test]
+fn wide_bvh_numbers_its_top_breadth_first() {
+    // The kernels read the first TOP_NODES nodes from a uniform copy on CPU devices: they must
+    // be the top of the tree (a breadth-first walk from the root in slot order), and the nodes
+    // below them keep the depth-first order of the collapse, which keeps a subtree's nodes close
+    // in memory. A soup of 16,000 triangles has a few thousand wide nodes, more than TOP_NODES.
+    let soup = common::random_soup(16_000, 5);
+    let wide = WideBvh::build(&Bvh::build(&soup));
+    let n = wide.nodes.len();
+    assert!(n > 2 * wide::TOP_NODES, "the tree should outgrow the top ({n} nodes)");
+    let inner = |i: usize| wide.nodes[i].children.into_iter().filter(|&c| c < gatetrace::gpu::layout::WIDE_LEAF);
+    let mut breadth_first = vec![0usize];
+    let mut next = 0;
+    while breadth_first.len() < wide::TOP_NODES {
+        breadth_first.extend(inner(breadth_first[next]).map(|c| c as usize));
+        next += 1;
+    }
+    breadth_first.truncate(wide::TOP_NODES);
+    assert_eq!(breadth_first, (0..wide::TOP_NODES).collect::<Vec<_>>(), "the top is not numbered breadth-first");
+    // Depth-first below the top: a pre-order walk that skips the top's nodes meets the others in
+    // increasing order.
+    let mut stack = vec![0usize];
+    let mut below = Vec::new();
+    while let Some(i) = stack.pop() {
+        if i >= wide::TOP_NODES {
+            below.push(i);
+        }
+        stack.extend(inner(i).map(|c| c as usize).collect::<Vec<_>>().into_iter().rev());
+    }
+    assert_eq!(below, (wide::TOP_NODES..n).collect::<Vec<_>>(), "the nodes below the top are not depth-first");
+}
+
 /// The triangle range (BVH positions) below wide node `node`.
 fn subtree_triangles(wide: &WideBvh, node: u32) -> std::ops::Range<u32> {
     let (mut lo, mut hi) = (u32::MAX, 0);
@@ -250,9 +282,16 @@ fn gpu_traversal_matches_cpu_twin() {
     // f32; the device may fuse multiply-adds, which changes t by a few ulps (allowed: 1e-5
     // relative, about 80 ulps) and can flip a hit only for rays grazing an edge or a tie.
     let ctx = common::gpu();
-    for (name, scene, scale) in
-        [("cornell box", common::cornell_box(), 0.6f32), ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4)]
-    {
+    // The large soup's tree outgrows the nodes CPU devices read from a uniform copy
+    // (wide::TOP_NODES), so its rays read nodes from both.
+    for (name, scene, scale) in [
+        ("cornell box", common::cornell_box(), 0.6f32),
+        ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4),
+        ("large soup", common::soup_scene(12_000, 13, "gpu_large_soup"), 0.4),
+    ] {
+        if name == "large soup" {
+            assert!(scene.wide.nodes.len() > wide::TOP_NODES, "{} wide nodes", scene.wide.nodes.len());
+        }
         let tracer =
             PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
         let rays = random_rays(4096, scene.triangles.len(), 5);

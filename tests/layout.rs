@@ -74,16 +74,34 @@ fn wgsl_structs_match_rust_structs() {
 /// fit, read from the composed kernel's constant.
 #[test]
 fn connect_direct_holds_the_longest_subpath() {
-    let source = gatetrace::gpu::kernels::kernel_source("connect_direct");
-    let module = naga::front::wgsl::parse_str(source.wgsl).expect("connect_direct parses");
+    let value = kernel_u32_const("connect_direct", "MAX_SUBPATH_VERTICES");
+    assert_eq!(value, gatetrace::integrator::bidirectional::MAX_BOUNCES + 2);
+}
+
+/// The lengths of the uniform tables the host pads to are the lengths the kernels declare.
+#[test]
+fn uniform_tables_have_the_host_lengths() {
+    for (name, host) in [
+        ("TOP_WIDE_NODES", gatetrace::bvh::wide::TOP_NODES),
+        ("MAX_SMALL_SCENE_TRIANGLES", gatetrace::bvh::MAX_SMALL_SCENE_TRIANGLES),
+        ("MAX_UNIFORM_MATERIALS", gatetrace::gpu::layout::MAX_UNIFORM_MATERIALS),
+        ("MAX_UNIFORM_LIGHTS", gatetrace::gpu::layout::MAX_UNIFORM_LIGHTS),
+    ] {
+        assert_eq!(kernel_u32_const("extend_paths", name) as usize, host, "{name}: WGSL vs host");
+    }
+}
+
+/// The value of u32 constant `name` in kernel `kernel` as composed.
+fn kernel_u32_const(kernel: &str, name: &str) -> u32 {
+    let source = gatetrace::gpu::kernels::kernel_source(kernel);
+    let module = naga::front::wgsl::parse_str(source.wgsl).unwrap_or_else(|e| panic!("{kernel} parses: {e}"));
     let (_, constant) = module
         .constants
         .iter()
-        .find(|(_, c)| c.name.as_deref() == Some("MAX_SUBPATH_VERTICES"))
-        .expect("connect_direct declares MAX_SUBPATH_VERTICES");
-    let value = match module.global_expressions[constant.init] {
+        .find(|(_, c)| c.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("{kernel} declares {name}"));
+    match module.global_expressions[constant.init] {
         naga::Expression::Literal(naga::Literal::U32(v)) => v,
-        ref e => panic!("MAX_SUBPATH_VERTICES is not a u32 literal: {e:?}"),
-    };
-    assert_eq!(value, gatetrace::integrator::bidirectional::MAX_BOUNCES + 2);
+        ref e => panic!("{name} is not a u32 literal: {e:?}"),
+    }
 }

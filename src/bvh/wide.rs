@@ -21,6 +21,11 @@ use crate::gpu::layout::{Hit, NONE, NodeSurface, Triangle, WIDE_LEAF, WideNode};
 /// Children per node.
 pub const WIDTH: usize = 4;
 
+/// Nodes at the top of the tree that the kernels read from a uniform buffer
+/// (`top_wide_nodes`, 64 KiB): on CPU Vulkan a uniform read at lanes' differing indices is a
+/// gather, a storage read a loop over the lanes.
+pub const TOP_NODES: usize = 1024;
+
 /// Entries of a stack traversal's stack (`STACK_SIZE` in bvh.wesl). A traversal that would need
 /// more stops, and goes on in resume mode.
 pub const STACK_SIZE: u32 = 32;
@@ -40,7 +45,8 @@ pub const TRAVERSAL_COMPLETE: u32 = u32::MAX;
 /// The wide BVH and what the host needs to know of its shape.
 #[derive(Clone, Debug, Default)]
 pub struct WideBvh {
-    /// Nodes in depth-first order, the root first.
+    /// The top of the tree breadth-first (the root first, at most `TOP_NODES`), then the other
+    /// nodes depth-first.
     pub nodes: Vec<WideNode>,
     /// Leaves (slots holding triangles).
     pub leaves: usize,
@@ -67,7 +73,53 @@ impl WideBvh {
         // A scene of one leaf: a root with that leaf as its only child.
         let root_children = if nodes[0].leaf != 0 { vec![0] } else { vec![1, nodes[1].skip as usize] };
         wide.emit(bvh, root_children, NONE, 1);
+        wide.top_levels_first();
         wide
+    }
+
+    /// Renumbers the nodes so that the first `TOP_NODES` are the top of the tree in
+    /// breadth-first order (the root first), the kernels' uniform copy (`top_wide_nodes`);
+    /// the others keep their depth-first order.
+    fn top_levels_first(&mut self) {
+        let n = self.nodes.len();
+        let top = n.min(TOP_NODES);
+        let mut order = Vec::with_capacity(n);
+        let mut placed = vec![false; n];
+        order.push(0usize);
+        placed[0] = true;
+        let mut next = 0;
+        while order.len() < top && next < order.len() {
+            let node = self.nodes[order[next]];
+            next += 1;
+            for &c in &node.children {
+                if c < WIDE_LEAF && order.len() < top {
+                    order.push(c as usize);
+                    placed[c as usize] = true;
+                }
+            }
+        }
+        order.extend((0..n).filter(|&i| !placed[i]));
+        let mut new_index = vec![0u32; n];
+        for (new, &old) in order.iter().enumerate() {
+            new_index[old] = new as u32;
+        }
+        let nodes: Vec<WideNode> = order
+            .iter()
+            .map(|&old| {
+                let mut node = self.nodes[old];
+                for c in node.children.iter_mut() {
+                    if *c < WIDE_LEAF {
+                        *c = new_index[*c as usize];
+                    }
+                }
+                if node.parent != NONE {
+                    node.parent = (new_index[(node.parent >> 2) as usize] << 2) | (node.parent & 3);
+                }
+                node
+            })
+            .collect();
+        self.sources = order.iter().map(|&old| self.sources[old]).collect();
+        self.nodes = nodes;
     }
 
     /// Appends the wide node whose children are the binary nodes `kids` (before opening), and

@@ -137,7 +137,8 @@ impl BvhNode {
 
 /// A node of the wide BVH that rays traverse (`bvh::wide`): four children whose boxes are
 /// stored inline, quantised to 8 bits per plane on a grid of steps 2^e (m) from `origin`, so a
-/// node is one 64-byte cache line. Nodes are in depth-first order, the root first.
+/// node is one 64-byte cache line. The first [`crate::bvh::wide::TOP_NODES`] nodes are the top of
+/// the tree breadth-first (the root first), the rest depth-first.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct WideNode {

@@ -5,6 +5,7 @@ use anyhow::Result;
 
 use super::wavefront::{FILM_ELEMENT_BYTES, film_elements, target_cdf, upload_gate};
 use super::{Method, RenderSettings};
+use crate::bvh::wide::TOP_NODES;
 use crate::film::target::TargetSampler;
 use crate::gpu::layout::{
     MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, Medium, NONE, RenderParams, TargetParams, TriangleShading, WaveParams,
@@ -92,6 +93,9 @@ pub fn upload_scene(
     let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", shading, limit)?;
     let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
     r.storage_init(ctx, "wide_nodes", &scene.wide.nodes)?;
+    // The top of the tree again, for CPU devices (TOP_NODES_IN_UNIFORMS).
+    let top = &scene.wide.nodes[..scene.wide.nodes.len().min(TOP_NODES)];
+    r.uniform_slice_init(ctx, "top_wide_nodes", &padded_table(top, TOP_NODES));
     // Queries over the wide BVH read one surface per wide node and slot in the same binding.
     let surfaces = if settings.query.wide { &scene.child_surfaces } else { &scene.node_surfaces };
     let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", surfaces, limit)?;
@@ -162,6 +166,7 @@ pub fn upload_scene(
         ("SMALL_SCENE_TRIANGLES", small as f64),
         ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
         ("RESUMABLE", flag(scene.wide.traversals_can_stop())),
+        ("TOP_NODES_IN_UNIFORMS", flag(ctx.is_cpu())),
         ("NLOS", flag(settings.nlos.is_some())),
     ];
     Ok((r, constants, film))
