@@ -758,13 +758,36 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:", "the albedo grid (4 x 2 x 1) must share the extinction grid's voxels (2 x 2 x 2)"],
         ),
         case(
-            "XML medium with a bidirectional method",
+            "XML medium with ellipsoidal connections",
             |d| {
                 let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";
                 std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
             },
+            plain(&[
+                "render",
+                "{dir}/scene.xml",
+                "--res",
+                "8x8",
+                "--spp",
+                "1",
+                "--method",
+                "ellipsoidal",
+                "--gate",
+                "box:3..3.1",
+                "--out",
+                "{out}",
+            ]),
+            &["scene.xml", "participating media", "`ellipsoidal`", "--method path or direct"],
+        ),
+        case(
+            "XML medium with a directional light and direct connections",
+            |d| {
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\
+                            <emitter type=\"directional\"><vector name=\"direction\" value=\"0, -1, 0\"/></emitter>";
+                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
+            },
             plain(&["render", "{dir}/scene.xml", "--res", "8x8", "--spp", "1", "--method", "direct", "--out", "{out}"]),
-            &["scene.xml", "participating media", "--method path"],
+            &["scene.xml", "participating media", "directional lights", "--method path"],
         ),
         case(
             "XML field of view of zero",

@@ -35,7 +35,7 @@ fn wgsl_structs_match_rust_structs() {
         PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, origin_triangle, dimension, traversal,
                     side }
         Hit { t, triangle, b1, b2 }
-        ShadowRay { origin, t_max, direction, waiting, ignore0, ignore1, resume, reserved }
+        ShadowRay { origin, t_max, direction, waiting, ignore0, ignore1, resume, medium }
         Contribution { radiance, path_length }
         PathVertex { position, path_length, normal, material, shading_normal, triangle, throughput, flags, pdf_fwd,
                      pdf_rev, uv }

@@ -1,5 +1,6 @@
 //! The multiple-importance weights of bidirectional path tracing (CPU twin of the kernels'
-//! code): on random paths with Lambertian, glossy and plastic vertices, area, point and directional
+//! code): on random paths with Lambertian, glossy and plastic vertices, scattering vertices in
+//! participating media (bidirectional weights), area, point and directional
 //! lights, the weights of all strategies sum to one, and each equals the power heuristic
 //! computed independently from the full path densities p_s = prod(light-side densities of
 //! x_0..x_{s-1}) x prod(camera-side densities of x_s..x_{k-2}); likewise the paper's approximate
@@ -100,11 +101,25 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light, glass: f32) -> 
     path
 }
 
+/// `path` with each surface vertex turned, with probability `medium`, into a scattering vertex in
+/// a participating medium (a random Henyey-Greenstein mean cosine in -0.8..0.8).
+fn with_medium_vertices(rng: &mut Xorshift64Star, mut path: Vec<Vertex>, medium: f32) -> Vec<Vertex> {
+    for v in &mut path {
+        if matches!(v.kind, VertexKind::Surface(_)) && rng.next_f32() < medium {
+            v.kind = VertexKind::Medium { g: 1.6 * rng.next_f32() - 0.8 };
+        }
+    }
+    path
+}
+
 /// Whether every direction the path takes leaves each vertex on its normal's side (so every
-/// density is nonzero and every strategy can sample it).
+/// density is nonzero and every strategy can sample it); a medium vertex has no side.
 fn is_valid(path: &[Vertex]) -> bool {
     let k = path.len();
     (0..k).all(|i| {
+        if matches!(path[i].kind, VertexKind::Medium { .. }) {
+            return true;
+        }
         let p = path[i].position;
         let ok = |j: usize| (path[j].position - p).dot(path[i].normal) > 1e-3 * (path[j].position - p).length();
         (i == 0 || ok(i - 1)) && (i == k - 1 || ok(i + 1))
@@ -164,6 +179,7 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
         let k = 2 + trial % 6;
         let light = light_of_trial(trial);
         let path = random_path(&mut rng, k, light, 0.25);
+        let path = with_medium_vertices(&mut rng, path, 0.3);
         if !is_valid(&path) {
             continue;
         }

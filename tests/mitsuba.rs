@@ -401,8 +401,10 @@ fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
 /// the Cornell box; extinction 4 m^-1, a coloured albedo, Henyey-Greenstein g = 0.5) agrees with
 /// mitransient's `transient_prbvolpath` rendering the same file, steady and as a transient, with
 /// `path`. Its two ways of reaching the light, next-event estimation alone (through the fog's
-/// surface, attenuated by the fog) and phase and BSDF sampling alone, agree bin by bin. The
-/// bidirectional methods refuse the scene with what to do instead, and `auto` takes `path` alone.
+/// surface, attenuated by the fog) and phase and BSDF sampling alone, agree bin by bin. `direct`
+/// (subpaths that scatter in the fog) agrees with mitransient's transient too; the ellipsoidal
+/// and combined methods refuse the scene with what to do instead, and `auto` weighs `path` and
+/// `direct`.
 #[test]
 fn fog_agrees_with_mitransient_with_path() {
     let ctx = common::gpu();
@@ -417,7 +419,10 @@ fn fog_agrees_with_mitransient_with_path() {
     let scene = PreparedScene::new(scene).unwrap();
     let transient = path_agrees_with_peer(&ctx, &scene, "fog_box", 7, 17);
     light_strategies_agree_per_bin("fog", &ctx, &scene, &transient, 256, 19);
-    for method in [Method::Direct, Method::Ellipsoidal, Method::Combined] {
+    let direct = RenderSettings { method: Method::Direct, seed: 29, ..transient.clone() };
+    let films = common::render_films(&ctx, &scene, &direct, 8, 128);
+    check_transient("fog_box_transient_direct", &films, "fog_box_peer/transient_16x16", 20);
+    for method in [Method::Ellipsoidal, Method::Combined] {
         let settings = RenderSettings { method, ..transient.clone() };
         let error = gatetrace::integrator::create_integrator(&ctx, &scene, &settings)
             .err()
@@ -426,14 +431,15 @@ fn fog_agrees_with_mitransient_with_path() {
         assert!(text.contains("participating media") && text.contains("--method path"), "{text}");
     }
     let settings = RenderSettings { method: Method::Auto, ..transient };
-    assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path]);
+    assert_eq!(gatetrace::integrator::auto::candidate_methods(&settings, &scene), vec![Method::Path, Method::Direct]);
 }
 
 /// A medium bounded by glass (`assets/scenes/murky_glass_box.xml`: a water sphere of index 1.33
 /// holding a scattering medium, extinction 6 m^-1, g = 0.6) agrees with mitransient's
 /// `transient_prbvolpath` rendering the same file, steady and as a transient, with `path`: light
 /// refracts into the medium, scatters there, and every stretch inside, from the surface to a
-/// scattering vertex and between two of them, counts the index times its distance.
+/// scattering vertex and between two of them, counts the index times its distance. `direct`
+/// agrees with `path` there, as a transient.
 #[test]
 fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
     let ctx = common::gpu();
@@ -445,7 +451,13 @@ fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
     assert!(!ball.null && (ball.dielectric.unwrap().eta - 1.33).abs() < 1e-6);
     assert_eq!((ball.media.interior, ball.media.exterior), (Some(0), None));
     let scene = PreparedScene::new(scene).unwrap();
-    path_agrees_with_peer(&ctx, &scene, "murky_glass_box", 31, 23);
+    let transient = path_agrees_with_peer(&ctx, &scene, "murky_glass_box", 31, 23);
+    // `direct` through the glass into the medium (delta vertices on the sphere, scattering
+    // vertices inside it at the water's index) against `path`, at 8 bounces.
+    let settings = |method, seed| RenderSettings { method, seed, max_bounces: 8, ..transient.clone() };
+    let path = common::render_films(&ctx, &scene, &settings(Method::Path, 25), 8, 256);
+    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, 27), 8, 64);
+    common::assert_films_agree("murky glass, direct against path", &direct, &path, 4, 0.001);
 }
 
 /// A heterogeneous medium (`assets/scenes/smoke_box/scene.xml`: a puff of smoke whose

@@ -56,6 +56,9 @@ pub const LIGHT_DOUBLE_SIDED: u32 = 1;
 /// [`Light::flags`]: a spot light's intensity falls linearly in the angle between its cones
 /// (Mitsuba's spot), not as the square of a ramp in the cosine (glTF's).
 pub const LIGHT_SPOT_LINEAR_IN_ANGLE: u32 = 2;
+/// First bit of [`Light::flags`] that holds, in scenes with media, the medium a light's
+/// subpaths start in: its index in the media table + 1, 0 for vacuum.
+pub const LIGHT_MEDIUM_SHIFT: u32 = 16;
 /// Largest triangle count a BVH leaf can hold (4 bits of `BvhNode::leaf`).
 pub const MAX_LEAF_TRIANGLES: u32 = 15;
 /// Largest triangle index a BVH leaf can address (28 bits of `BvhNode::leaf`).
@@ -299,7 +302,8 @@ pub struct Light {
     pub area: f32,
     /// Probability that light sampling picks this light.
     pub select_pdf: f32,
-    /// [`LIGHT_DOUBLE_SIDED`] | [`LIGHT_SPOT_LINEAR_IN_ANGLE`].
+    /// [`LIGHT_DOUBLE_SIDED`] | [`LIGHT_SPOT_LINEAR_IN_ANGLE`], and from bit [`LIGHT_MEDIUM_SHIFT`]
+    /// the light's medium.
     pub flags: u32,
     /// Point or spot light: cosine of the outer cone half-angle (-1 for a point light and for
     /// a directional light).
@@ -525,9 +529,13 @@ pub struct ShadowRay {
     /// Where the traversal resumes in a later pass (a resume position, `bvh::wide::resume_position`);
     /// 0 before the first pass and once the ray is decided.
     pub resume: u32,
-    /// Padding.
-    pub reserved: u32,
+    /// In scenes with media: the medium the ray starts in (its index in the media table,
+    /// [`NONE`] for vacuum); the waiting contribution takes the transmittance. Unused otherwise.
+    pub medium: u32,
 }
+
+/// Bits of a subpath vertex's flags that hold its medium (`VERTEX_MEDIUM_BITS` in layout.wesl).
+pub const VERTEX_MEDIUM_BITS: u32 = 10;
 
 /// Marks a shadow ray's target as an index into the splat buffer.
 pub const SPLAT_WAITING: u32 = 0x8000_0000;
@@ -587,7 +595,7 @@ pub struct PathVertex {
     pub pdf_fwd: f32,
     /// Reverse area density (m^-2).
     pub pdf_rev: f32,
-    /// Texture coordinates.
+    /// Texture coordinates (surface vertices); (g, 0) for a medium vertex, g its phase function's mean cosine.
     pub uv: glam::Vec2,
 }
 

@@ -164,12 +164,20 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 /// The methods `auto` measures for `settings` and `scene`: `path` and `direct` always, and
 /// `ellipsoidal` where there is a gate (it has no steady state). In a scene with a dielectric,
 /// smooth or rough, `ellipsoidal` is left out (alone it cannot sample the paths through glass,
-/// nor place a vertex on rough glass); a scene with media, or an NLOS capture of glass, takes
+/// nor place a vertex on rough glass); a scene with media weighs `path` and `direct` (where
+/// `direct` renders it, see `bidirectional::check_media`), and an NLOS capture of glass takes
 /// `path` alone, which only it renders.
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
     let glass = scene.has_dielectric() || scene.has_rough_dielectric();
-    if scene.scene.has_media() || (glass && settings.nlos.is_some()) {
+    if glass && settings.nlos.is_some() {
         return vec![Method::Path];
+    }
+    if scene.scene.has_media() {
+        let direct = RenderSettings { method: Method::Direct, ..settings.clone() };
+        if super::bidirectional::check_media(scene, &direct, false, Method::Direct.name()).is_err() {
+            return vec![Method::Path];
+        }
+        return vec![Method::Path, Method::Direct];
     }
     let mut methods = vec![Method::Path, Method::Direct];
     if !matches!(settings.gate, Gate::None) && !glass {
@@ -214,7 +222,7 @@ pub fn choose(
             candidates: Vec::new(),
             pilot_resolution: (0, 0),
             reason: format!(
-                "{} is the only method that renders this scene (it holds rough glass or participating media): no pilot",
+                "{} is the only method that renders this scene (an NLOS capture of glass, or participating media that `direct` does not render yet): no pilot",
                 only.name()
             ),
             pilot_seconds: 0.0,

@@ -51,7 +51,9 @@ use super::wavefront::{
     DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves, target_slots_per_wave,
 };
 use super::{Integrator, Method, RenderSettings, Wavefront};
-use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
+use crate::gpu::layout::{
+    Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, VERTEX_MEDIUM_BITS, WaveParams,
+};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
@@ -153,6 +155,44 @@ pub struct BidirectionalTracer<'a> {
     keeps_visit_tables: bool,
 }
 
+/// Refuses what bidirectional subpaths through participating media do not render yet: ellipsoidal
+/// connections and combined renders (no spheroid vertex in a medium), NLOS captures, directional
+/// lights, rough glass (a connection may leave through it into another medium) and double-sided
+/// lights between two media.
+pub(crate) fn check_media(
+    scene: &PreparedScene,
+    settings: &RenderSettings,
+    combined: bool,
+    method: &str,
+) -> Result<()> {
+    let source = &scene.scene.source;
+    let refuse = |what: &str| -> Result<()> {
+        anyhow::bail!("{source}: the scene has participating media, and {what}: render it with --method path or direct")
+    };
+    if combined || settings.method != Method::Direct {
+        return refuse(&format!("`{method}` does not place connection vertices in media yet"));
+    }
+    if settings.nlos.is_some() {
+        return refuse("NLOS captures do not render media yet");
+    }
+    if !scene.scene.directional_lights.is_empty() {
+        return refuse("`direct` does not start light subpaths of directional lights in media yet");
+    }
+    if scene.has_rough_dielectric() {
+        return refuse("`direct` does not connect across rough glass in media yet");
+    }
+    if scene.lights.two_sided_media {
+        return refuse("a double-sided light has different media on its two faces");
+    }
+    anyhow::ensure!(
+        scene.scene.media.len() < (1 << VERTEX_MEDIUM_BITS) - 1,
+        "{source}: {} participating media; bidirectional methods render at most {}",
+        scene.scene.media.len(),
+        (1 << VERTEX_MEDIUM_BITS) - 2
+    );
+    Ok(())
+}
+
 impl<'a> BidirectionalTracer<'a> {
     /// Uploads the scene, creates the subpath and connection buffers and builds the kernels.
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
@@ -173,11 +213,7 @@ impl<'a> BidirectionalTracer<'a> {
         // The method the user asked for: a combined render's, for either half.
         let method = if family.is_some() { Method::Combined.name() } else { settings.method.name() };
         if scene.scene.has_media() {
-            anyhow::bail!(
-                "{}: the scene has participating media, which `{method}` does not render yet (its connections do \
-                 not carry transmittance): render it with --method path",
-                scene.scene.source
-            );
+            check_media(scene, settings, family.is_some(), method)?;
         }
         if scene.has_dielectric() {
             if settings.nlos.is_some() {

@@ -52,6 +52,14 @@ pub enum VertexKind {
     },
     /// A surface point with a material.
     Surface(Bsdf),
+    /// A scattering point in a participating medium with a Henyey-Greenstein phase function of
+    /// mean cosine `g`: no normal, no cosine in its densities (the kernels' VERTEX_MEDIUM). Its
+    /// densities, like every other vertex's, leave out the transmittance and the extinction
+    /// (extend_subpaths).
+    Medium {
+        /// Mean cosine of the phase function.
+        g: f32,
+    },
 }
 
 /// One vertex of a full path. Normals are unit and face the side the path lies on.
@@ -124,6 +132,10 @@ pub fn vertex_pdf(v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
         VertexKind::AreaLight { .. } => w.dot(v.normal).max(0.0) * FRAC_1_PI,
         VertexKind::PointLight { .. } => 0.25 * FRAC_1_PI,
         VertexKind::DirectionalLight { .. } => unreachable!("returned above"),
+        VertexKind::Medium { g } => {
+            let prev = prev.expect("a medium vertex has a predecessor");
+            crate::scene::medium::hg_phase((v.position - prev.position).normalize().dot(w), g)
+        }
         VertexKind::Surface(bsdf) => {
             if w.dot(v.normal) <= 0.0 {
                 return 0.0;

@@ -8,9 +8,36 @@ use glam::{Vec2, Vec3};
 
 use super::Scene;
 use crate::gpu::layout::{
-    LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_POINT, LIGHT_SPOT_LINEAR_IN_ANGLE, Light, NONE, Triangle,
+    LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_MEDIUM_SHIFT, LIGHT_POINT, LIGHT_SPOT_LINEAR_IN_ANGLE,
+    Light, NONE, Triangle,
 };
 use crate::sampling::sample_triangle_barycentrics;
+
+/// The media on the front and back of light `l` (from scene triangle `source`, or NONE): an
+/// area light whose material declares media has those (its exterior in front); otherwise the
+/// medium found at a point just off each face (`medium::medium_at`). A point light's are both the
+/// medium at its position; a directional light's the camera's.
+fn light_media(scene: &Scene, l: &Light, source: u32) -> (Option<u32>, Option<u32>) {
+    match l.kind {
+        LIGHT_AREA => {
+            let t = &scene.triangles[source as usize];
+            let media = scene.materials[t.material as usize].media;
+            if media != super::medium::MediumInterface::default() {
+                return (media.exterior, media.interior);
+            }
+            let [a, b, c] = t.positions;
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            let centre = (a + b + c) / 3.0;
+            let offset = 1e-4 * (1.0 + centre.abs().max_element());
+            (super::medium::medium_at(scene, centre + offset * n), super::medium::medium_at(scene, centre - offset * n))
+        }
+        LIGHT_POINT => {
+            let m = super::medium::medium_at(scene, l.position);
+            (m, m)
+        }
+        _ => (scene.camera_medium, scene.camera_medium),
+    }
+}
 
 /// Lights with their selection CDF.
 #[derive(Clone, Debug, Default)]
@@ -21,6 +48,9 @@ pub struct LightTable {
     pub cdf: Vec<f32>,
     /// For each light, the scene triangle (load order) it comes from, or NONE.
     pub source_triangle: Vec<u32>,
+    /// In scenes with media: a double-sided area light has different media on its two faces
+    /// (its light subpaths would start in either; bidirectional methods refuse the scene).
+    pub two_sided_media: bool,
 }
 
 impl LightTable {
@@ -103,7 +133,15 @@ impl LightTable {
         if let Some(last) = cdf.last_mut() {
             *last = 1.0;
         }
-        Self { lights, cdf, source_triangle }
+        let mut two_sided_media = false;
+        if scene.has_media() {
+            for (l, &source) in lights.iter_mut().zip(&source_triangle) {
+                let (front, back) = light_media(scene, l, source);
+                two_sided_media |= l.flags & LIGHT_DOUBLE_SIDED != 0 && front != back;
+                l.flags |= front.map_or(0, |m| (m + 1) << LIGHT_MEDIUM_SHIFT);
+            }
+        }
+        Self { lights, cdf, source_triangle, two_sided_media }
     }
 
     /// Index of the light whose CDF interval holds `u` in [0, 1) (as `select_light` in WGSL).

@@ -277,6 +277,67 @@ pub fn medium_connection_oracle(o: Vec3, w: Vec3, y: Vec3, r: f32) -> Option<(f6
     Some((t, 1.0 - w.dot((y - z).normalize())))
 }
 
+/// The medium at point `p` (m) as light leaving it travels in: an index of `scene.media`, or
+/// None for vacuum. Space is divided by the surfaces that declare media
+/// ([`MediumInterface`]: null boundaries, glass holding a medium); others leave a ray in the
+/// medium it came through. So the nearest such surface seen from `p` along 14 directions (the
+/// axes and the diagonals) decides: its exterior medium where `p` lies in front of it, its
+/// interior one behind it. Where none is seen, `p` lies in the space no boundary encloses, which
+/// holds the camera's medium (a fog). Light subpaths start in their light's medium.
+pub fn medium_at(scene: &super::Scene, p: Vec3) -> Option<u32> {
+    let mut directions = Vec::with_capacity(14);
+    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+        directions.extend([axis, -axis]);
+    }
+    for x in [-1.0f32, 1.0] {
+        for y in [-1.0f32, 1.0] {
+            for z in [-1.0f32, 1.0] {
+                directions.push(Vec3::new(x, y, z).normalize());
+            }
+        }
+    }
+    // The nearest boundary over all directions: (distance, in front of it, its interface).
+    let mut nearest: Option<(f32, bool, MediumInterface)> = None;
+    for t in &scene.triangles {
+        let m = &scene.materials[t.material as usize];
+        if m.media == MediumInterface::default() {
+            continue;
+        }
+        let [a, b, c] = t.positions;
+        let n = (b - a).cross(c - a);
+        for &d in &directions {
+            if let Some(distance) = ray_triangle(p, d, a, b, c)
+                && nearest.is_none_or(|(best, _, _)| distance < best)
+            {
+                nearest = Some((distance, d.dot(n) < 0.0, m.media));
+            }
+        }
+    }
+    match nearest {
+        Some((_, true, media)) => media.exterior,
+        Some((_, false, media)) => media.interior,
+        None => scene.camera_medium,
+    }
+}
+
+/// Distance (m) along unit direction `d` from `o` to triangle (a, b, c), if the ray meets it
+/// (Moller-Trumbore, in f64).
+fn ray_triangle(o: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<f32> {
+    let (o, d, a, b, c) = (o.as_dvec3(), d.as_dvec3(), a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+    let (e1, e2) = (b - a, c - a);
+    let q = d.cross(e2);
+    let det = e1.dot(q);
+    if det.abs() < 1e-300 {
+        return None;
+    }
+    let s = (o - a) / det;
+    let u = s.dot(q);
+    let r = s.cross(e1);
+    let v = d.dot(r);
+    let t = e2.dot(r);
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0).then_some(t as f32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
