@@ -439,7 +439,8 @@ fn fog_agrees_with_mitransient_with_path() {
 /// `transient_prbvolpath` rendering the same file, steady and as a transient, with `path`: light
 /// refracts into the medium, scatters there, and every stretch inside, from the surface to a
 /// scattering vertex and between two of them, counts the index times its distance. `direct`
-/// agrees with `path` there, as a transient.
+/// agrees with `path` there, as a transient, and so it does with the sphere frosted (rough glass)
+/// and a lamp inside it.
 #[test]
 fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
     let ctx = common::gpu();
@@ -458,6 +459,25 @@ fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
     let path = common::render_films(&ctx, &scene, &settings(Method::Path, 25), 8, 256);
     let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, 27), 8, 64);
     common::assert_films_agree("murky glass, direct against path", &direct, &path, 4, 0.001);
+    // The same sphere frosted (rough glass, GGX alpha 0.3) with a lamp at its centre: connections
+    // end on its surface (one that leaves through it starts in the medium beyond), and the lamp's
+    // subpaths start in the water's medium and index (counted at the index of air, bin 1 fails at
+    // z = -10.8).
+    let dir = common::scratch_dir("frosted_murky_glass");
+    let xml = std::fs::read_to_string(common::repo_path("assets/scenes/murky_glass_box.xml")).unwrap();
+    let lamp = r#"<emitter type="point"><point name="position" value="0.1, -0.3, 0.05"/>
+        <rgb name="intensity" value="0.2"/></emitter>
+</scene>"#;
+    let frosted = xml
+        .replacen(r#"<bsdf type="dielectric">"#, r#"<bsdf type="roughdielectric"><float name="alpha" value="0.3"/>"#, 1)
+        .replace("</scene>", lamp);
+    assert_ne!(frosted, xml);
+    std::fs::write(dir.join("scene.xml"), frosted).unwrap();
+    let scene = PreparedScene::new(load_scene_with(&dir.join("scene.xml"), &LoadOptions::default()).unwrap()).unwrap();
+    assert!(scene.has_rough_dielectric());
+    let path = common::render_films(&ctx, &scene, &settings(Method::Path, 28), 8, 256);
+    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, 30), 8, 64);
+    common::assert_films_agree("frosted murky glass, direct against path", &direct, &path, 4, 0.001);
 }
 
 /// A heterogeneous medium (`assets/scenes/smoke_box/scene.xml`: a puff of smoke whose

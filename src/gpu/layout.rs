@@ -57,8 +57,12 @@ pub const LIGHT_DOUBLE_SIDED: u32 = 1;
 /// (Mitsuba's spot), not as the square of a ramp in the cosine (glTF's).
 pub const LIGHT_SPOT_LINEAR_IN_ANGLE: u32 = 2;
 /// First bit of [`Light::flags`] that holds, in scenes with media, the medium a light's
-/// subpaths start in: its index in the media table + 1, 0 for vacuum.
-pub const LIGHT_MEDIUM_SHIFT: u32 = 16;
+/// subpaths start in: its index in the media table + 1, 0 for vacuum (10 bits). From bit
+/// [`VERTEX_IOR_SHIFT`] the flags hold the index of refraction there, as a vertex's do.
+pub const LIGHT_MEDIUM_SHIFT: u32 = 6;
+/// First bit of a subpath vertex's (and a light's) flags that holds the index of refraction
+/// there: (index - 1) x 8192 as a signed 16-bit integer (`VERTEX_IOR_SHIFT` in layout.wesl).
+pub const VERTEX_IOR_SHIFT: u32 = 16;
 /// Largest triangle count a BVH leaf can hold (4 bits of `BvhNode::leaf`).
 pub const MAX_LEAF_TRIANGLES: u32 = 15;
 /// Largest triangle index a BVH leaf can address (28 bits of `BvhNode::leaf`).
@@ -302,8 +306,8 @@ pub struct Light {
     pub area: f32,
     /// Probability that light sampling picks this light.
     pub select_pdf: f32,
-    /// [`LIGHT_DOUBLE_SIDED`] | [`LIGHT_SPOT_LINEAR_IN_ANGLE`], and from bit [`LIGHT_MEDIUM_SHIFT`]
-    /// the light's medium.
+    /// [`LIGHT_DOUBLE_SIDED`] | [`LIGHT_SPOT_LINEAR_IN_ANGLE`], from bit [`LIGHT_MEDIUM_SHIFT`]
+    /// the light's medium and from bit [`VERTEX_IOR_SHIFT`] the index of refraction where it stands.
     pub flags: u32,
     /// Point or spot light: cosine of the outer cone half-angle (-1 for a point light and for
     /// a directional light).

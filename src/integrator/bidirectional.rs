@@ -157,8 +157,7 @@ pub struct BidirectionalTracer<'a> {
 
 /// Refuses what bidirectional subpaths through participating media do not render yet: ellipsoidal
 /// connections and combined renders (no spheroid vertex in a medium), NLOS captures, directional
-/// lights, rough glass (a connection may leave through it into another medium) and double-sided
-/// lights between two media.
+/// lights and double-sided lights between two media.
 pub(crate) fn check_media(
     scene: &PreparedScene,
     settings: &RenderSettings,
@@ -177,9 +176,6 @@ pub(crate) fn check_media(
     }
     if !scene.scene.directional_lights.is_empty() {
         return refuse("`direct` does not start light subpaths of directional lights in media yet");
-    }
-    if scene.has_rough_dielectric() {
-        return refuse("`direct` does not connect across rough glass in media yet");
     }
     if scene.lights.two_sided_media {
         return refuse("a double-sided light has different media on its two faces");

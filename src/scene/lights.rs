@@ -6,36 +6,40 @@
 
 use glam::{Vec2, Vec3};
 
-use super::Scene;
+use super::{Scene, medium};
 use crate::gpu::layout::{
     LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_MEDIUM_SHIFT, LIGHT_POINT, LIGHT_SPOT_LINEAR_IN_ANGLE,
-    Light, NONE, Triangle,
+    Light, NONE, Triangle, VERTEX_IOR_SHIFT,
 };
 use crate::sampling::sample_triangle_barycentrics;
 
-/// The media on the front and back of light `l` (from scene triangle `source`, or NONE): an
-/// area light whose material declares media has those (its exterior in front); otherwise the
-/// medium found at a point just off each face (`medium::medium_at`). A point light's are both the
-/// medium at its position; a directional light's the camera's.
-fn light_media(scene: &Scene, l: &Light, source: u32) -> (Option<u32>, Option<u32>) {
+/// Where light `l` (from scene triangle `source`, or NONE) stands: the media on its front and back,
+/// and the index of refraction there. An area light whose material declares media has those (its
+/// exterior in front); otherwise the medium found at a point just off each face
+/// ([`medium::medium_at`]). A point light's are both the medium at its position; a directional
+/// light's the camera's. The index is that of glass the light lies inside
+/// ([`medium::index_of_refraction_at`], in front of an area light), 1 elsewhere.
+fn light_space(scene: &Scene, l: &Light, source: u32) -> (Option<u32>, Option<u32>, f32) {
     match l.kind {
         LIGHT_AREA => {
             let t = &scene.triangles[source as usize];
-            let media = scene.materials[t.material as usize].media;
-            if media != super::medium::MediumInterface::default() {
-                return (media.exterior, media.interior);
-            }
             let [a, b, c] = t.positions;
             let n = (b - a).cross(c - a).normalize_or_zero();
             let centre = (a + b + c) / 3.0;
             let offset = 1e-4 * (1.0 + centre.abs().max_element());
-            (super::medium::medium_at(scene, centre + offset * n), super::medium::medium_at(scene, centre - offset * n))
+            let (front, back) = (centre + offset * n, centre - offset * n);
+            let ior = medium::index_of_refraction_at(scene, front);
+            let media = scene.materials[t.material as usize].media;
+            if media != medium::MediumInterface::default() {
+                return (media.exterior, media.interior, ior);
+            }
+            (medium::medium_at(scene, front), medium::medium_at(scene, back), ior)
         }
         LIGHT_POINT => {
-            let m = super::medium::medium_at(scene, l.position);
-            (m, m)
+            let m = medium::medium_at(scene, l.position);
+            (m, m, medium::index_of_refraction_at(scene, l.position))
         }
-        _ => (scene.camera_medium, scene.camera_medium),
+        _ => (scene.camera_medium, scene.camera_medium, 1.0),
     }
 }
 
@@ -134,11 +138,12 @@ impl LightTable {
             *last = 1.0;
         }
         let mut two_sided_media = false;
-        if scene.has_media() {
+        let glass = scene.materials.iter().any(|m| m.dielectric.is_some_and(|d| !d.thin));
+        if scene.has_media() || glass {
             for (l, &source) in lights.iter_mut().zip(&source_triangle) {
-                let (front, back) = light_media(scene, l, source);
+                let (front, back, ior) = light_space(scene, l, source);
                 two_sided_media |= l.flags & LIGHT_DOUBLE_SIDED != 0 && front != back;
-                l.flags |= front.map_or(0, |m| (m + 1) << LIGHT_MEDIUM_SHIFT);
+                l.flags |= front.map_or(0, |m| (m + 1) << LIGHT_MEDIUM_SHIFT) | ior_bits(ior);
             }
         }
         Self { lights, cdf, source_triangle, two_sided_media }
@@ -222,4 +227,12 @@ pub struct LightSample {
 
 fn mean(v: Vec3) -> f64 {
     (v.x as f64 + v.y as f64 + v.z as f64) / 3.0
+}
+
+/// The flag bits that store index of refraction `ior` from bit [`VERTEX_IOR_SHIFT`], as subpath
+/// vertices' flags hold it (`vertex_ior_bits` in subpath.wesl): (ior - 1) x 8192 as a signed
+/// 16-bit integer.
+fn ior_bits(ior: f32) -> u32 {
+    let q = ((ior - 1.0) * 8192.0).round().clamp(-32768.0, 32767.0) as i32;
+    (q as u32) << VERTEX_IOR_SHIFT
 }

@@ -280,11 +280,37 @@ pub fn medium_connection_oracle(o: Vec3, w: Vec3, y: Vec3, r: f32) -> Option<(f6
 /// The medium at point `p` (m) as light leaving it travels in: an index of `scene.media`, or
 /// None for vacuum. Space is divided by the surfaces that declare media
 /// ([`MediumInterface`]: null boundaries, glass holding a medium); others leave a ray in the
-/// medium it came through. So the nearest such surface seen from `p` along 14 directions (the
-/// axes and the diagonals) decides: its exterior medium where `p` lies in front of it, its
-/// interior one behind it. Where none is seen, `p` lies in the space no boundary encloses, which
-/// holds the camera's medium (a fog). Light subpaths start in their light's medium.
+/// medium it came through. So the nearest such surface seen from `p` ([`nearest_boundary`])
+/// decides: its exterior medium where `p` lies in front of it, its interior one behind it. Where
+/// none is seen, `p` lies in the space no boundary encloses, which holds the camera's medium (a
+/// fog). Light subpaths start in their light's medium.
 pub fn medium_at(scene: &super::Scene, p: Vec3) -> Option<u32> {
+    match nearest_boundary(scene, p, |m| m.media != MediumInterface::default()) {
+        Some((true, m)) => m.media.exterior,
+        Some((false, m)) => m.media.interior,
+        None => scene.camera_medium,
+    }
+}
+
+/// The index of refraction of the space at point `p` (m): the relative index of the nearest
+/// glass (a smooth or rough dielectric, not a thin pane) seen from `p` where `p` lies behind its
+/// front faces (inside it, in air), 1 elsewhere. Optical lengths from a light inside glass count
+/// that index.
+pub fn index_of_refraction_at(scene: &super::Scene, p: Vec3) -> f32 {
+    let glass = |m: &super::MaterialDesc| m.dielectric.is_some_and(|d| !d.thin);
+    match nearest_boundary(scene, p, glass) {
+        Some((false, m)) => m.dielectric.map_or(1.0, |d| d.eta),
+        _ => 1.0,
+    }
+}
+
+/// The nearest triangle whose material passes `filter`, seen from `p` (m) along 14 directions
+/// (the axes and the diagonals), and whether `p` lies in front of it.
+fn nearest_boundary(
+    scene: &super::Scene,
+    p: Vec3,
+    filter: impl Fn(&super::MaterialDesc) -> bool,
+) -> Option<(bool, &super::MaterialDesc)> {
     let mut directions = Vec::with_capacity(14);
     for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
         directions.extend([axis, -axis]);
@@ -296,11 +322,11 @@ pub fn medium_at(scene: &super::Scene, p: Vec3) -> Option<u32> {
             }
         }
     }
-    // The nearest boundary over all directions: (distance, in front of it, its interface).
-    let mut nearest: Option<(f32, bool, MediumInterface)> = None;
+    // (distance, in front of it, its material).
+    let mut nearest: Option<(f32, bool, &super::MaterialDesc)> = None;
     for t in &scene.triangles {
         let m = &scene.materials[t.material as usize];
-        if m.media == MediumInterface::default() {
+        if !filter(m) {
             continue;
         }
         let [a, b, c] = t.positions;
@@ -309,15 +335,11 @@ pub fn medium_at(scene: &super::Scene, p: Vec3) -> Option<u32> {
             if let Some(distance) = ray_triangle(p, d, a, b, c)
                 && nearest.is_none_or(|(best, _, _)| distance < best)
             {
-                nearest = Some((distance, d.dot(n) < 0.0, m.media));
+                nearest = Some((distance, d.dot(n) < 0.0, m));
             }
         }
     }
-    match nearest {
-        Some((_, true, media)) => media.exterior,
-        Some((_, false, media)) => media.interior,
-        None => scene.camera_medium,
-    }
+    nearest.map(|(_, front, m)| (front, m))
 }
 
 /// Distance (m) along unit direction `d` from `o` to triangle (a, b, c), if the ray meets it
