@@ -51,15 +51,13 @@ use super::wavefront::{
     DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves, target_slots_per_wave,
 };
 use super::{Integrator, Method, RenderSettings, Wavefront};
-use crate::gpu::layout::{
-    Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, VERTEX_MEDIUM_BITS, WaveParams,
-};
+use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 pub use options::{
     DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, MAX_BOUNCES,
-    MAX_CONNECTIONS_PER_QUERY, check_tracer_settings, default_connections_per_query, strategies,
+    MAX_CONNECTIONS_PER_QUERY, check_media, check_tracer_settings, default_connections_per_query, strategies,
 };
 
 /// Slots a wave aims for on a CPU device (target_slots_per_wave: more on a GPU): each slot
@@ -153,40 +151,6 @@ pub struct BidirectionalTracer<'a> {
     /// `target_visits` holds visit tables of the gate it was built for (a target pilot or a band
     /// index shares out extra visits); otherwise it is a stand-in of one element.
     keeps_visit_tables: bool,
-}
-
-/// Refuses what bidirectional subpaths through participating media do not render yet: ellipsoidal
-/// connections and combined renders (no spheroid vertex in a medium), NLOS captures, directional
-/// lights and double-sided lights between two media.
-pub(crate) fn check_media(
-    scene: &PreparedScene,
-    settings: &RenderSettings,
-    combined: bool,
-    method: &str,
-) -> Result<()> {
-    let source = &scene.scene.source;
-    let refuse = |what: &str| -> Result<()> {
-        anyhow::bail!("{source}: the scene has participating media, and {what}: render it with --method path or direct")
-    };
-    if combined || settings.method != Method::Direct {
-        return refuse(&format!("`{method}` does not place connection vertices in media yet"));
-    }
-    if settings.nlos.is_some() {
-        return refuse("NLOS captures do not render media yet");
-    }
-    if !scene.scene.directional_lights.is_empty() {
-        return refuse("`direct` does not start light subpaths of directional lights in media yet");
-    }
-    if scene.lights.two_sided_media {
-        return refuse("a double-sided light has different media on its two faces");
-    }
-    anyhow::ensure!(
-        scene.scene.media.len() < (1 << VERTEX_MEDIUM_BITS) - 1,
-        "{source}: {} participating media; bidirectional methods render at most {}",
-        scene.scene.media.len(),
-        (1 << VERTEX_MEDIUM_BITS) - 2
-    );
-    Ok(())
 }
 
 impl<'a> BidirectionalTracer<'a> {

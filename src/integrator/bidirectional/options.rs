@@ -1,10 +1,12 @@
 //! The options of the bidirectional methods: their limits and defaults, the family a tracer is
 //! in a combined render, the (s, t) strategies of a path length, and the checks of the
-//! settings they are given.
+//! settings and scenes (participating media) they are given.
 
 use anyhow::{Result, ensure};
 
+use crate::gpu::layout::VERTEX_MEDIUM_BITS;
 use crate::integrator::{Method, RenderSettings, kernel_bounces};
+use crate::scene::PreparedScene;
 
 /// Most scattering vertices `direct` supports: the strategies of a slot grow as B^2 and
 /// lavapipe ends a shader invocation's loops after 65535 iterations in total.
@@ -120,5 +122,34 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
              need t >= 1 and 2 <= s + t <= max_bounces + 2"
         );
     }
+    Ok(())
+}
+
+/// Refuses what bidirectional subpaths through participating media do not render yet: ellipsoidal
+/// connections and combined renders (no spheroid vertex in a medium), NLOS captures, directional
+/// lights and double-sided lights between two media.
+pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: bool, method: &str) -> Result<()> {
+    let source = &scene.scene.source;
+    let refuse = |what: &str| -> Result<()> {
+        anyhow::bail!("{source}: the scene has participating media, and {what}: render it with --method path or direct")
+    };
+    if combined || settings.method != Method::Direct {
+        return refuse(&format!("`{method}` does not place connection vertices in media yet"));
+    }
+    if settings.nlos.is_some() {
+        return refuse("NLOS captures do not render media yet");
+    }
+    if !scene.scene.directional_lights.is_empty() {
+        return refuse("`direct` does not start light subpaths of directional lights in media yet");
+    }
+    if scene.lights.two_sided_media {
+        return refuse("a double-sided light has different media on its two faces");
+    }
+    anyhow::ensure!(
+        scene.scene.media.len() < (1 << VERTEX_MEDIUM_BITS) - 1,
+        "{source}: {} participating media; bidirectional methods render at most {}",
+        scene.scene.media.len(),
+        (1 << VERTEX_MEDIUM_BITS) - 2
+    );
     Ok(())
 }
