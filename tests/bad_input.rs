@@ -758,7 +758,7 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:", "the albedo grid (4 x 2 x 1) must share the extinction grid's voxels (2 x 2 x 2)"],
         ),
         case(
-            "XML medium with ellipsoidal connections",
+            "XML medium with a combined render",
             |d| {
                 let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";
                 std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
@@ -771,13 +771,13 @@ fn cases() -> Vec<(Case, Setup)> {
                 "--spp",
                 "1",
                 "--method",
-                "ellipsoidal",
+                "combined",
                 "--gate",
                 "box:3..3.1",
                 "--out",
                 "{out}",
             ]),
-            &["scene.xml", "participating media", "`ellipsoidal`", "--method path or direct"],
+            &["scene.xml", "participating media", "`combined`", "--method path, direct or ellipsoidal"],
         ),
         case(
             "XML medium with a directional light and direct connections",

@@ -206,8 +206,10 @@ fn weights_of_all_strategies_sum_to_one_and_match_the_power_heuristic() {
     println!("{checked} random paths checked");
 }
 
-/// p_j of the full path for a direct connection across edge j (j light-side vertices): the
-/// explicit product, as `strategy_pdf`.
+/// The paper's approximate weights of ellipsoidal connections (ellipsoidal_mis.wesl, CPU twin
+/// `ellipsoidal_mis_weight`) match their definition, (p_e + p_{e+1}) / 2 over the sum of c_j p_j
+/// with p_j the explicit products of `strategy_pdf`, and sum to one over the placeable vertices
+/// of random paths, on surfaces and in media (connect_medium places the latter).
 #[test]
 fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
     use gatetrace::integrator::mis::{ellipsoidal_mis_weight, spheroid_places};
@@ -216,6 +218,9 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
     for trial in 0..4000 {
         let k = 3 + trial % 5;
         let path = random_path(&mut rng, k, light_of_trial(trial), 0.2);
+        // Half the paths scatter in media too: a spheroid places a vertex in a medium as one on a
+        // surface (connect_medium).
+        let path = if trial % 2 == 1 { with_medium_vertices(&mut rng, path, 0.4) } else { path };
         if !is_valid(&path) {
             continue;
         }

@@ -30,7 +30,7 @@ pub struct ImageArgs {
     pub define: Vec<(String, String)>,
     /// Fill the scene with homogeneous fog: extinction SIGMA_T (m^-1; a visibility V in metres is
     /// about 3.9 / V), single-scattering ALBEDO (0..1, default 0.9) and Henyey-Greenstein mean
-    /// cosine G (default 0.8, forward); rendered by --method path{n}
+    /// cosine G (default 0.8, forward); rendered by --method path, direct or ellipsoidal{n}
     #[arg(long, value_name = "SIGMA_T[,ALBEDO[,G]]", value_parser = parse_fog)]
     pub fog: Option<gatetrace::scene::MediumDesc>,
     /// Pathlength importance W, lengths in metres of optical path or with a ps/ns/mm suffix: none;

@@ -164,8 +164,8 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 /// The methods `auto` measures for `settings` and `scene`: `path` and `direct` always, and
 /// `ellipsoidal` where there is a gate (it has no steady state). In a scene with a dielectric,
 /// smooth or rough, `ellipsoidal` is left out (alone it cannot sample the paths through glass,
-/// nor place a vertex on rough glass); a scene with media weighs `path` and `direct` (where
-/// `direct` renders it, see `bidirectional::check_media`), and an NLOS capture of glass takes
+/// nor place a vertex on rough glass); a scene with media weighs the bidirectional methods only
+/// where they render it (see `bidirectional::check_media`), and an NLOS capture of glass takes
 /// `path` alone, which only it renders.
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
     let glass = scene.has_dielectric() || scene.has_rough_dielectric();
@@ -177,7 +177,6 @@ pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Ve
         if super::bidirectional::check_media(scene, &direct, false, Method::Direct.name()).is_err() {
             return vec![Method::Path];
         }
-        return vec![Method::Path, Method::Direct];
     }
     let mut methods = vec![Method::Path, Method::Direct];
     if !matches!(settings.gate, Gate::None) && !glass {

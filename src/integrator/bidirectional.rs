@@ -26,7 +26,9 @@
 //!                                       themselves, the queue stays empty, and t = 1
 //!                                       contributions go straight to splat_film)
 //! setup_dispatch(shadow_rays)
-//! trace_shadow_rays                     occluded connections are cleared
+//! trace_shadow_rays                     occluded connections are cleared (media: attenuated)
+//! [connect_medium]                      (ellipsoidal, scenes with media) per ellipsoid query
+//!                                       entry: a vertex in the medium, both rays traced there
 //! [setup_dispatch(shadow_resume)        while shadow rays stopped at the traversal budget
 //!  trace_shadow_rays(resume)]           (read back after each pass)
 //! accumulate                            t >= 2 contributions -> film, per pixel, in order
@@ -38,8 +40,9 @@
 //! `slot_count + slot` of the path, hit and queue buffers; its vertices lie in
 //! `subpath_vertices[slot * stride ..]`, camera vertices first (see shaders/lib/subpath.wesl).
 //!
-//! `options` holds the methods' limits, defaults and checks of settings; `target_visits` how
-//! extra visits of stratified bins are shared out (band index or pilot render).
+//! `options` holds the methods' limits, defaults, checks of settings and strategy counters;
+//! `target_visits` how extra visits of stratified bins are shared out (band index or pilot
+//! render).
 
 mod options;
 mod target_visits;
@@ -57,7 +60,8 @@ use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 pub use options::{
     DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, MAX_BOUNCES,
-    MAX_CONNECTIONS_PER_QUERY, check_media, check_tracer_settings, default_connections_per_query, strategies,
+    MAX_CONNECTIONS_PER_QUERY, StrategyStats, check_media, check_tracer_settings, default_connections_per_query,
+    strategies,
 };
 
 /// Slots a wave aims for on a CPU device (target_slots_per_wave: more on a GPU): each slot
@@ -65,21 +69,6 @@ pub use options::{
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 16;
 /// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
 const QUERY_COUNTERS: usize = 5;
-
-/// Connections of one (s, t) strategy (`--stats`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct StrategyStats {
-    /// Light-subpath vertices.
-    pub s: u32,
-    /// Camera-subpath vertices (the pinhole included).
-    pub t: u32,
-    /// Connections whose vertices both existed and could contribute.
-    pub evaluated: u64,
-    /// Of those, connections dropped before any shading because W(length) = 0.
-    pub skipped_by_gate: u64,
-    /// Shadow rays traced.
-    pub shadow_rays: u64,
-}
 
 /// Pipelines of the stages.
 struct Stages {
@@ -93,6 +82,8 @@ struct Stages {
     /// setup_dispatch(ellipsoid_queries) (connect is then indirect).
     ellipsoidal: Option<[Kernel; 3]>,
     shadow_rays: ShadowRayStages,
+    /// Ellipsoidal renders of scenes with media: connect_medium, after the shadow rays.
+    medium: Option<Kernel>,
     accumulate: Kernel,
     /// Not where the connection kernels splat light-tracing contributions themselves
     /// (`inline_shadow_rays`).
@@ -107,6 +98,7 @@ struct Bindings {
     extend_subpaths: [wgpu::BindGroup; 2],
     connect: wgpu::BindGroup,
     ellipsoidal: Option<[wgpu::BindGroup; 3]>,
+    medium: Option<wgpu::BindGroup>,
     accumulate: wgpu::BindGroup,
     splat_light_paths: Option<wgpu::BindGroup>,
 }
@@ -211,7 +203,9 @@ impl<'a> BidirectionalTracer<'a> {
         let rays_per_connection = if ellipsoidal { 2 } else { 1 };
         let k = settings.connections_per_query as u64;
         let resumable = scene.wide.traversals_can_stop();
-        let inline_shadow_rays = ellipsoidal && !resumable;
+        // In scenes with media every shadow ray is queued: trace_shadow_rays takes transmittances.
+        let inline_shadow_rays = ellipsoidal && !resumable && !scene.scene.has_media();
+        let medium_connections = ellipsoidal && scene.scene.has_media();
         let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
         let splats_per_slot = light_vertices * k + if directional { b as u64 } else { 0 };
         let queued_rays_per_slot =
@@ -384,6 +378,7 @@ impl<'a> BidirectionalTracer<'a> {
                 ]
             });
             let shadow_rays = ShadowRayStages::new(ctx, &constants, &r);
+            let medium = medium_connections.then(|| build("connect_medium"));
             let accumulate = build("accumulate");
             let splat_light_paths = (!inline_shadow_rays).then(|| build("splat_light_paths"));
             let joined =
@@ -396,6 +391,7 @@ impl<'a> BidirectionalTracer<'a> {
                 connect: joined(connect),
                 ellipsoidal: spherical.zip(queue).map(|(spherical, [queue, setup])| [joined(spherical), queue, setup]),
                 shadow_rays,
+                medium,
                 accumulate,
                 splat_light_paths,
             }
@@ -410,6 +406,7 @@ impl<'a> BidirectionalTracer<'a> {
             extend_subpaths: both(&stages.extend_subpaths),
             connect: stages.connect.bind(ctx, &even),
             ellipsoidal: stages.ellipsoidal.as_ref().map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
+            medium: stages.medium.as_ref().map(|k| k.bind(ctx, &even)),
             accumulate: stages.accumulate.bind(ctx, &even),
             splat_light_paths: stages.splat_light_paths.as_ref().map(|k| k.bind(ctx, &even)),
         };
@@ -494,6 +491,11 @@ impl<'a> BidirectionalTracer<'a> {
                 _ => s.connect.dispatch(pass, &b.connect, wave.slot_count),
             }
             s.shadow_rays.encode(pass, args);
+            // Vertices in media: both segments traced there, after the surface connections'
+            // shadow rays (connect_medium adds to their decided contributions).
+            if let (Some(kernel), Some(group)) = (&s.medium, &b.medium) {
+                kernel.dispatch_indirect(pass, group, args, 24);
+            }
         });
         // Shadow rays that stopped at the traversal budget resume until every one is decided.
         while self.wf.counters()?.unfinished_shadow_rays > 0 {

@@ -1,6 +1,6 @@
 //! The options of the bidirectional methods: their limits and defaults, the family a tracer is
-//! in a combined render, the (s, t) strategies of a path length, and the checks of the
-//! settings and scenes (participating media) they are given.
+//! in a combined render, the (s, t) strategies of a path length and their `--stats` counters,
+//! and the checks of the settings and scenes (participating media) they are given.
 
 use anyhow::{Result, ensure};
 
@@ -125,25 +125,29 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
     Ok(())
 }
 
-/// Refuses what bidirectional subpaths through participating media do not render yet: ellipsoidal
-/// connections and combined renders (no spheroid vertex in a medium), NLOS captures, directional
-/// lights and double-sided lights between two media.
+/// Refuses what bidirectional subpaths through participating media do not render yet: combined
+/// renders (their family weights leave media out), NLOS captures, directional lights and
+/// double-sided lights between two media.
 pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: bool, method: &str) -> Result<()> {
     let source = &scene.scene.source;
-    let refuse = |what: &str| -> Result<()> {
-        anyhow::bail!("{source}: the scene has participating media, and {what}: render it with --method path or direct")
+    let refuse = |what: &str, instead: &str| -> Result<()> {
+        anyhow::bail!("{source}: the scene has participating media, and {what}: render it with --method {instead}")
     };
-    if combined || settings.method != Method::Direct {
-        return refuse(&format!("`{method}` does not place connection vertices in media yet"));
+    if combined || !matches!(settings.method, Method::Direct | Method::Ellipsoidal) {
+        return refuse(
+            &format!("`{method}` does not weigh connection vertices in media yet"),
+            "path, direct or ellipsoidal",
+        );
     }
-    if settings.nlos.is_some() {
-        return refuse("NLOS captures do not render media yet");
-    }
+    anyhow::ensure!(
+        settings.nlos.is_none(),
+        "{source}: NLOS captures of scenes with participating media are not rendered yet"
+    );
     if !scene.scene.directional_lights.is_empty() {
-        return refuse("`direct` does not start light subpaths of directional lights in media yet");
+        return refuse(&format!("`{method}` does not start light subpaths of directional lights in media yet"), "path");
     }
     if scene.lights.two_sided_media {
-        return refuse("a double-sided light has different media on its two faces");
+        return refuse("a double-sided light has different media on its two faces", "path");
     }
     anyhow::ensure!(
         scene.scene.media.len() < (1 << VERTEX_MEDIUM_BITS) - 1,
@@ -152,4 +156,19 @@ pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: b
         (1 << VERTEX_MEDIUM_BITS) - 2
     );
     Ok(())
+}
+
+/// Connections of one (s, t) strategy (`--stats`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StrategyStats {
+    /// Light-subpath vertices.
+    pub s: u32,
+    /// Camera-subpath vertices (the pinhole included).
+    pub t: u32,
+    /// Connections whose vertices both existed and could contribute.
+    pub evaluated: u64,
+    /// Of those, connections dropped before any shading because W(length) = 0.
+    pub skipped_by_gate: u64,
+    /// Shadow rays traced.
+    pub shadow_rays: u64,
 }
