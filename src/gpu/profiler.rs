@@ -20,6 +20,10 @@ pub struct StageTime {
     pub nanoseconds: f64,
     /// Dispatches measured.
     pub dispatches: u64,
+    /// GPU time of the first dispatch measured (ns). On lavapipe it includes compiling the
+    /// kernel, which llvmpipe does at a kernel's first dispatch unless Mesa's shader cache
+    /// holds it.
+    pub first_nanoseconds: f64,
 }
 
 /// The timestamp queries and the per-stage sums.
@@ -112,7 +116,11 @@ impl Profiler {
             let ticks: &[u64] = bytemuck::cast_slice(&view);
             for (label, pair) in self.pending.iter().zip(ticks.chunks(2)) {
                 let t = self.totals.entry(label.clone()).or_default();
-                t.nanoseconds += pair[1].saturating_sub(pair[0]) as f64 * self.period;
+                let nanoseconds = pair[1].saturating_sub(pair[0]) as f64 * self.period;
+                if t.dispatches == 0 {
+                    t.first_nanoseconds = nanoseconds;
+                }
+                t.nanoseconds += nanoseconds;
                 t.dispatches += 1;
             }
         }
@@ -126,28 +134,68 @@ impl Profiler {
         &self.totals
     }
 
-    /// A table of the stages, longest first: total ms, share, dispatches, mean µs.
+    /// A table of the stages, longest first: total ms, share, dispatches, mean µs, and the
+    /// first dispatch's µs; then the stages whose first dispatch stands out (compile_suspects).
     pub fn report(&self, adapter: &str) -> String {
         let all: f64 = self.totals.values().map(|t| t.nanoseconds).sum();
         let mut rows: Vec<(&String, &StageTime)> = self.totals.iter().collect();
         rows.sort_by(|a, b| b.1.nanoseconds.total_cmp(&a.1.nanoseconds));
         let mut out = format!(
             "GPU time per stage (timestamp queries around each dispatch) on {adapter}: {:.1} ms in all\n\
-             stage                                   total ms   share  dispatches    mean us\n",
+             stage                                   total ms   share  dispatches    mean us   first us\n",
             all / 1e6
         );
-        for (label, t) in rows {
+        for (label, t) in &rows {
             out += &format!(
-                "{label:<38} {:>10.1} {:>6.1}% {:>11} {:>10.1}\n",
+                "{label:<38} {:>10.1} {:>6.1}% {:>11} {:>10.1} {:>10.1}\n",
                 t.nanoseconds / 1e6,
                 100.0 * t.nanoseconds / all.max(1e-9),
                 t.dispatches,
-                t.nanoseconds / 1e3 / t.dispatches.max(1) as f64
+                t.nanoseconds / 1e3 / t.dispatches.max(1) as f64,
+                t.first_nanoseconds / 1e3
+            );
+        }
+        let suspects: Vec<&str> =
+            rows.iter().filter(|(_, t)| compile_suspect(t)).map(|(label, _)| label.as_str()).collect();
+        if !suspects.is_empty() {
+            out += &format!(
+                "First dispatches far above the rest of their stage ({}): they likely include compiling \
+                 the kernel (lavapipe compiles at a kernel's first dispatch unless Mesa's shader cache \
+                 holds it). Render again for steady figures.\n",
+                suspects.join(", ")
             );
         }
         if self.missed > 0 {
             out += &format!("({} dispatches were not measured: more than {CAPACITY} between waits)\n", self.missed);
         }
         out
+    }
+}
+
+/// Whether a stage's first dispatch took over 50 ms and over 4x the mean of its later ones:
+/// time that is not the kernel's steady cost.
+pub fn compile_suspect(t: &StageTime) -> bool {
+    if t.dispatches < 2 {
+        return false;
+    }
+    let rest = (t.nanoseconds - t.first_nanoseconds) / (t.dispatches - 1) as f64;
+    t.first_nanoseconds > 50e6 && t.first_nanoseconds > 4.0 * rest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_first_dispatch_far_above_the_rest_is_a_compile_suspect() {
+        let stage = |first_ms: f64, rest_ms: f64, dispatches: u64| StageTime {
+            nanoseconds: (first_ms + rest_ms * (dispatches - 1) as f64) * 1e6,
+            dispatches,
+            first_nanoseconds: first_ms * 1e6,
+        };
+        assert!(compile_suspect(&stage(5000.0, 300.0, 6)));
+        assert!(!compile_suspect(&stage(900.0, 300.0, 6)), "3x the rest is within a stage's spread");
+        assert!(!compile_suspect(&stage(40.0, 1.0, 6)), "under 50 ms is no compilation worth a note");
+        assert!(!compile_suspect(&stage(5000.0, 0.0, 1)), "one dispatch has no rest to compare");
     }
 }
