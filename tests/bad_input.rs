@@ -780,14 +780,26 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml", "participating media", "`combined`", "--method path, direct or ellipsoidal"],
         ),
         case(
-            "XML medium with a directional light and direct connections",
+            "XML directional light in fog that fills the scene, with direct connections",
             |d| {
-                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\
-                            <emitter type=\"directional\"><vector name=\"direction\" value=\"0, -1, 0\"/></emitter>";
+                let body = "<emitter type=\"directional\"><vector name=\"direction\" value=\"0, -1, 0\"/></emitter>";
                 std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
             },
-            plain(&["render", "{dir}/scene.xml", "--res", "8x8", "--spp", "1", "--method", "direct", "--out", "{out}"]),
-            &["scene.xml", "participating media", "directional lights", "--method path"],
+            plain(&[
+                "render",
+                "{dir}/scene.xml",
+                "--fog",
+                "0.5",
+                "--res",
+                "8x8",
+                "--spp",
+                "1",
+                "--method",
+                "direct",
+                "--out",
+                "{out}",
+            ]),
+            &["scene.xml", "participating media", "directional light", "fills the scene", "--method path"],
         ),
         case(
             "XML field of view of zero",

@@ -557,6 +557,47 @@ fn ellipsoidal_agrees_with_direct_in_media() {
     }
 }
 
+/// A directional light in media: its wave enters the Cornell box through the open front, crosses
+/// the fog box (bounded by a `null` cube) and lights the walls behind it. `direct` (light subpaths
+/// from the wave's disk, which enter the fog through its boundary, and connections to the light
+/// drawn anew where its ray starts) and `ellipsoidal` (camera vertices in the fog joined to the
+/// light too, connect_spherical) agree with `path`, per bin and 4 x 4 block of a transient and
+/// behind a narrow box gate.
+#[test]
+fn a_directional_light_in_media_agrees_with_path() {
+    let ctx = common::gpu();
+    let sun = r#"<emitter type="directional">
+        <vector name="direction" value="0.2, -0.6, -1"/>
+        <rgb name="irradiance" value="1.5"/>
+    </emitter>"#;
+    let scene = fog_box("directional_fog_box", CONNECTED_FOG, &[], sun);
+    assert_eq!(scene.scene.directional_lights.len(), 1);
+    for (k, (gate, path_spp, spp)) in
+        [("transient:1.5,0.5,10", 512, 128), ("box:2.6..2.62", 1024, 128)].into_iter().enumerate()
+    {
+        let settings = |method, seed| RenderSettings {
+            width: 16,
+            height: 16,
+            max_bounces: 4,
+            gate: Gate::parse(gate).unwrap(),
+            method,
+            seed,
+            ..Default::default()
+        };
+        let path = common::render_films(&ctx, &scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
+        for (method, seed) in [(Method::Direct, 83), (Method::Ellipsoidal, 85)] {
+            let films = common::render_films(&ctx, &scene, &settings(method, seed + k as u32), 8, spp);
+            common::assert_films_agree(
+                &format!("{} against path with a directional light in the fog box on {gate}", method.name()),
+                &films,
+                &path,
+                4,
+                0.001,
+            );
+        }
+    }
+}
+
 /// Forward-scattering fog for the medium connections' tests, and a spot light within the box
 /// (a delta light, which only next-event estimation and medium connections reach).
 const CONNECTED_FOG: &str = r#"<medium type="homogeneous" name="interior">

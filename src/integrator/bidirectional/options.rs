@@ -126,8 +126,8 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
 }
 
 /// Refuses what bidirectional subpaths through participating media do not render yet: combined
-/// renders (their family weights leave media out), NLOS captures, directional lights and
-/// double-sided lights between two media.
+/// renders (their family weights leave media out), NLOS captures, directional lights in fog that
+/// fills the scene (the camera's medium) and double-sided lights between two media.
 pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: bool, method: &str) -> Result<()> {
     let source = &scene.scene.source;
     let refuse = |what: &str, instead: &str| -> Result<()> {
@@ -143,8 +143,14 @@ pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: b
         settings.nlos.is_none(),
         "{source}: NLOS captures of scenes with participating media are not rendered yet"
     );
-    if !scene.scene.directional_lights.is_empty() {
-        return refuse(&format!("`{method}` does not start light subpaths of directional lights in media yet"), "path");
+    if !scene.scene.directional_lights.is_empty() && scene.scene.camera_medium.is_some() {
+        // A directional light's wave starts on the plane that touches the scene's bounding
+        // sphere, inside fog that fills the scene, and camera subpaths scatter beyond that plane.
+        return refuse(
+            "a directional light shines into fog that fills the scene (its wave would start inside the fog; \
+             fog bounded by a closed `null` shape renders)",
+            "path",
+        );
     }
     if scene.lights.two_sided_media {
         return refuse("a double-sided light has different media on its two faces", "path");
