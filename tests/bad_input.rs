@@ -780,7 +780,7 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml", "participating media", "`combined`", "--method path, direct or ellipsoidal"],
         ),
         case(
-            "XML directional light in fog that fills the scene, with direct connections",
+            "XML directional light in fog that fills the scene, with ellipsoidal connections",
             |d| {
                 let body = "<emitter type=\"directional\"><vector name=\"direction\" value=\"0, -1, 0\"/></emitter>";
                 std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
@@ -795,11 +795,13 @@ fn cases() -> Vec<(Case, Setup)> {
                 "--spp",
                 "1",
                 "--method",
-                "direct",
+                "ellipsoidal",
+                "--gate",
+                "box:3..3.1",
                 "--out",
                 "{out}",
             ]),
-            &["scene.xml", "participating media", "directional light", "fills the scene", "--method path"],
+            &["scene.xml", "participating media", "directional light", "fills the scene", "--method path or direct"],
         ),
         case(
             "XML field of view of zero",

@@ -562,7 +562,10 @@ fn ellipsoidal_agrees_with_direct_in_media() {
 /// from the wave's disk, which enter the fog through its boundary, and connections to the light
 /// drawn anew where its ray starts) and `ellipsoidal` (camera vertices in the fog joined to the
 /// light too, connect_spherical) agree with `path`, per bin and 4 x 4 block of a transient and
-/// behind a narrow box gate.
+/// behind a narrow box gate. So does `direct` in the box filled with fog around the camera, where
+/// the wave starts inside the fog and lights only the beam its subpaths start in
+/// (lights.wesl directional_reaches: with next-event estimation lighting fog outside it too, the
+/// transient's bin 1 fails at z = -4.2).
 #[test]
 fn a_directional_light_in_media_agrees_with_path() {
     let ctx = common::gpu();
@@ -570,11 +573,15 @@ fn a_directional_light_in_media_agrees_with_path() {
         <vector name="direction" value="0.2, -0.6, -1"/>
         <rgb name="irradiance" value="1.5"/>
     </emitter>"#;
-    let scene = fog_box("directional_fog_box", CONNECTED_FOG, &[], sun);
-    assert_eq!(scene.scene.directional_lights.len(), 1);
-    for (k, (gate, path_spp, spp)) in
-        [("transient:1.5,0.5,10", 512, 128), ("box:2.6..2.62", 1024, 128)].into_iter().enumerate()
-    {
+    let fog = fog_box("directional_fog_box", CONNECTED_FOG, &[], sun);
+    let fogged = fogged_box("directional_fogged_box", sun);
+    assert_eq!((fog.scene.directional_lights.len(), fogged.scene.directional_lights.len()), (1, 1));
+    let cases = [
+        (&fog, "the fog box", "transient:1.5,0.5,10", 512, 128),
+        (&fog, "the fog box", "box:2.6..2.62", 1024, 128),
+        (&fogged, "the box filled with fog", "transient:1.5,0.5,10", 1024, 128),
+    ];
+    for (k, (scene, name, gate, path_spp, spp)) in cases.into_iter().enumerate() {
         let settings = |method, seed| RenderSettings {
             width: 16,
             height: 16,
@@ -584,11 +591,18 @@ fn a_directional_light_in_media_agrees_with_path() {
             seed,
             ..Default::default()
         };
-        let path = common::render_films(&ctx, &scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
-        for (method, seed) in [(Method::Direct, 83), (Method::Ellipsoidal, 85)] {
-            let films = common::render_films(&ctx, &scene, &settings(method, seed + k as u32), 8, spp);
+        let path = common::render_films(&ctx, scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
+        // (`ellipsoidal` refuses a directional light in fog that fills the scene.)
+        let methods: &[Method] = if scene.scene.camera_medium.is_some() {
+            &[Method::Direct]
+        } else {
+            &[Method::Direct, Method::Ellipsoidal]
+        };
+        for &method in methods {
+            let seed = 83 + 2 * (method == Method::Ellipsoidal) as u32;
+            let films = common::render_films(&ctx, scene, &settings(method, seed + k as u32), 8, spp);
             common::assert_films_agree(
-                &format!("{} against path with a directional light in the fog box on {gate}", method.name()),
+                &format!("{} against path with a directional light in {name} on {gate}", method.name()),
                 &films,
                 &path,
                 4,

@@ -126,8 +126,9 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
 }
 
 /// Refuses what bidirectional subpaths through participating media do not render yet: combined
-/// renders (their family weights leave media out), NLOS captures, directional lights in fog that
-/// fills the scene (the camera's medium) and double-sided lights between two media.
+/// renders (their family weights leave media out), NLOS captures, `ellipsoidal` with a
+/// directional light in fog that fills the scene (the camera's medium), and double-sided lights
+/// between two media.
 pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: bool, method: &str) -> Result<()> {
     let source = &scene.scene.source;
     let refuse = |what: &str, instead: &str| -> Result<()> {
@@ -143,13 +144,13 @@ pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: b
         settings.nlos.is_none(),
         "{source}: NLOS captures of scenes with participating media are not rendered yet"
     );
-    if !scene.scene.directional_lights.is_empty() && scene.scene.camera_medium.is_some() {
-        // A directional light's wave starts on the plane that touches the scene's bounding
-        // sphere, inside fog that fills the scene, and camera subpaths scatter beyond that plane.
+    if settings.method == Method::Ellipsoidal
+        && !scene.scene.directional_lights.is_empty()
+        && scene.scene.camera_medium.is_some()
+    {
         return refuse(
-            "a directional light shines into fog that fills the scene (its wave would start inside the fog; \
-             fog bounded by a closed `null` shape renders)",
-            "path",
+            "`ellipsoidal` does not join a directional light to fog that fills the scene yet",
+            "path or direct",
         );
     }
     if scene.lights.two_sided_media {
