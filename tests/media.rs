@@ -497,15 +497,7 @@ fn direct_agrees_with_path_in_media() {
         ),
     ];
     for (k, (scene, name)) in scenes.iter().enumerate() {
-        let settings = |method, seed| RenderSettings {
-            width: 16,
-            height: 16,
-            max_bounces: 4,
-            gate: Gate::parse("transient:1.94,0.1,12").unwrap(),
-            method,
-            seed,
-            ..Default::default()
-        };
+        let settings = |method, seed| connection_settings("transient:1.94,0.1,12", method, seed);
         let path = common::render_films(&ctx, scene, &settings(Method::Path, 31 + k as u32), 8, 256);
         let direct = common::render_films(&ctx, scene, &settings(Method::Direct, 41 + k as u32), 8, 64);
         common::assert_films_agree(&format!("direct against path in {name}"), &direct, &path, 4, 0.001);
@@ -536,15 +528,7 @@ fn ellipsoidal_agrees_with_direct_in_media() {
     .into_iter()
     .enumerate()
     {
-        let settings = |method, seed| RenderSettings {
-            width: 16,
-            height: 16,
-            max_bounces: 4,
-            gate: Gate::parse(gate).unwrap(),
-            method,
-            seed,
-            ..Default::default()
-        };
+        let settings = |method, seed| connection_settings(gate, method, seed);
         let direct = common::render_films(&ctx, scene, &settings(Method::Direct, 61 + k as u32), 8, 4 * spp);
         let ellipsoidal = common::render_films(&ctx, scene, &settings(Method::Ellipsoidal, 71 + k as u32), 8, spp);
         common::assert_films_agree(
@@ -582,15 +566,7 @@ fn a_directional_light_in_media_agrees_with_path() {
         (&fogged, "the box filled with fog", "transient:1.5,0.5,10", 1024, 128),
     ];
     for (k, (scene, name, gate, path_spp, spp)) in cases.into_iter().enumerate() {
-        let settings = |method, seed| RenderSettings {
-            width: 16,
-            height: 16,
-            max_bounces: 4,
-            gate: Gate::parse(gate).unwrap(),
-            method,
-            seed,
-            ..Default::default()
-        };
+        let settings = |method, seed| connection_settings(gate, method, seed);
         let path = common::render_films(&ctx, scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
         // (`ellipsoidal` refuses a directional light in fog that fills the scene.)
         let methods: &[Method] = if scene.scene.camera_medium.is_some() {
@@ -609,6 +585,20 @@ fn a_directional_light_in_media_agrees_with_path() {
                 0.001,
             );
         }
+    }
+}
+
+/// 16 x 16 pixels, 4 bounces, `gate` (a gate spec), `method` and `seed`: the settings of the
+/// connection tests in media.
+fn connection_settings(gate: &str, method: Method, seed: u32) -> RenderSettings {
+    RenderSettings {
+        width: 16,
+        height: 16,
+        max_bounces: 4,
+        gate: Gate::parse(gate).unwrap(),
+        method,
+        seed,
+        ..Default::default()
     }
 }
 
