@@ -560,6 +560,11 @@ fn a_directional_light_in_media_agrees_with_path() {
     let fog = fog_box("directional_fog_box", CONNECTED_FOG, &[], sun);
     let fogged = fogged_box("directional_fogged_box", sun);
     assert_eq!((fog.scene.directional_lights.len(), fogged.scene.directional_lights.len()), (1, 1));
+    // `auto` weighs only the methods that render each scene behind a gate.
+    let gated = connection_settings("box:2.6..2.62", Method::Auto, 0);
+    let candidates = |scene| gatetrace::integrator::auto::candidate_methods(&gated, scene);
+    assert_eq!(candidates(&fog), vec![Method::Path, Method::Direct, Method::Ellipsoidal]);
+    assert_eq!(candidates(&fogged), vec![Method::Path, Method::Direct]);
     let cases = [
         (&fog, "the fog box", "transient:1.5,0.5,10", 512, 128),
         (&fog, "the fog box", "box:2.6..2.62", 1024, 128),

@@ -172,14 +172,15 @@ pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Ve
     if glass && settings.nlos.is_some() {
         return vec![Method::Path];
     }
-    if scene.scene.has_media() {
-        let direct = RenderSettings { method: Method::Direct, ..settings.clone() };
-        if super::bidirectional::check_media(scene, &direct, false, Method::Direct.name()).is_err() {
-            return vec![Method::Path];
-        }
+    let renders_media = |method: Method| {
+        let settings = RenderSettings { method, ..settings.clone() };
+        !scene.scene.has_media() || super::bidirectional::check_media(scene, &settings, false, method.name()).is_ok()
+    };
+    if !renders_media(Method::Direct) {
+        return vec![Method::Path];
     }
     let mut methods = vec![Method::Path, Method::Direct];
-    if !matches!(settings.gate, Gate::None) && !glass {
+    if !matches!(settings.gate, Gate::None) && !glass && renders_media(Method::Ellipsoidal) {
         methods.push(Method::Ellipsoidal);
     }
     methods
