@@ -758,9 +758,10 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml:", "the albedo grid (4 x 2 x 1) must share the extinction grid's voxels (2 x 2 x 2)"],
         ),
         case(
-            "XML medium with a combined render",
+            "XML medium and a directional light with a combined render",
             |d| {
-                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>";
+                let body = "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\
+                            <emitter type=\"directional\"><vector name=\"direction\" value=\"0, -1, 0\"/></emitter>";
                 std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
             },
             plain(&[
@@ -777,7 +778,7 @@ fn cases() -> Vec<(Case, Setup)> {
                 "--out",
                 "{out}",
             ]),
-            &["scene.xml", "participating media", "`combined`", "--method path, direct or ellipsoidal"],
+            &["scene.xml", "--method combined does not weigh connections to directional lights", "--method direct"],
         ),
         case(
             "XML directional light in fog that fills the scene, with ellipsoidal connections",

@@ -102,11 +102,13 @@ fn random_path(rng: &mut Xorshift64Star, k: usize, light: Light, glass: f32) -> 
 }
 
 /// `path` with each surface vertex turned, with probability `medium`, into a scattering vertex in
-/// a participating medium (a random Henyey-Greenstein mean cosine in -0.8..0.8).
+/// a participating medium (a random Henyey-Greenstein mean cosine in -0.8..0.8, an extinction
+/// from 0.01 to 100 m^-1).
 fn with_medium_vertices(rng: &mut Xorshift64Star, mut path: Vec<Vertex>, medium: f32) -> Vec<Vertex> {
     for v in &mut path {
         if matches!(v.kind, VertexKind::Surface(_)) && rng.next_f32() < medium {
-            v.kind = VertexKind::Medium { g: 1.6 * rng.next_f32() - 0.8 };
+            let g = 1.6 * rng.next_f32() - 0.8;
+            v.kind = VertexKind::Medium { g, sigma_t: 10f32.powf(4.0 * rng.next_f32() - 2.0) };
         }
     }
     path
@@ -247,26 +249,36 @@ fn approximate_ellipsoidal_weights_match_their_definition_and_sum_to_one() {
 
 /// The random path of trial `trial` of the combined weights' tests (3 to 8 vertices, area and
 /// point lights: a combined render refuses directional ones; glass vertices with probability
-/// `glass`), if its directions leave each vertex on its normal's side.
+/// `glass`; in every other trial, vertices in a medium with probability 0.4), if its directions
+/// leave each vertex on its normal's side.
 fn combined_trial_path(rng: &mut Xorshift64Star, trial: usize, glass: f32) -> Option<(Vec<Vertex>, Light)> {
     let light = if trial.is_multiple_of(3) { Light::Point } else { Light::Area };
     let path = random_path(rng, 3 + trial % 6, light, glass);
+    let path = if trial % 4 >= 2 { with_medium_vertices(rng, path, 0.4) } else { path };
     is_valid(&path).then_some((path, light))
+}
+
+/// Whether vertex i of `path` lies in a participating medium.
+fn in_medium(path: &[Vertex], i: usize) -> bool {
+    matches!(path[i].kind, VertexKind::Medium { .. })
 }
 
 /// The combined estimator's weights (family_mis.wesl `combined_weight`, CPU twin of the same
 /// name): each direct strategy's weight is the direct family's share times its power-heuristic
 /// weight, each spheroid vertex's the ellipsoidal family's share times the paper's weight, the
-/// share S_D / (S_D + r S_E) computed here from explicit products (S_D the sum of the direct
-/// strategies' densities, S_E that of the spheroid vertices' stand-in densities: the light-side
-/// densities of x_0..x_{m-1} times e(x_m) times the camera-side ones of x_{m+1}..x_{k-2}); and
-/// the weights of all strategies of both families sum to one.
+/// share S_D / (S_D + R S_E + R_m S_M) computed here from explicit products (S_D the sum of the
+/// direct strategies' densities, S_E and S_M those of the spheroid vertices' on surfaces and in
+/// media: the light-side densities of x_0..x_{m-1} times e(x_m) times the camera-side ones of
+/// x_{m+1}..x_{k-2}, R and R_m = R / K the connections per direct one of each); and the weights
+/// of all strategies of both families sum to one, on paths with vertices in media too.
 #[test]
 fn combined_weights_match_their_definition_and_sum_to_one() {
     use gatetrace::integrator::combined::Family;
-    use gatetrace::integrator::mis::{combined_weight, spheroid_places, spheroid_vertex_density};
+    use gatetrace::integrator::mis::{
+        combined_weight, medium_vertex_density, spheroid_places, spheroid_vertex_density,
+    };
     let mut rng = Xorshift64Star(0x0DDB_1A5E_5BAD_5EED);
-    let mut checked = 0;
+    let (mut checked, mut media) = (0, 0);
     let mut shares = Vec::new();
     for trial in 0..4000 {
         let Some((path, _)) = combined_trial_path(&mut rng, trial, 0.2) else { continue };
@@ -274,44 +286,59 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
         // Target densities from those of a 1 mm gate (1000 m^-1) to a 10 m one's, 1 to 8
         // ellipsoidal connections per direct one.
         let p_tau = 10f32.powf(3.0 - 4.0 * rng.next_f32());
-        let ratio = (1 + (rng.next_f32() * 8.0) as u32) as f32;
+        let connections = 1 + (rng.next_f32() * 8.0) as u32;
+        let medium_ratio = 2f32.powf(6.0 * rng.next_f32() - 3.0);
+        let ratio = connections as f32 * medium_ratio;
         let pdfs: Vec<f64> = (0..k).map(|s| strategy_pdf(&path, s)).collect();
         let sd: f64 = pdfs.iter().sum();
         let sd2: f64 = pdfs.iter().map(|p| p * p).sum();
         let sc: f64 = (1..k).map(|j| edge_share(&path, j) * pdfs[j]).sum();
-        let mut se = 0.0f64;
+        let (mut se, mut sm) = (0.0f64, 0.0f64);
         for m in (1..=k - 2).filter(|&m| spheroid_places(&path, m)) {
             let v = &path[m];
-            let e =
-                spheroid_vertex_density(path[m - 1].position, v.position, v.normal, path[m + 1].position, p_tau, 1e-6);
-            se += light_side_pdf(&path, m) * e as f64 * camera_side_pdf(&path, m + 1);
+            let rest = light_side_pdf(&path, m) * camera_side_pdf(&path, m + 1);
+            if in_medium(&path, m) {
+                sm += rest * medium_vertex_density(&path, m, p_tau) as f64;
+            } else {
+                let e = spheroid_vertex_density(
+                    path[m - 1].position,
+                    v.position,
+                    v.normal,
+                    path[m + 1].position,
+                    p_tau,
+                    1e-6,
+                );
+                se += rest * e as f64;
+            }
         }
-        let share = sd / (sd + ratio as f64 * se);
+        let share = sd / (sd + ratio as f64 * se + medium_ratio as f64 * sm);
         if !(share.is_finite() && sd2.is_finite() && sd > 0.0) {
             continue;
         }
         let close = |w: f64, expected: f64| (w - expected).abs() <= 1e-3 * expected.max(1e-3);
         let mut sum = 0.0f64;
         for s in (0..k).filter(|&s| connectible(&path, s)) {
-            let w = combined_weight(&path, Family::Direct, s, p_tau, ratio, 1e-6) as f64;
+            let w = combined_weight(&path, Family::Direct, s, p_tau, ratio, medium_ratio, 1e-6) as f64;
             let expected = share * pdfs[s] * pdfs[s] / sd2;
             assert!(close(w, expected), "path of {k} vertices, direct s = {s}: weight {w}, definition {expected}");
             sum += w;
         }
         for e in (1..=k - 2).filter(|&e| spheroid_places(&path, e)) {
-            let w = combined_weight(&path, Family::Ellipsoidal, e, p_tau, ratio, 1e-6) as f64;
+            let w = combined_weight(&path, Family::Ellipsoidal, e, p_tau, ratio, medium_ratio, 1e-6) as f64;
             let expected = (1.0 - share) * 0.5 * (pdfs[e] + pdfs[e + 1]) / sc;
             assert!(close(w, expected), "path of {k} vertices, spheroid vertex {e}: weight {w}, definition {expected}");
             sum += w;
         }
         assert!((sum - 1.0).abs() < 1e-4, "path of {k} vertices: the weights of both families sum to {sum}");
         shares.push(share);
+        media += usize::from(sm > 0.0);
         checked += 1;
     }
     assert!(checked > 1000, "only {checked} valid random paths");
     // Both families carry weight on these paths: the test sees shares away from 0 and 1.
     let between = shares.iter().filter(|&&s| s > 0.01 && s < 0.99).count();
     assert!(between > checked / 10, "only {between} of {checked} paths share their weight between the families");
+    assert!(media > checked / 10, "only {media} of {checked} paths had a medium vertex a spheroid places");
 }
 
 /// `combined_weight` of family_mis.wesl (probe_functions 20) against its twin on random paths and
@@ -324,7 +351,8 @@ fn combined_weights_in_wgsl_match_the_twin() {
     use gatetrace::integrator::combined::Family;
     use gatetrace::integrator::mis::{combined_weight, spheroid_places};
     use gatetrace::integrator::{PathTracer, RenderSettings, target_sampler};
-    const RECORDS: usize = 18; // COMBINED_RECORDS: a header, two records per vertex (k <= 8), the ratio
+    // COMBINED_RECORDS: a header, two records per vertex (k <= 8), two of extinctions, the ratios.
+    const RECORDS: usize = 20;
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let gate = Gate::Box { start: 3.0, end: 3.3 };
@@ -349,9 +377,11 @@ fn combined_weights_in_wgsl_match_the_twin() {
         } else {
             (Family::Ellipsoidal, pick(&placed, u))
         };
-        // The family, 4 for an area light, 8 times the bits of the delta vertices.
+        // The family, 4 for an area light, 8 times the bits of the delta vertices, 2048 times
+        // those of the vertices in a medium.
         let deltas: u32 = path.iter().enumerate().map(|(i, v)| u32::from(v.is_delta()) << i).sum();
-        let code = family as u32 + if light == Light::Area { 4 } else { 0 } + 8 * deltas;
+        let media: u32 = (0..k).map(|i| u32::from(in_medium(&path, i)) << i).sum();
+        let code = family as u32 + if light == Light::Area { 4 } else { 0 } + 8 * deltas + 2048 * media;
         input.push([k as f32, own as f32, code as f32, length]);
         for (i, v) in path.iter().enumerate() {
             let from_light = match i {
@@ -362,19 +392,33 @@ fn combined_weights_in_wgsl_match_the_twin() {
             input.push([v.position.x, v.position.y, v.position.z, from_light]);
             input.push([v.normal.x, v.normal.y, v.normal.z, from_camera]);
         }
-        // The ratio R of a combined render: K (1 to 8) times the ellipsoidal half's share (1/8 to 8).
-        let ratio = (1 + (rng.next_f32() * 8.0) as u32) as f32 * 2f32.powf(6.0 * rng.next_f32() - 3.0);
-        input.resize((cases.len() + 1) * RECORDS - 1, [0.0; 4]);
-        input.push([ratio, 0.0, 0.0, 0.0]);
-        cases.push((path, family, own, 1.0 / inv_p, ratio));
+        // The extinctions, in two records.
+        let mut sigma_t = [0.0f32; 8];
+        for (i, v) in path.iter().enumerate() {
+            if let VertexKind::Medium { sigma_t: s, .. } = v.kind {
+                sigma_t[i] = s;
+            }
+        }
+        input.resize((cases.len() + 1) * RECORDS - 3, [0.0; 4]);
+        input.push([sigma_t[0], sigma_t[1], sigma_t[2], sigma_t[3]]);
+        input.push([sigma_t[4], sigma_t[5], sigma_t[6], sigma_t[7]]);
+        // The ratios of a combined render: R = K (1 to 8) times the ellipsoidal half's share
+        // (1/8 to 8), and R / K.
+        let connections = (1 + (rng.next_f32() * 8.0) as u32) as f32;
+        let medium_ratio = 2f32.powf(6.0 * rng.next_f32() - 3.0);
+        let ratio = connections * medium_ratio;
+        input.push([ratio, medium_ratio, 0.0, 0.0]);
+        cases.push((path, family, own, 1.0 / inv_p, ratio, medium_ratio));
     }
     assert!(cases.len() > 500, "only {} valid random paths", cases.len());
     assert!(cases.iter().any(|c| c.0.iter().any(Vertex::is_delta)), "some paths hold glass");
-    let extra = [("FUNCTION", 20.0), ("HAS_DIELECTRIC", 1.0)];
+    let placed_in_media = cases.iter().filter(|c| (1..c.0.len() - 1).any(|m| in_medium(&c.0, m))).count();
+    assert!(placed_in_media > cases.len() / 10, "only {placed_in_media} paths have vertices in a medium");
+    let extra = [("FUNCTION", 20.0), ("HAS_DIELECTRIC", 1.0), ("HAS_MEDIA", 1.0)];
     let out = common::run_probe(&ctx, &tracer, "probe_functions", &extra, &input, cases.len());
-    for (i, ((path, family, own, p_tau, ratio), o)) in cases.iter().zip(&out).enumerate() {
+    for (i, ((path, family, own, p_tau, ratio, medium_ratio), o)) in cases.iter().zip(&out).enumerate() {
         assert!((o[1] - p_tau).abs() <= 1e-4 * p_tau, "path {i}: target density GPU {} CPU {p_tau}", o[1]);
-        let twin = combined_weight(path, *family, *own, o[1], *ratio, 1e-6);
+        let twin = combined_weight(path, *family, *own, o[1], *ratio, *medium_ratio, 1e-6);
         assert!(
             (o[0] - twin).abs() <= 1e-3 * twin.max(1e-3),
             "path {i} ({} vertices, {family:?} {own}): weight GPU {} CPU {twin}",

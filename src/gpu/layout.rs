@@ -439,8 +439,10 @@ pub struct RenderParams {
     /// (dimensionless: K per spheroid times the ellipsoidal half's samples per direct sample);
     /// 0 in renders of one method.
     pub family_ratio: f32,
-    /// Padding.
-    pub reserved1: u32,
+    /// A combined render's connections through a vertex in a participating medium per direct
+    /// one, one per spheroid (dimensionless: the ellipsoidal half's samples per direct sample);
+    /// 0 in renders of one method.
+    pub family_medium_ratio: f32,
     /// Padding.
     pub reserved2: u32,
 }
@@ -599,7 +601,8 @@ pub struct PathVertex {
     pub pdf_fwd: f32,
     /// Reverse area density (m^-2).
     pub pdf_rev: f32,
-    /// Texture coordinates (surface vertices); (g, 0) for a medium vertex, g its phase function's mean cosine.
+    /// Texture coordinates (surface vertices); (g, sigma_t) for a medium vertex, g its phase
+    /// function's mean cosine and sigma_t its extinction there (m^-1).
     pub uv: glam::Vec2,
 }
 

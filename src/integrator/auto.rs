@@ -174,7 +174,7 @@ pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Ve
     }
     let renders_media = |method: Method| {
         let settings = RenderSettings { method, ..settings.clone() };
-        !scene.scene.has_media() || super::bidirectional::check_media(scene, &settings, false, method.name()).is_ok()
+        !scene.scene.has_media() || super::bidirectional::check_media(scene, &settings, method.name()).is_ok()
     };
     if !renders_media(Method::Direct) {
         return vec![Method::Path];

@@ -59,9 +59,9 @@ use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
 pub use options::{
-    DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, MAX_BOUNCES,
-    MAX_CONNECTIONS_PER_QUERY, StrategyStats, check_media, check_tracer_settings, default_connections_per_query,
-    strategies,
+    DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, FamilyRole,
+    MAX_BOUNCES, MAX_CONNECTIONS_PER_QUERY, StrategyStats, check_media, check_tracer_settings,
+    default_connections_per_query, strategies,
 };
 
 /// Slots a wave aims for on a CPU device (target_slots_per_wave: more on a GPU): each slot
@@ -151,21 +151,20 @@ impl<'a> BidirectionalTracer<'a> {
         Self::with_family(ctx, scene, settings, None)
     }
 
-    /// A tracer of `settings.method` (direct or ellipsoidal) that is `family`'s half of a
-    /// combined render whose weights count `ratio` ellipsoidal connections per direct one (K
-    /// per spheroid times the ellipsoidal half's samples per direct sample), or a method on its
-    /// own (None).
+    /// A tracer of `settings.method` (direct or ellipsoidal) that is one half of a combined
+    /// render (`family`: which half, and the ellipsoidal connections per direct one its weights
+    /// count), or a method on its own (None).
     pub fn with_family(
         ctx: &'a GpuContext,
         scene: &PreparedScene,
         settings: &RenderSettings,
-        family: Option<(Family, f64)>,
+        family: Option<FamilyRole>,
     ) -> Result<Self> {
         check_tracer_settings(settings)?;
         // The method the user asked for: a combined render's, for either half.
         let method = if family.is_some() { Method::Combined.name() } else { settings.method.name() };
         if scene.scene.has_media() {
-            check_media(scene, settings, family.is_some(), method)?;
+            check_media(scene, settings, method)?;
         }
         if scene.has_dielectric() {
             if settings.nlos.is_some() {
@@ -233,8 +232,9 @@ impl<'a> BidirectionalTracer<'a> {
         let slots = slots_per_wave;
 
         let mut params = super::render_params(scene, settings);
-        if let Some((_, ratio)) = family {
-            params.family_ratio = ratio as f32;
+        if let Some(role) = family {
+            params.family_ratio = role.ratio as f32;
+            params.family_medium_ratio = role.medium_ratio as f32;
         }
         let (mut r, mut constants, film) = super::upload_scene(ctx, scene, settings, &params, limit)?;
         if ellipsoidal {
@@ -322,13 +322,14 @@ impl<'a> BidirectionalTracer<'a> {
         constants.push(("LIGHT_VERTICES_TRACED", light_traced as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
-        if let Some((role, _)) = family {
+        if let Some(role) = family {
             ensure!(
                 scene.scene.directional_lights.is_empty(),
-                "--method combined does not weigh connections to directional lights yet: use --method direct or \
-                 ellipsoidal for this scene"
+                "{}: --method combined does not weigh connections to directional lights yet: use --method direct or \
+                 ellipsoidal for this scene",
+                scene.scene.source
             );
-            constants.push(("FAMILY", role as u32 as f64));
+            constants.push(("FAMILY", role.family as u32 as f64));
         }
         if ellipsoidal || family.is_some() {
             // (A combined render's direct half leaves out the spheroids its ellipsoidal half does.)

@@ -21,7 +21,7 @@
 use anyhow::{Result, bail, ensure};
 
 use super::auto::{Batches, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed};
-pub use super::bidirectional::Family;
+pub use super::bidirectional::{Family, FamilyRole};
 use super::{BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint};
 use crate::film::Film;
 use crate::gpu::GpuContext;
@@ -168,9 +168,9 @@ impl<'a> CombinedTracer<'a> {
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
         let share = settings.ellipsoidal_share.unwrap_or(1.0);
-        let ratio = settings.connections_per_query as f64 * share;
         let half = |family: Family| {
-            BidirectionalTracer::with_family(ctx, scene, &family.settings(settings), Some((family, ratio)))
+            let role = FamilyRole { family, ratio: settings.connections_per_query as f64 * share, medium_ratio: share };
+            BidirectionalTracer::with_family(ctx, scene, &family.settings(settings), Some(role))
         };
         Ok(Self { direct: half(Family::Direct)?, ellipsoidal: half(Family::Ellipsoidal)?, share })
     }

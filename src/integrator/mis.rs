@@ -59,6 +59,9 @@ pub enum VertexKind {
     Medium {
         /// Mean cosine of the phase function.
         g: f32,
+        /// Extinction there (m^-1): only the combined weights' density of a medium vertex
+        /// placed on a spheroid reads it ([`medium_vertex_density`]).
+        sigma_t: f32,
     },
 }
 
@@ -132,7 +135,7 @@ pub fn vertex_pdf(v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
         VertexKind::AreaLight { .. } => w.dot(v.normal).max(0.0) * FRAC_1_PI,
         VertexKind::PointLight { .. } => 0.25 * FRAC_1_PI,
         VertexKind::DirectionalLight { .. } => unreachable!("returned above"),
-        VertexKind::Medium { g } => {
+        VertexKind::Medium { g, .. } => {
             let prev = prev.expect("a medium vertex has a predecessor");
             crate::scene::medium::hg_phase((v.position - prev.position).normalize().dot(w), g)
         }
@@ -336,15 +339,45 @@ pub fn spheroid_vertex_density(prev: Vec3, x: Vec3, normal: Vec3, next: Vec3, p_
     p_tau * along_surface / (std::f32::consts::TAU * b)
 }
 
+/// `medium_vertex_density` of family_mis.wesl: the density (m^-3, over the extinction) the
+/// families' weights give vertex `i` of `path`, in a participating medium, when a spheroid
+/// places it: connect_medium's density of placing it (`spheroid_point_mixture` of medium.wesl:
+/// half uniform in prolate spheroidal coordinates, a quarter along a ray from each neighbour,
+/// in a direction uniform over the half-space a surface reflects into or over the sphere from a
+/// medium vertex; from the light 1 / 2 pi for an area light and 1 / 4 pi for a point light;
+/// from the pinhole the camera's own density) times the target-length density `p_tau` (m^-1),
+/// over the extinction there, which the subpaths' densities leave out.
+pub fn medium_vertex_density(path: &[Vertex], i: usize, p_tau: f32) -> f32 {
+    use std::f32::consts::PI;
+    let (prev, v, next) = (&path[i - 1], &path[i], &path[i + 1]);
+    let VertexKind::Medium { sigma_t, .. } = v.kind else { panic!("vertex {i} is not in a medium") };
+    let (d1, d2) = (v.position.distance(prev.position), v.position.distance(next.position));
+    if !(d1 > 0.0 && d2 > 0.0) {
+        return 0.0;
+    }
+    let ray = |u: &Vertex| match u.kind {
+        VertexKind::Medium { .. } | VertexKind::PointLight { .. } => 0.25 / PI,
+        _ => 0.5 / PI,
+    };
+    let from_next = match next.kind {
+        VertexKind::Camera { .. } => vertex_pdf(next, None, v),
+        _ => ray(next) / (d2 * d2),
+    };
+    let sum = (prev.position - v.position) / d1 + (next.position - v.position) / d2;
+    let q = 0.5 / (2.0 * PI * d1 * d2) + 0.25 * (ray(prev) / (d1 * d1) + from_next) * 0.5 * sum.dot(sum);
+    p_tau * q / sigma_t.max(1e-30)
+}
+
 /// `combined_weight` of family_mis.wesl: the weight of a combined render's contribution through
 /// `path` (x_0 on a light, the last vertex the pinhole), its family's share times its weight
 /// within the family, for strategy `own` of `family` (direct: `own` light-subpath vertices,
 /// weighted by the power heuristic; ellipsoidal: the vertex path[own] on a spheroid, weighted
 /// by the paper's approximation). The direct family's share is S_D / (S_D + ratio S_E), S_D the
 /// sum of the direct strategies' densities and S_E that of the spheroid vertices' stand-in
-/// densities (`spheroid_vertex_density` for the placed vertex, the subpaths' densities for the
-/// rest), with target-length density `p_tau` (m^-1) at the path's length and `ratio`
-/// ellipsoidal connections per direct one (paths of at least three vertices). Both sums leave
+/// densities (`spheroid_vertex_density` or, in a medium, [`medium_vertex_density`] for the
+/// placed vertex, the subpaths' densities for the rest), with target-length density `p_tau`
+/// (m^-1) at the path's length, `ratio` ellipsoidal connections per direct one through surface
+/// vertices and `medium_ratio` through medium vertices (paths of at least three vertices). Both sums leave
 /// out what cannot sample the path (direct strategies ending at a delta vertex, vertices
 /// [`spheroid_places`] rules out), and delta steps' zero densities count as 1.
 pub fn combined_weight(
@@ -353,6 +386,7 @@ pub fn combined_weight(
     own: usize,
     p_tau: f32,
     ratio: f32,
+    medium_ratio: f32,
     needle_guard: f32,
 ) -> f32 {
     let k = path.len();
@@ -365,6 +399,7 @@ pub fn combined_weight(
     let from_camera = |i: usize| if i + 1 < k { vertex_pdf(&path[i + 1], path.get(i + 2), &path[i]) } else { 1.0 };
     let first = if path[0].is_delta_light() { 1 } else { 0 };
     let (mut r, mut sd, mut sd2, mut sc, mut se, mut r_own, mut r_next) = (1.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut sm = 0.0f32;
     let delta: Vec<bool> = path.iter().map(Vertex::is_delta).collect();
     for j in first..k {
         if j == 0 || !(delta[j - 1] || delta[j]) {
@@ -382,7 +417,9 @@ pub fn combined_weight(
         }
         let camera = if j + 1 < k && delta[j + 1] { 1.0 } else { from_camera(j).max(1e-30) };
         let light = if j >= 1 && delta[j - 1] { 1.0 } else { from_light(j) };
-        if spheroid_places(path, j) && p_tau > 0.0 {
+        if spheroid_places(path, j) && p_tau > 0.0 && matches!(path[j].kind, VertexKind::Medium { .. }) {
+            sm += r * medium_vertex_density(path, j, p_tau) / camera;
+        } else if spheroid_places(path, j) && p_tau > 0.0 {
             let v = &path[j];
             let e = spheroid_vertex_density(
                 path[j - 1].position,
@@ -398,9 +435,10 @@ pub fn combined_weight(
         if r > 1e10 || sd > 1e10 {
             let f = 1e-10;
             (r, sd, sd2, sc, se, r_own, r_next) = (r * f, sd * f, sd2 * f * f, sc * f, se * f, r_own * f, r_next * f);
+            sm *= f;
         }
     }
-    let share_d = sd / (sd + ratio * se);
+    let share_d = sd / (sd + ratio * se + medium_ratio * sm);
     let w = match family {
         super::bidirectional::Family::Direct => share_d * (r_own * r_own / sd2),
         super::bidirectional::Family::Ellipsoidal => (1.0 - share_d) * (0.5 * (r_own + r_next) / sc),

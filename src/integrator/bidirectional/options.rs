@@ -48,8 +48,22 @@ pub fn default_connections_per_query(method: Method) -> u32 {
 pub enum Family {
     /// connect_direct's strategies.
     Direct = 1,
-    /// connect_ellipsoidal's and connect_spherical's.
+    /// connect_ellipsoidal's, connect_medium's and connect_spherical's.
     Ellipsoidal = 2,
+}
+
+/// A combined render's half: its family, and the ellipsoidal connections per direct one that
+/// the family weights count (shaders/lib/family_mis.wesl).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FamilyRole {
+    /// Which half.
+    pub family: Family,
+    /// Connections through a surface vertex per direct one (dimensionless): K per spheroid
+    /// times the ellipsoidal half's samples per direct sample.
+    pub ratio: f64,
+    /// Connections through a vertex in a participating medium per direct one (dimensionless):
+    /// one per spheroid times the ellipsoidal half's samples per direct sample.
+    pub medium_ratio: f64,
 }
 
 /// The (s, t) strategies with at most `max_bounces` scattering vertices and t >= 1, in the
@@ -125,19 +139,19 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
     Ok(())
 }
 
-/// Refuses what bidirectional subpaths through participating media do not render yet: combined
-/// renders (their family weights leave media out), NLOS captures, `ellipsoidal` with a
-/// directional light in fog that fills the scene (the camera's medium), and double-sided lights
-/// between two media.
-pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, combined: bool, method: &str) -> Result<()> {
+/// Refuses what bidirectional subpaths through participating media do not render yet (`method`
+/// names what the user asked for: a combined render's, for either half): NLOS captures,
+/// `ellipsoidal` with a directional light in fog that fills the scene (the camera's medium), and
+/// double-sided lights between two media.
+pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, method: &str) -> Result<()> {
     let source = &scene.scene.source;
     let refuse = |what: &str, instead: &str| -> Result<()> {
         anyhow::bail!("{source}: the scene has participating media, and {what}: render it with --method {instead}")
     };
-    if combined || !matches!(settings.method, Method::Direct | Method::Ellipsoidal) {
+    if !matches!(settings.method, Method::Direct | Method::Ellipsoidal) {
         return refuse(
             &format!("`{method}` does not weigh connection vertices in media yet"),
-            "path, direct or ellipsoidal",
+            "path, direct, ellipsoidal or combined",
         );
     }
     anyhow::ensure!(
