@@ -298,7 +298,7 @@ fn combined_weights_match_their_definition_and_sum_to_one() {
             let v = &path[m];
             let rest = light_side_pdf(&path, m) * camera_side_pdf(&path, m + 1);
             if in_medium(&path, m) {
-                sm += rest * medium_vertex_density(&path, m, p_tau) as f64;
+                sm += rest * medium_vertex_density(&path, m, p_tau, 1e-6) as f64;
             } else {
                 let e = spheroid_vertex_density(
                     path[m - 1].position,

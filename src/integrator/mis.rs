@@ -346,13 +346,14 @@ pub fn spheroid_vertex_density(prev: Vec3, x: Vec3, normal: Vec3, next: Vec3, p_
 /// in a direction uniform over the half-space a surface reflects into or over the sphere from a
 /// medium vertex; from the light 1 / 2 pi for an area light and 1 / 4 pi for a point light;
 /// from the pinhole the camera's own density) times the target-length density `p_tau` (m^-1),
-/// over the extinction there, which the subpaths' densities leave out.
-pub fn medium_vertex_density(path: &[Vertex], i: usize, p_tau: f32) -> f32 {
+/// over the extinction there, which the subpaths' densities leave out; zero within the needle
+/// guard (`needle_guard`, relative), where no spheroid is queried.
+pub fn medium_vertex_density(path: &[Vertex], i: usize, p_tau: f32, needle_guard: f32) -> f32 {
     use std::f32::consts::PI;
     let (prev, v, next) = (&path[i - 1], &path[i], &path[i + 1]);
     let VertexKind::Medium { sigma_t, .. } = v.kind else { panic!("vertex {i} is not in a medium") };
     let (d1, d2) = (v.position.distance(prev.position), v.position.distance(next.position));
-    if !(d1 > 0.0 && d2 > 0.0) {
+    if !(d1 > 0.0 && d2 > 0.0 && d1 + d2 > prev.position.distance(next.position) * (1.0 + needle_guard)) {
         return 0.0;
     }
     let ray = |u: &Vertex| match u.kind {
@@ -418,7 +419,7 @@ pub fn combined_weight(
         let camera = if j + 1 < k && delta[j + 1] { 1.0 } else { from_camera(j).max(1e-30) };
         let light = if j >= 1 && delta[j - 1] { 1.0 } else { from_light(j) };
         if spheroid_places(path, j) && p_tau > 0.0 && matches!(path[j].kind, VertexKind::Medium { .. }) {
-            sm += r * medium_vertex_density(path, j, p_tau) / camera;
+            sm += r * medium_vertex_density(path, j, p_tau, needle_guard) / camera;
         } else if spheroid_places(path, j) && p_tau > 0.0 {
             let v = &path[j];
             let e = spheroid_vertex_density(
