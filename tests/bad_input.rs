@@ -781,30 +781,6 @@ fn cases() -> Vec<(Case, Setup)> {
             &["scene.xml", "--method combined does not weigh connections to directional lights", "--method direct"],
         ),
         case(
-            "XML directional light in fog that fills the scene, with ellipsoidal connections",
-            |d| {
-                let body = "<emitter type=\"directional\"><vector name=\"direction\" value=\"0, -1, 0\"/></emitter>";
-                std::fs::write(d.join("scene.xml"), xml_with(body)).unwrap();
-            },
-            plain(&[
-                "render",
-                "{dir}/scene.xml",
-                "--fog",
-                "0.5",
-                "--res",
-                "8x8",
-                "--spp",
-                "1",
-                "--method",
-                "ellipsoidal",
-                "--gate",
-                "box:3..3.1",
-                "--out",
-                "{out}",
-            ]),
-            &["scene.xml", "participating media", "directional light", "fills the scene", "--method path or direct"],
-        ),
-        case(
             "XML field of view of zero",
             |d| {
                 let xml = "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><float name=\"fov\" value=\"0\"/></sensor>\

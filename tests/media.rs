@@ -464,6 +464,20 @@ fn fogged_box(name: &str, extra: &str) -> PreparedScene {
         .unwrap()
 }
 
+/// The Cornell box without its area light, with `extra` (XML elements), filled with fog around
+/// the camera as in [`fogged_box`].
+fn fogged_box_without_area_light(name: &str, extra: &str) -> PreparedScene {
+    let dir = common::scratch_dir(name);
+    let box_xml = std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.xml")).unwrap();
+    let start = box_xml.find("<emitter type=\"area\">").expect("the Cornell box has an area light");
+    let end = start + box_xml[start..].find("</emitter>").unwrap() + "</emitter>".len();
+    let unlit = format!("{}{}", &box_xml[..start], &box_xml[end..]);
+    std::fs::write(dir.join("scene.xml"), unlit.replace("</scene>", &format!("{extra}</scene>"))).unwrap();
+    let fog = Some(gatetrace::scene::MediumDesc::parse_fog("1.5,0.8,0.6").unwrap());
+    PreparedScene::new(load_scene_with(&dir.join("scene.xml"), &LoadOptions { fog, ..Default::default() }).unwrap())
+        .unwrap()
+}
+
 /// `direct` through media (subpaths that scatter in them, connections attenuated by the media
 /// they cross, densities without the transmittance in the MIS weights) agrees with `path`, per
 /// bin and 4 x 4 block of a transient: in the fog box lit by the box's light and a spot outside
@@ -581,10 +595,13 @@ fn combined_agrees_with_direct_in_media() {
 /// from the wave's disk, which enter the fog through its boundary, and connections to the light
 /// drawn anew where its ray starts) and `ellipsoidal` (camera vertices in the fog joined to the
 /// light too, connect_spherical) agree with `path`, per bin and 4 x 4 block of a transient and
-/// behind a narrow box gate. So does `direct` in the box filled with fog around the camera, where
-/// the wave starts inside the fog and lights only the beam its subpaths start in
-/// (lights.wesl directional_reaches: with next-event estimation lighting fog outside it too, the
-/// transient's bin 1 fails at z = -4.2).
+/// behind a narrow box gate. So do both in the box filled with fog around the camera, where the
+/// wave starts inside the fog and lights only the beam its subpaths start in (lights.wesl
+/// directional_reaches: with next-event estimation lighting fog outside it too, `direct`'s
+/// transient bin 1 fails at z = -4.2), and where camera subpaths scatter in fog outside the
+/// geometry's bounds, nearer to where the wave starts than to those bounds (Scene::light_bounds:
+/// with the geometry's bounds as the lights' in extend_subpaths' closing distance, `direct`
+/// behind the gate fails at z = -5.2).
 #[test]
 fn a_directional_light_in_media_agrees_with_path() {
     let ctx = common::gpu();
@@ -594,27 +611,25 @@ fn a_directional_light_in_media_agrees_with_path() {
     </emitter>"#;
     let fog = fog_box("directional_fog_box", CONNECTED_FOG, &[], sun);
     let fogged = fogged_box("directional_fogged_box", sun);
+    let sunlit = fogged_box_without_area_light("directional_sunlit_fogged_box", sun);
     assert_eq!((fog.scene.directional_lights.len(), fogged.scene.directional_lights.len()), (1, 1));
     // `auto` weighs only the methods that render each scene behind a gate.
     let gated = connection_settings("box:2.6..2.62", Method::Auto, 0);
     let candidates = |scene| gatetrace::integrator::auto::candidate_methods(&gated, scene);
     assert_eq!(candidates(&fog), vec![Method::Path, Method::Direct, Method::Ellipsoidal]);
-    assert_eq!(candidates(&fogged), vec![Method::Path, Method::Direct]);
+    assert_eq!(candidates(&fogged), vec![Method::Path, Method::Direct, Method::Ellipsoidal]);
+    // (scene, its name, gate, most bounces, path's and the other methods' samples per pixel)
     let cases = [
-        (&fog, "the fog box", "transient:1.5,0.5,10", 512, 128),
-        (&fog, "the fog box", "box:2.6..2.62", 1024, 128),
-        (&fogged, "the box filled with fog", "transient:1.5,0.5,10", 1024, 128),
+        (&fog, "the fog box", "transient:1.5,0.5,10", 4, 512, 128),
+        (&fog, "the fog box", "box:2.6..2.62", 4, 1024, 128),
+        (&fogged, "the box filled with fog", "transient:1.5,0.5,10", 4, 1024, 128),
+        (&sunlit, "the box filled with fog, lit by the sun alone", "box:2.6..2.62", 5, 4096, 512),
     ];
-    for (k, (scene, name, gate, path_spp, spp)) in cases.into_iter().enumerate() {
-        let settings = |method, seed| connection_settings(gate, method, seed);
+    for (k, (scene, name, gate, bounces, path_spp, spp)) in cases.into_iter().enumerate() {
+        let settings =
+            |method, seed| RenderSettings { max_bounces: bounces, ..connection_settings(gate, method, seed) };
         let path = common::render_films(&ctx, scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
-        // (`ellipsoidal` refuses a directional light in fog that fills the scene.)
-        let methods: &[Method] = if scene.scene.camera_medium.is_some() {
-            &[Method::Direct]
-        } else {
-            &[Method::Direct, Method::Ellipsoidal]
-        };
-        for &method in methods {
+        for method in [Method::Direct, Method::Ellipsoidal] {
             let seed = 83 + 2 * (method == Method::Ellipsoidal) as u32;
             let films = common::render_films(&ctx, scene, &settings(method, seed + k as u32), 8, spp);
             common::assert_films_agree(

@@ -409,11 +409,12 @@ pub struct RenderParams {
     pub gate: GateParams,
     /// Target-length sampling (ellipsoidal connections).
     pub target_length: TargetParams,
-    /// Lower corner of the bounds of every light (m).
+    /// Lower corner of the bounds of where paths start on lights (m; all of space with a
+    /// directional light: [`crate::scene::Scene::light_bounds`]).
     pub light_bounds_min: Vec3,
     /// Area of the whole image on the image plane at unit distance (4 tan^2(yfov/2) aspect).
     pub image_area: f32,
-    /// Upper corner of the bounds of every light (m).
+    /// Upper corner of the bounds of where paths start on lights (m).
     pub light_bounds_max: Vec3,
     /// The medium the camera stands in (an index of the media table), or [`NONE`] for vacuum.
     pub camera_medium: u32,

@@ -417,13 +417,22 @@ impl Scene {
         (0.5 * (lo + hi), radius * (1.0 + 1e-4) + 1e-6)
     }
 
-    /// Axis-aligned bounds of every emitting triangle and point light (m); with a directional
-    /// light, which can reach any point, the scene's bounds; an empty box (min > max) when the
+    /// Axis-aligned bounds (m) of the points where a path can start on a light, the closing
+    /// distances of camera subpaths (params.light_bounds_min/max): every emitting triangle and
+    /// point light; with a directional light, all of space, since its wave reaches fog that
+    /// fills the scene outside the geometry's bounds (a camera subpath's vertex there may be
+    /// nearer to where the wave starts than to those bounds); an empty box (min > max) when the
     /// scene has no light.
     pub fn light_bounds(&self) -> (Vec3, Vec3) {
         if !self.directional_lights.is_empty() {
-            return self.bounds();
+            return (Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX));
         }
+        self.local_light_bounds()
+    }
+
+    /// Axis-aligned bounds of every emitting triangle and point light (m); an empty box (min >
+    /// max) when the scene has none.
+    fn local_light_bounds(&self) -> (Vec3, Vec3) {
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
         for t in &self.triangles {
@@ -480,7 +489,7 @@ impl Scene {
         };
         let lens = self.camera.lens_radius();
         let camera = [self.camera.position];
-        let (lo, hi) = self.light_bounds();
+        let (lo, hi) = self.local_light_bounds();
         let lights = if lo.cmple(hi).all() { corners((lo, hi)).to_vec() } else { Vec::new() };
         // A directional light's path starts on the plane tangent to the bounding sphere.
         let directional = if self.directional_lights.is_empty() { 0.0 } else { 2.0 * self.bounding_sphere().1 };

@@ -140,8 +140,7 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
 }
 
 /// Refuses what bidirectional subpaths through participating media do not render yet (`method`
-/// names what the user asked for: a combined render's, for either half): NLOS captures,
-/// `ellipsoidal` with a directional light in fog that fills the scene (the camera's medium), and
+/// names what the user asked for: a combined render's, for either half): NLOS captures and
 /// double-sided lights between two media.
 pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, method: &str) -> Result<()> {
     let source = &scene.scene.source;
@@ -158,15 +157,6 @@ pub fn check_media(scene: &PreparedScene, settings: &RenderSettings, method: &st
         settings.nlos.is_none(),
         "{source}: NLOS captures of scenes with participating media are not rendered yet"
     );
-    if settings.method == Method::Ellipsoidal
-        && !scene.scene.directional_lights.is_empty()
-        && scene.scene.camera_medium.is_some()
-    {
-        return refuse(
-            "`ellipsoidal` does not join a directional light to fog that fills the scene yet",
-            "path or direct",
-        );
-    }
     if scene.lights.two_sided_media {
         return refuse("a double-sided light has different media on its two faces", "path");
     }
