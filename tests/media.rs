@@ -456,24 +456,21 @@ fn fog_box(name: &str, medium: &str, files: &[(&str, &[f32])], extra: &str) -> P
 /// The Cornell box with `extra` (XML elements), filled with fog around the camera (`--fog
 /// 1.5,0.8,0.6`): every ray travels in it, and no surface changes it.
 fn fogged_box(name: &str, extra: &str) -> PreparedScene {
-    let dir = common::scratch_dir(name);
-    let box_xml = std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.xml")).unwrap();
-    std::fs::write(dir.join("scene.xml"), box_xml.replace("</scene>", &format!("{extra}</scene>"))).unwrap();
-    let fog = Some(gatetrace::scene::MediumDesc::parse_fog("1.5,0.8,0.6").unwrap());
-    PreparedScene::new(load_scene_with(&dir.join("scene.xml"), &LoadOptions { fog, ..Default::default() }).unwrap())
-        .unwrap()
+    fogged_box_in(name, extra, "1.5,0.8,0.6", true)
 }
 
-/// The Cornell box without its area light, with `extra` (XML elements), filled with fog around
-/// the camera as in [`fogged_box`].
-fn fogged_box_without_area_light(name: &str, extra: &str) -> PreparedScene {
+/// The Cornell box (without its area light unless `area_light`) with `extra` (XML elements),
+/// filled with the fog `--fog fog` around the camera.
+fn fogged_box_in(name: &str, extra: &str, fog: &str, area_light: bool) -> PreparedScene {
     let dir = common::scratch_dir(name);
-    let box_xml = std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.xml")).unwrap();
-    let start = box_xml.find("<emitter type=\"area\">").expect("the Cornell box has an area light");
-    let end = start + box_xml[start..].find("</emitter>").unwrap() + "</emitter>".len();
-    let unlit = format!("{}{}", &box_xml[..start], &box_xml[end..]);
-    std::fs::write(dir.join("scene.xml"), unlit.replace("</scene>", &format!("{extra}</scene>"))).unwrap();
-    let fog = Some(gatetrace::scene::MediumDesc::parse_fog("1.5,0.8,0.6").unwrap());
+    let mut box_xml = std::fs::read_to_string(common::repo_path("assets/scenes/cornell_box.xml")).unwrap();
+    if !area_light {
+        let start = box_xml.find("<emitter type=\"area\">").expect("the Cornell box has an area light");
+        let end = start + box_xml[start..].find("</emitter>").unwrap() + "</emitter>".len();
+        box_xml.replace_range(start..end, "");
+    }
+    std::fs::write(dir.join("scene.xml"), box_xml.replace("</scene>", &format!("{extra}</scene>"))).unwrap();
+    let fog = Some(gatetrace::scene::MediumDesc::parse_fog(fog).unwrap());
     PreparedScene::new(load_scene_with(&dir.join("scene.xml"), &LoadOptions { fog, ..Default::default() }).unwrap())
         .unwrap()
 }
@@ -555,6 +552,37 @@ fn ellipsoidal_agrees_with_direct_in_media() {
     }
 }
 
+/// Fog that fills all space (`--fog`) bounds no path's length: a camera subpath may scatter far
+/// beyond the geometry and come back. The path-length bounds say so (no longest, where the fog
+/// box's, bounded by its `null` cube, stay finite), and behind a gate beyond the longest path
+/// within the Cornell box's bounds with 5 bounces (12 m, against 10.9 m) `ellipsoidal` agrees with
+/// `direct` on the light that is there, per 4 x 4 block (with the box's bound as the longest, the
+/// gate is refused as unreachable and no sample is traced).
+#[test]
+fn fog_that_fills_all_space_bounds_no_path_length() {
+    let ctx = common::gpu();
+    let thin = fogged_box_in("unbounded_thin_fog", FOG_SPOT, "0.1,0.9,0.6", true);
+    let bounded = fog_box("unbounded_fog_box", CONNECTED_FOG, &[], FOG_SPOT);
+    // (The fog box's triangles span the Cornell box: its bound is the box's.)
+    let within_box = bounded.scene.path_length_bounds(5).1;
+    assert!(thin.scene.path_length_bounds(5).1.is_infinite(), "the fog that fills all space has a longest path");
+    assert!(bounded.scene.path_length_bounds(5).1.is_finite(), "the fog box's paths have no longest");
+    assert!(within_box < 12.0, "the Cornell box's longest path with 5 bounces is {within_box} m");
+    let cw = connection_settings("cw:3e7,0", Method::Ellipsoidal, 0);
+    let range = gatetrace::integrator::target_sampler(&thin, &RenderSettings { max_bounces: 5, ..cw });
+    assert!(range.is_some_and(|t| t.params.hi.is_finite()), "a CW gate's targets need a finite range");
+    let gate = "box:12..12.5";
+    let settings = |method, seed| RenderSettings { max_bounces: 5, ..connection_settings(gate, method, seed) };
+    assert_eq!(gatetrace::integrator::unreachable_gate(&thin, &settings(Method::Direct, 0)), None);
+    let direct = common::render_films(&ctx, &thin, &settings(Method::Direct, 91), 8, 512);
+    let ellipsoidal = common::render_films(&ctx, &thin, &settings(Method::Ellipsoidal, 93), 8, 128);
+    for (method, films) in [("direct", &direct), ("ellipsoidal", &ellipsoidal)] {
+        let total: f64 = films.iter().flat_map(|f| f.data.iter()).map(|&v| v as f64).sum();
+        assert!(total > 0.0, "{method} renders nothing behind {gate}");
+    }
+    common::assert_films_agree(&format!("ellipsoidal against direct behind {gate}"), &ellipsoidal, &direct, 4, 0.001);
+}
+
 /// `combined` in media: its direct half's subpaths scatter in the fog, its ellipsoidal half places
 /// spheroid vertices on surfaces and in the fog, and the family weights count both
 /// (family_mis.wesl medium_vertex_density); the sum agrees with `direct`, per 4 x 4 block, in the
@@ -611,7 +639,7 @@ fn a_directional_light_in_media_agrees_with_path() {
     </emitter>"#;
     let fog = fog_box("directional_fog_box", CONNECTED_FOG, &[], sun);
     let fogged = fogged_box("directional_fogged_box", sun);
-    let sunlit = fogged_box_without_area_light("directional_sunlit_fogged_box", sun);
+    let sunlit = fogged_box_in("directional_sunlit_fogged_box", sun, "1.5,0.8,0.6", false);
     assert_eq!((fog.scene.directional_lights.len(), fogged.scene.directional_lights.len()), (1, 1));
     // `auto` weighs only the methods that render each scene behind a gate.
     let gated = connection_settings("box:2.6..2.62", Method::Auto, 0);

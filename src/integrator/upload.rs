@@ -62,7 +62,16 @@ pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Optio
             );
             (0.0, (settings.max_bounces as f32 + 1.0) * (hi - lo).length())
         }
-        None => scene.scene.path_length_bounds(settings.max_bounces),
+        None => match scene.scene.path_length_bounds(settings.max_bounces) {
+            // A CW gate weighs every length: its targets need a finite range.
+            (shortest, longest)
+                if longest.is_infinite()
+                    && matches!(settings.gate, crate::film::Gate::Cw { .. } | crate::film::Gate::CwCode { .. }) =>
+            {
+                (shortest, scene.scene.finite_longest_path(settings.max_bounces))
+            }
+            bounds => bounds,
+        },
     };
     TargetSampler::new(&settings.gate, (shortest as f64, longest as f64))
 }

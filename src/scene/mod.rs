@@ -367,6 +367,10 @@ pub struct Scene {
     pub camera_medium: Option<u32>,
 }
 
+/// Optical depths of fog beyond which [`Scene::finite_longest_path`] ends a scene's path lengths:
+/// exp(-40) is 4e-18.
+pub const FOG_TAIL_DEPTHS: f32 = 40.0;
+
 impl Scene {
     /// True when light travels through a participating medium somewhere in the scene.
     pub fn has_media(&self) -> bool {
@@ -450,11 +454,26 @@ impl Scene {
         (lo, hi)
     }
 
+    /// The extinction (m^-1) of the fog that fills the space beyond the geometry's bounds, if
+    /// any: the camera's medium where no surface that declares media has another outside it
+    /// (`--fog`, or a sensor's medium that no `null` shape encloses). Paths that scatter there
+    /// have no longest length.
+    pub fn fog_beyond_bounds(&self) -> Option<f32> {
+        let fog = self.camera_medium?;
+        let enclosed = self
+            .materials
+            .iter()
+            .any(|m| m.media != medium::MediumInterface::default() && m.media.exterior != Some(fog));
+        (!enclosed).then(|| self.media[fog as usize].sigma_t)
+    }
+
     /// Shortest and longest optical path length (m) any light path with at most `max_bounces`
     /// scattering vertices can have: at least the distance from the pinhole to the nearest
     /// light less the lens radius; at most the farthest reach from the lens into the triangles'
     /// bounds, plus a diagonal of those bounds per further bounce, plus the farthest reach from
-    /// them to a light (each segment's longest length between two boxes is between corners).
+    /// them to a light (each segment's longest length between two boxes is between corners);
+    /// no longest (infinity) where fog fills the space beyond those bounds
+    /// ([`Scene::fog_beyond_bounds`]), in which paths scatter as far as they travel.
     pub fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
         let camera = self.camera.position;
         let mut shortest = f32::INFINITY;
@@ -473,7 +492,23 @@ impl Scene {
             shortest = shortest.min((l.direction.dot(camera - centre) + radius).max(0.0));
         }
         let shortest = (shortest - self.camera.lens_radius()).max(0.0);
-        (shortest, self.longest_path(max_bounces))
+        let longest = if self.fog_beyond_bounds().is_some() { f32::INFINITY } else { self.longest_path(max_bounces) };
+        (shortest, longest)
+    }
+
+    /// A finite stand-in (m) for the longest optical path where [`Scene::path_length_bounds`]
+    /// has none (fog beyond the geometry's bounds): the longest path within those bounds plus
+    /// FOG_TAIL_DEPTHS optical depths of the fog per vertex and way. A vertex at distance δ outside
+    /// the bounds lengthens its path by at most 2δ and the path travels δ in the fog to reach
+    /// it, so a longer path keeps less than exp(-FOG_TAIL_DEPTHS) of its light, against the
+    /// gate's weight there; for ranges that must be finite (a CW gate's target lengths, the
+    /// viewer's gate slider). The same as path_length_bounds' longest elsewhere.
+    pub fn finite_longest_path(&self, max_bounces: u32) -> f32 {
+        let longest = self.longest_path(max_bounces);
+        match self.fog_beyond_bounds() {
+            Some(sigma_t) => longest + 2.0 * max_bounces as f32 * FOG_TAIL_DEPTHS / sigma_t.max(1e-6),
+            None => longest,
+        }
     }
 
     /// The longest optical path (m) with at most `max_bounces` scattering vertices, all of them

@@ -163,9 +163,15 @@ pub fn time_unit_hint(spec: &str, (shortest, longest): (f64, f64)) -> Option<Str
     ["ns", "ps"].iter().find_map(|unit| {
         let (candidate, lo, hi) = with_unit(unit)?;
         (lo < longest && hi > shortest).then(|| {
+            // (No longest where fog fills the scene.)
+            let range = if longest.is_finite() {
+                format!("{shortest:.3} to {longest:.3} m")
+            } else {
+                format!("from {shortest:.3} m")
+            };
             format!(
                 "lengths without a unit are metres of optical path; read as {unit} the gate would be `{candidate}` \
-                 ({lo:.4} to {hi:.4} m), within this scene's path lengths ({shortest:.3} to {longest:.3} m)"
+                 ({lo:.4} to {hi:.4} m), within this scene's path lengths ({range})"
             )
         })
     })
