@@ -499,10 +499,11 @@ impl Scene {
     /// A finite stand-in (m) for the longest optical path where [`Scene::path_length_bounds`]
     /// has none (fog beyond the geometry's bounds): the longest path within those bounds plus
     /// FOG_TAIL_DEPTHS optical depths of the fog per vertex and way. A vertex at distance δ outside
-    /// the bounds lengthens its path by at most 2δ and the path travels δ in the fog to reach
-    /// it, so a longer path keeps less than exp(-FOG_TAIL_DEPTHS) of its light, against the
-    /// gate's weight there; for ranges that must be finite (a CW gate's target lengths, the
-    /// viewer's gate slider). The same as path_length_bounds' longest elsewhere.
+    /// the bounds (which hold the camera) lengthens its path by at most 2δ and the path travels
+    /// at least δ in the fog to reach it, so in a homogeneous fog a longer path keeps less than
+    /// exp(-FOG_TAIL_DEPTHS) of its light (a grid's extinction, below its largest, may keep
+    /// more); for ranges that must be finite (a CW gate's target lengths, the viewer's gate
+    /// slider). The same as path_length_bounds' longest elsewhere.
     pub fn finite_longest_path(&self, max_bounces: u32) -> f32 {
         let longest = self.longest_path(max_bounces);
         match self.fog_beyond_bounds() {
