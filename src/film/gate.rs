@@ -9,7 +9,7 @@ use anyhow::{Context as _, Result, bail, ensure};
 
 use crate::gpu::layout;
 use crate::units::SPEED_OF_LIGHT;
-pub use parse::{read_gate_table, time_unit_hint};
+pub use parse::{describe_lengths, read_gate_table, time_unit_hint};
 
 /// A sensor's pathlength importance. All lengths are optical path lengths in metres.
 #[derive(Clone, Debug, PartialEq)]

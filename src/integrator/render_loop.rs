@@ -245,15 +245,11 @@ pub fn black_image_warning(
         Some(reason) => format!("{reason}: the image is black; no samples were traced"),
         None => format!(
             "the image is black: no path of its {} samples per pixel reached gate {} (paths of this scene with at \
-             most {} bounces are {})",
+             most {} bounces: {})",
             film.spp,
             settings.gate.describe(),
             settings.max_bounces,
-            if longest.is_finite() {
-                format!("{shortest:.3} to {longest:.3} m long")
-            } else {
-                format!("at least {shortest:.3} m long, through the fog that fills the scene")
-            }
+            crate::film::gate::describe_lengths(shortest as f64, longest as f64)
         ),
     };
     if let Some(hint) = crate::film::gate::time_unit_hint(gate_spec, (shortest as f64, longest as f64)) {

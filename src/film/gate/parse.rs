@@ -163,18 +163,23 @@ pub fn time_unit_hint(spec: &str, (shortest, longest): (f64, f64)) -> Option<Str
     ["ns", "ps"].iter().find_map(|unit| {
         let (candidate, lo, hi) = with_unit(unit)?;
         (lo < longest && hi > shortest).then(|| {
-            // (No longest where fog fills the scene.)
-            let range = if longest.is_finite() {
-                format!("{shortest:.3} to {longest:.3} m")
-            } else {
-                format!("from {shortest:.3} m")
-            };
             format!(
                 "lengths without a unit are metres of optical path; read as {unit} the gate would be `{candidate}` \
-                 ({lo:.4} to {hi:.4} m), within this scene's path lengths ({range})"
+                 ({lo:.4} to {hi:.4} m), within this scene's path lengths ({})",
+                describe_lengths(shortest, longest)
             )
         })
     })
+}
+
+/// A scene's range of path lengths (m) in words: "A to B m", or "A m and longer" where there
+/// is no longest (fog that fills the scene, `Scene::path_length_bounds`).
+pub fn describe_lengths(shortest: f64, longest: f64) -> String {
+    if longest.is_finite() {
+        format!("{shortest:.3} to {longest:.3} m")
+    } else {
+        format!("{shortest:.3} m and longer, through the fog that fills the scene")
+    }
 }
 
 /// Reads a gate table: CSV lines `length,weight` (length in m or with a unit suffix), sorted by
