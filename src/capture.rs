@@ -200,13 +200,43 @@ pub struct PreparedCapture {
     pub laser_grid: (u32, u32),
 }
 
+/// Piece-pixels (a piece of the hidden scene times a pixel of the capture) whose band index a
+/// second of a render's budget pays for: finer cuts than the edge rule
+/// (`crate::nlos::refine_for_shells`) are taken only where the capture's pieces times its pixels
+/// stay within this times the budget. The index's build time grows about with that product
+/// (on the 2-core test machine's llvmpipe, 0.6 s for 22,108 pieces and 256 pixels, 2.6 s for
+/// 341,924), and within short budgets the build's share outweighs the pieces' gain: 2 s
+/// captures (confocal 16 x 16, 4 ps bins) had 0.62 of the error with edges of 1/2 on
+/// `nlos_panels.xml` (22,108 pieces) but 1.21 on `nlos_staircase.xml` (55,126), where 10 s
+/// ones had 0.63 (docs/nlos.md, "Finer pieces").
+pub const PIECE_PIXELS_PER_SECOND: f64 = 5.0e6;
+
+/// Pieces per sample per pixel a budget of samples pays for in [`finer_pieces`]: the time
+/// rule's pieces over the samples per pixel a capture renders in that time (16 x 16 points of
+/// `nlos_staircase.xml` at 4 ps: about 26,000 in 10 s on the 2-core test machine, where
+/// PIECE_PIXELS_PER_SECOND allows 195,312 pieces), so that the index's build keeps about its
+/// share of the render on any device.
+pub const PIECES_PER_SAMPLE: f64 = 7.5;
+
+/// The most triangles a capture of `pixels` pixels within `budget` cuts its hidden scene into
+/// beyond the edge rule (`crate::nlos::prepare_for_shells`): PIECE_PIXELS_PER_SECOND times its
+/// seconds over its pixels, or PIECES_PER_SAMPLE times its samples per pixel.
+pub fn finer_pieces(budget: Budget, pixels: u64) -> u64 {
+    match budget {
+        Budget::Time(t) => (PIECE_PIXELS_PER_SECOND * t.as_secs_f64() / pixels.max(1) as f64) as u64,
+        Budget::Samples(n) => (PIECES_PER_SAMPLE * n as f64) as u64,
+    }
+}
+
 /// Loads the capture's scene and prepares it: the band index's decision, the origins, the
-/// hidden scene's preparation for shell connections, and the checks of the capture.
+/// hidden scene's preparation for shell connections (its pieces sized for `budget`, see
+/// [`finer_pieces`]), and the checks of the capture.
 pub fn prepare_capture(
     scene_path: &Path,
     load: LoadOptions,
     request: &CaptureRequest,
     base: RenderSettings,
+    budget: Budget,
 ) -> Result<PreparedCapture> {
     let mut loaded = load_scene_with(scene_path, &LoadOptions { capture: true, ..load })?;
     let mut settings = base;
@@ -231,8 +261,14 @@ pub fn prepare_capture(
     // triangles cut into pieces (prepare_for_shells).
     let shells = match (settings.band_index, &settings.gate) {
         (true, Gate::Transient { width, .. }) if loaded.node(wall).is_some() => Some(
-            crate::nlos::prepare_for_shells(&mut loaded, wall, *width, &[sensor_origin, laser_origin])
-                .with_context(|| scene_path.display().to_string())?,
+            crate::nlos::prepare_for_shells(
+                &mut loaded,
+                wall,
+                *width,
+                &[sensor_origin, laser_origin],
+                finer_pieces(budget, settings.width as u64 * settings.height as u64),
+            )
+            .with_context(|| scene_path.display().to_string())?,
         ),
         _ => None,
     };
@@ -370,6 +406,7 @@ impl Capture {
                 serde_json::json!({
                     "closed_meshes_made_one_sided": r.closed_meshes,
                     "triangles_cut_into_pieces": r.refined,
+                    "finer_cut": r.finer_cut,
                     "convex_solids": r.solids,
                     "buried_pieces_dropped": r.buried,
                     "triangles": r.triangles,

@@ -73,7 +73,7 @@ fn capture(
     let mut scene = common::nlos_sphere_scene_unprepared(16, occluder);
     if band_index {
         let origin = glam::Vec3::new(-1.2, 0.0, 0.6);
-        gatetrace::nlos::prepare_for_shells(&mut scene, "relay_wall", 0.0024, &[origin]).unwrap();
+        gatetrace::nlos::prepare_for_shells(&mut scene, "relay_wall", 0.0024, &[origin], 0).unwrap();
     }
     let scene = gatetrace::scene::PreparedScene::new(scene).unwrap();
     let capture = common::example_capture(4, 4, gate, aim, Method::Ellipsoidal);
@@ -424,7 +424,7 @@ fn wgsl_strip_point_matches_its_twin() {
 fn refining_for_shells_keeps_the_surface() {
     let scene = common::nlos_sphere_scene_unprepared(4, true);
     let mut refined = scene.clone();
-    let summary = gatetrace::nlos::refine_for_shells(&mut refined, "relay_wall", 0.0012).unwrap();
+    let summary = gatetrace::nlos::refine_for_shells(&mut refined, "relay_wall", 0.0012, 0).unwrap();
     println!("{summary:?}, {} triangles before", scene.triangles.len());
     assert!(summary.refined >= 2, "the occluder's two panels must be cut");
     assert_eq!(summary.triangles, refined.triangles.len());
@@ -459,6 +459,56 @@ fn refining_for_shells_keeps_the_surface() {
         let after = gatetrace::nlos::wall_point_at(&refined, "relay_wall", uv).unwrap();
         assert!(before.distance(after) < 1e-6, "wall point at {uv} moved from {before} to {after}");
     }
+}
+
+/// With a budget of pieces (`finer_pieces`), refine_for_shells cuts the edges by the finest of
+/// FINER_CUTS whose pieces fit it, never coarser than its edge rule, and the budget a capture
+/// gets grows with its seconds over its pixels (or with its samples).
+#[test]
+fn finer_cuts_take_the_finest_that_fits_the_budget() {
+    use gatetrace::capture::finer_pieces;
+    use gatetrace::integrator::Budget;
+    use gatetrace::nlos::{FINER_CUTS, refine_for_shells};
+    let scene = common::nlos_sphere_scene_unprepared(4, true);
+    let cut = |budget: u64| {
+        let mut refined = scene.clone();
+        let summary = refine_for_shells(&mut refined, "relay_wall", 0.0012, budget).unwrap();
+        let occluder = refined.node("occluder").unwrap().triangles.clone();
+        let longest = refined.triangles[occluder]
+            .iter()
+            .map(|t| (0..3).map(|i| t.positions[i].distance(t.positions[(i + 1) % 3])).fold(0.0f32, f32::max))
+            .fold(0.0f32, f32::max);
+        (summary.triangles as u64, longest, summary.finer_cut)
+    };
+    let (rule, rule_edge, rule_cut) = cut(0);
+    let (finest, finest_edge, _) = cut(u64::MAX);
+    assert_eq!(rule_cut, 1);
+    println!("edge rule: {rule} triangles, longest occluder piece {rule_edge} m; finest: {finest}, {finest_edge} m");
+    // The occluder's panels reach MAX_REFINE_PIECES per edge before the finest cut's 1/8.
+    assert!(finest_edge < 0.3 * rule_edge, "the finest cut's edges: {finest_edge} m");
+    // Each budget takes the finest cut that fits it: just below a cut's count, the next coarser.
+    let (mut counts, mut cuts) = (Vec::new(), Vec::new());
+    let mut budget = finest;
+    loop {
+        let (n, _, finer_cut) = cut(budget);
+        assert!(n <= budget, "{n} triangles over a budget of {budget}");
+        assert!(counts.last().is_none_or(|&finer| n < finer), "cuts must get coarser as the budget falls");
+        if n == rule {
+            break;
+        }
+        counts.push(n);
+        cuts.push(finer_cut);
+        budget = n - 1;
+    }
+    assert_eq!(counts.len(), FINER_CUTS.len(), "every finer cut is taken by some budget: {counts:?}");
+    assert_eq!(counts[0], finest);
+    let expected: Vec<u32> = FINER_CUTS.iter().rev().map(|f| (1.0 / f).round() as u32).collect();
+    assert_eq!(cuts, expected, "the metadata's finer_cut of each");
+    assert_eq!(cut(rule - 1).0, rule, "a budget below the edge rule's pieces keeps the rule");
+    // The budget: 10 s of a 16x16 capture, and a capture of 4096 samples per point.
+    assert_eq!(finer_pieces(Budget::Time(std::time::Duration::from_secs(10)), 256), 195_312);
+    assert_eq!(finer_pieces(Budget::Time(std::time::Duration::from_secs(10)), 1024), 48_828);
+    assert_eq!(finer_pieces(Budget::Samples(4096), 256), 30_720);
 }
 
 /// close_surfaces makes the closed hidden sphere one-sided (it is watertight, wound outwards,
@@ -563,7 +613,7 @@ fn buried_pieces_between_boxes_are_dropped_and_nothing_else() {
     let solids = gatetrace::nlos::convex_solids(&scene, "relay_wall", &[origin]);
     assert_eq!(solids.len(), 5);
     let mut refined = scene.clone();
-    gatetrace::nlos::refine_for_shells(&mut refined, "relay_wall", 0.0012).unwrap();
+    gatetrace::nlos::refine_for_shells(&mut refined, "relay_wall", 0.0012, 0).unwrap();
     let mut dropped = refined.clone();
     let buried = gatetrace::nlos::drop_buried_pieces(&mut dropped, "relay_wall", &solids);
     assert_eq!(dropped.triangles.len() + buried, refined.triangles.len());

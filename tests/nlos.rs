@@ -207,6 +207,10 @@ fn confocal_scan_with_direct_connections_matches_peer() {
     compare_with_peer("confocal", LaserAim::Confocal, Method::Direct, 4096, EACH_BIN);
 }
 
+/// The budget the XML captures' scenes are prepared for (their pieces: capture::finer_pieces),
+/// that of the comparisons' batches.
+const PREPARED_FOR: gatetrace::integrator::Budget = gatetrace::integrator::Budget::Samples(4096);
+
 /// The capture of assets/scenes/SCENE.xml (read unchanged but for `confocal`) with `scan`
 /// and `method`: its prepared scene, and settings with the capture's grid, gate and depth.
 fn xml_capture(scene: &str, scan: &str, method: Method) -> (gatetrace::capture::PreparedCapture, RenderSettings) {
@@ -237,7 +241,7 @@ fn xml_capture_with(
     CaptureChoices { method: Some(method), ..Default::default() }.apply(&mut settings);
     let load = LoadOptions { parameters, ..Default::default() };
     let request = CaptureRequest::new(capture.scan, Some(&capture), options);
-    let prepared = prepare_capture(&path, load, &request, settings).unwrap();
+    let prepared = prepare_capture(&path, load, &request, settings, PREPARED_FOR).unwrap();
     let settings = RenderSettings { nlos: Some(prepared.capture.clone()), ..prepared.settings.clone() };
     (prepared, settings)
 }

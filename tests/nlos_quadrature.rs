@@ -373,7 +373,7 @@ fn shell_connections_match_quadrature_on_a_convex_sphere(scan: &str, aim: LaserA
     }
     let base = common::example_capture(GRID, GRID, gate, aim, Method::Ellipsoidal);
     let capture = base.nlos.clone().unwrap();
-    gatetrace::nlos::prepare_for_shells(&mut scene, "relay_wall", WIDTH, &[capture.laser_origin]).unwrap();
+    gatetrace::nlos::prepare_for_shells(&mut scene, "relay_wall", WIDTH, &[capture.laser_origin], 0).unwrap();
     let scene = PreparedScene::new(scene).unwrap();
     let points = wall_points(&scene, &capture, GRID, GRID).unwrap();
     let pixels = (GRID * GRID) as usize;

@@ -669,7 +669,7 @@ fn capture<'py>(
     request.check(&settings).map_err(value_error)?;
     gatetrace::integrator::film_elements(&settings).map_err(value_error)?;
     let load = LoadOptions { allow_unsupported_materials, parameters, ..Default::default() };
-    let prepared = py.detach(|| prepare_capture(&path, load, &request, settings)).map_err(value_error)?;
+    let prepared = py.detach(|| prepare_capture(&path, load, &request, settings, budget)).map_err(value_error)?;
     let ctx = device()?;
     let mut signals = CaptureSignals::default();
     let rendered = py.detach(|| render_capture(ctx, &prepared, budget, &mut signals));

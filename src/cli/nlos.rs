@@ -52,7 +52,7 @@ pub fn run(
     request.check(&base)?;
     film_elements(&base)?;
     check_writable(&out, args.mkdir)?;
-    let prepared = prepare_capture(scene_path, args.load_options(None), &request, base)?;
+    let prepared = prepare_capture(scene_path, args.load_options(None), &request, base, budget)?;
     print_warnings(&prepared.scene.scene.warnings);
     let mut ctx = GpuContext::new()?;
     if args.profile {

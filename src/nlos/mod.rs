@@ -40,8 +40,8 @@ pub use geometry::{
     wall_points_and_warnings, wall_target_at,
 };
 pub use shells::{
-    ConvexSolid, MAX_REFINE_PIECES, MAX_REFINED_TRIANGLES, MAX_SOLID_TRIANGLES, REFINE_FINEST_BIN, ShellPreparation,
-    close_surfaces, convex_solids, drop_buried_pieces, prepare_for_shells, refine_for_shells,
+    ConvexSolid, FINER_CUTS, MAX_REFINE_PIECES, MAX_REFINED_TRIANGLES, MAX_SOLID_TRIANGLES, REFINE_FINEST_BIN,
+    ShellPreparation, close_surfaces, convex_solids, drop_buried_pieces, prepare_for_shells, refine_for_shells,
 };
 
 pub use crate::scene::{DEFAULT_RELAY_WALL, Scan};

@@ -17,6 +17,9 @@ pub const MAX_REFINE_PIECES: u32 = 256;
 pub const REFINE_FINEST_BIN: f64 = 0.0012;
 /// Most triangles `refine_for_shells` leaves a scene with (unless it had more).
 pub const MAX_REFINED_TRIANGLES: u64 = 1 << 23;
+/// Finer cuts `refine_for_shells` tries beyond its edge rule, as factors on the edges, coarse
+/// to fine: the finest whose pieces stay within the capture's `finer_pieces` is taken.
+pub const FINER_CUTS: [f64; 3] = [0.5, 0.25, 0.125];
 
 /// What `prepare_for_shells` did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -31,21 +34,27 @@ pub struct ShellPreparation {
     pub solids: usize,
     /// Pieces dropped because no light reaches them: both their sides lie within solids.
     pub buried: usize,
+    /// The pieces' edges are 1/finer_cut of the edge rule's (`FINER_CUTS`; 1: the rule's, or
+    /// coarser where they would pass MAX_REFINED_TRIANGLES).
+    pub finer_cut: u32,
 }
 
 /// Prepares a capture's scene for the shell connections of the band index (band_index.wesl)
 /// at bins `bin_width` metres wide: `close_surfaces`, then `refine_for_shells`, then
 /// `drop_buried_pieces` over the `convex_solids` of the scene before its refinement. `outside`:
-/// the points every path starts and ends beyond the hidden scene (the sensor and laser origins).
+/// the points every path starts and ends beyond the hidden scene (the sensor and laser origins);
+/// `finer_pieces`: the most triangles finer cuts than the edge rule may leave (0: none; see
+/// `refine_for_shells` and `crate::capture::finer_pieces`).
 pub fn prepare_for_shells(
     scene: &mut Scene,
     relay_wall: &str,
     bin_width: f64,
     outside: &[Vec3],
+    finer_pieces: u64,
 ) -> Result<ShellPreparation> {
     let closed_meshes = close_surfaces(scene, relay_wall, outside)?;
     let solids = convex_solids(scene, relay_wall, outside);
-    let mut done = refine_for_shells(scene, relay_wall, bin_width)?;
+    let mut done = refine_for_shells(scene, relay_wall, bin_width, finer_pieces)?;
     done.closed_meshes = closed_meshes;
     done.solids = solids.len();
     done.buried = drop_buried_pieces(scene, relay_wall, &solids);
@@ -139,10 +148,25 @@ fn vertex_key(p: Vec3) -> [u32; 3] {
 /// min(sqrt(0.75 w d), d / 20), w the bin width (at least REFINE_FINEST_BIN): its strip then
 /// overshoots a bin of w by at most a quarter (eps = K e^2 / 6 with K <= 2 / d) and its 1 / d^4
 /// falls by at most a fifth across it.
+///
+/// Finer pieces cost index entries and build time but less variance: a shell connection's
+/// estimate is the bin's total mass times the share of its strip's points whose own length lies
+/// in the bin, and that share varies from piece to piece by up to the strip's overshoot. Where
+/// the edge rule's pieces are few, the edges are cut by the finest of FINER_CUTS that leaves at
+/// most `finer_pieces` triangles (0: the edge rule alone). 10 s captures (confocal 16 x 16, 4 ps
+/// bins) had 0.47, 0.19 and 0.11 of the error with edges of 1/2, 1/4 and 1/8 of the rule on
+/// `nlos_panels.xml`, and 0.63 and 0.66 with 1/2 and 1/4 on `nlos_staircase.xml`
+/// (docs/nlos.md, "Finer pieces").
+///
 /// Each triangle becomes k x k congruent pieces (k <= MAX_REFINE_PIECES; normals and texture
 /// coordinates interpolated), in place, so every node keeps its triangles contiguous. The relay
 /// wall's own triangles, on which no three-bounce connection reflects, are kept whole.
-pub fn refine_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64) -> Result<ShellPreparation> {
+pub fn refine_for_shells(
+    scene: &mut Scene,
+    relay_wall: &str,
+    bin_width: f64,
+    finer_pieces: u64,
+) -> Result<ShellPreparation> {
     let wall = scene.node(relay_wall).map(|n| n.triangles.clone()).unwrap_or(0..0);
     ensure!(!wall.is_empty(), "the relay wall `{relay_wall}` has no triangles");
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
@@ -173,6 +197,17 @@ pub fn refine_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64) ->
     while total(&counts) > MAX_REFINED_TRIANGLES && scale < 1e6 {
         scale *= 1.05 * (total(&counts) as f64 / MAX_REFINED_TRIANGLES as f64).sqrt();
         counts = count(scale);
+    }
+    let mut finer_cut = 1;
+    if scale == 1.0 {
+        for finer in FINER_CUTS {
+            let finer_counts = count(finer);
+            if total(&finer_counts) > finer_pieces.min(MAX_REFINED_TRIANGLES) {
+                break;
+            }
+            counts = finer_counts;
+            finer_cut = (1.0 / finer).round() as u32;
+        }
     }
     let total = total(&counts);
     let mut starts = Vec::with_capacity(counts.len() + 1);
@@ -214,7 +249,7 @@ pub fn refine_for_shells(scene: &mut Scene, relay_wall: &str, bin_width: f64) ->
         node.triangles = starts[a]..starts[b];
     }
     scene.triangles = triangles;
-    Ok(ShellPreparation { refined, triangles: scene.triangles.len(), ..Default::default() })
+    Ok(ShellPreparation { refined, triangles: scene.triangles.len(), finer_cut, ..Default::default() })
 }
 
 /// The k^2 congruent sub-triangles of a triangle as barycentric corners (weights of its three
