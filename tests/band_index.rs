@@ -502,7 +502,7 @@ fn finer_cuts_take_the_finest_that_fits_the_budget() {
     }
     assert_eq!(counts.len(), FINER_CUTS.len(), "every finer cut is taken by some budget: {counts:?}");
     assert_eq!(counts[0], finest);
-    let expected: Vec<u32> = FINER_CUTS.iter().rev().map(|f| (1.0 / f).round() as u32).collect();
+    let expected: Vec<u32> = FINER_CUTS.iter().rev().copied().collect();
     assert_eq!(cuts, expected, "the metadata's finer_cut of each");
     assert_eq!(cut(rule - 1).0, rule, "a budget below the edge rule's pieces keeps the rule");
     // The budget: 10 s of a 16x16 capture, and a capture of 4096 samples per point.

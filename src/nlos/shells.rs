@@ -17,9 +17,9 @@ pub const MAX_REFINE_PIECES: u32 = 256;
 pub const REFINE_FINEST_BIN: f64 = 0.0012;
 /// Most triangles `refine_for_shells` leaves a scene with (unless it had more).
 pub const MAX_REFINED_TRIANGLES: u64 = 1 << 23;
-/// Finer cuts `refine_for_shells` tries beyond its edge rule, as factors on the edges, coarse
+/// Finer cuts `refine_for_shells` tries beyond its edge rule, as divisors of its edges, coarse
 /// to fine: the finest whose pieces stay within the capture's `finer_pieces` is taken.
-pub const FINER_CUTS: [f64; 3] = [0.5, 0.25, 0.125];
+pub const FINER_CUTS: [u32; 3] = [2, 4, 8];
 
 /// What `prepare_for_shells` did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -200,13 +200,13 @@ pub fn refine_for_shells(
     }
     let mut finer_cut = 1;
     if scale == 1.0 {
-        for finer in FINER_CUTS {
-            let finer_counts = count(finer);
+        for cut in FINER_CUTS {
+            let finer_counts = count(1.0 / cut as f64);
             if total(&finer_counts) > finer_pieces.min(MAX_REFINED_TRIANGLES) {
                 break;
             }
             counts = finer_counts;
-            finer_cut = (1.0 / finer).round() as u32;
+            finer_cut = cut;
         }
     }
     let total = total(&counts);
