@@ -46,16 +46,31 @@ fn screenshot(name: &str, args: &[&str]) -> Shot {
     let dir = common::scratch_dir(name);
     let shot = dir.join("shot.png");
     let res = format!("{W}x{H}");
-    // One X server at a time: `xvfb-run -a` started by parallel tests can pick the same display
-    // number, and the later viewer then finds no X server.
+    // One X server at a time, each on a display number of its own: `xvfb-run` kills its server
+    // without waiting for it to exit, so a later `xvfb-run -a` starting from the same number can
+    // pick a display whose dying server still holds it, and the viewer then finds no X server.
     static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    static DISPLAYS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let _one_at_a_time = XVFB.lock().unwrap_or_else(|e| e.into_inner());
-    let o = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1280x900x24", env!("CARGO_BIN_EXE_gatetrace"), "view", "--res", &res])
-        .args(args)
-        .args(["--after-frames", "12", "--screenshot", shot.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let mut o = None;
+    // A second try only when no X server answered: that is the machine, not the viewer.
+    for _ in 0..2 {
+        let first_display =
+            200 + (std::process::id() % 400) * 16 + DISPLAYS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let run = Command::new("xvfb-run")
+            .args(["-n", &first_display.to_string(), "-a", "-s", "-screen 0 1280x900x24"])
+            .args([env!("CARGO_BIN_EXE_gatetrace"), "view", "--res", &res])
+            .args(args)
+            .args(["--after-frames", "12", "--screenshot", shot.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let no_server = String::from_utf8_lossy(&run.stderr).contains("Failed to open connection to X server");
+        o = Some(run);
+        if !no_server {
+            break;
+        }
+    }
+    let o = o.unwrap();
     assert!(
         o.status.success(),
         "the viewer failed:\n{}\n{}",
