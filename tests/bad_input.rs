@@ -1156,6 +1156,18 @@ fn cases() -> Vec<(Case, Setup)> {
             default_scene(&["--method", "combined", "--gate", "box:3.0..3.2", "--ellipsoidal-share", "100"]),
             &["--ellipsoidal-share 100", "1/8 to 8"],
         ),
+        case(
+            "--query-roulette without ellipsoidal",
+            none,
+            default_scene(&["--method", "direct", "--gate", "box:3.0..3.2", "--query-roulette", "0.5"]),
+            &["--query-roulette", "--method ellipsoidal"],
+        ),
+        case(
+            "--query-roulette out of range",
+            none,
+            default_scene(&["--method", "ellipsoidal", "--gate", "box:3.0..3.2", "--query-roulette", "0"]),
+            &["--query-roulette 0", "0.0625 to 1"],
+        ),
         case("a lens without focus", none, default_scene(&["--aperture-radius", "0.1"]), &["give --focus-distance"]),
         case(
             "a negative focus distance",

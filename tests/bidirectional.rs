@@ -301,6 +301,66 @@ fn ellipsoidal_with_four_connections_per_query_matches_direct() {
     common::assert_films_agree("ellipsoidal K = 4 box [3.14, 3.19)", &ellipsoidal, &direct, 8, ALPHA);
 }
 
+/// The query roulette (`--query-roulette`): a sample makes each query for a path of two or
+/// more scattering vertices with probability p and weighs it 1 / p, which leaves the image's
+/// expectation as it was, on the box and the glossy box.
+#[test]
+fn ellipsoidal_with_a_query_roulette_matches_direct() {
+    let ctx = common::gpu();
+    for (label, scene, gate, seed) in [
+        ("box [3.14, 3.19)", common::cornell_box(), Gate::Box { start: 3.14, end: 3.19 }, 446),
+        ("glossy box [3.0, 3.3)", glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 448),
+    ] {
+        let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, 32);
+        let rouletted = RenderSettings { query_roulette: Some(0.25), ..settings(Method::Ellipsoidal, gate, seed + 1) };
+        let ellipsoidal = common::render_films(&ctx, &scene, &rouletted, BATCHES, 32);
+        common::assert_films_agree(
+            &format!("ellipsoidal, query roulette 0.25, {label}"),
+            &ellipsoidal,
+            &direct,
+            8,
+            ALPHA,
+        );
+    }
+}
+
+/// The roulette keeps the one-bounce queries (s + t = 2 in the kernels' count, (1, 2) in the
+/// statistics) and a binomial share p of the others: from the same subpaths (same seed), p = 1/4
+/// makes as many of the former and a quarter of the latter, within four standard deviations.
+#[test]
+fn the_query_roulette_keeps_its_share_of_the_multi_bounce_queries() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let gate = Gate::Box { start: 3.14, end: 3.19 };
+    let queries = |p: f32| {
+        let s =
+            RenderSettings { stats: true, query_roulette: Some(p), ..settings(Method::Ellipsoidal, gate.clone(), 450) };
+        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
+        tracer.render_samples(8).unwrap();
+        let stats = tracer.strategy_stats().unwrap().to_vec();
+        let count = |one: bool| -> u64 {
+            stats
+                .iter()
+                .filter(|st| st.s >= 1 && (st.s + st.t == 3) == one && st.s + st.t >= 3)
+                .map(|st| st.evaluated)
+                .sum()
+        };
+        (count(true), count(false))
+    };
+    let (one_all, multi_all) = queries(1.0);
+    let (one_quarter, multi_quarter) = queries(0.25);
+    println!("one-bounce queries {one_all} and {one_quarter}; others {multi_all} and {multi_quarter}");
+    assert!(multi_all > 1000, "too few multi-bounce queries to measure: {multi_all}");
+    assert_eq!(one_all, one_quarter, "the one-bounce queries are all made");
+    let (n, p) = (multi_all as f64, 0.25);
+    let sigma = (n * p * (1.0 - p)).sqrt();
+    assert!(
+        (multi_quarter as f64 - n * p).abs() < 4.0 * sigma,
+        "{multi_quarter} of {multi_all} multi-bounce queries made, expected {} +- {sigma:.1}",
+        n * p
+    );
+}
+
 /// The needle guard leaves out a set of connections that grows with the guard, and every
 /// contribution of a box gate is non-negative: so the bias of the default guard (1e-6) is at
 /// most that of a guard 10^4 times wider, which this bounds by the noise of the comparison with

@@ -30,7 +30,7 @@ fn wgsl_structs_match_rust_structs() {
         GateParams { bins, table_len, reserved0, reserved1, p0, p1, max_length, reserved2 }
         TargetParams { lo, hi, cells, strata, first_bin, stride, seed, extra, extra_stride, film_first_sample, band_index, reserved2 }
         RenderParams { camera, gate, target_length, light_bounds_min, image_area, light_bounds_max, camera_medium, width, height, seed, max_bounces, rr_depth, light_count, node_count, ray_epsilon, one,
-                       family_ratio, family_medium_ratio, reserved2 }
+                       family_ratio, family_medium_ratio, query_roulette }
         WaveParams { sample_base, samples, pixel_base, pixel_count, slot_count, tracers_per_pixel, reserved1, reserved2 }
         PathState { origin, path_length, direction, bsdf_pdf, throughput, depth, origin_triangle, dimension, traversal,
                     side }

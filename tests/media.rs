@@ -552,6 +552,26 @@ fn ellipsoidal_agrees_with_direct_in_media() {
     }
 }
 
+/// The query roulette in media: a pair it leaves out has neither its surface vertex
+/// (connect_ellipsoidal) nor its vertex in the fog (connect_medium), and both weigh a pair it
+/// keeps by the inverse of its probability, so the image agrees with `direct`'s.
+#[test]
+fn ellipsoidal_with_a_query_roulette_agrees_with_direct_in_media() {
+    let ctx = common::gpu();
+    let fog = fog_box("roulette_fog_box", CONNECTED_FOG, &[], FOG_SPOT);
+    let gate = "box:2.6..2.62";
+    let direct = common::render_films(&ctx, &fog, &connection_settings(gate, Method::Direct, 81), 8, 128);
+    let rouletted = RenderSettings { query_roulette: Some(0.25), ..connection_settings(gate, Method::Ellipsoidal, 82) };
+    let ellipsoidal = common::render_films(&ctx, &fog, &rouletted, 8, 32);
+    common::assert_films_agree(
+        &format!("ellipsoidal, query roulette 0.25, against direct on {gate}"),
+        &ellipsoidal,
+        &direct,
+        4,
+        0.001,
+    );
+}
+
 /// Fog that fills all space (`--fog`) bounds no path's length: a camera subpath may scatter far
 /// beyond the geometry and come back. The path-length bounds say so (no longest, where the fog
 /// box's, bounded by its `null` cube, stay finite), and behind a gate beyond the longest path

@@ -170,6 +170,10 @@ class Renderer:
         query_split, query_bottom_nodes, query_weights, query_tree: ``ellipsoidal``'s ellipsoid
             queries, as ``render --query-split``, ``--query-bottom-nodes``, ``--query-weights``
             and ``--query-tree`` (``"binary"`` or ``"wide"``).
+        query_roulette: ``ellipsoidal``: the probability (1/16 to 1) with which a sample makes
+            each ellipsoid query for paths of two or more scattering vertices, weighted by its
+            inverse, as ``render --query-roulette`` (None: 1, every query; the command line's
+            ``--time`` renders choose it by a pilot).
         medium_connections: ``path`` in homogeneous media behind a box or transient gate: also
             place scattering vertices where a ray meets the spheroid of a length drawn from the
             gate, as ``render --medium-connections`` (False: off).
@@ -189,6 +193,7 @@ class Renderer:
         query_bottom_nodes: int = 31,
         query_weights: str = "arcs",
         query_tree: str = "binary",
+        query_roulette: Optional[float] = None,
         medium_connections: bool = False,
     ):
         if not isinstance(scene, Scene):
@@ -219,6 +224,7 @@ class Renderer:
             query_bottom_nodes=query_bottom_nodes,
             query_weights=query_weights,
             query_tree=query_tree,
+            query_roulette=None if query_roulette is None else float(query_roulette),
             medium_connections=bool(medium_connections),
         )
 

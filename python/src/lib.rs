@@ -265,7 +265,7 @@ impl Renderer {
     #[new]
     #[pyo3(signature = (scene, *, method="path", max_bounces=8, res=(256, 256), rr_depth=None, samples_per_pass=None,
         connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="arcs",
-        query_tree="binary", medium_connections=false))]
+        query_tree="binary", query_roulette=None, medium_connections=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: PyRef<'_, Scene>,
@@ -279,6 +279,7 @@ impl Renderer {
         query_bottom_nodes: u32,
         query_weights: &str,
         query_tree: &str,
+        query_roulette: Option<f32>,
         medium_connections: bool,
     ) -> PyResult<Self> {
         let method = parse_method(method)?;
@@ -301,6 +302,7 @@ impl Renderer {
                 wide,
                 ..Default::default()
             },
+            query_roulette,
             medium_connections,
             ..Default::default()
         };
@@ -406,6 +408,7 @@ impl Renderer {
                 samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
                 choice: None,
                 allocation: None,
+                roulette: None,
                 stopped_early: false,
                 state: None,
             }

@@ -209,6 +209,8 @@ pub struct Variant {
     pub query: gatetrace::integrator::QuerySettings,
     /// Medium connections (path; see `RenderSettings::medium_connections`).
     pub medium_connections: bool,
+    /// The query roulette's probability (ellipsoidal; see `RenderSettings::query_roulette`).
+    pub query_roulette: Option<f32>,
 }
 
 impl Variant {
@@ -225,6 +227,7 @@ impl Variant {
             connections_per_query,
             query: Default::default(),
             medium_connections: RenderSettings::default().medium_connections,
+            query_roulette: None,
         };
         for option in parts {
             if method == Method::Path {
@@ -249,6 +252,9 @@ impl Variant {
             } else if let Some(r) = option.strip_prefix("split=") {
                 variant.query.split =
                     r.parse().map_err(|_| anyhow::anyhow!("`{s}`: split=R needs a number, got `{r}`"))?;
+            } else if let Some(r) = option.strip_prefix("roulette=") {
+                variant.query_roulette =
+                    Some(r.parse().map_err(|_| anyhow::anyhow!("`{s}`: roulette=P needs a number, got `{r}`"))?);
             } else if let Some(n) = option.strip_prefix("bottom=") {
                 variant.query.bottom_nodes =
                     n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
@@ -288,6 +294,9 @@ impl Variant {
             if self.query.wide {
                 name += ":wide";
             }
+            if let Some(p) = self.query_roulette {
+                name += &format!(":roulette={p}");
+            }
         }
         name
     }
@@ -299,6 +308,7 @@ impl Variant {
             connections_per_query: self.connections_per_query,
             query: self.query,
             medium_connections: self.medium_connections,
+            query_roulette: self.query_roulette,
             ..base.clone()
         }
     }

@@ -119,6 +119,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         target_pilot_spp: args.target_pilot.unwrap_or(0),
         band_index: false,
         ellipsoidal_share: args.ellipsoidal_share,
+        query_roulette: args.query_roulette,
         medium_connections: args.medium_connections == Switch::On,
     };
     // A capture's own defaults, and its band index (`auto` is decided once the scene is loaded:
@@ -487,6 +488,9 @@ fn render_one(
     }
     if let Some(allocation) = &output.allocation {
         say(bars, format!("combined: {}", allocation.reason))?;
+    }
+    if let Some(roulette) = output.roulette.as_ref().filter(|r| r.pilot_seconds > 0.0) {
+        say(bars, format!("query roulette: {}", roulette.reason))?;
     }
     print_stats(settings, &output);
     Ok(())

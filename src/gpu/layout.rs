@@ -444,8 +444,10 @@ pub struct RenderParams {
     /// one, one per spheroid (dimensionless: the ellipsoidal half's samples per direct sample);
     /// 0 in renders of one method.
     pub family_medium_ratio: f32,
-    /// Padding.
-    pub reserved2: u32,
+    /// `ellipsoidal`: the probability with which a sample makes each ellipsoid query for paths
+    /// of two or more scattering vertices (dimensionless; see
+    /// [`crate::integrator::query_roulette`]); 1: every query.
+    pub query_roulette: f32,
 }
 
 /// Settings of one wave: samples `sample_base..sample_base + samples` of the pixels

@@ -56,6 +56,10 @@ pub fn render_metadata(
         metadata.push(("ellipsoidal_share".into(), allocation.ellipsoidal_share.into()));
         metadata.push(("combined_allocation".into(), allocation.reason.clone().into()));
     }
+    if let Some(roulette) = &output.roulette {
+        metadata.push(("query_roulette".into(), (roulette.probability as f64).into()));
+        metadata.push(("query_roulette_reason".into(), roulette.reason.clone().into()));
+    }
     if let Some(choice) = &output.choice {
         metadata.push(("chosen_method".into(), choice.chosen.name().into()));
         metadata.push(("auto_reason".into(), choice.reason.clone().into()));

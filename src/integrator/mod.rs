@@ -14,6 +14,7 @@ pub mod combined;
 pub mod metadata;
 pub mod mis;
 pub mod path;
+pub mod query_roulette;
 pub mod render_loop;
 pub mod settings;
 pub mod upload;
@@ -185,6 +186,14 @@ impl RenderSettings {
         ensure!(
             self.ellipsoidal_share.is_none() || self.method == Method::Combined,
             "--ellipsoidal-share applies to --method combined only"
+        );
+        ensure!(
+            self.query_roulette.is_none() || matches!(self.method, Method::Ellipsoidal | Method::Auto),
+            "--query-roulette applies to --method ellipsoidal (and auto's ellipsoidal choice) only"
+        );
+        ensure!(
+            self.query_roulette.is_none() || self.nlos.is_none(),
+            "--query-roulette does not apply to NLOS captures: their three-bounce queries are the signal"
         );
         ensure!(
             self.target_pilot_spp == 0 || self.method == Method::Ellipsoidal,

@@ -7,7 +7,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 
-use super::{Budget, Integrator, Method, RenderSettings, auto, checkpoint, combined, create_integrator, film_elements};
+use super::{
+    Budget, Integrator, Method, RenderSettings, auto, checkpoint, combined, create_integrator, film_elements,
+    query_roulette,
+};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
@@ -111,6 +114,9 @@ pub struct RenderOutput {
     /// `--method combined`: how its samples were split between its halves (a pilot's time is
     /// in `rendering`).
     pub allocation: Option<combined::Allocation>,
+    /// `ellipsoidal`: the query roulette's probability and why (a pilot's time is in
+    /// `rendering`).
+    pub roulette: Option<query_roulette::Choice>,
     /// The render stopped before its budget was spent (see [`render_resumable`]).
     pub stopped_early: bool,
     /// The render's state after its last pass, when asked for (see [`render_resumable`]).
@@ -160,6 +166,7 @@ impl RenderOutput {
             samples_to_visit_every_bin: None,
             choice: None,
             allocation: None,
+            roulette: None,
             stopped_early: false,
             state: None,
         }
@@ -324,6 +331,21 @@ pub fn render_resumable(
         }
         _ => settings.clone(),
     };
+    // ellipsoidal (also as auto's choice): the query roulette, from a pilot with a time budget
+    // (counted against it), or from the resumed state.
+    let roulette = match resume {
+        _ if !query_roulette::applies(&render_settings) => None,
+        None => Some(query_roulette::choose(ctx, scene, &render_settings, budget)?),
+        Some(state) => Some(query_roulette::Choice {
+            probability: render_settings.query_roulette.unwrap_or(query_roulette::saved(state)),
+            reason: "as the resumed render had it".into(),
+            pilot_seconds: 0.0,
+        }),
+    };
+    let render_settings = match &roulette {
+        Some(r) => RenderSettings { query_roulette: Some(r.probability), ..render_settings },
+        None => render_settings,
+    };
     let mut tracer = create_integrator(ctx, scene, &render_settings)?;
     if let Budget::Time(_) = budget {
         // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
@@ -344,7 +366,8 @@ pub fn render_resumable(
     }
     let pilot = before
         + Duration::from_secs_f64(choice.as_ref().map_or(0.0, |c| c.pilot_seconds))
-        + Duration::from_secs_f64(allocation.as_ref().map_or(0.0, |a| a.pilot_seconds));
+        + Duration::from_secs_f64(allocation.as_ref().map_or(0.0, |a| a.pilot_seconds))
+        + Duration::from_secs_f64(roulette.as_ref().map_or(0.0, |r| r.pilot_seconds));
     let budget = match budget {
         Budget::Time(t) => Budget::Time(t.saturating_sub(pilot)),
         Budget::Samples(n) => Budget::Samples(n.saturating_sub(tracer.samples_done())),
@@ -375,6 +398,7 @@ pub fn render_resumable(
         samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),
         choice,
         allocation,
+        roulette,
         stopped_early: flow.is_break(),
         state,
     })

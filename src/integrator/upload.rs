@@ -36,6 +36,7 @@ pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> Render
         node_count: scene.bvh.nodes.len() as u32,
         ray_epsilon: scene.ray_epsilon,
         one: 1.0,
+        query_roulette: settings.query_roulette.unwrap_or(1.0),
         camera_medium: scene.scene.camera_medium.unwrap_or(NONE),
         ..Default::default()
     }

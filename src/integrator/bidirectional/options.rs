@@ -101,6 +101,13 @@ pub fn check_tracer_settings(settings: &RenderSettings) -> Result<()> {
             "--query-split {}: give a non-negative number (0: exhaustive queries)",
             q.split
         );
+        if let Some(p) = settings.query_roulette {
+            let least = 1.0 / crate::integrator::query_roulette::MAX_SKIP;
+            ensure!(
+                (least..=1.0).contains(&p),
+                "--query-roulette {p}: give a probability from {least} to 1 (1: every query)"
+            );
+        }
         let g = settings.ellipsoid_guards;
         ensure!(
             g.needle >= 0.0 && g.needle.is_finite() && g.length > 0.0,

@@ -1,0 +1,200 @@
+//! The query roulette of `ellipsoidal`: each ellipsoid query for a path of two or more
+//! scattering vertices (light-subpath vertex s and camera-subpath vertex t with s + t > 2) is
+//! made with probability p and then weighs 1 / p (`RenderParams::query_roulette`,
+//! shaders/lib/ellipsoid_query.wesl `query_made`, each pair's decision independent); the queries of one-bounce paths always are.
+//! The image's expectation is the same for any p in (0, 1]. Where one-bounce light fills the
+//! gate (the fence at 1 ns, 96 % of it), the other queries take most of a sample's time for
+//! little of its light, and a smaller p buys more samples; where multi-bounce light matters (a
+//! narrow gate in the Cornell box) it adds their variance instead.
+//!
+//! With a time budget a pilot chooses p. Per sample, the variance and the time are
+//!
+//!     V(p) = A + B / p,    C(p) = D + E p,
+//!
+//! the variance exactly (B is the sum of the rouletted queries' contributions' second moments,
+//! A holds everything else, their covariances with the rest included, which do not depend on
+//! p), the time as far as it follows the queries made (E their time at p = 1). The pilot measures
+//! both at p = 1 and at p = [`TRIAL`] (on `auto`'s smaller image, from its own seed, films
+//! discarded), solves for A, B, D and E, and takes the p that minimises V(p) C(p), the error at
+//! equal time: p = sqrt(B D / (A E)), clamped to 1 / [`MAX_SKIP`] ..= 1. With a sample budget
+//! (`--spp`, shards, checkpoints), a sample stays what it was: every query is made, unless
+//! `--query-roulette` says otherwise.
+
+use std::fmt::Write as _;
+
+use anyhow::Result;
+
+use super::auto::{
+    Batches, EARLY_STOP_BATCHES, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed,
+};
+use super::{Budget, Method, RenderSettings, create_integrator};
+use crate::gpu::GpuContext;
+use crate::scene::PreparedScene;
+
+/// The least probability a pilot chooses is 1 / MAX_SKIP (dimensionless): however far it
+/// misjudges the multi-bounce queries' variance, a sample makes one in MAX_SKIP of them.
+pub const MAX_SKIP: f32 = 16.0;
+
+/// The pilot's second probability (dimensionless): far enough below 1 that the multi-bounce
+/// queries' variance, B / p, stands out of the pilot's noise where it matters.
+pub const TRIAL: f32 = 0.125;
+
+/// After `auto::EARLY_STOP_BATCHES` batches at each probability the pilot stops where the model's
+/// optimum lies at least this factor above 1 (every query; a wrong stop there costs nothing but
+/// the roulette's gain) ...
+pub const EARLY_STOP_ALL: f64 = 1.5;
+
+/// ... or this factor below 1 / MAX_SKIP (a wrong stop there adds the multi-bounce queries'
+/// variance, so only a clear case stops).
+pub const EARLY_STOP_LEAST: f64 = 4.0;
+
+/// The query roulette's probability of a render, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Choice {
+    /// The probability with which a sample makes each multi-bounce query (dimensionless).
+    pub probability: f32,
+    /// Why, in words (for logs and metadata).
+    pub reason: String,
+    /// Seconds the pilot took: passes, film clears and readbacks (counted in a time budget).
+    pub pilot_seconds: f64,
+}
+
+/// The probability that minimises the variance x time per sample of the model V(p) = A + B / p,
+/// C(p) = D + E p fitted to a pilot's variance per sample v (radiance squared) and seconds per
+/// sample c at p = 1 and at p = `trial`: sqrt(B D / (A E)), clamped to 1 / MAX_SKIP ..= 1. B <= 0
+/// (the rouletted queries' variance lost in the pilot's noise) or D <= 0 (they are all the time)
+/// give the least; A <= 0 or E <= 0 (nothing else varies, or they cost nothing) give 1.
+pub fn probability(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f32 {
+    optimum(v_all, c_all, v_trial, c_trial, trial).clamp(1.0 / MAX_SKIP as f64, 1.0) as f32
+}
+
+/// [`probability`] before its clamp: infinite where A <= 0 or E <= 0, 0 where B <= 0 or D <= 0.
+fn optimum(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f64 {
+    let b = (v_trial - v_all) / (1.0 / trial - 1.0);
+    let a = v_all - b;
+    let e = (c_all - c_trial) / (1.0 - trial);
+    let d = c_all - e;
+    if !(a > 0.0) || !(e > 0.0) {
+        f64::INFINITY
+    } else if !(b > 0.0) || !(d > 0.0) {
+        0.0
+    } else {
+        (b * d / (a * e)).sqrt()
+    }
+}
+
+/// Does `settings` take a query roulette at all? `ellipsoidal` with paths of two or more
+/// scattering vertices, outside NLOS captures (whose three-bounce queries are the signal).
+pub fn applies(settings: &RenderSettings) -> bool {
+    settings.method == Method::Ellipsoidal && settings.nlos.is_none() && settings.max_bounces >= 2
+}
+
+/// The query roulette of the `ellipsoidal` render `settings` with `budget`:
+/// `settings.query_roulette` where given; 1 where it does not apply ([`applies`]) or with a
+/// sample budget; otherwise the pilot of the module's header, which spends about
+/// `auto::PILOT_SHARE` of the time.
+pub fn choose(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings, budget: Budget) -> Result<Choice> {
+    let given = |probability: f32, reason: &str| Choice { probability, reason: reason.into(), pilot_seconds: 0.0 };
+    if let Some(p) = settings.query_roulette {
+        return Ok(given(p, "as given"));
+    }
+    if !applies(settings) {
+        return Ok(given(1.0, "every query (no multi-bounce queries to weigh)"));
+    }
+    if let Budget::Samples(_) = budget {
+        return Ok(given(1.0, "every query (a sample budget)"));
+    }
+    let (width, height, _) = pilot_resolution(settings.width, settings.height);
+    let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
+    let per_probability = pilot_budget(budget, pixel_ratio, 2);
+    let pilot = |p: f32| RenderSettings {
+        width,
+        height,
+        seed: pilot_seed(settings.seed),
+        query_roulette: Some(p),
+        ..settings.clone()
+    };
+    let mut all = create_integrator(ctx, scene, &pilot(1.0))?;
+    let mut trial = create_integrator(ctx, scene, &pilot(TRIAL))?;
+    all.warm_up()?;
+    trial.warm_up()?;
+    let (mut b_all, mut b_trial) = (Batches::default(), Batches::default());
+    let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
+    let figures = |a: &Batches, t: &Batches| (a.variance(), per_sample(a), t.variance(), per_sample(t));
+    let mut batches = 0;
+    while batches < PILOT_BATCHES {
+        pilot_batch(all.as_mut(), &mut b_all, per_probability)?;
+        pilot_batch(trial.as_mut(), &mut b_trial, per_probability)?;
+        batches += 1;
+        if batches == EARLY_STOP_BATCHES {
+            let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &b_trial);
+            let p = optimum(v_all, c_all, v_trial, c_trial, TRIAL as f64);
+            if p >= EARLY_STOP_ALL || p <= 1.0 / (MAX_SKIP as f64 * EARLY_STOP_LEAST) {
+                break;
+            }
+        }
+    }
+    let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &b_trial);
+    let p = probability(v_all, c_all, v_trial, c_trial, TRIAL as f64);
+    let mut reason =
+        format!("pilot on {width}x{height}, {batches} batches each: variance per sample {v_all:.3e} with ");
+    let _ = write!(
+        reason,
+        "every query and {v_trial:.3e} with {TRIAL} of the multi-bounce ones, seconds per sample {c_all:.3e} and \
+         {c_trial:.3e}: probability {p:.3}"
+    );
+    Ok(Choice { probability: p, reason, pilot_seconds: b_all.wall_seconds + b_trial.wall_seconds })
+}
+
+/// Name of the checkpoint blob that holds a render's probability (f32 bits).
+pub const STATE_BLOB: &str = "query_roulette";
+
+/// The probability the render of `state` had (1 for states saved before the roulette existed).
+pub fn saved(state: &super::checkpoint::RenderState) -> f32 {
+    state.values::<u32>(STATE_BLOB, 1).map_or(1.0, |v| f32::from_bits(v[0]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Variance and time per sample of the model at p.
+    fn model(a: f64, b: f64, d: f64, e: f64, p: f64) -> (f64, f64) {
+        (a + b / p, d + e * p)
+    }
+
+    #[test]
+    fn the_model_is_solved_exactly() {
+        // Measurements from the model itself give back its optimum sqrt(B D / (A E)).
+        for (a, b, d, e) in [(2.7, 0.03, 6.1e-3, 6.3e-3), (1.8, 0.36, 2.1e-3, 1.2e-3), (1.0, 1.0, 1.0, 0.01)] {
+            let (v1, c1) = model(a, b, d, e, 1.0);
+            let (vt, ct) = model(a, b, d, e, 0.125);
+            let want = ((b * d / (a * e)).sqrt()).clamp(1.0 / 16.0, 1.0);
+            let got = probability(v1, c1, vt, ct, 0.125) as f64;
+            assert!((got - want).abs() < 1e-6 * want, "{got} against {want}");
+            // It is the model's best: no probability on a grid does better at equal time.
+            let cost = |p: f64| {
+                let (v, c) = model(a, b, d, e, p);
+                v * c
+            };
+            for k in 1..=64 {
+                let p = k as f64 / 64.0;
+                if p >= 1.0 / 16.0 {
+                    assert!(cost(got) <= cost(p) * (1.0 + 1e-9), "p {p} beats {got}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn degenerate_pilots_give_the_bounds() {
+        // No measurable multi-bounce variance: the least probability.
+        assert_eq!(probability(1.0, 2.0, 0.9, 1.0, 0.125), 1.0 / MAX_SKIP);
+        // Multi-bounce queries that cost nothing: every query.
+        assert_eq!(probability(1.0, 1.0, 3.0, 1.0, 0.125), 1.0);
+        // All the variance in the multi-bounce queries: every query.
+        assert_eq!(probability(1.0, 2.0, 8.0, 1.0, 0.125), 1.0);
+        // A pilot that saw nothing at all.
+        assert_eq!(probability(0.0, 1.0, 0.0, 0.5, 0.125), 1.0);
+    }
+}
