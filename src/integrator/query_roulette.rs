@@ -16,7 +16,10 @@
 //! p), the time as far as it follows the queries made (E their time at p = 1). The pilot measures
 //! both at p = 1 and at p = [`TRIAL`] (on `auto`'s smaller image, from its own seed, films
 //! discarded), solves for A, B, D and E, and takes the p that minimises V(p) C(p), the error at
-//! equal time: p = sqrt(B D / (A E)), clamped to 1 / [`MAX_SKIP`] ..= 1. With a sample budget
+//! equal time: p = sqrt(B D / (A E)), clamped to [`TRIAL`] ..= 1 (it never extrapolates below
+//! what it measured). Variances that contradict the model (a smaller one at p = TRIAL than at
+//! p = 1: rare heavy contributions the short pilot drew at p = 1 and not at TRIAL, as in fog on
+//! the road scene's pedestrian gate, where every query is best) give 1. With a sample budget
 //! (`--spp`, shards, checkpoints), a sample stays what it was: every query is made, unless
 //! `--query-roulette` says otherwise.
 
@@ -31,12 +34,12 @@ use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
 
-/// The least probability a pilot chooses is 1 / MAX_SKIP (dimensionless): however far it
-/// misjudges the multi-bounce queries' variance, a sample makes one in MAX_SKIP of them.
+/// The least probability `--query-roulette` takes is 1 / MAX_SKIP (dimensionless).
 pub const MAX_SKIP: f32 = 16.0;
 
-/// The pilot's second probability (dimensionless): far enough below 1 that the multi-bounce
-/// queries' variance, B / p, stands out of the pilot's noise where it matters.
+/// The pilot's second probability, and the least it chooses (dimensionless): far enough below 1
+/// that the multi-bounce queries' variance, B / p, stands out of the pilot's noise where it
+/// matters.
 pub const TRIAL: f32 = 0.125;
 
 /// After `auto::EARLY_STOP_BATCHES` batches at each probability the pilot stops where the model's
@@ -44,7 +47,7 @@ pub const TRIAL: f32 = 0.125;
 /// the roulette's gain) ...
 pub const EARLY_STOP_ALL: f64 = 1.5;
 
-/// ... or this factor below 1 / MAX_SKIP (a wrong stop there adds the multi-bounce queries'
+/// ... or this factor below [`TRIAL`] (a wrong stop there adds the multi-bounce queries'
 /// variance, so only a clear case stops).
 pub const EARLY_STOP_LEAST: f64 = 4.0;
 
@@ -61,22 +64,23 @@ pub struct Choice {
 
 /// The probability that minimises the variance x time per sample of the model V(p) = A + B / p,
 /// C(p) = D + E p fitted to a pilot's variance per sample v (radiance squared) and seconds per
-/// sample c at p = 1 and at p = `trial`: sqrt(B D / (A E)), clamped to 1 / MAX_SKIP ..= 1. B <= 0
-/// (the rouletted queries' variance lost in the pilot's noise) or D <= 0 (they are all the time)
-/// give the least; A <= 0 or E <= 0 (nothing else varies, or they cost nothing) give 1.
+/// sample c at p = 1 and at p = `trial`: sqrt(B D / (A E)), clamped to `trial` ..= 1. D <= 0
+/// (the rouletted queries are all the time) gives `trial`; A <= 0 or E <= 0 (nothing else
+/// varies, or they cost nothing) give 1, and so does B <= 0, which the model cannot give (the
+/// variances are the pilot's noise, or rare contributions it drew at p = 1 only).
 pub fn probability(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f32 {
-    optimum(v_all, c_all, v_trial, c_trial, trial).clamp(1.0 / MAX_SKIP as f64, 1.0) as f32
+    optimum(v_all, c_all, v_trial, c_trial, trial).clamp(trial, 1.0) as f32
 }
 
-/// [`probability`] before its clamp: infinite where A <= 0 or E <= 0, 0 where B <= 0 or D <= 0.
+/// [`probability`] before its clamp: infinite where A, B or E <= 0, 0 where D <= 0.
 fn optimum(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f64 {
     let b = (v_trial - v_all) / (1.0 / trial - 1.0);
     let a = v_all - b;
     let e = (c_all - c_trial) / (1.0 - trial);
     let d = c_all - e;
-    if !(a > 0.0) || !(e > 0.0) {
+    if !(a > 0.0) || !(b > 0.0) || !(e > 0.0) {
         f64::INFINITY
-    } else if !(b > 0.0) || !(d > 0.0) {
+    } else if !(d > 0.0) {
         0.0
     } else {
         (b * d / (a * e)).sqrt()
@@ -129,7 +133,7 @@ pub fn choose(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
         if batches == EARLY_STOP_BATCHES {
             let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &b_trial);
             let p = optimum(v_all, c_all, v_trial, c_trial, TRIAL as f64);
-            if p >= EARLY_STOP_ALL || p <= 1.0 / (MAX_SKIP as f64 * EARLY_STOP_LEAST) {
+            if p >= EARLY_STOP_ALL || p <= TRIAL as f64 / EARLY_STOP_LEAST {
                 break;
             }
         }
@@ -169,7 +173,7 @@ mod tests {
         for (a, b, d, e) in [(2.7, 0.03, 6.1e-3, 6.3e-3), (1.8, 0.36, 2.1e-3, 1.2e-3), (1.0, 1.0, 1.0, 0.01)] {
             let (v1, c1) = model(a, b, d, e, 1.0);
             let (vt, ct) = model(a, b, d, e, 0.125);
-            let want = ((b * d / (a * e)).sqrt()).clamp(1.0 / 16.0, 1.0);
+            let want = ((b * d / (a * e)).sqrt()).clamp(0.125, 1.0);
             let got = probability(v1, c1, vt, ct, 0.125) as f64;
             assert!((got - want).abs() < 1e-6 * want, "{got} against {want}");
             // It is the model's best: no probability on a grid does better at equal time.
@@ -179,7 +183,7 @@ mod tests {
             };
             for k in 1..=64 {
                 let p = k as f64 / 64.0;
-                if p >= 1.0 / 16.0 {
+                if p >= 0.125 {
                     assert!(cost(got) <= cost(p) * (1.0 + 1e-9), "p {p} beats {got}");
                 }
             }
@@ -188,8 +192,10 @@ mod tests {
 
     #[test]
     fn degenerate_pilots_give_the_bounds() {
-        // No measurable multi-bounce variance: the least probability.
-        assert_eq!(probability(1.0, 2.0, 0.9, 1.0, 0.125), 1.0 / MAX_SKIP);
+        // Less variance with fewer multi-bounce queries, which the model cannot give: every query.
+        assert_eq!(probability(1.0, 2.0, 0.9, 1.0, 0.125), 1.0);
+        // The multi-bounce queries are all the time: the least probability, the trial's.
+        assert_eq!(probability(1.0, 2.0, 2.0, 0.1, 0.125), 0.125);
         // Multi-bounce queries that cost nothing: every query.
         assert_eq!(probability(1.0, 1.0, 3.0, 1.0, 0.125), 1.0);
         // All the variance in the multi-bounce queries: every query.
