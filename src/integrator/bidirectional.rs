@@ -126,8 +126,6 @@ pub struct BidirectionalTracer<'a> {
     /// follow: `target_pilot_asked`, or fewer where a time budget cut it short
     /// (`run_target_pilot`); 0: none.
     target_pilot_traced: u32,
-    /// The query roulette's probability (`RenderSettings::query_roulette`; 1 where none).
-    query_roulette: f32,
     /// The band index of an NLOS capture, while it is still to be built (before the pilot and
     /// the first pass).
     band_index: Option<crate::nlos::band_index::BandIndex>,
@@ -436,7 +434,6 @@ impl<'a> BidirectionalTracer<'a> {
             target_pilot_asked: target_pilot_spp,
             target_pilot_pending: target_pilot_spp > 0,
             target_pilot_traced: 0,
-            query_roulette: settings.query_roulette.unwrap_or(1.0),
             band_index,
             time_budget: None,
             band_index_deferred: None,
@@ -610,7 +607,7 @@ impl Integrator for BidirectionalTracer<'_> {
         )?;
         state.push("splat_film", &splats);
         state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_traced]);
-        state.push(super::query_roulette::STATE_BLOB, &[self.query_roulette.to_bits()]);
+        state.push(super::query_roulette::STATE_BLOB, &[self.wf.params.query_roulette.to_bits()]);
         Ok(state)
     }
 
