@@ -397,16 +397,18 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
 /// kernels weigh every path alike; against `direct` and `path`, independent estimators, at a
 /// narrow box gate with K = 4 (the ratio of the families' samples then 4), a wide one, on the
 /// glossy box, with a point light (no s = 0 strategy), per bin of a stratified transient gate,
-/// and with the halves' samples split 1 : 4 and 4 : 1 (the weights then count them so).
+/// with the halves' samples split 1 : 4 and 4 : 1 (the weights then count them so), and with a
+/// query roulette of 1/4 (the weights of both halves then count a quarter of the multi-bounce
+/// queries).
 #[test]
 fn combined_matches_direct_and_path() {
     let ctx = common::gpu();
     let (box_scene, glossy, point) = (common::cornell_box(), glossy_cornell_box(), modified_cornell_box(true, false));
     let narrow = Gate::Box { start: 3.14, end: 3.19 };
     let cases = [
-        ("combined K = 4 box [3.14, 3.19)", &box_scene, narrow.clone(), 4, 1.0, Method::Direct),
-        ("combined box [2.0, 3.0)", &box_scene, Gate::Box { start: 2.0, end: 3.0 }, 1, 1.0, Method::Path),
-        ("combined glossy box [3.0, 3.3)", &glossy, Gate::Box { start: 3.0, end: 3.3 }, 4, 1.0, Method::Path),
+        ("combined K = 4 box [3.14, 3.19)", &box_scene, narrow.clone(), 4, 1.0, Method::Direct, None),
+        ("combined box [2.0, 3.0)", &box_scene, Gate::Box { start: 2.0, end: 3.0 }, 1, 1.0, Method::Path, None),
+        ("combined glossy box [3.0, 3.3)", &glossy, Gate::Box { start: 3.0, end: 3.3 }, 4, 1.0, Method::Path, None),
         (
             "combined point + area lights box [2.6, 3.2)",
             &point,
@@ -414,6 +416,7 @@ fn combined_matches_direct_and_path() {
             4,
             1.0,
             Method::Direct,
+            None,
         ),
         (
             "combined transient 3.0 + 6 x 0.1",
@@ -422,8 +425,17 @@ fn combined_matches_direct_and_path() {
             4,
             1.0,
             Method::Direct,
+            None,
         ),
-        ("combined 1 ellipsoidal : 4 direct box [3.14, 3.19)", &box_scene, narrow, 4, 0.25, Method::Direct),
+        (
+            "combined 1 ellipsoidal : 4 direct box [3.14, 3.19)",
+            &box_scene,
+            narrow.clone(),
+            4,
+            0.25,
+            Method::Direct,
+            None,
+        ),
         (
             "combined 4 ellipsoidal : 1 direct glossy [3.0, 3.3)",
             &glossy,
@@ -431,19 +443,59 @@ fn combined_matches_direct_and_path() {
             1,
             4.0,
             Method::Path,
+            None,
+        ),
+        ("combined, query roulette 0.25, box [3.14, 3.19)", &box_scene, narrow, 4, 1.0, Method::Direct, Some(0.25)),
+        (
+            "combined, query roulette 0.25, glossy [3.0, 3.3)",
+            &glossy,
+            Gate::Box { start: 3.0, end: 3.3 },
+            4,
+            1.0,
+            Method::Path,
+            Some(0.25),
         ),
     ];
-    for (i, (label, scene, gate, k, share, reference)) in cases.into_iter().enumerate() {
+    for (i, (label, scene, gate, k, share, reference, roulette)) in cases.into_iter().enumerate() {
         let seed = 700 + 10 * i as u32;
         let s = RenderSettings {
             connections_per_query: k,
             ellipsoidal_share: Some(share),
+            query_roulette: roulette,
             ..settings(Method::Combined, gate.clone(), seed)
         };
         let combined = common::render_films(&ctx, scene, &s, BATCHES, 16);
         assert!(combined.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: combined renders black");
         let reference = common::render_films(&ctx, scene, &settings(reference, gate, seed + 1), BATCHES, 32);
         common::assert_films_agree(label, &combined, &reference, 8, ALPHA);
+    }
+}
+
+/// A combined render's direct half takes its weights from sums formed once per slot
+/// (connect_direct family_weight_from_sums); with statistics on, each is checked against the
+/// walk of its whole path that the ellipsoidal half's weights also take (family_weight): on the
+/// box at a narrow and a wide gate, with a point light (no s = 0 strategy), on the glossy box,
+/// at a ratio of 16 and with a query roulette of 1/4, none differs.
+#[test]
+fn combined_direct_weights_from_sums_equal_the_walk_of_each_path() {
+    use gatetrace::integrator::bidirectional::{Family, FamilyRole};
+    let ctx = common::gpu();
+    let (box_scene, glossy, point) = (common::cornell_box(), glossy_cornell_box(), modified_cornell_box(true, false));
+    let narrow = Gate::Box { start: 3.14, end: 3.19 };
+    for (label, scene, gate, ratio, roulette) in [
+        ("box [3.14, 3.19)", &box_scene, narrow.clone(), 4.0, None),
+        ("box [2.0, 3.0)", &box_scene, Gate::Box { start: 2.0, end: 3.0 }, 1.0, None),
+        ("point + area lights [2.6, 3.2)", &point, Gate::Box { start: 2.6, end: 3.2 }, 16.0, None),
+        ("glossy box [3.0, 3.3), roulette 1/4", &glossy, Gate::Box { start: 3.0, end: 3.3 }, 4.0, Some(0.25)),
+    ] {
+        let s = RenderSettings { stats: true, query_roulette: roulette, ..settings(Method::Direct, gate, 31) };
+        let role = FamilyRole { family: Family::Direct, ratio, medium_ratio: ratio / 4.0 };
+        let mut tracer = BidirectionalTracer::with_family(&ctx, scene, &s, Some(role)).unwrap();
+        tracer.render_samples(16).unwrap();
+        let (checked, differing) = tracer.family_weights_checked();
+        assert_eq!(differing, 0, "{label}: {differing} of {checked} weights differ from the walk of their path");
+        assert!(checked > 1000, "{label}: only {checked} weights checked");
+        println!("{label}: {checked} weights checked");
     }
 }
 

@@ -126,7 +126,7 @@ pub struct RenderArgs {
     /// --method combined: ellipsoidal samples per direct sample, 1/8 to 8 (default: from a pilot).
     #[arg(long, value_name = "R")]
     pub ellipsoidal_share: Option<f64>,
-    /// --method ellipsoidal: probability, 1/16 to 1, with which a sample makes each ellipsoid query
+    /// --method ellipsoidal or combined: probability, 1/16 to 1, with which a sample makes each ellipsoid query
     /// for paths of two or more scattering vertices (weighted by its inverse; default: from a
     /// pilot with --time, 1 with --spp)
     #[arg(long, value_name = "P")]

@@ -209,7 +209,7 @@ pub struct Variant {
     pub query: gatetrace::integrator::QuerySettings,
     /// Medium connections (path; see `RenderSettings::medium_connections`).
     pub medium_connections: bool,
-    /// The query roulette's probability (ellipsoidal; see `RenderSettings::query_roulette`).
+    /// The query roulette's probability (ellipsoidal, combined; see `RenderSettings::query_roulette`).
     pub query_roulette: Option<f32>,
 }
 
@@ -238,10 +238,19 @@ impl Variant {
                 };
                 continue;
             }
+            if method == Method::Combined {
+                let r = option
+                    .strip_prefix("roulette=")
+                    .ok_or_else(|| anyhow::anyhow!("`{s}`: `{option}` is not an option of combined (roulette=P)"))?;
+                variant.query_roulette =
+                    Some(r.parse().map_err(|_| anyhow::anyhow!("`{s}`: roulette=P needs a number, got `{r}`"))?);
+                continue;
+            }
             anyhow::ensure!(
                 matches!(method, Method::Ellipsoidal | Method::Auto),
                 "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
-                 split=R, bottom=N, reflection, wide)"
+                 split=R, bottom=N, reflection, wide, roulette=P), combined roulette=P and path \
+                 medium-connections=on|off"
             );
             if option == "exhaustive" {
                 variant.query.split = 0.0;
@@ -294,9 +303,9 @@ impl Variant {
             if self.query.wide {
                 name += ":wide";
             }
-            if let Some(p) = self.query_roulette {
-                name += &format!(":roulette={p}");
-            }
+        }
+        if let Some(p) = self.query_roulette {
+            name += &format!(":roulette={p}");
         }
         name
     }

@@ -18,12 +18,12 @@ use super::parse::parse_resolution;
 pub struct EqualTimeArgs {
     /// Scenes (glTF 2.0 or Mitsuba 3 XML), each compared separately; the Cornell box when omitted.
     scenes: Vec<PathBuf>,
-    /// Methods to compare, comma-separated: path, direct, ellipsoidal, auto, and ellipsoidal
-    /// (or auto, for its ellipsoidal candidate) with options after colons: K (render
+    /// Methods to compare, comma-separated: path, direct, ellipsoidal, combined, auto, and
+    /// ellipsoidal (or auto, for its ellipsoidal candidate) with options after colons: K (render
     /// --connections-per-query), exhaustive (render --query-split 0), split=R, bottom=N,
-    /// reflection (render --query-weights reflection) or wide (render --query-tree wide), e.g.
-    /// ellipsoidal:4:exhaustive; and path:medium-connections=on (render --medium-connections
-    /// on).
+    /// reflection (render --query-weights reflection), wide (render --query-tree wide) or
+    /// roulette=P (render --query-roulette), e.g. ellipsoidal:4:exhaustive;
+    /// combined:roulette=P; and path:medium-connections=on (render --medium-connections on).
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]
     methods: Vec<Variant>,
     /// Gates to compare at, separated by ; (same syntax as render --gate).

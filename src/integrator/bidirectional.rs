@@ -67,8 +67,9 @@ pub use options::{
 /// Slots a wave aims for on a CPU device (target_slots_per_wave: more on a GPU): each slot
 /// holds two subpaths and all their connections (a few KiB).
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 16;
-/// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards.
-const QUERY_COUNTERS: usize = 5;
+/// Counters after the strategies' in `strategy_stats`: ellipsoid query work and guards, and the
+/// check of a combined render's direct-family weights.
+const QUERY_COUNTERS: usize = 7;
 
 /// Pipelines of the stages.
 struct Stages {
@@ -112,7 +113,8 @@ pub struct BidirectionalTracer<'a> {
     /// Strategy counters summed over the waves so far (when `stats` is on).
     stats: Option<Vec<StrategyStats>>,
     /// Ellipsoid queries' loop iterations, triangles tested and triangles intersected, spheroids
-    /// left out by the needle guard and points dropped by the length guard, summed.
+    /// left out by the needle guard and points dropped by the length guard, summed; then a
+    /// combined render's direct-family weights checked, and those that failed the check.
     query_work: [u64; QUERY_COUNTERS],
     /// Which connections join the subpaths.
     method: Method,
@@ -462,6 +464,12 @@ impl<'a> BidirectionalTracer<'a> {
         (self.query_work[3], self.query_work[4])
     }
 
+    /// A combined render's direct half, with `stats` on: its weights taken from per-slot sums
+    /// that were checked against the walk of the whole path, and those that differed.
+    pub fn family_weights_checked(&self) -> (u64, u64) {
+        (self.query_work[5], self.query_work[6])
+    }
+
     fn render_wave(&mut self, wave: WaveParams) -> Result<()> {
         let ctx = self.wf.ctx;
         self.wf.write_wave(&wave);
@@ -683,7 +691,7 @@ impl Integrator for BidirectionalTracer<'_> {
         );
         if ellipsoidal {
             let q = total.evaluated.max(1) as f64;
-            let [nodes, tested, intersected, needles, off_length] = self.query_work;
+            let [nodes, tested, intersected, needles, off_length, ..] = self.query_work;
             out += &format!(
                 "per ellipsoid query: {:.1} loop iterations (BVH nodes and triangles), {:.2} triangles tested, {:.2} \
                  triangles intersected\n\

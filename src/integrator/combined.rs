@@ -13,10 +13,16 @@
 //! noise, so a render splits its samples between them ([`Allocation`]): the ellipsoidal half
 //! traces r samples per pixel for each of the direct half's, r chosen by a pilot (as `auto`'s,
 //! on a smaller image and a seed of its own, its films discarded) to minimise the variance of
-//! the sum at equal time, and the weights count the families' samples in that ratio.
+//! the sum at equal time, and the weights count the families' samples in that ratio. The
+//! ellipsoidal half has `ellipsoidal`'s query roulette (a multi-bounce query made with
+//! probability p, `super::query_roulette`), which the weights of both halves count (p R
+//! connections per direct one on such paths, so the direct half takes them over as p falls);
+//! with a time budget the same pilot weighs p = 1 against p = `query_roulette::TRIAL`.
 //!
 //! Not yet: checkpoints, shards, NLOS captures and directional lights (refused with a clear
 //! error).
+
+use std::fmt::Write as _;
 
 use anyhow::{Result, bail, ensure};
 
@@ -81,6 +87,9 @@ pub struct Allocation {
     /// Samples per pixel of the ellipsoidal half per sample of the direct half (dimensionless,
     /// 1 / MAX_SHARE ..= MAX_SHARE).
     pub ellipsoidal_share: f64,
+    /// The ellipsoidal half's query roulette (dimensionless; `RenderSettings::query_roulette`),
+    /// which both halves' weights count.
+    pub query_roulette: f32,
     /// Why, in words (for logs and metadata).
     pub reason: String,
     /// Seconds the pilot took: passes, film clears and readbacks (counted in a time budget).
@@ -103,11 +112,34 @@ pub fn ellipsoidal_share(v_direct: f64, c_direct: f64, v_ellipsoidal: f64, c_ell
     share.clamp(1.0 / MAX_SHARE, MAX_SHARE)
 }
 
-/// The allocation of the combined render `settings`: `settings.ellipsoidal_share` where given;
-/// otherwise a pilot of both halves (one sample each per pixel sample, on the image of
-/// `auto::pilot_resolution` from `auto::pilot_seed`, films discarded) measures each half's
-/// variance and time per sample, and [`ellipsoidal_share`] splits the samples. With a time
-/// budget the pilot spends about `auto::PILOT_SHARE` of it.
+/// Variance x time per direct sample of the sum of the halves' estimates (radiance squared x
+/// seconds) with `share` ellipsoidal samples per direct one, from each half's variance per sample
+/// v and seconds per sample c: (v_D + v_E / share)(c_D + share c_E), what the error at equal time
+/// is proportional to.
+pub fn equal_time_error(v_direct: f64, c_direct: f64, v_ellipsoidal: f64, c_ellipsoidal: f64, share: f64) -> f64 {
+    (v_direct + v_ellipsoidal / share) * (c_direct + share * c_ellipsoidal)
+}
+
+/// The query roulettes a combined render's pilot weighs: the given one; with a time budget and
+/// paths of two or more scattering vertices, every query and `query_roulette::TRIAL` of the
+/// multi-bounce ones; otherwise every query (a sample budget keeps a sample what it was).
+fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
+    match (settings.query_roulette, budget) {
+        (Some(p), _) => vec![p],
+        (None, Budget::Time(_)) if settings.max_bounces >= 2 => vec![1.0, super::query_roulette::TRIAL],
+        _ => vec![1.0],
+    }
+}
+
+/// The allocation of the combined render `settings`: its samples' split
+/// (`settings.ellipsoidal_share` where given) and its query roulette (`settings.query_roulette`
+/// where given). Whatever is not given a pilot chooses: for each candidate roulette
+/// ([`roulette_candidates`]) both halves (one sample each per pixel sample, on the image of
+/// `auto::pilot_resolution` from `auto::pilot_seed`, films discarded) measure their variance and
+/// time per sample, [`ellipsoidal_share`] splits the samples, and the roulette of the least
+/// [`equal_time_error`] at its split wins. The weights of both halves change with the roulette
+/// (multi-bounce paths go to the direct half as its queries grow rare), so each candidate is
+/// measured as it renders. With a time budget the pilot spends about `auto::PILOT_SHARE` of it.
 pub fn allocate(
     ctx: &GpuContext,
     scene: &PreparedScene,
@@ -115,43 +147,66 @@ pub fn allocate(
     budget: Budget,
 ) -> Result<Allocation> {
     check_settings(settings)?;
-    if let Some(share) = settings.ellipsoidal_share {
+    let roulettes = roulette_candidates(settings, budget);
+    if let (Some(share), [p]) = (settings.ellipsoidal_share, &roulettes[..]) {
         return Ok(Allocation {
             ellipsoidal_share: share,
-            reason: format!("{share} ellipsoidal samples per direct one, as given"),
+            query_roulette: *p,
+            reason: format!("{share} ellipsoidal samples per direct one, as given, query roulette {p}"),
             pilot_seconds: 0.0,
         });
     }
     let (width, height, _) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
-    let per_half = pilot_budget(budget, pixel_ratio, 2);
-    let pilot = RenderSettings {
-        width,
-        height,
-        seed: pilot_seed(settings.seed),
-        ellipsoidal_share: Some(1.0),
-        ..settings.clone()
-    };
-    let mut tracer = CombinedTracer::new(ctx, scene, &pilot)?;
-    tracer.direct.warm_up()?;
-    tracer.ellipsoidal.warm_up()?;
-    let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
-    for _ in 0..PILOT_BATCHES {
-        pilot_batch(&mut tracer.direct, &mut direct, per_half)?;
-        pilot_batch(&mut tracer.ellipsoidal, &mut ellipsoidal, per_half)?;
-    }
+    let per_half = pilot_budget(budget, pixel_ratio, 2 * roulettes.len());
     let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
-    let share =
-        ellipsoidal_share(direct.variance(), per_sample(&direct), ellipsoidal.variance(), per_sample(&ellipsoidal));
-    let reason = format!(
-        "pilot on {width}x{height}: variance per sample {:.3e} (direct half) and {:.3e} (ellipsoidal half), seconds per \
-         sample {:.3e} and {:.3e}: {share:.3} ellipsoidal samples per direct one",
-        direct.variance(),
-        ellipsoidal.variance(),
-        per_sample(&direct),
-        per_sample(&ellipsoidal)
+    let mut best: Option<(f64, Allocation)> = None;
+    let mut reason = format!("pilot on {width}x{height}:");
+    let mut pilot_seconds = 0.0;
+    for &p in &roulettes {
+        let pilot = RenderSettings {
+            width,
+            height,
+            seed: pilot_seed(settings.seed),
+            ellipsoidal_share: Some(1.0),
+            query_roulette: Some(p),
+            ..settings.clone()
+        };
+        let mut tracer = CombinedTracer::new(ctx, scene, &pilot)?;
+        tracer.direct.warm_up()?;
+        tracer.ellipsoidal.warm_up()?;
+        let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
+        for _ in 0..PILOT_BATCHES {
+            pilot_batch(&mut tracer.direct, &mut direct, per_half)?;
+            pilot_batch(&mut tracer.ellipsoidal, &mut ellipsoidal, per_half)?;
+        }
+        pilot_seconds += direct.wall_seconds + ellipsoidal.wall_seconds;
+        let (v_d, c_d, v_e, c_e) =
+            (direct.variance(), per_sample(&direct), ellipsoidal.variance(), per_sample(&ellipsoidal));
+        let share = settings.ellipsoidal_share.unwrap_or_else(|| ellipsoidal_share(v_d, c_d, v_e, c_e));
+        let error = equal_time_error(v_d, c_d, v_e, c_e, share);
+        let _ = write!(
+            reason,
+            " query roulette {p}: variance per sample {v_d:.3e} (direct half) and {v_e:.3e} (ellipsoidal half), \
+             seconds per sample {c_d:.3e} and {c_e:.3e}, {share:.3} ellipsoidal samples per direct one, variance x \
+             time {error:.3e};"
+        );
+        // (A pilot that measured nothing, error NaN, never wins over one that did.)
+        if best.as_ref().is_none_or(|(e, _)| error < *e || e.is_nan()) {
+            let allocation =
+                Allocation { ellipsoidal_share: share, query_roulette: p, reason: String::new(), pilot_seconds: 0.0 };
+            best = Some((error, allocation));
+        }
+    }
+    let (_, mut allocation) = best.expect("at least one candidate roulette");
+    let _ = write!(
+        reason,
+        " {:.3} ellipsoidal samples per direct one, query roulette {}",
+        allocation.ellipsoidal_share, allocation.query_roulette
     );
-    Ok(Allocation { ellipsoidal_share: share, reason, pilot_seconds: direct.wall_seconds + ellipsoidal.wall_seconds })
+    allocation.reason = reason;
+    allocation.pilot_seconds = pilot_seconds;
+    Ok(allocation)
 }
 
 /// The two halves of a combined render, and the ellipsoidal half's samples per direct one.

@@ -188,8 +188,9 @@ impl RenderSettings {
             "--ellipsoidal-share applies to --method combined only"
         );
         ensure!(
-            self.query_roulette.is_none() || matches!(self.method, Method::Ellipsoidal | Method::Auto),
-            "--query-roulette applies to --method ellipsoidal (and auto's ellipsoidal choice) only"
+            self.query_roulette.is_none()
+                || matches!(self.method, Method::Ellipsoidal | Method::Combined | Method::Auto),
+            "--query-roulette applies to --method ellipsoidal and combined (and auto's ellipsoidal choice) only"
         );
         ensure!(
             self.query_roulette.is_none() || self.nlos.is_none(),

@@ -118,12 +118,12 @@ pub struct RenderSettings {
     /// (dimensionless, 1 / [`super::combined::MAX_SHARE`] ..= MAX_SHARE); None: a render's pilot
     /// chooses it (see [`super::combined::allocate`]), an integrator built directly takes 1.
     pub ellipsoidal_share: Option<f64>,
-    /// `ellipsoidal` (not NLOS captures): the probability (1 / [`super::query_roulette::MAX_SKIP`]
-    /// ..= 1) with which a sample makes each of its ellipsoid queries for paths of two or more
-    /// scattering vertices, a query made weighing its inverse (unbiased for any); `render
-    /// --query-roulette`. None: with a time budget a render's pilot chooses it (see
-    /// [`super::query_roulette::choose`]), otherwise, and for an integrator built directly, 1
-    /// (every query).
+    /// `ellipsoidal` (not NLOS captures) and `combined`'s ellipsoidal half: the probability (1 /
+    /// [`super::query_roulette::MAX_SKIP`] ..= 1) with which a sample makes each of its ellipsoid
+    /// queries for paths of two or more scattering vertices, a query made weighing its inverse
+    /// (unbiased for any); `render --query-roulette`. None: with a time budget a render's pilot
+    /// chooses it (see [`super::query_roulette::choose`], [`super::combined::allocate`]),
+    /// otherwise, and for an integrator built directly, 1 (every query).
     pub query_roulette: Option<f32>,
     /// `path` in scenes with homogeneous media on a box or transient gate: also place scattering
     /// vertices where a flight's ray meets the spheroid of a target length drawn from the gate
