@@ -348,6 +348,36 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_neyman_split_minimises_the_error_at_equal_time() {
+        // At n_E / n_D = sqrt(v_E c_D / (v_D c_E)) the error is (sqrt(v_D c_D) + sqrt(v_E c_E))^2,
+        // and no other split on a grid does better.
+        for (vd, cd, ve, ce) in [(1.0, 1.0, 4.0, 1.0), (2.0, 3.0, 0.5, 7.0), (0.3, 2e-3, 0.05, 5e-3)] {
+            let share = ellipsoidal_share(vd, cd, ve, ce);
+            let best = equal_time_error(vd, cd, ve, ce, share);
+            assert!((best - ((vd * cd).sqrt() + (ve * ce).sqrt()).powi(2)).abs() < 1e-9 * best);
+            for k in 1..=64 {
+                let r = k as f64 / 8.0;
+                assert!(best <= equal_time_error(vd, cd, ve, ce, r) * (1.0 + 1e-12), "{r} beats {share}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_pilot_weighs_a_roulette_only_where_it_may_choose_one() {
+        let gated = RenderSettings { gate: crate::film::Gate::Box { start: 3.0, end: 3.2 }, ..Default::default() };
+        let time = Budget::Time(std::time::Duration::from_secs(10));
+        assert_eq!(roulette_candidates(&gated, time), vec![1.0, super::super::query_roulette::TRIAL]);
+        // A sample budget keeps every query; a given probability is the only one; one bounce has
+        // no multi-bounce queries.
+        assert_eq!(roulette_candidates(&gated, Budget::Samples(64)), vec![1.0]);
+        assert_eq!(
+            roulette_candidates(&RenderSettings { query_roulette: Some(0.5), ..gated.clone() }, time),
+            vec![0.5]
+        );
+        assert_eq!(roulette_candidates(&RenderSettings { max_bounces: 1, ..gated }, time), vec![1.0]);
+    }
+
+    #[test]
     fn shares_follow_variance_over_time() {
         // n_h proportional to sqrt(v_h / c_h).
         assert_eq!(ellipsoidal_share(1.0, 1.0, 1.0, 1.0), 1.0);
