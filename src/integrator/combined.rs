@@ -15,7 +15,7 @@
 //! on a smaller image and a seed of its own, its films discarded) to minimise the variance of
 //! the sum at equal time, and the weights count the families' samples in that ratio. The
 //! ellipsoidal half has `ellipsoidal`'s query roulette (a multi-bounce query made with
-//! probability p, `super::query_roulette`), which the weights of both halves count (p R
+//! probability p, `query_roulette`), which the weights of both halves count (p R
 //! connections per direct one on such paths, so the direct half takes them over as p falls);
 //! with a time budget the same pilot weighs p = 1 against p = `query_roulette::TRIAL`.
 //!
@@ -28,7 +28,7 @@ use anyhow::{Result, bail, ensure};
 
 use super::auto::{Batches, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed};
 pub use super::bidirectional::{Family, FamilyRole};
-use super::{BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint};
+use super::{BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint, query_roulette};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
@@ -126,7 +126,9 @@ pub fn equal_time_error(v_direct: f64, c_direct: f64, v_ellipsoidal: f64, c_elli
 fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
     match (settings.query_roulette, budget) {
         (Some(p), _) => vec![p],
-        (None, Budget::Time(_)) if settings.max_bounces >= 2 => vec![1.0, super::query_roulette::TRIAL],
+        (None, Budget::Time(_)) if query_roulette::has_multi_bounce_queries(settings) => {
+            vec![1.0, query_roulette::TRIAL]
+        }
         _ => vec![1.0],
     }
 }
@@ -160,7 +162,7 @@ pub fn allocate(
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_half = pilot_budget(budget, pixel_ratio, 2 * roulettes.len());
     let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
-    let mut best: Option<(f64, Allocation)> = None;
+    let mut best: Option<(f64, f64, f32)> = None; // (variance x time, split, roulette)
     let mut reason = format!("pilot on {width}x{height}:");
     let mut pilot_seconds = 0.0;
     for &p in &roulettes {
@@ -192,21 +194,13 @@ pub fn allocate(
              time {error:.3e};"
         );
         // (A pilot that measured nothing, error NaN, never wins over one that did.)
-        if best.as_ref().is_none_or(|(e, _)| error < *e || e.is_nan()) {
-            let allocation =
-                Allocation { ellipsoidal_share: share, query_roulette: p, reason: String::new(), pilot_seconds: 0.0 };
-            best = Some((error, allocation));
+        if best.is_none_or(|(e, _, _)| error < e || e.is_nan()) {
+            best = Some((error, share, p));
         }
     }
-    let (_, mut allocation) = best.expect("at least one candidate roulette");
-    let _ = write!(
-        reason,
-        " {:.3} ellipsoidal samples per direct one, query roulette {}",
-        allocation.ellipsoidal_share, allocation.query_roulette
-    );
-    allocation.reason = reason;
-    allocation.pilot_seconds = pilot_seconds;
-    Ok(allocation)
+    let (_, share, p) = best.expect("at least one candidate roulette");
+    let _ = write!(reason, " {share:.3} ellipsoidal samples per direct one, query roulette {p}");
+    Ok(Allocation { ellipsoidal_share: share, query_roulette: p, reason, pilot_seconds })
 }
 
 /// The two halves of a combined render, and the ellipsoidal half's samples per direct one.
@@ -366,7 +360,7 @@ mod tests {
     fn the_pilot_weighs_a_roulette_only_where_it_may_choose_one() {
         let gated = RenderSettings { gate: crate::film::Gate::Box { start: 3.0, end: 3.2 }, ..Default::default() };
         let time = Budget::Time(std::time::Duration::from_secs(10));
-        assert_eq!(roulette_candidates(&gated, time), vec![1.0, super::super::query_roulette::TRIAL]);
+        assert_eq!(roulette_candidates(&gated, time), vec![1.0, query_roulette::TRIAL]);
         // A sample budget keeps every query; a given probability is the only one; one bounce has
         // no multi-bounce queries.
         assert_eq!(roulette_candidates(&gated, Budget::Samples(64)), vec![1.0]);

@@ -87,10 +87,16 @@ fn optimum(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f6
     }
 }
 
-/// Does `settings` take a query roulette at all? `ellipsoidal` with paths of two or more
+/// Does a render of `settings` make queries the roulette may skip? Paths of two or more
 /// scattering vertices, outside NLOS captures (whose three-bounce queries are the signal).
+pub fn has_multi_bounce_queries(settings: &RenderSettings) -> bool {
+    settings.nlos.is_none() && settings.max_bounces >= 2
+}
+
+/// Does `settings` take `ellipsoidal`'s query roulette at all ([`has_multi_bounce_queries`];
+/// `combined` chooses its own in `combined::allocate`)?
 pub fn applies(settings: &RenderSettings) -> bool {
-    settings.method == Method::Ellipsoidal && settings.nlos.is_none() && settings.max_bounces >= 2
+    settings.method == Method::Ellipsoidal && has_multi_bounce_queries(settings)
 }
 
 /// The query roulette of the `ellipsoidal` render `settings` with `budget`:
