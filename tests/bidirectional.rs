@@ -471,6 +471,33 @@ fn combined_matches_direct_and_path() {
     }
 }
 
+/// Where one family alone is ahead of both halves together, a combined render traces it alone
+/// (`Allocation::alone`): on the box at a 1 m gate `direct` is several times ahead of
+/// `ellipsoidal`, and of both halves, whose samples also pay for the family weights; the render
+/// is then `direct`'s own from the same seed, bit for bit. At 1 mm `ellipsoidal` is hundreds of
+/// times ahead of `direct`, which a combined render then never traces alone.
+#[test]
+fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
+    use gatetrace::integrator::{Budget, render};
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let wide = RenderSettings {
+        connections_per_query: 4,
+        ..settings(Method::Combined, Gate::Box { start: 3.14, end: 4.14 }, 41)
+    };
+    let output = render(&ctx, &scene, &wide, Budget::Samples(64), |_| {}).unwrap();
+    let allocation = output.allocation.expect("a combined render reports its allocation");
+    assert_eq!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
+    let direct = RenderSettings { method: Method::Direct, connections_per_query: 1, ..wide.clone() };
+    let same = render(&ctx, &scene, &direct, Budget::Samples(64), |_| {}).unwrap().film;
+    assert!(same.mean_rgb()[0] > 0.0, "light reaches the gate");
+    assert!(output.film.data == same.data, "the combined render is direct's own image");
+    let narrow = RenderSettings { gate: Gate::Box { start: 3.14, end: 3.141 }, ..wide };
+    let output = render(&ctx, &scene, &narrow, Budget::Samples(64), |_| {}).unwrap();
+    let allocation = output.allocation.expect("a combined render reports its allocation");
+    assert_ne!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
+}
+
 /// A combined render's direct half takes its weights from sums formed once per slot
 /// (connect_direct family_weight_from_sums); with statistics on, each is checked against the
 /// walk of its whole path that the ellipsoidal half's weights also take (family_weight): on the

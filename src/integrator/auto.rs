@@ -270,8 +270,21 @@ pub fn choose(
 /// The methods' figures from their pilot batches so far, the method of the lowest variance x
 /// time per sample, and how many times lower it is than the next best's.
 fn compare(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> (Vec<CandidateFigures>, Method, f64) {
+    let candidates = figures(methods, batches, pixel_ratio);
+    // Ties (all zero: nothing reaches the gate in the pilot) go to the faster method.
+    let key = |c: &CandidateFigures| (c.cost(), c.seconds_per_sample());
+    let mut order: Vec<&CandidateFigures> = candidates.iter().collect();
+    order.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
+    let (best, next) = (order[0], order[1]);
+    let (chosen, ratio) = (best.method, next.cost() / best.cost());
+    (candidates, chosen, ratio)
+}
+
+/// Each method's figures from its pilot batches so far (`batches[i]` of `methods[i]`), the
+/// variances charged for what a pilot missed (see `per_sample_variances`).
+pub(super) fn figures(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> Vec<CandidateFigures> {
     let variances = per_sample_variances(&batches.iter().collect::<Vec<_>>());
-    let candidates: Vec<CandidateFigures> = methods
+    methods
         .iter()
         .zip(batches)
         .zip(variances)
@@ -282,14 +295,7 @@ fn compare(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> (Vec<Ca
             pixel_ratio,
             variance_per_sample: v,
         })
-        .collect();
-    // Ties (all zero: nothing reaches the gate in the pilot) go to the faster method.
-    let key = |c: &CandidateFigures| (c.cost(), c.seconds_per_sample());
-    let mut order: Vec<&CandidateFigures> = candidates.iter().collect();
-    order.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap_or(std::cmp::Ordering::Equal));
-    let (best, next) = (order[0], order[1]);
-    let (chosen, ratio) = (best.method, next.cost() / best.cost());
-    (candidates, chosen, ratio)
+        .collect()
 }
 
 /// How much pilot each method gets.
@@ -373,6 +379,11 @@ impl Batches {
         }
         self.samples += k as u64;
         self.count += 1;
+    }
+
+    /// Values of the image (pixels x bins x channels).
+    pub(super) fn values(&self) -> usize {
+        self.values
     }
 
     /// The per-sample variance summed over the values: the median of the pairs' estimates

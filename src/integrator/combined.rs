@@ -26,9 +26,15 @@ use std::fmt::Write as _;
 
 use anyhow::{Result, bail, ensure};
 
-use super::auto::{Batches, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed};
+use super::auto::{
+    Batches, PILOT_BATCHES, candidate_methods, candidate_settings, figures, pilot_batch, pilot_budget,
+    pilot_resolution, pilot_seed,
+};
 pub use super::bidirectional::{Family, FamilyRole};
-use super::{BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint, query_roulette};
+use super::{
+    BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint, create_integrator,
+    query_roulette,
+};
 use crate::film::Film;
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
@@ -90,10 +96,63 @@ pub struct Allocation {
     /// The ellipsoidal half's query roulette (dimensionless; `RenderSettings::query_roulette`),
     /// which both halves' weights count.
     pub query_roulette: f32,
+    /// `Method::Direct` or `Method::Ellipsoidal` where the pilot found that family alone, with
+    /// its own weights, ahead of both halves at their split: the render is then that method's
+    /// (the limit of a split that gives the other family no samples, where the family weights'
+    /// cost buys nothing). `None`: both halves.
+    pub alone: Option<Method>,
     /// Why, in words (for logs and metadata).
     pub reason: String,
     /// Seconds the pilot took: passes, film clears and readbacks (counted in a time budget).
     pub pilot_seconds: f64,
+}
+
+impl Allocation {
+    /// The settings of `method` (direct, ellipsoidal, or combined: both halves) for the render
+    /// of `settings` under this allocation's split and roulette.
+    fn render_settings_of(&self, settings: &RenderSettings, method: Method) -> RenderSettings {
+        let alone = if method == Method::Combined { None } else { Some(method) };
+        Allocation { alone, ..self.clone() }.render_settings(settings)
+    }
+
+    /// What the render traces, in words (metadata `combined_renders`).
+    pub fn renders(&self) -> &'static str {
+        match self.alone {
+            Some(Method::Direct) => "direct alone",
+            Some(_) => "ellipsoidal alone",
+            None => "both halves",
+        }
+    }
+
+    /// The settings the render of `settings` (method `combined`) runs with under this
+    /// allocation: both halves at its split and roulette, or the family alone.
+    pub fn render_settings(&self, settings: &RenderSettings) -> RenderSettings {
+        let both = RenderSettings {
+            ellipsoidal_share: Some(self.ellipsoidal_share),
+            query_roulette: Some(self.query_roulette),
+            ..settings.clone()
+        };
+        match self.alone {
+            Some(Method::Direct) => RenderSettings {
+                ellipsoidal_share: None,
+                query_roulette: None,
+                ..candidate_settings(settings, Method::Direct)
+            },
+            Some(method) => RenderSettings { ellipsoidal_share: None, ..candidate_settings(&both, method) },
+            None => both,
+        }
+    }
+}
+
+/// The families a combined render of `settings` may trace alone instead of both halves: none
+/// where the split is given (`--ellipsoidal-share`), else `direct`, and `ellipsoidal` where it
+/// renders the scene alone (not through glass; `auto::candidate_methods`).
+fn alone_candidates(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
+    if settings.ellipsoidal_share.is_some() {
+        return Vec::new();
+    }
+    let auto = RenderSettings { method: Method::Auto, ..settings.clone() };
+    candidate_methods(&auto, scene).into_iter().filter(|m| matches!(m, Method::Direct | Method::Ellipsoidal)).collect()
 }
 
 /// The ellipsoidal half's samples per sample of the direct half that minimise the variance of
@@ -154,13 +213,17 @@ pub fn allocate(
         return Ok(Allocation {
             ellipsoidal_share: share,
             query_roulette: *p,
+            alone: None,
             reason: format!("{share} ellipsoidal samples per direct one, as given, query roulette {p}"),
             pilot_seconds: 0.0,
         });
     }
     let (width, height, _) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
-    let per_half = pilot_budget(budget, pixel_ratio, 2 * roulettes.len());
+    let alone = alone_candidates(settings, scene);
+    // Each half at each roulette, then each family alone and each half at the chosen split.
+    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone.len() + 2 };
+    let per_half = pilot_budget(budget, pixel_ratio, runs);
     let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
     let mut best: Option<(f64, f64, f32)> = None; // (variance x time, split, roulette)
     let mut reason = format!("pilot on {width}x{height}:");
@@ -200,7 +263,67 @@ pub fn allocate(
     }
     let (_, share, p) = best.expect("at least one candidate roulette");
     let _ = write!(reason, " {share:.3} ellipsoidal samples per direct one, query roulette {p}");
-    Ok(Allocation { ellipsoidal_share: share, query_roulette: p, reason, pilot_seconds })
+    let mut allocation = Allocation { ellipsoidal_share: share, query_roulette: p, alone: None, reason, pilot_seconds };
+    if alone.is_empty() {
+        return Ok(allocation);
+    }
+    // Each family alone (its images weighed against each other's as `auto` weighs methods: a
+    // pilot that missed the gate's rare paths is charged for them) against both halves at that
+    // split, each half measured with the weights of the split (they move with it) and their
+    // error at it predicted as above. Where a family alone is ahead the family weights' cost
+    // buys nothing.
+    let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
+    let mut tracers = Vec::new();
+    for &method in &alone {
+        let mut tracer = create_integrator(ctx, scene, &allocation.render_settings_of(&pilot, method))?;
+        tracer.warm_up()?;
+        tracers.push(tracer);
+    }
+    let mut halves = CombinedTracer::new(ctx, scene, &allocation.render_settings_of(&pilot, Method::Combined))?;
+    halves.direct.warm_up()?;
+    halves.ellipsoidal.warm_up()?;
+    let mut batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
+    let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
+    for _ in 0..PILOT_BATCHES {
+        for (tracer, b) in tracers.iter_mut().zip(&mut batches) {
+            pilot_batch(tracer.as_mut(), b, per_half)?;
+        }
+        pilot_batch(&mut halves.direct, &mut direct, per_half)?;
+        pilot_batch(&mut halves.ellipsoidal, &mut ellipsoidal, per_half)?;
+    }
+    allocation.pilot_seconds += batches.iter().chain([&direct, &ellipsoidal]).map(|b| b.wall_seconds).sum::<f64>();
+    // In `auto`'s units: variance per sample and value, seconds per sample of the render's image.
+    let per_value = |b: &Batches| b.variance() / b.values().max(1) as f64;
+    let both = equal_time_error(
+        per_value(&direct),
+        per_sample(&direct) * pixel_ratio,
+        per_value(&ellipsoidal),
+        per_sample(&ellipsoidal) * pixel_ratio,
+        share,
+    );
+    let candidates = figures(&alone, &batches, pixel_ratio);
+    let mut words: Vec<String> = candidates
+        .iter()
+        .map(|c| {
+            format!(
+                "{:.3e} ({}: variance per sample {:.3e}, seconds per sample {:.3e})",
+                c.cost(),
+                c.method.name(),
+                c.variance_per_sample,
+                c.seconds_per_sample()
+            )
+        })
+        .collect();
+    words.push(format!("{both:.3e} (both halves)"));
+    let ahead = candidates.iter().filter(|c| c.cost() < both).min_by(|a, b| a.cost().total_cmp(&b.cost()));
+    allocation.alone = ahead.map(|c| c.method);
+    let _ = write!(
+        allocation.reason,
+        "; then at that split, variance x time per sample {}: {}",
+        words.join(" vs "),
+        allocation.renders()
+    );
+    Ok(allocation)
 }
 
 /// The two halves of a combined render, and the ellipsoidal half's samples per direct one.
@@ -369,6 +492,53 @@ mod tests {
             vec![0.5]
         );
         assert_eq!(roulette_candidates(&RenderSettings { max_bounces: 1, ..gated }, time), vec![1.0]);
+    }
+
+    #[test]
+    fn a_family_alone_renders_with_its_own_settings() {
+        let combined = RenderSettings {
+            method: Method::Combined,
+            connections_per_query: 4,
+            gate: crate::film::Gate::Box { start: 3.0, end: 3.2 },
+            ..Default::default()
+        };
+        let allocation = |alone| Allocation {
+            ellipsoidal_share: 0.5,
+            query_roulette: 0.125,
+            alone,
+            reason: String::new(),
+            pilot_seconds: 0.0,
+        };
+        let both = allocation(None).render_settings(&combined);
+        assert_eq!(
+            (both.method, both.ellipsoidal_share, both.query_roulette),
+            (Method::Combined, Some(0.5), Some(0.125))
+        );
+        // Direct alone: one connection per strategy, no split and no roulette (direct has
+        // neither); ellipsoidal alone keeps K and the roulette the pilot measured it with.
+        let direct = allocation(Some(Method::Direct)).render_settings(&combined);
+        assert_eq!(
+            (direct.method, direct.connections_per_query, direct.ellipsoidal_share, direct.query_roulette),
+            (Method::Direct, 1, None, None)
+        );
+        let ellipsoidal = allocation(Some(Method::Ellipsoidal)).render_settings(&combined);
+        assert_eq!(
+            (
+                ellipsoidal.method,
+                ellipsoidal.connections_per_query,
+                ellipsoidal.ellipsoidal_share,
+                ellipsoidal.query_roulette
+            ),
+            (Method::Ellipsoidal, 4, None, Some(0.125))
+        );
+        assert_eq!(ellipsoidal.seed, combined.seed, "a family alone renders from the render's own seed");
+        for (alone, words) in [
+            (None, "both halves"),
+            (Some(Method::Direct), "direct alone"),
+            (Some(Method::Ellipsoidal), "ellipsoidal alone"),
+        ] {
+            assert_eq!(allocation(alone).renders(), words);
+        }
     }
 
     #[test]

@@ -53,7 +53,10 @@ pub fn render_metadata(
         metadata.push(("debug_strategy".into(), json!([s, t])));
     }
     if let Some(allocation) = &output.allocation {
-        metadata.push(("ellipsoidal_share".into(), allocation.ellipsoidal_share.into()));
+        metadata.push(("combined_renders".into(), allocation.renders().into()));
+        if allocation.alone.is_none() {
+            metadata.push(("ellipsoidal_share".into(), allocation.ellipsoidal_share.into()));
+        }
         metadata.push(("combined_allocation".into(), allocation.reason.clone().into()));
     }
     if let Some(roulette) = &output.roulette {

@@ -325,11 +325,7 @@ pub fn render_resumable(
     };
     let render_settings = match (&choice, &allocation, resume) {
         (Some(c), _, _) => auto::candidate_settings(settings, c.chosen),
-        (None, Some(a), _) => RenderSettings {
-            ellipsoidal_share: Some(a.ellipsoidal_share),
-            query_roulette: Some(a.query_roulette),
-            ..settings.clone()
-        },
+        (None, Some(a), _) => a.render_settings(settings),
         (None, None, Some(state)) if settings.method == Method::Auto => {
             auto::candidate_settings(settings, state.method)
         }
@@ -338,11 +334,13 @@ pub fn render_resumable(
     // ellipsoidal (also as auto's choice): the query roulette, from a pilot with a time budget
     // (counted against it), or from the resumed state; combined: its allocation's.
     let roulette = match resume {
-        _ if allocation.is_some() => allocation.as_ref().map(|a| query_roulette::Choice {
-            probability: a.query_roulette,
-            reason: "the combined render's allocation".into(),
-            pilot_seconds: 0.0,
-        }),
+        _ if allocation.is_some() => {
+            allocation.as_ref().filter(|a| a.alone != Some(Method::Direct)).map(|a| query_roulette::Choice {
+                probability: a.query_roulette,
+                reason: "the combined render's allocation".into(),
+                pilot_seconds: 0.0,
+            })
+        }
         _ if !query_roulette::applies(&render_settings) => None,
         None => Some(query_roulette::choose(ctx, scene, &render_settings, budget)?),
         Some(state) => Some(query_roulette::Choice {
