@@ -82,10 +82,11 @@ pub const PILOT_MAX_SHRINK: u32 = 4;
 /// fewer light paths per sample), so per-sample variances mostly carry over (not where the
 /// radiance varies within a pixel: on the glossy box `path`'s variance per sample is 17x
 /// `direct`'s at 32x32 and 11x at 64x64, docs/methods.md, `auto`); times per sample are
-/// scaled by the pixel count. That scaling overstates both methods' times a little (a small
-/// pass pays the fixed cost of its dispatches and readbacks over fewer paths): on the fence
-/// scene at 32x32 for 64x64, `direct`'s by 1.75x and `ellipsoidal`'s by 1.5x, which matters
-/// only where the two are within about 20 %. Returns (width, height, f).
+/// scaled by the pixel count. A small pass pays the fixed cost of its dispatches over fewer
+/// paths (on the fence scene at 32x32 for 64x64 it overstated `direct`'s time per sample by
+/// 1.75x and `ellipsoidal`'s by 1.5x), so the times are the passes' marginal ones, fitted over
+/// batches of different sizes (`Batches::marginal_seconds_per_sample`). Returns (width,
+/// height, f).
 pub fn pilot_resolution(width: u32, height: u32) -> (u32, u32, u32) {
     let pixels = width as u64 * height as u64;
     let fits = |f: u32| {
@@ -117,6 +118,11 @@ pub struct CandidateFigures {
     pub spp: u64,
     /// Seconds its pilot passes took (film clears and readbacks not counted).
     pub seconds: f64,
+    /// Of `seconds`, what the samples took beyond each pass's fixed cost (dispatches, waits):
+    /// `spp` times [`MARGINAL_SHARE_FLOOR`]..=1 of the mean time per sample (see
+    /// `Batches::marginal_seconds_per_sample`). A render's passes are far larger than the
+    /// pilot's, so this is the time its samples take.
+    pub marginal_seconds: f64,
     /// The render's pixels per pilot pixel (f^2 of [`pilot_resolution`]): a sample per pixel of
     /// the render is this many times the pilot's work.
     pub pixel_ratio: f64,
@@ -129,7 +135,7 @@ impl CandidateFigures {
     /// Seconds per sample per pixel of the render's image (the pilot's, scaled by
     /// `pixel_ratio`).
     pub fn seconds_per_sample(&self) -> f64 {
-        self.seconds / self.spp.max(1) as f64 * self.pixel_ratio
+        self.marginal_seconds / self.spp.max(1) as f64 * self.pixel_ratio
     }
 
     /// Variance x time per sample: the MSE of an image rendered for one second (radiance
@@ -292,6 +298,7 @@ pub(super) fn figures(methods: &[Method], batches: &[Batches], pixel_ratio: f64)
             method,
             spp: p.samples,
             seconds: p.seconds,
+            marginal_seconds: p.marginal_seconds_per_sample() * p.samples as f64,
             pixel_ratio,
             variance_per_sample: v,
         })
@@ -347,6 +354,8 @@ pub(super) struct Batches {
     pub(super) samples: u64,
     /// Seconds of their passes (what the sample rate is measured by).
     pub(super) seconds: f64,
+    /// Per batch: its samples per pixel and the seconds of its pass.
+    passes: Vec<(u32, f64)>,
     /// Seconds of the whole batches: passes, film clears and readbacks (the pilot's cost).
     pub(super) wall_seconds: f64,
     /// Values of an image (pixels x bins x channels).
@@ -381,6 +390,26 @@ impl Batches {
         self.count += 1;
     }
 
+    /// Seconds per sample per pixel of the pilot's image without each pass's fixed cost: the
+    /// slope of a pass's seconds over its samples, fitted by least squares over the batches
+    /// (whose sizes differ, see `pilot_batch`), within [`MARGINAL_SHARE_FLOOR`]..=1 of the mean
+    /// seconds per sample (a pass costs at least its samples); the mean where every batch had
+    /// one size. A pilot's passes of one or two samples on a small image pay the fixed cost of
+    /// a pass's dispatches over few paths: on lavapipe it was most of a `direct` pass on the
+    /// glossy box at 32x32.
+    pub(super) fn marginal_seconds_per_sample(&self) -> f64 {
+        let mean = self.seconds / self.samples.max(1) as f64;
+        let n = self.passes.len() as f64;
+        let k_mean = self.passes.iter().map(|p| p.0 as f64).sum::<f64>() / n;
+        let t_mean = self.passes.iter().map(|p| p.1).sum::<f64>() / n;
+        let spread = self.passes.iter().map(|p| (p.0 as f64 - k_mean).powi(2)).sum::<f64>();
+        if !(spread > 0.0) {
+            return mean;
+        }
+        let slope = self.passes.iter().map(|p| (p.0 as f64 - k_mean) * (p.1 - t_mean)).sum::<f64>() / spread;
+        if slope.is_nan() { mean } else { slope.clamp(MARGINAL_SHARE_FLOOR * mean, mean) }
+    }
+
     /// Values of the image (pixels x bins x channels).
     pub(super) fn values(&self) -> usize {
         self.values
@@ -407,8 +436,14 @@ impl Batches {
 /// of 7 degrees of freedom passes it with probability 1.6 %).
 pub const MISS_FACTOR: f64 = 10.0;
 
+/// The least share of the mean time per sample that the marginal time per sample is taken to
+/// be (dimensionless): a floor against a fit that timing jitter drove to zero.
+pub const MARGINAL_SHARE_FLOOR: f64 = 0.05;
+
 /// Renders the next of a method's [`PILOT_BATCHES`] independent batches on `tracer`, sized to
-/// `budget`, and adds it to `batches`.
+/// `budget`, and adds it to `batches`. With a time budget the first batch has one sample and
+/// the second at least two, so that the batches' sizes differ and the time a sample takes
+/// beyond a pass's fixed cost can be fitted (`Batches::marginal_seconds_per_sample`).
 pub(super) fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, budget: PilotBudget) -> Result<()> {
     let k = match budget {
         PilotBudget::Samples(k) => k,
@@ -417,14 +452,17 @@ pub(super) fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, bu
         PilotBudget::Seconds(total) => {
             let per_sample = batches.seconds / batches.samples as f64;
             let left = (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
-            ((left / per_sample.max(1e-12)) as u32).clamp(1, tracer.samples_per_pass())
+            let k = ((left / per_sample.max(1e-12)) as u32).clamp(1, tracer.samples_per_pass());
+            if batches.count == 1 { k.max(2) } else { k }
         }
     };
     let start = Instant::now();
     tracer.reset_film();
     let pass = Instant::now();
     tracer.render_pass(k)?;
-    batches.seconds += pass.elapsed().as_secs_f64();
+    let seconds = pass.elapsed().as_secs_f64();
+    batches.seconds += seconds;
+    batches.passes.push((k, seconds));
     let film = tracer.film()?;
     let image: Vec<f64> = film.data.iter().map(|&x| x as f64).collect();
     batches.add(k, &image, film.data.len() / (film.width as usize * film.height as usize).max(1));
@@ -488,6 +526,36 @@ fn relative_noise(m: &Batches) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_marginal_time_per_sample_leaves_out_each_passs_fixed_cost() {
+        // Passes of 3 ms plus 1 ms a sample.
+        let timed = |sizes: &[u32]| {
+            let mut b = Batches::default();
+            for &k in sizes {
+                let t = 3e-3 + 1e-3 * k as f64;
+                b.passes.push((k, t));
+                b.seconds += t;
+                b.samples += k as u64;
+            }
+            b
+        };
+        let fitted = timed(&[1, 2, 1, 1, 3, 1, 1, 1]).marginal_seconds_per_sample();
+        assert!((fitted - 1e-3).abs() < 1e-12, "{fitted}");
+        // One size: the mean, fixed cost included.
+        let mean = timed(&[2; 8]).marginal_seconds_per_sample();
+        assert!((mean - 2.5e-3).abs() < 1e-12, "{mean}");
+        // A fit below the floor (jitter) is held at it; above the mean, at the mean.
+        let mut jittered = timed(&[1, 2]);
+        jittered.passes[1].1 = jittered.passes[0].1;
+        jittered.seconds = 2.0 * jittered.passes[0].1;
+        let floor = MARGINAL_SHARE_FLOOR * jittered.seconds / 3.0;
+        assert!((jittered.marginal_seconds_per_sample() - floor).abs() < 1e-15);
+        let mut steep = timed(&[1, 2]);
+        steep.passes[0].1 = 0.0;
+        steep.seconds = steep.passes[1].1;
+        assert!((steep.marginal_seconds_per_sample() - steep.seconds / 3.0).abs() < 1e-15);
+    }
 
     /// The per-sample variances of two pilots.
     fn two_variances(a: &Batches, b: &Batches) -> (f64, f64) {

@@ -224,7 +224,7 @@ pub fn allocate(
     // Each half at each roulette, then each family alone and each half at the chosen split.
     let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone.len() + 2 };
     let per_half = pilot_budget(budget, pixel_ratio, runs);
-    let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
+    let per_sample = |b: &Batches| b.marginal_seconds_per_sample();
     let mut best: Option<(f64, f64, f32)> = None; // (variance x time, split, roulette)
     let mut reason = format!("pilot on {width}x{height}:");
     let mut pilot_seconds = 0.0;
