@@ -407,7 +407,7 @@ impl Batches {
             return mean;
         }
         let slope = self.passes.iter().map(|p| (p.0 as f64 - k_mean) * (p.1 - t_mean)).sum::<f64>() / spread;
-        if slope.is_nan() { mean } else { slope.clamp(MARGINAL_SHARE_FLOOR * mean, mean) }
+        slope.clamp(MARGINAL_SHARE_FLOOR * mean, mean)
     }
 
     /// Values of the image (pixels x bins x channels).

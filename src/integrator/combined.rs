@@ -108,13 +108,6 @@ pub struct Allocation {
 }
 
 impl Allocation {
-    /// The settings of `method` (direct, ellipsoidal, or combined: both halves) for the render
-    /// of `settings` under this allocation's split and roulette.
-    fn render_settings_of(&self, settings: &RenderSettings, method: Method) -> RenderSettings {
-        let alone = if method == Method::Combined { None } else { Some(method) };
-        Allocation { alone, ..self.clone() }.render_settings(settings)
-    }
-
     /// What the render traces, in words (metadata `combined_renders`).
     pub fn renders(&self) -> &'static str {
         match self.alone {
@@ -127,12 +120,18 @@ impl Allocation {
     /// The settings the render of `settings` (method `combined`) runs with under this
     /// allocation: both halves at its split and roulette, or the family alone.
     pub fn render_settings(&self, settings: &RenderSettings) -> RenderSettings {
+        self.settings_with(settings, self.alone)
+    }
+
+    /// The settings of both halves at this allocation's split and roulette (`alone` None), or
+    /// of family `alone` by itself, for the render of `settings`.
+    fn settings_with(&self, settings: &RenderSettings, alone: Option<Method>) -> RenderSettings {
         let both = RenderSettings {
             ellipsoidal_share: Some(self.ellipsoidal_share),
             query_roulette: Some(self.query_roulette),
             ..settings.clone()
         };
-        match self.alone {
+        match alone {
             Some(Method::Direct) => RenderSettings {
                 ellipsoidal_share: None,
                 query_roulette: None,
@@ -275,11 +274,11 @@ pub fn allocate(
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut tracers = Vec::new();
     for &method in &alone {
-        let mut tracer = create_integrator(ctx, scene, &allocation.render_settings_of(&pilot, method))?;
+        let mut tracer = create_integrator(ctx, scene, &allocation.settings_with(&pilot, Some(method)))?;
         tracer.warm_up()?;
         tracers.push(tracer);
     }
-    let mut halves = CombinedTracer::new(ctx, scene, &allocation.render_settings_of(&pilot, Method::Combined))?;
+    let mut halves = CombinedTracer::new(ctx, scene, &allocation.settings_with(&pilot, None))?;
     halves.direct.warm_up()?;
     halves.ellipsoidal.warm_up()?;
     let mut batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
