@@ -178,6 +178,8 @@ pub fn upload_scene(
         ("RESUMABLE", flag(scene.wide.traversals_can_stop())),
         ("TOP_NODES_IN_UNIFORMS", flag(ctx.is_cpu())),
         ("NLOS", flag(settings.nlos.is_some())),
+        ("THIN_LENS", flag(scene.scene.camera.lens_radius() > 0.0)),
+        ("STRATIFIED_TARGETS", flag(params.target_length.strata > 0)),
     ];
     Ok((r, constants, film))
 }

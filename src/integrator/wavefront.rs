@@ -134,7 +134,8 @@ impl<'a> Wavefront<'a> {
 
     /// Moves the render to `gate`, whose target lengths `sampler` draws (see
     /// `integrator::target_sampler`), without rebuilding anything when the kernels'
-    /// specialisation and the buffers' sizes allow it (same gate kind, bins and table length):
+    /// specialisation and the buffers' sizes allow it (same gate kind, bins and table length,
+    /// target lengths stratified or not, STRATIFIED_TARGETS):
     /// rewrites the gate's device data ([`upload_gate`]). Returns false, changing nothing, when
     /// the integrator must be rebuilt. The film is not cleared (see `Integrator::set_gate`).
     pub fn set_gate(&mut self, gate: &Gate, sampler: Option<TargetSampler>) -> Result<bool> {
@@ -146,7 +147,10 @@ impl<'a> Wavefront<'a> {
             return Ok(false);
         }
         let cdf = target_cdf(sampler.as_ref());
-        if storage_init_bytes(&cdf) != self.resources.get("target_cdf").unwrap().size() {
+        let stratified = sampler.as_ref().is_some_and(|t| t.params.strata > 0);
+        if storage_init_bytes(&cdf) != self.resources.get("target_cdf").unwrap().size()
+            || stratified != (self.params.target_length.strata > 0)
+        {
             return Ok(false);
         }
         self.params.gate = new;

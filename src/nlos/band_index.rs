@@ -185,8 +185,6 @@ pub struct BandIndex {
     clusters: usize,
     /// Why the capture goes without the index, found before building it.
     refused: Option<String>,
-    /// band_ranges holds every pixel's clusters' index bins (else the fill pass recomputes them).
-    ranges: bool,
 }
 
 /// (first cluster, clusters, first index bin, end of index bins) of each dispatch of a pass.
@@ -211,6 +209,8 @@ impl BandIndex {
         r.storage_zeroed(ctx, "band_cursors", cells * 4, wgpu::BufferUsages::empty())?;
         r.storage_zeroed(ctx, "band_sums", cells * 4, wgpu::BufferUsages::empty())?;
         let range_bytes = params.width as u64 * params.height as u64 * clusters.len() as u64 * 4;
+        // band_ranges holds every pixel's clusters' index bins where it fits (BAND_RANGES; else
+        // the fill pass works them out again).
         let ranges = params.target_length.strata <= u16::MAX as u32 && range_bytes <= limit;
         if ranges {
             r.storage_zeroed(ctx, "band_ranges", range_bytes, wgpu::BufferUsages::empty())?;
@@ -221,13 +221,13 @@ impl BandIndex {
         let costs = clusters.iter().map(|c| cluster_cost(&scene.bvh.nodes, &scene.triangles, c, width)).collect();
         let mut constants = constants.to_vec();
         constants.push(("BAND_INDEX", 1.0));
+        constants.push(("BAND_RANGES", ranges as u32 as f64));
         Ok(Self {
             count: Kernel::new(ctx, "count_band_entries", None, &constants),
             fill: Kernel::new(ctx, "fill_band_entries", None, &constants),
             costs,
             clusters: clusters.len(),
             refused,
-            ranges,
         })
     }
 
@@ -322,7 +322,7 @@ impl BandIndex {
                 .iter()
                 .map(|&[first, count, lo, hi]| {
                     let mut batch = r.clone();
-                    batch.uniform_init(ctx, "band_build", &[[first, count, self.ranges as u32, 0], [lo, hi, ratio, 0]]);
+                    batch.uniform_init(ctx, "band_build", &[[first, count, 0, 0], [lo, hi, ratio, 0]]);
                     kernel.bind(ctx, &batch)
                 })
                 .collect();
