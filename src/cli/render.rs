@@ -484,10 +484,13 @@ fn render_one(
         ),
     )?;
     if let Some(choice) = &output.choice {
-        say(bars, format!("auto chose {}: {}", choice.chosen.name(), choice.reason))?;
+        say(
+            bars,
+            format!("auto chose {} (pilot {:.2} s): {}", choice.chosen.name(), choice.pilot_seconds, choice.reason),
+        )?;
     }
     if let Some(allocation) = &output.allocation {
-        say(bars, format!("combined: {}", allocation.reason))?;
+        say(bars, format!("combined (pilot {:.2} s): {}", allocation.pilot_seconds, allocation.reason))?;
     }
     if let Some(roulette) = output.roulette.as_ref().filter(|r| r.pilot_seconds > 0.0) {
         say(bars, format!("query roulette: {}", roulette.reason))?;

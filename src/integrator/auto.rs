@@ -82,11 +82,7 @@ pub const PILOT_MAX_SHRINK: u32 = 4;
 /// fewer light paths per sample), so per-sample variances mostly carry over (not where the
 /// radiance varies within a pixel: on the glossy box `path`'s variance per sample is 17x
 /// `direct`'s at 32x32 and 11x at 64x64, docs/methods.md, `auto`); times per sample are
-/// scaled by the pixel count. A small pass pays the fixed cost of its dispatches over fewer
-/// paths (on the fence scene at 32x32 for 64x64 it overstated `direct`'s time per sample by
-/// 1.75x and `ellipsoidal`'s by 1.5x), so the times are the passes' marginal ones, fitted over
-/// batches of different sizes (`Batches::marginal_seconds_per_sample`). Returns (width,
-/// height, f).
+/// scaled by the pixel count (`Batches::seconds_per_sample`). Returns (width, height, f).
 pub fn pilot_resolution(width: u32, height: u32) -> (u32, u32, u32) {
     let pixels = width as u64 * height as u64;
     let fits = |f: u32| {
@@ -118,11 +114,9 @@ pub struct CandidateFigures {
     pub spp: u64,
     /// Seconds its pilot passes took (film clears and readbacks not counted).
     pub seconds: f64,
-    /// Of `seconds`, what the samples took beyond each pass's fixed cost (dispatches, waits):
-    /// `spp` times [`MARGINAL_SHARE_FLOOR`]..=1 of the mean time per sample (see
-    /// `Batches::marginal_seconds_per_sample`). A render's passes are far larger than the
-    /// pilot's, so this is the time its samples take.
-    pub marginal_seconds: f64,
+    /// Seconds per sample per pixel of the pilot's image, without each pass's fixed cost (see
+    /// `Batches::seconds_per_sample`).
+    pub pilot_seconds_per_sample: f64,
     /// The render's pixels per pilot pixel (f^2 of [`pilot_resolution`]): a sample per pixel of
     /// the render is this many times the pilot's work.
     pub pixel_ratio: f64,
@@ -135,7 +129,7 @@ impl CandidateFigures {
     /// Seconds per sample per pixel of the render's image (the pilot's, scaled by
     /// `pixel_ratio`).
     pub fn seconds_per_sample(&self) -> f64 {
-        self.marginal_seconds / self.spp.max(1) as f64 * self.pixel_ratio
+        self.pilot_seconds_per_sample * self.pixel_ratio
     }
 
     /// Variance x time per sample: the MSE of an image rendered for one second (radiance
@@ -250,7 +244,7 @@ pub fn choose(
     let mut early = false;
     for j in 1..=PILOT_BATCHES {
         for (tracer, b) in tracers.iter_mut().zip(&mut batches) {
-            pilot_batch(tracer.as_mut(), b, per_method)?;
+            pilot_batch(tracer.as_mut(), b, per_method, 1)?;
         }
         if j == EARLY_STOP_BATCHES && compare(&methods, &batches, pixel_ratio).2 >= EARLY_STOP_RATIO {
             early = true;
@@ -298,7 +292,7 @@ pub(super) fn figures(methods: &[Method], batches: &[Batches], pixel_ratio: f64)
             method,
             spp: p.samples,
             seconds: p.seconds,
-            marginal_seconds: p.marginal_seconds_per_sample() * p.samples as f64,
+            pilot_seconds_per_sample: p.seconds_per_sample(),
             pixel_ratio,
             variance_per_sample: v,
         })
@@ -390,29 +384,30 @@ impl Batches {
         self.count += 1;
     }
 
-    /// Seconds per sample per pixel of the pilot's image without each pass's fixed cost: the
-    /// slope of a pass's seconds over its samples, fitted by least squares over the batches
-    /// (whose sizes differ, see `pilot_batch`), within [`MARGINAL_SHARE_FLOOR`]..=1 of the mean
-    /// seconds per sample (a pass costs at least its samples); the mean where every batch had
-    /// one size. A pilot's passes of one or two samples on a small image pay the fixed cost of
-    /// a pass's dispatches over few paths: on lavapipe it was most of a `direct` pass on the
-    /// glossy box at 32x32.
-    pub(super) fn marginal_seconds_per_sample(&self) -> f64 {
+    /// Seconds per sample per pixel of the pilot's image without each pass's fixed cost
+    /// (dispatches and waits, which a render's larger passes spread thinner): the median of the
+    /// slopes of a pass's seconds over its samples between every two batches of different
+    /// sizes (Theil-Sen; `pilot_batch` alternates sizes), within [`MARGINAL_SHARE_FLOOR`]..=1
+    /// of the mean seconds per sample (a pass costs at least its samples); the mean where every
+    /// batch had one size. A pass's time varies by tens of per cent from pass to pass (the first
+    /// passes of a new tracer are the slowest), which a least-squares fit over so few batches
+    /// follows and the median of slopes does not. The fixed cost matters most for the cheapest
+    /// method: on the fence at 1 ns `path`'s one-sample passes at 32x32 took about twice its
+    /// time per sample.
+    pub(super) fn seconds_per_sample(&self) -> f64 {
         let mean = self.seconds / self.samples.max(1) as f64;
-        let n = self.passes.len() as f64;
-        let k_mean = self.passes.iter().map(|p| p.0 as f64).sum::<f64>() / n;
-        let t_mean = self.passes.iter().map(|p| p.1).sum::<f64>() / n;
-        let spread = self.passes.iter().map(|p| (p.0 as f64 - k_mean).powi(2)).sum::<f64>();
-        if !(spread > 0.0) {
+        let mut slopes = Vec::new();
+        for (i, &(k_i, t_i)) in self.passes.iter().enumerate() {
+            for &(k_j, t_j) in &self.passes[i + 1..] {
+                if k_i != k_j {
+                    slopes.push((t_j - t_i) / (k_j as f64 - k_i as f64));
+                }
+            }
+        }
+        if slopes.is_empty() {
             return mean;
         }
-        let slope = self.passes.iter().map(|p| (p.0 as f64 - k_mean) * (p.1 - t_mean)).sum::<f64>() / spread;
-        slope.clamp(MARGINAL_SHARE_FLOOR * mean, mean)
-    }
-
-    /// Values of the image (pixels x bins x channels).
-    pub(super) fn values(&self) -> usize {
-        self.values
+        median(slopes).clamp(MARGINAL_SHARE_FLOOR * mean, mean)
     }
 
     /// The per-sample variance summed over the values: the median of the pairs' estimates
@@ -421,41 +416,57 @@ impl Batches {
     /// the pilot's samples shows at its true rate, not at the one in a few hundred it was drawn
     /// with) from deciding the choice, where the mean of the pairs would follow it.
     pub(super) fn variance(&self) -> f64 {
-        let mut v = self.pair_variances.clone();
-        v.sort_by(f64::total_cmp);
-        match v.len() {
-            0 => 0.0,
-            n if n % 2 == 1 => v[n / 2],
-            n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-        }
+        median(self.pair_variances.clone())
     }
 }
+
+/// The median of `values` (the mean of the middle two for an even count; 0 for none).
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    match values.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => values[n / 2],
+        n => 0.5 * (values[n / 2 - 1] + values[n / 2]),
+    }
+}
+
+/// The least share of the mean time per sample that a sample's time is taken to be
+/// (dimensionless): a floor against a fit that timing jitter drove to zero.
+pub const MARGINAL_SHARE_FLOOR: f64 = 0.05;
 
 /// A group's means differ beyond noise where their squared difference exceeds MISS_FACTOR times
 /// its expectation under fair sampling (|t| > 3.2: with variances from 8 batches, Student's t
 /// of 7 degrees of freedom passes it with probability 1.6 %).
 pub const MISS_FACTOR: f64 = 10.0;
 
-/// The least share of the mean time per sample that the marginal time per sample is taken to
-/// be (dimensionless): a floor against a fit that timing jitter drove to zero.
-pub const MARGINAL_SHARE_FLOOR: f64 = 0.05;
-
 /// Renders the next of a method's [`PILOT_BATCHES`] independent batches on `tracer`, sized to
-/// `budget`, and adds it to `batches`. With a time budget the first batch has one sample and
-/// the second at least two, so that the batches' sizes differ and the time a sample takes
-/// beyond a pass's fixed cost can be fitted (`Batches::marginal_seconds_per_sample`).
-pub(super) fn pilot_batch(tracer: &mut dyn Integrator, batches: &mut Batches, budget: PilotBudget) -> Result<()> {
+/// `budget` in multiples of `unit` samples per pixel (as far as a pass holds them), and adds it
+/// to `batches`. With a time budget the first batch has one unit and the others spread the
+/// time left over the batches left, alternately 2/3 and 4/3 of an equal share (odd batches at
+/// least two units), so that the batches' sizes differ and the time a sample takes beyond a
+/// pass's fixed cost can be fitted (`Batches::seconds_per_sample`). A unit above one keeps the
+/// ratio of a combined render's halves in every batch (the other half traces at least one
+/// sample a pass).
+pub(super) fn pilot_batch(
+    tracer: &mut dyn Integrator,
+    batches: &mut Batches,
+    budget: PilotBudget,
+    unit: u32,
+) -> Result<()> {
+    let unit = unit.clamp(1, tracer.samples_per_pass().max(1));
     let k = match budget {
-        PilotBudget::Samples(k) => k,
-        // First one sample, then what spreads the time left over the batches left.
-        PilotBudget::Seconds(_) if batches.count == 0 => 1,
+        PilotBudget::Samples(k) => k.div_ceil(unit) * unit,
+        PilotBudget::Seconds(_) if batches.count == 0 => unit,
         PilotBudget::Seconds(total) => {
             let per_sample = batches.seconds / batches.samples as f64;
             let left = (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
-            let k = ((left / per_sample.max(1e-12)) as u32).clamp(1, tracer.samples_per_pass());
-            if batches.count == 1 { k.max(2) } else { k }
+            let odd = batches.count % 2 == 1;
+            let share = left / per_sample.max(1e-12) * if odd { 4.0 / 3.0 } else { 2.0 / 3.0 };
+            let k = (share as u32).div_ceil(unit) * unit;
+            if odd { k.max(2 * unit) } else { k }
         }
     };
+    let k = k.min(tracer.samples_per_pass() / unit * unit).max(unit);
     let start = Instant::now();
     tracer.reset_film();
     let pass = Instant::now();
@@ -528,33 +539,31 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_marginal_time_per_sample_leaves_out_each_passs_fixed_cost() {
-        // Passes of 3 ms plus 1 ms a sample.
-        let timed = |sizes: &[u32]| {
-            let mut b = Batches::default();
-            for &k in sizes {
-                let t = 3e-3 + 1e-3 * k as f64;
-                b.passes.push((k, t));
-                b.seconds += t;
-                b.samples += k as u64;
-            }
+    fn a_samples_time_leaves_out_each_passs_fixed_cost() {
+        // Passes of 3 ms plus 1 ms a sample, alternating sizes.
+        let timed = |passes: &[(u32, f64)]| {
+            let mut b = Batches { passes: passes.to_vec(), ..Batches::default() };
+            b.seconds = passes.iter().map(|p| p.1).sum();
+            b.samples = passes.iter().map(|p| p.0 as u64).sum();
             b
         };
-        let fitted = timed(&[1, 2, 1, 1, 3, 1, 1, 1]).marginal_seconds_per_sample();
-        assert!((fitted - 1e-3).abs() < 1e-12, "{fitted}");
+        let pass = |k: u32| (k, 3e-3 + 1e-3 * k as f64);
+        let fitted = timed(&[pass(1), pass(2), pass(1), pass(3), pass(2), pass(4), pass(2), pass(4)]);
+        assert!((fitted.seconds_per_sample() - 1e-3).abs() < 1e-12, "{}", fitted.seconds_per_sample());
+        // A slow first pass (a new tracer) and one stalled pass do not move it.
+        let mut slow = fitted.passes.clone();
+        slow[0].1 *= 3.0;
+        slow[5].1 *= 5.0;
+        let slow = timed(&slow);
+        assert!((slow.seconds_per_sample() - 1e-3).abs() < 1e-12, "{}", slow.seconds_per_sample());
         // One size: the mean, fixed cost included.
-        let mean = timed(&[2; 8]).marginal_seconds_per_sample();
+        let mean = timed(&[pass(2); 8]).seconds_per_sample();
         assert!((mean - 2.5e-3).abs() < 1e-12, "{mean}");
         // A fit below the floor (jitter) is held at it; above the mean, at the mean.
-        let mut jittered = timed(&[1, 2]);
-        jittered.passes[1].1 = jittered.passes[0].1;
-        jittered.seconds = 2.0 * jittered.passes[0].1;
-        let floor = MARGINAL_SHARE_FLOOR * jittered.seconds / 3.0;
-        assert!((jittered.marginal_seconds_per_sample() - floor).abs() < 1e-15);
-        let mut steep = timed(&[1, 2]);
-        steep.passes[0].1 = 0.0;
-        steep.seconds = steep.passes[1].1;
-        assert!((steep.marginal_seconds_per_sample() - steep.seconds / 3.0).abs() < 1e-15);
+        let flat = timed(&[(1, 4e-3), (2, 4e-3)]);
+        assert!((flat.seconds_per_sample() - MARGINAL_SHARE_FLOOR * 8e-3 / 3.0).abs() < 1e-15);
+        let steep = timed(&[(1, 0.0), (2, 5e-3)]);
+        assert!((steep.seconds_per_sample() - 5e-3 / 3.0).abs() < 1e-15);
     }
 
     /// The per-sample variances of two pilots.

@@ -220,10 +220,10 @@ pub fn allocate(
     let (width, height, _) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let alone = alone_candidates(settings, scene);
-    // Each half at each roulette, then each family alone and each half at the chosen split.
-    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone.len() + 2 };
-    let per_half = pilot_budget(budget, pixel_ratio, runs);
-    let per_sample = |b: &Batches| b.marginal_seconds_per_sample();
+    // Each half at each roulette, then each family alone and both halves at the chosen split.
+    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone.len() + 1 };
+    let per_run = pilot_budget(budget, pixel_ratio, runs);
+    let per_sample = |b: &Batches| b.seconds_per_sample();
     let mut best: Option<(f64, f64, f32)> = None; // (variance x time, split, roulette)
     let mut reason = format!("pilot on {width}x{height}:");
     let mut pilot_seconds = 0.0;
@@ -241,8 +241,8 @@ pub fn allocate(
         tracer.ellipsoidal.warm_up()?;
         let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
         for _ in 0..PILOT_BATCHES {
-            pilot_batch(&mut tracer.direct, &mut direct, per_half)?;
-            pilot_batch(&mut tracer.ellipsoidal, &mut ellipsoidal, per_half)?;
+            pilot_batch(&mut tracer.direct, &mut direct, per_run, 1)?;
+            pilot_batch(&mut tracer.ellipsoidal, &mut ellipsoidal, per_run, 1)?;
         }
         pilot_seconds += direct.wall_seconds + ellipsoidal.wall_seconds;
         let (v_d, c_d, v_e, c_e) =
@@ -266,56 +266,45 @@ pub fn allocate(
     if alone.is_empty() {
         return Ok(allocation);
     }
-    // Each family alone (its images weighed against each other's as `auto` weighs methods: a
-    // pilot that missed the gate's rare paths is charged for them) against both halves at that
-    // split, each half measured with the weights of the split (they move with it) and their
-    // error at it predicted as above. Where a family alone is ahead the family weights' cost
-    // buys nothing.
+    // Each family alone and both halves at that split, rendered as the render would (each pass
+    // the halves' samples in its ratio, their films summed), weighed against each other as
+    // `auto` weighs methods: medians of the batch pairs, and a pilot that missed what another
+    // found (a gate's rare paths, the tail of a heavy-tailed half) charged for it. Where a family
+    // alone is ahead the family weights' cost buys nothing.
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut tracers = Vec::new();
     for &method in &alone {
         let mut tracer = create_integrator(ctx, scene, &allocation.settings_with(&pilot, Some(method)))?;
         tracer.warm_up()?;
-        tracers.push(tracer);
+        tracers.push((tracer, 1));
     }
     let mut halves = CombinedTracer::new(ctx, scene, &allocation.settings_with(&pilot, None))?;
     halves.direct.warm_up()?;
     halves.ellipsoidal.warm_up()?;
-    let mut batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
-    let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
+    tracers.push((Box::new(halves), samples_per_other_sample(share)));
+    let mut batches: Vec<Batches> = tracers.iter().map(|_| Batches::default()).collect();
     for _ in 0..PILOT_BATCHES {
-        for (tracer, b) in tracers.iter_mut().zip(&mut batches) {
-            pilot_batch(tracer.as_mut(), b, per_half)?;
+        for ((tracer, unit), b) in tracers.iter_mut().zip(&mut batches) {
+            pilot_batch(tracer.as_mut(), b, per_run, *unit)?;
         }
-        pilot_batch(&mut halves.direct, &mut direct, per_half)?;
-        pilot_batch(&mut halves.ellipsoidal, &mut ellipsoidal, per_half)?;
     }
-    allocation.pilot_seconds += batches.iter().chain([&direct, &ellipsoidal]).map(|b| b.wall_seconds).sum::<f64>();
-    // In `auto`'s units: variance per sample and value, seconds per sample of the render's image.
-    let per_value = |b: &Batches| b.variance() / b.values().max(1) as f64;
-    let both = equal_time_error(
-        per_value(&direct),
-        per_sample(&direct) * pixel_ratio,
-        per_value(&ellipsoidal),
-        per_sample(&ellipsoidal) * pixel_ratio,
-        share,
-    );
-    let candidates = figures(&alone, &batches, pixel_ratio);
-    let mut words: Vec<String> = candidates
+    allocation.pilot_seconds += batches.iter().map(|b| b.wall_seconds).sum::<f64>();
+    let methods: Vec<Method> = alone.iter().copied().chain([Method::Combined]).collect();
+    let candidates = figures(&methods, &batches, pixel_ratio);
+    let words: Vec<String> = candidates
         .iter()
         .map(|c| {
+            let name = if c.method == Method::Combined { "both halves" } else { c.method.name() };
             format!(
-                "{:.3e} ({}: variance per sample {:.3e}, seconds per sample {:.3e})",
+                "{:.3e} ({name}: variance per sample {:.3e}, seconds per sample {:.3e})",
                 c.cost(),
-                c.method.name(),
                 c.variance_per_sample,
                 c.seconds_per_sample()
             )
         })
         .collect();
-    words.push(format!("{both:.3e} (both halves)"));
-    let ahead = candidates.iter().filter(|c| c.cost() < both).min_by(|a, b| a.cost().total_cmp(&b.cost()));
-    allocation.alone = ahead.map(|c| c.method);
+    let ahead = candidates.iter().min_by(|a, b| a.cost().total_cmp(&b.cost())).map(|c| c.method);
+    allocation.alone = ahead.filter(|&m| m != Method::Combined);
     let _ = write!(
         allocation.reason,
         "; then at that split, variance x time per sample {}: {}",
@@ -323,6 +312,13 @@ pub fn allocate(
         allocation.renders()
     );
     Ok(allocation)
+}
+
+/// Samples per pixel of a combined render's leading half (see `CombinedTracer::halves`) for
+/// each of the other half's at `share` ellipsoidal samples per direct one, rounded: a pilot's
+/// batches hold multiples of it, so each has the halves in about the render's ratio.
+fn samples_per_other_sample(share: f64) -> u32 {
+    share.max(1.0 / share).round().max(1.0) as u32
 }
 
 /// The two halves of a combined render, and the ellipsoidal half's samples per direct one.

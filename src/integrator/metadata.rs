@@ -73,7 +73,7 @@ pub fn render_metadata(
                     "spp": c.spp,
                     "resolution": [choice.pilot_resolution.0, choice.pilot_resolution.1],
                     "seconds": c.seconds,
-                    "marginal_seconds": c.marginal_seconds,
+                    "seconds_per_sample": c.pilot_seconds_per_sample,
                     "variance_per_sample": c.variance_per_sample,
                     "variance_seconds_per_sample": c.cost(),
                 }),

@@ -129,12 +129,12 @@ pub fn choose(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
     all.warm_up()?;
     trial.warm_up()?;
     let (mut b_all, mut b_trial) = (Batches::default(), Batches::default());
-    let per_sample = |b: &Batches| b.seconds / b.samples.max(1) as f64;
+    let per_sample = |b: &Batches| b.seconds_per_sample();
     let figures = |a: &Batches, t: &Batches| (a.variance(), per_sample(a), t.variance(), per_sample(t));
     let mut batches = 0;
     while batches < PILOT_BATCHES {
-        pilot_batch(all.as_mut(), &mut b_all, per_probability)?;
-        pilot_batch(trial.as_mut(), &mut b_trial, per_probability)?;
+        pilot_batch(all.as_mut(), &mut b_all, per_probability, 1)?;
+        pilot_batch(trial.as_mut(), &mut b_trial, per_probability, 1)?;
         batches += 1;
         if batches == EARLY_STOP_BATCHES {
             let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &b_trial);
