@@ -199,7 +199,10 @@ fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
 /// time per sample, [`ellipsoidal_share`] splits the samples, and the roulette of the least
 /// [`equal_time_error`] at its split wins. The weights of both halves change with the roulette
 /// (multi-bounce paths go to the direct half as its queries grow rare), so each candidate is
-/// measured as it renders. With a time budget the pilot spends about `auto::PILOT_SHARE` of it.
+/// measured as it renders. Unless the split is given, each family alone and both halves at the
+/// chosen split then render batches of their own and the least variance x time per sample
+/// decides what the render traces ([`Allocation::alone`]). With a time budget the pilot spends
+/// about `auto::PILOT_SHARE` of it.
 pub fn allocate(
     ctx: &GpuContext,
     scene: &PreparedScene,
