@@ -27,10 +27,10 @@ use std::fmt::Write as _;
 use anyhow::{Result, bail, ensure};
 
 use super::auto::{
-    Batches, PILOT_BATCHES, candidate_methods, candidate_settings, figures, pilot_batch, pilot_budget,
-    pilot_resolution, pilot_seed,
+    PILOT_BATCHES, candidate_methods, candidate_settings, figures, pilot_budget, pilot_resolution, pilot_seed,
 };
 pub use super::bidirectional::{Family, FamilyRole};
+use super::pilot::{Batches, pilot_batch};
 use super::{
     BidirectionalTracer, Budget, Integrator, Method, RenderSettings, Wavefront, checkpoint, create_integrator,
     query_roulette,

@@ -14,6 +14,7 @@ pub mod combined;
 pub mod metadata;
 pub mod mis;
 pub mod path;
+pub mod pilot;
 pub mod query_roulette;
 pub mod render_loop;
 pub mod settings;

@@ -27,9 +27,8 @@ use std::fmt::Write as _;
 
 use anyhow::Result;
 
-use super::auto::{
-    Batches, EARLY_STOP_BATCHES, PILOT_BATCHES, pilot_batch, pilot_budget, pilot_resolution, pilot_seed,
-};
+use super::auto::{EARLY_STOP_BATCHES, PILOT_BATCHES, pilot_budget, pilot_resolution, pilot_seed};
+use super::pilot::{Batches, pilot_batch};
 use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
