@@ -708,6 +708,47 @@ fn connection_settings(gate: &str, method: Method, seed: u32) -> RenderSettings 
     }
 }
 
+/// `auto` leaves `path` out where a point or spot light stands in a scattering medium (its
+/// next-event estimates from vertices next to the light have infinite variance): behind a gate
+/// it weighs `direct` and `ellipsoidal`, and in the steady state it renders `direct` without a
+/// pilot. A spot outside the fog, an area light in fog and a fog that absorbs only keep `path`.
+#[test]
+fn auto_leaves_out_path_where_a_delta_light_stands_in_fog() {
+    let gated = connection_settings("box:2.6..2.62", Method::Auto, 0);
+    let steady = connection_settings("none", Method::Auto, 0);
+    let candidates = |settings: &RenderSettings, scene| gatetrace::integrator::auto::candidate_methods(settings, scene);
+    let spot_in_fog = fogged_box_in("spot_in_fog", FOG_SPOT, "1.5,0.8,0.6", false);
+    assert!(spot_in_fog.scene.has_delta_light_in_scattering_medium());
+    assert_eq!(candidates(&gated, &spot_in_fog), vec![Method::Direct, Method::Ellipsoidal]);
+    assert_eq!(candidates(&steady, &spot_in_fog), vec![Method::Direct]);
+    let road = load_scene_with(&common::repo_path("assets/scenes/fog_road.xml"), &LoadOptions::default()).unwrap();
+    assert!(road.has_delta_light_in_scattering_medium(), "fog_road.xml's flash stands in its fog");
+
+    // The spot outside the fog's cube; an area light in fog; fog that scatters nothing.
+    let spot_outside = fog_box("spot_outside_fog", CONNECTED_FOG, &[], FOG_SPOT);
+    let area_in_fog = fogged_box("area_light_in_fog", "");
+    let absorbing = fogged_box_in("spot_in_absorbing_fog", FOG_SPOT, "1.5,0", false);
+    for (scene, name) in [
+        (&spot_outside, "a spot outside the fog"),
+        (&area_in_fog, "an area light in fog"),
+        (&absorbing, "a spot in fog of albedo 0"),
+    ] {
+        assert!(!scene.scene.has_delta_light_in_scattering_medium(), "{name}");
+        assert_eq!(candidates(&gated, scene), vec![Method::Path, Method::Direct, Method::Ellipsoidal], "{name}");
+        assert_eq!(candidates(&steady, scene), vec![Method::Path, Method::Direct], "{name}");
+    }
+
+    let ctx = common::gpu();
+    let settings = RenderSettings { seed: 7, ..steady };
+    let output =
+        gatetrace::integrator::render(&ctx, &spot_in_fog, &settings, gatetrace::integrator::Budget::Samples(2), |_| {})
+            .unwrap();
+    let choice = output.choice.unwrap();
+    assert_eq!((choice.chosen, choice.pilot_seconds), (Method::Direct, 0.0), "{choice:?}");
+    assert!(choice.reason.contains("infinite variance"), "{}", choice.reason);
+    assert_eq!(output.film.spp, 2);
+}
+
 /// Forward-scattering fog for the medium connections' tests, and a spot light within the box
 /// (a delta light, which only next-event estimation and medium connections reach).
 const CONNECTED_FOG: &str = r#"<medium type="homogeneous" name="interior">

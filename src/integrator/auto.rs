@@ -7,7 +7,9 @@
 //! Why a pilot and not a rule of gate width: where one method wins depends on the gate's width
 //! against the scene's size, on where the gate sits in the scene's path lengths, on the
 //! geometry the ellipsoid queries cross (their cost) and on the image; a measurement on the
-//! render itself sees all of it. The pilot costs [`PILOT_SHARE`] of a time budget, and renders
+//! render itself sees all of it. One fact no pilot can measure is a rule: where a point or spot
+//! light stands in a scattering medium `path` has infinite variance, and it is not a candidate
+//! ([`candidate_methods`]). The pilot costs [`PILOT_SHARE`] of a time budget, and renders
 //! the camera's image at a lower resolution ([`pilot_resolution`]) so that its floor of a few
 //! one-sample batches stays small beside a short budget on a slow scene. It runs from a seed of
 //! its own ([`pilot_seed`]); the render then starts afresh from the user's seed, so an `auto`
@@ -165,7 +167,12 @@ pub fn candidate_settings(settings: &RenderSettings, method: Method) -> RenderSe
 /// smooth or rough, `ellipsoidal` is left out (alone it cannot sample the paths through glass,
 /// nor place a vertex on rough glass); a scene with media weighs the bidirectional methods only
 /// where they render it (see `bidirectional::check_media`), and an NLOS capture of glass takes
-/// `path` alone, which only it renders.
+/// `path` alone, which only it renders. Where a point or spot light stands in a scattering
+/// medium, `path`'s estimator has infinite variance ([`Scene::has_delta_light_in_scattering_medium`]):
+/// a pilot cannot measure that (it rarely draws the vertices next to the light that ruin a
+/// render), so `path` is left out wherever `direct` renders the scene.
+///
+/// [`Scene::has_delta_light_in_scattering_medium`]: crate::scene::Scene::has_delta_light_in_scattering_medium
 pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Vec<Method> {
     let glass = scene.has_dielectric() || scene.has_rough_dielectric();
     if glass && settings.nlos.is_some() {
@@ -179,6 +186,9 @@ pub fn candidate_methods(settings: &RenderSettings, scene: &PreparedScene) -> Ve
         return vec![Method::Path];
     }
     let mut methods = vec![Method::Path, Method::Direct];
+    if scene.scene.has_delta_light_in_scattering_medium() {
+        methods.remove(0);
+    }
     if !matches!(settings.gate, Gate::None) && !glass && renders_media(Method::Ellipsoidal) {
         methods.push(Method::Ellipsoidal);
     }
@@ -221,8 +231,12 @@ pub fn choose(
             candidates: Vec::new(),
             pilot_resolution: (0, 0),
             reason: format!(
-                "{} is the only method that renders this scene (an NLOS capture of glass, or participating media that `direct` does not render yet): no pilot",
-                only.name()
+                "{}: no pilot",
+                if only == Method::Path {
+                    "path is the only method that renders this scene (an NLOS capture of glass, or participating media that `direct` does not render yet)"
+                } else {
+                    "direct is the only candidate: a point or spot light in a scattering medium gives path infinite variance, and ellipsoidal needs a gate and a scene without glass"
+                }
             ),
             pilot_seconds: 0.0,
         });

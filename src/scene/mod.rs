@@ -377,6 +377,27 @@ impl Scene {
         !self.media.is_empty()
     }
 
+    /// True where a point or spot light stands inside a medium that scatters there (extinction
+    /// and albedo above zero at its position). Next-event estimation alone reaches a delta light
+    /// from the medium's vertices: an estimate weighs 1/d^2 at a vertex d (m) from the light, and
+    /// such vertices have a density of order d^2 dd, so the estimates' second moment, of order
+    /// the integral of d^-2 dd, diverges at the light. `path`'s estimator then has infinite
+    /// variance (its rare vertices next to the light ruin the images they land in), where the
+    /// bidirectional methods' light subpaths, which start at the light and scatter in the
+    /// medium, carry those paths with finite variance (their MIS weights fall as d^4 on the
+    /// next-event strategy). Area lights are reached by phase sampling too, whose MIS keeps
+    /// `path`'s variance finite.
+    pub fn has_delta_light_in_scattering_medium(&self) -> bool {
+        self.point_lights.iter().any(|l| {
+            medium::medium_at(self, l.position).is_some_and(|m| {
+                let m = &self.media[m as usize];
+                let share = m.grid.as_ref().map_or(1.0, |g| g.share(l.position));
+                let albedo = m.grid.as_ref().and_then(|g| g.albedo_at(l.position)).unwrap_or(Vec3::ONE) * m.albedo;
+                m.sigma_t * share > 0.0 && albedo.max_element() > 0.0
+            })
+        })
+    }
+
     /// Fills all space with `fog` (the camera's medium, which no surface of a scene without
     /// media changes: every ray travels in it). A scene with media of its own is refused.
     pub fn add_fog(&mut self, fog: MediumDesc) -> anyhow::Result<()> {
