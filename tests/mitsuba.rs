@@ -435,6 +435,65 @@ fn fog_agrees_with_mitransient_with_path() {
     );
 }
 
+/// A slab of fog in front of a diffuse target (`assets/scenes/fog_slab.xml`: fog of extinction
+/// 0.6 m^-1 and optical depth 1.08 between the camera and a grey wall 3 m away, lit by a small
+/// area light beside the camera) agrees with mitransient's `transient_prbvolpath` rendering the
+/// same file, with `path`, `direct` and `ellipsoidal`: as a transient cube (the image mean of
+/// each of its 10 bins of 0.5 m and each channel), and behind the gate on the wall's return,
+/// `box:6.0..6.5`, which is the peer's bin 8 (its channel means and 8x8-pixel blocks). The
+/// return (6.01 to 6.41 m) lies within one bin: the peer's paths come out shorter by its offset
+/// ray origins at each crossing of the fog's `null` faces, and with bins of 0.2 m the edge at
+/// 6.2 m moved 0.25 % of that bin's light (tests/data/fog_slab_peer/README.md).
+#[test]
+fn a_fog_slab_before_a_target_agrees_with_mitransient_as_a_transient_and_behind_a_gate() {
+    let ctx = common::gpu();
+    let scene = load_scene_with(&common::repo_path("assets/scenes/fog_slab.xml"), &LoadOptions::default()).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!((scene.settings.max_bounces, scene.media.len()), (Some(5), 1));
+    let scene = PreparedScene::new(scene).unwrap();
+    let (bins, gate_bin) = (10, 8);
+    let (shape, peer_mean) = common::reference("fog_slab_peer/transient_16x16_mean.npy");
+    let (_, peer_var) = common::reference("fog_slab_peer/transient_16x16_var.npy");
+    assert_eq!(shape, [16, 16, bins, 3]);
+    // The peer's bin 8 as an image: pixel p, channel c at ((p * bins) + 8) * 3 + c.
+    let bin = |values: &[f32]| -> Vec<f32> {
+        (0..16 * 16 * 3).map(|i| values[((i / 3) * bins + gate_bin) * 3 + i % 3]).collect()
+    };
+    let (gate_mean, gate_var) = (bin(&peer_mean), bin(&peer_var));
+    let transient = RenderSettings {
+        width: 16,
+        height: 16,
+        max_bounces: 5,
+        gate: Gate::parse("transient:2,0.5,10").unwrap(),
+        ..Default::default()
+    };
+    for (method, spp, seed) in [(Method::Path, 512, 41), (Method::Direct, 128, 43), (Method::Ellipsoidal, 64, 47)] {
+        let name = method.name();
+        let settings = RenderSettings { method, seed, ..transient.clone() };
+        let films = common::render_films(&ctx, &scene, &settings, 8, spp);
+        check_transient(&format!("fog_slab_transient_{name}"), &films, "fog_slab_peer/transient_16x16", bins);
+
+        let gated = RenderSettings { gate: Gate::parse("box:6.0..6.5").unwrap(), seed: seed + 1, ..settings };
+        let films = common::render_films(&ctx, &scene, &gated, 8, spp);
+        let channels = common::peer::group_z(&films, &gate_mean, &gate_var, 3, |i| Some(i % 3));
+        // 2 x 2 blocks of 8 x 8 pixels, per channel.
+        let blocks = common::peer::group_z(&films, &gate_mean, &gate_var, 12, |i| {
+            let (p, c) = (i / 3, i % 3);
+            Some((((p / 16) / 8) * 2 + (p % 16) / 8) * 3 + c)
+        });
+        let limit = t_critical(sidak(common::peer::ALPHA, channels.len() + blocks.len()), 7.0);
+        for (what, (ours, peer, z)) in
+            channels.iter().map(|c| ("channel", c)).chain(blocks.iter().map(|b| ("block", b)))
+        {
+            assert!(
+                z.abs() < limit,
+                "{name} behind box:6.0..6.5, {what}: {ours} against the peer's {peer} (z = {z:.2}, limit {limit:.2})"
+            );
+        }
+        println!("fog slab, {name} behind box:6.0..6.5: channel means {:?}", channels);
+    }
+}
+
 /// A medium bounded by glass (`assets/scenes/murky_glass_box.xml`: a water sphere of index 1.33
 /// holding a scattering medium, extinction 6 m^-1, g = 0.6) agrees with mitransient's
 /// `transient_prbvolpath` rendering the same file, steady and as a transient, with `path`: light
