@@ -70,15 +70,27 @@ pub fn group_z(
         .collect()
 }
 
+/// Compares an image with the peer's `{reference}_mean.npy` (and `_var`): see
+/// [`check_image_values`].
 pub fn check_image(name: &str, films: &[Film], reference: &str) {
     let (shape, peer_mean) = super::reference(&format!("{reference}_mean.npy"));
     let (_, peer_var) = super::reference(&format!("{reference}_var.npy"));
-    assert!(shape.len() == 3 && shape[2] == 3 && shape[0] % 8 == 0 && shape[1] % 8 == 0, "{reference}: {shape:?}");
+    check_image_values(name, films, &shape, &peer_mean, &peer_var);
+}
+
+/// Compares an image ([H, W, 3], H and W multiples of 8) with the peer's mean and the variance of
+/// that mean per element: the image mean per channel (|z| < 4) and 8x8-pixel blocks per channel
+/// (Sidak-corrected).
+pub fn check_image_values(name: &str, films: &[Film], shape: &[usize], peer_mean: &[f32], peer_var: &[f32]) {
+    assert!(
+        shape.len() == 3 && shape[2] == 3 && shape[0].is_multiple_of(8) && shape[1].is_multiple_of(8),
+        "{name}: {shape:?}"
+    );
     let (width, height) = (shape[1], shape[0]);
     let write_failure =
-        || super::write_failure_images(name, &shape, &batch_mean(films), &peer_mean).display().to_string();
+        || super::write_failure_images(name, shape, &batch_mean(films), peer_mean).display().to_string();
     // Image mean per channel: |z| < 4 (the acceptance criterion).
-    let channel = group_z(films, &peer_mean, &peer_var, 3, |i| Some(i % 3));
+    let channel = group_z(films, peer_mean, peer_var, 3, |i| Some(i % 3));
     for (c, (ours, peer, z)) in channel.iter().enumerate() {
         println!("{name} channel {c}: ours {ours:.6} peer {peer:.6} z {z:+.2}");
         if z.abs() >= 4.0 {
@@ -87,7 +99,7 @@ pub fn check_image(name: &str, films: &[Film], reference: &str) {
     }
     // 8x8-pixel blocks per channel (192 comparisons at 64x64), Sidak-corrected.
     let columns = width / 8;
-    let blocks = group_z(films, &peer_mean, &peer_var, 3 * columns * (height / 8), |i| {
+    let blocks = group_z(films, peer_mean, peer_var, 3 * columns * (height / 8), |i| {
         let (p, c) = (i / 3, i % 3);
         let (x, y) = (p % width, p / width);
         Some(((y / 8) * columns + x / 8) * 3 + c)
