@@ -475,7 +475,9 @@ fn combined_matches_direct_and_path() {
 /// (`Allocation::alone`): on the box at a 1 m gate `direct` is several times ahead of
 /// `ellipsoidal`, and of both halves, whose samples also pay for the family weights; the render
 /// is then `direct`'s own from the same seed, bit for bit. At 1 mm `ellipsoidal` is hundreds of
-/// times ahead of `direct`, which a combined render then never traces alone.
+/// times ahead of `direct`, which a combined render then never traces alone; with a time budget,
+/// where the pilot weighs a query roulette for both halves, `ellipsoidal` alone makes every
+/// query whatever the halves' roulette.
 #[test]
 fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
     use gatetrace::integrator::{Budget, render};
@@ -493,9 +495,17 @@ fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
     assert!(same.mean_rgb()[0] > 0.0, "light reaches the gate");
     assert!(output.film.data == same.data, "the combined render is direct's own image");
     let narrow = RenderSettings { gate: Gate::Box { start: 3.14, end: 3.141 }, ..wide };
-    let output = render(&ctx, &scene, &narrow, Budget::Samples(64), |_| {}).unwrap();
+    let output = render(&ctx, &scene, &narrow, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
     let allocation = output.allocation.expect("a combined render reports its allocation");
     assert_ne!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
+    let roulette = output.roulette.expect("a combined render with ellipsoidal queries reports its roulette");
+    assert_eq!(roulette.probability, allocation.query_roulette, "the render takes the allocation's roulette");
+    if allocation.alone == Some(Method::Ellipsoidal) {
+        assert_eq!(allocation.query_roulette, 1.0, "ellipsoidal alone makes every query: {}", allocation.reason);
+        assert!(allocation.reason.ends_with("ellipsoidal alone, query roulette 1"), "{}", allocation.reason);
+    } else {
+        assert!([1.0, 0.125].contains(&allocation.query_roulette), "{}", allocation.reason);
+    }
 }
 
 /// A combined render's direct half takes its weights from sums formed once per slot

@@ -53,8 +53,9 @@ pub struct EqualTimeArgs {
     #[arg(long, default_value_t = 5)]
     max_bounces: u32,
     /// Write one row per render to this CSV file (scene, triangles, gate, method, repeat,
-    /// seconds, spp, MSE, relative MSE, the reference's noise, and for ellipsoidal the loop
-    /// iterations and triangles tested per ellipsoid query).
+    /// seconds, spp, MSE, relative MSE, the reference's noise, for ellipsoidal the loop
+    /// iterations and triangles tested per ellipsoid query, and what the pilots chose: auto's
+    /// method, what combined traced, the query roulette).
     #[arg(long)]
     csv: Option<PathBuf>,
 }
@@ -109,18 +110,28 @@ pub struct EqualTimeSettings {
 
 /// A film rendered for `seconds` as `render --time` renders it: passes sized to end on time,
 /// after a warm-up pass (kernel builds, upload and the device's first compilation excluded;
-/// `auto`'s pilot included); returns the film, the seconds actually spent and, for `auto`, the
-/// method it chose.
+/// `auto`'s pilot included); returns the film, the seconds actually spent and what its pilots
+/// chose, in words (empty where none ran): for `auto` the method, for `combined` what it traced
+/// (`both halves`, `direct alone`, `ellipsoidal alone`) and the query roulette where it applies,
+/// for `ellipsoidal` the roulette.
 fn render_for(
     ctx: &GpuContext,
     scene: &PreparedScene,
     settings: &RenderSettings,
     seconds: f64,
-) -> Result<(gatetrace::film::Film, f64, Option<Method>)> {
+) -> Result<(gatetrace::film::Film, f64, String)> {
     let budget = gatetrace::integrator::Budget::Time(Duration::from_secs_f64(seconds));
     let output = gatetrace::integrator::render(ctx, scene, settings, budget, |_| {})?;
     super::report::print_warnings(&output.truncated_traversals_warning());
-    Ok((output.film, output.rendering.as_secs_f64(), output.choice.map(|c| c.chosen)))
+    let roulette = output.roulette.as_ref().map(|r| format!("roulette {}", r.probability));
+    let chosen = match (&output.choice, &output.allocation, roulette) {
+        (Some(c), _, None) => c.chosen.name().to_string(),
+        (Some(c), _, Some(r)) => format!("{} {r}", c.chosen.name()),
+        (None, Some(a), None) => a.renders().to_string(),
+        (None, Some(a), Some(r)) => format!("{} {r}", a.renders()),
+        (None, None, r) => r.unwrap_or_default(),
+    };
+    Ok((output.film, output.rendering.as_secs_f64(), chosen))
 }
 
 /// Work of one ellipsoid query: (loop iterations, triangles tested), from a short render with
@@ -225,13 +236,12 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 let cost = query_cost(&ctx, &scene, &base)?;
                 bases.push((base, cost));
             }
-            let mut results: Vec<(Vec<f64>, Vec<u64>, Vec<&str>)> = vec![Default::default(); s.methods.len()];
+            let mut results: Vec<(Vec<f64>, Vec<u64>, Vec<String>)> = vec![Default::default(); s.methods.len()];
             for repeat in 0..s.repeats {
                 for ((variant, (base, cost)), (mses, spps, choices)) in s.methods.iter().zip(&bases).zip(&mut results) {
                     let (iterations, tested) = cost_columns(*cost);
                     let settings = RenderSettings { seed: REPEAT_SEEDS + repeat, ..base.clone() };
                     let (film, secs, chosen) = render_for(&ctx, &scene, &settings, s.seconds)?;
-                    let chosen = chosen.map_or("", Method::name);
                     let se: f64 =
                         film.data.iter().zip(&reference).map(|(&x, r)| (x as f64 - r).powi(2)).sum::<f64>() / elements;
                     let mse = se - ref_noise;
@@ -257,14 +267,17 @@ pub fn run_equal_time(scene_paths: &[std::path::PathBuf], s: &EqualTimeSettings)
                 let (iterations, tested) = cost_columns(*cost);
                 let mse = mses.iter().sum::<f64>() / mses.len() as f64;
                 let first_mse = *first.get_or_insert(mse);
-                // auto: the methods its pilots chose, e.g. `direct x2, ellipsoidal x1`.
-                let mut chosen = String::new();
-                for method in [Method::Path, Method::Direct, Method::Ellipsoidal] {
-                    let n = choices.iter().filter(|&&c| c == method.name()).count();
-                    if n > 0 {
-                        chosen += &format!("{}{} x{n}", if chosen.is_empty() { "" } else { ", " }, method.name());
+                // What the pilots chose, each choice once with its count in order of first
+                // appearance, e.g. `direct x2, ellipsoidal roulette 1 x1`.
+                let mut counts: Vec<(&str, usize)> = Vec::new();
+                for choice in choices {
+                    match counts.iter_mut().find(|(c, _)| c == choice) {
+                        Some((_, n)) => *n += 1,
+                        None => counts.push((choice, 1)),
                     }
                 }
+                let chosen: Vec<String> = counts.iter().map(|(c, n)| format!("{c} x{n}")).collect();
+                let chosen = chosen.join(", ");
                 println!(
                     "{:>24} {:>8} {:>12.4e} {:>12.4e} {:>12.3} {:>11} {:>9} {}",
                     variant.name(),

@@ -94,7 +94,8 @@ pub struct Allocation {
     /// 1 / MAX_SHARE ..= MAX_SHARE).
     pub ellipsoidal_share: f64,
     /// The ellipsoidal half's query roulette (dimensionless; `RenderSettings::query_roulette`),
-    /// which both halves' weights count.
+    /// which both halves' weights count; where `alone` is `ellipsoidal`, its own (every query
+    /// unless given: [`allocate`]).
     pub query_roulette: f32,
     /// `Method::Direct` or `Method::Ellipsoidal` where the pilot found that family alone, with
     /// its own weights, ahead of both halves at their split: the render is then that method's
@@ -199,9 +200,10 @@ fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
 /// time per sample, [`ellipsoidal_share`] splits the samples, and the roulette of the least
 /// [`equal_time_error`] at its split wins. The weights of both halves change with the roulette
 /// (multi-bounce paths go to the direct half as its queries grow rare), so each candidate is
-/// measured as it renders. Unless the split is given, each family alone and both halves at the
-/// chosen split then render batches of their own and the least variance x time per sample
-/// decides what the render traces ([`Allocation::alone`]). With a time budget the pilot spends
+/// measured as it renders. Unless the split is given, each family alone (`ellipsoidal` making
+/// every query, or with `settings.query_roulette` where given) and both halves at the chosen
+/// split then render batches of their own and the least variance x time per sample decides what
+/// the render traces ([`Allocation::alone`]). With a time budget the pilot spends
 /// about `auto::PILOT_SHARE` of it.
 pub fn allocate(
     ctx: &GpuContext,
@@ -273,11 +275,18 @@ pub fn allocate(
     // the halves' samples in its ratio, their films summed), weighed against each other as
     // `auto` weighs methods: medians of the batch pairs, and a pilot that missed what another
     // found (a gate's rare paths, the tail of a heavy-tailed half) charged for it. Where a family
-    // alone is ahead the family weights' cost buys nothing.
+    // alone is ahead the family weights' cost buys nothing. `ellipsoidal` alone makes every
+    // query (unless the roulette is given): the roulette chosen for both halves, whose direct half
+    // carries the multi-bounce paths it skips, is no guide to it alone, and where it renders
+    // alone multi-bounce light matters (on the glossy box at 1 cm it had 4 times the error with
+    // the halves' 1/8). Weighing 1/8 alone too, in a pilot of this size, chose it in 2 renders of 6
+    // there: the medians of pairs miss the heavy tail of queries that weigh 8.
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
+    let alone_roulette = settings.query_roulette.unwrap_or(1.0);
+    let alone_allocation = Allocation { query_roulette: alone_roulette, ..allocation.clone() };
     let mut tracers = Vec::new();
     for &method in &alone {
-        let mut tracer = create_integrator(ctx, scene, &allocation.settings_with(&pilot, Some(method)))?;
+        let mut tracer = create_integrator(ctx, scene, &alone_allocation.settings_with(&pilot, Some(method)))?;
         tracer.warm_up()?;
         tracers.push((tracer, 1));
     }
@@ -308,12 +317,18 @@ pub fn allocate(
         .collect();
     let ahead = candidates.iter().min_by(|a, b| a.cost().total_cmp(&b.cost())).map(|c| c.method);
     allocation.alone = ahead.filter(|&m| m != Method::Combined);
+    if allocation.alone == Some(Method::Ellipsoidal) {
+        allocation.query_roulette = alone_roulette;
+    }
     let _ = write!(
         allocation.reason,
         "; then at that split, variance x time per sample {}: {}",
         words.join(" vs "),
         allocation.renders()
     );
+    if allocation.alone == Some(Method::Ellipsoidal) {
+        let _ = write!(allocation.reason, ", query roulette {alone_roulette}");
+    }
     Ok(allocation)
 }
 

@@ -158,7 +158,7 @@ def main():
         for r in rows:
             mse[r["method"]].append(float(r["mse"]))
             spp[r["method"]].append(int(r["spp"]))
-            if r.get("chosen_method"):
+            if r["method"] == "auto" and r.get("chosen_method"):
                 picks[r["chosen_method"]] += 1
         mean = {m: sum(v) / len(v) for m, v in mse.items()}
         gain = lambda m: mean["direct"] / mean[m] if mean[m] > 0 else float("inf")
