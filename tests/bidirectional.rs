@@ -475,9 +475,9 @@ fn combined_matches_direct_and_path() {
 /// (`Allocation::alone`): on the box at a 1 m gate `direct` is several times ahead of
 /// `ellipsoidal`, and of both halves, whose samples also pay for the family weights; the render
 /// is then `direct`'s own from the same seed, bit for bit. At 1 mm `ellipsoidal` is hundreds of
-/// times ahead of `direct`, which a combined render then never traces alone; with a time budget,
-/// where the pilot weighs a query roulette for both halves, `ellipsoidal` alone makes every
-/// query whatever the halves' roulette.
+/// times ahead of `direct`, so far that the pilot traces `ellipsoidal` alone without measuring
+/// the halves (`auto::EARLY_STOP_RATIO`); with a time budget, where the pilot would weigh a
+/// query roulette for both halves, `ellipsoidal` alone makes every query.
 #[test]
 fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
     use gatetrace::integrator::{Budget, render};
@@ -500,12 +500,10 @@ fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
     assert_ne!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
     let roulette = output.roulette.expect("a combined render with ellipsoidal queries reports its roulette");
     assert_eq!(roulette.probability, allocation.query_roulette, "the render takes the allocation's roulette");
-    if allocation.alone == Some(Method::Ellipsoidal) {
-        assert_eq!(allocation.query_roulette, 1.0, "ellipsoidal alone makes every query: {}", allocation.reason);
-        assert!(allocation.reason.ends_with("ellipsoidal alone, query roulette 1"), "{}", allocation.reason);
-    } else {
-        assert!([1.0, 0.125].contains(&allocation.query_roulette), "{}", allocation.reason);
-    }
+    assert_eq!(allocation.alone, Some(Method::Ellipsoidal), "{}", allocation.reason);
+    assert_eq!(allocation.query_roulette, 1.0, "ellipsoidal alone makes every query: {}", allocation.reason);
+    assert!(allocation.reason.contains("each family alone"), "the halves are not measured: {}", allocation.reason);
+    assert!(allocation.reason.ends_with("ellipsoidal alone, query roulette 1"), "{}", allocation.reason);
 }
 
 /// A combined render's direct half takes its weights from sums formed once per slot

@@ -281,8 +281,12 @@ pub fn choose(
 }
 
 /// The methods' figures from their pilot batches so far, the method of the lowest variance x
-/// time per sample, and how many times lower it is than the next best's.
-fn compare(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> (Vec<CandidateFigures>, Method, f64) {
+/// time per sample, and how many times lower it is than the next best's (at least two methods).
+pub(super) fn compare(
+    methods: &[Method],
+    batches: &[Batches],
+    pixel_ratio: f64,
+) -> (Vec<CandidateFigures>, Method, f64) {
     let candidates = figures(methods, batches, pixel_ratio);
     // Ties (all zero: nothing reaches the gate in the pilot) go to the faster method.
     let key = |c: &CandidateFigures| (c.cost(), c.seconds_per_sample());
@@ -295,7 +299,7 @@ fn compare(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> (Vec<Ca
 
 /// Each method's figures from its pilot batches so far (`batches[i]` of `methods[i]`), the
 /// variances charged for what a pilot missed (see `per_sample_variances`).
-pub(super) fn figures(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> Vec<CandidateFigures> {
+fn figures(methods: &[Method], batches: &[Batches], pixel_ratio: f64) -> Vec<CandidateFigures> {
     let variances = per_sample_variances(&batches.iter().collect::<Vec<_>>());
     methods
         .iter()

@@ -27,7 +27,8 @@ use std::fmt::Write as _;
 use anyhow::{Result, bail, ensure};
 
 use super::auto::{
-    PILOT_BATCHES, candidate_methods, candidate_settings, figures, pilot_budget, pilot_resolution, pilot_seed,
+    CandidateFigures, EARLY_STOP_RATIO, PILOT_BATCHES, candidate_methods, candidate_settings, compare, pilot_budget,
+    pilot_resolution, pilot_seed,
 };
 pub use super::bidirectional::{Family, FamilyRole};
 use super::pilot::{Batches, pilot_batch};
@@ -225,23 +226,83 @@ pub fn allocate(
     let (width, height, _) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let alone = alone_candidates(settings, scene);
-    // Each half at each roulette, then each family alone and both halves at the chosen split.
-    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone.len() + 1 };
+    // Each family alone, then each half at each roulette, and both halves at the chosen split
+    // beside each family alone again.
+    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { 2 * alone.len() + 1 };
     let per_run = pilot_budget(budget, pixel_ratio, runs);
-    let per_sample = |b: &Batches| b.seconds_per_sample();
-    let mut best: Option<(f64, f64, f32)> = None; // (variance x time, split, roulette)
+    let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut reason = format!("pilot on {width}x{height}:");
     let mut pilot_seconds = 0.0;
+
+    // Each family alone, as `auto` weighs methods: medians of the batch pairs, and a pilot that
+    // missed what another found (a gate's rare paths) charged for it. `ellipsoidal` alone makes
+    // every query (unless the roulette is given): a roulette chosen for both halves, whose direct
+    // half carries the multi-bounce paths it skips, is no guide to it alone, and where it renders
+    // alone multi-bounce light matters (on the glossy box at 1 cm it had 4 times the error at the
+    // halves' 1/8; weighing 1/8 alone too, a pilot of this size chose it in 2 renders of 6 there:
+    // the medians of pairs miss the heavy tail of queries that weigh 8). Where one family is
+    // `auto::EARLY_STOP_RATIO` times ahead of the other after all its batches the render traces
+    // it alone without measuring the halves, whose runs are most of the pilot: the halves'
+    // samples also pay for the family weights, and at such a margin they have not been measured
+    // ahead. (Not after half the batches, as `auto` may stop: there one firefly in a `direct`
+    // batch of the glossy box at 10 cm, where `direct` leads 7-fold, put `ellipsoidal` 11 times
+    // ahead.)
+    let alone_roulette = settings.query_roulette.unwrap_or(1.0);
+    let mut alone_tracers = Vec::new();
+    for &method in &alone {
+        let alone_settings = Allocation {
+            ellipsoidal_share: 1.0,
+            query_roulette: alone_roulette,
+            alone: Some(method),
+            reason: String::new(),
+            pilot_seconds: 0.0,
+        }
+        .render_settings(&pilot);
+        let mut tracer = create_integrator(ctx, scene, &alone_settings)?;
+        tracer.warm_up()?;
+        alone_tracers.push(tracer);
+    }
+    let mut alone_batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
+    for j in 1..=PILOT_BATCHES {
+        for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
+            pilot_batch(tracer.as_mut(), b, per_run, 1)?;
+        }
+        if alone.len() > 1 && j == PILOT_BATCHES {
+            let (measured, best, ratio) = compare(&alone, &alone_batches, pixel_ratio);
+            if ratio >= EARLY_STOP_RATIO {
+                let pilot_seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
+                let words: Vec<String> = measured.iter().map(|m| words_of(m, m.method.name())).collect();
+                let allocation = Allocation {
+                    ellipsoidal_share: 1.0,
+                    query_roulette: alone_roulette,
+                    alone: Some(best),
+                    reason: String::new(),
+                    pilot_seconds,
+                };
+                let reason = format!(
+                    "{reason} after {j} batches each, each family alone, variance x time per sample {}: {} {ratio:.3} \
+                     times ahead, {}{}",
+                    words.join(" vs "),
+                    best.name(),
+                    allocation.renders(),
+                    if best == Method::Ellipsoidal {
+                        format!(", query roulette {alone_roulette}")
+                    } else {
+                        String::new()
+                    }
+                );
+                return Ok(Allocation { reason, ..allocation });
+            }
+        }
+    }
+    pilot_seconds += alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
+
+    // Both halves at each candidate roulette, one sample each per pixel sample.
+    let per_sample = |b: &Batches| b.seconds_per_sample();
+    let mut best: Option<(f64, f64, f32)> = None; // (variance x time, split, roulette)
     for &p in &roulettes {
-        let pilot = RenderSettings {
-            width,
-            height,
-            seed: pilot_seed(settings.seed),
-            ellipsoidal_share: Some(1.0),
-            query_roulette: Some(p),
-            ..settings.clone()
-        };
-        let mut tracer = CombinedTracer::new(ctx, scene, &pilot)?;
+        let halves = RenderSettings { ellipsoidal_share: Some(1.0), query_roulette: Some(p), ..pilot.clone() };
+        let mut tracer = CombinedTracer::new(ctx, scene, &halves)?;
         tracer.direct.warm_up()?;
         tracer.ellipsoidal.warm_up()?;
         let (mut direct, mut ellipsoidal) = (Batches::default(), Batches::default());
@@ -271,28 +332,15 @@ pub fn allocate(
     if alone.is_empty() {
         return Ok(allocation);
     }
-    // Each family alone and both halves at that split, rendered as the render would (each pass
-    // the halves' samples in its ratio, their films summed), weighed against each other as
-    // `auto` weighs methods: medians of the batch pairs, and a pilot that missed what another
-    // found (a gate's rare paths, the tail of a heavy-tailed half) charged for it. Where a family
-    // alone is ahead the family weights' cost buys nothing. `ellipsoidal` alone makes every
-    // query (unless the roulette is given): the roulette chosen for both halves, whose direct half
-    // carries the multi-bounce paths it skips, is no guide to it alone, and where it renders
-    // alone multi-bounce light matters (on the glossy box at 1 cm it had 4 times the error with
-    // the halves' 1/8). Weighing 1/8 alone too, in a pilot of this size, chose it in 2 renders of 6
-    // there: the medians of pairs miss the heavy tail of queries that weigh 8.
-    let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
-    let alone_roulette = settings.query_roulette.unwrap_or(1.0);
-    let alone_allocation = Allocation { query_roulette: alone_roulette, ..allocation.clone() };
-    let mut tracers = Vec::new();
-    for &method in &alone {
-        let mut tracer = create_integrator(ctx, scene, &alone_allocation.settings_with(&pilot, Some(method)))?;
-        tracer.warm_up()?;
-        tracers.push((tracer, 1));
-    }
+    // Both halves at that split, rendered as the render would (each pass the halves' samples in
+    // its ratio, their films summed), weighed against each family alone, whose tracers render
+    // batches afresh between the halves' so that all candidates are timed alike (a tracer's
+    // first passes are its slowest, and the host's load drifts). Where a family alone is ahead
+    // the family weights' cost buys nothing.
     let mut halves = CombinedTracer::new(ctx, scene, &allocation.settings_with(&pilot, None))?;
     halves.direct.warm_up()?;
     halves.ellipsoidal.warm_up()?;
+    let mut tracers: Vec<(Box<dyn Integrator + '_>, u32)> = alone_tracers.into_iter().map(|t| (t, 1)).collect();
     tracers.push((Box::new(halves), samples_per_other_sample(share)));
     let mut batches: Vec<Batches> = tracers.iter().map(|_| Batches::default()).collect();
     for _ in 0..PILOT_BATCHES {
@@ -302,21 +350,12 @@ pub fn allocate(
     }
     allocation.pilot_seconds += batches.iter().map(|b| b.wall_seconds).sum::<f64>();
     let methods: Vec<Method> = alone.iter().copied().chain([Method::Combined]).collect();
-    let candidates = figures(&methods, &batches, pixel_ratio);
+    let (candidates, ahead, _) = compare(&methods, &batches, pixel_ratio);
     let words: Vec<String> = candidates
         .iter()
-        .map(|c| {
-            let name = if c.method == Method::Combined { "both halves" } else { c.method.name() };
-            format!(
-                "{:.3e} ({name}: variance per sample {:.3e}, seconds per sample {:.3e})",
-                c.cost(),
-                c.variance_per_sample,
-                c.seconds_per_sample()
-            )
-        })
+        .map(|c| words_of(c, if c.method == Method::Combined { "both halves" } else { c.method.name() }))
         .collect();
-    let ahead = candidates.iter().min_by(|a, b| a.cost().total_cmp(&b.cost())).map(|c| c.method);
-    allocation.alone = ahead.filter(|&m| m != Method::Combined);
+    allocation.alone = Some(ahead).filter(|&m| m != Method::Combined);
     if allocation.alone == Some(Method::Ellipsoidal) {
         allocation.query_roulette = alone_roulette;
     }
@@ -330,6 +369,16 @@ pub fn allocate(
         let _ = write!(allocation.reason, ", query roulette {alone_roulette}");
     }
     Ok(allocation)
+}
+
+/// A candidate's figures in words, under `name`.
+fn words_of(c: &CandidateFigures, name: &str) -> String {
+    format!(
+        "{:.3e} ({name}: variance per sample {:.3e}, seconds per sample {:.3e})",
+        c.cost(),
+        c.variance_per_sample,
+        c.seconds_per_sample()
+    )
 }
 
 /// Samples per pixel of a combined render's leading half (see `CombinedTracer::halves`) for
