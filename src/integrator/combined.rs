@@ -195,17 +195,19 @@ fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
 
 /// The allocation of the combined render `settings`: its samples' split
 /// (`settings.ellipsoidal_share` where given) and its query roulette (`settings.query_roulette`
-/// where given). Whatever is not given a pilot chooses: for each candidate roulette
-/// ([`roulette_candidates`]) both halves (one sample each per pixel sample, on the image of
-/// `auto::pilot_resolution` from `auto::pilot_seed`, films discarded) measure their variance and
-/// time per sample, [`ellipsoidal_share`] splits the samples, and the roulette of the least
-/// [`equal_time_error`] at its split wins. The weights of both halves change with the roulette
-/// (multi-bounce paths go to the direct half as its queries grow rare), so each candidate is
-/// measured as it renders. Unless the split is given, each family alone (`ellipsoidal` making
-/// every query, or with `settings.query_roulette` where given) and both halves at the chosen
-/// split then render batches of their own and the least variance x time per sample decides what
-/// the render traces ([`Allocation::alone`]). With a time budget the pilot spends
-/// about `auto::PILOT_SHARE` of it.
+/// where given). Whatever is not given a pilot chooses, on the image of `auto::pilot_resolution`
+/// from `auto::pilot_seed`, its films discarded. Unless the split is given, each family alone
+/// (`ellipsoidal` making every query, or with `settings.query_roulette` where given) renders
+/// batches first, and where one leads the other `auto::EARLY_STOP_RATIO`-fold the render traces
+/// it alone ([`Allocation::alone`]). Otherwise, for each candidate roulette
+/// ([`roulette_candidates`]) both halves (one sample each per pixel sample) measure their
+/// variance and time per sample, [`ellipsoidal_share`] splits the samples, and the roulette of
+/// the least [`equal_time_error`] at its split wins. The weights of both halves change with the
+/// roulette (multi-bounce paths go to the direct half as its queries grow rare), so each
+/// candidate is measured as it renders. Unless the split is given, both halves at the chosen split
+/// then render batches between fresh ones of each family alone, and the least variance x time
+/// per sample decides what the render traces. With a time budget the pilot spends about
+/// `auto::PILOT_SHARE` of it.
 pub fn allocate(
     ctx: &GpuContext,
     scene: &PreparedScene,
@@ -226,9 +228,11 @@ pub fn allocate(
     let (width, height, _) = pilot_resolution(settings.width, settings.height);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let alone = alone_candidates(settings, scene);
-    // Each family alone, then each half at each roulette, and both halves at the chosen split
-    // beside each family alone again.
-    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { 2 * alone.len() + 1 };
+    // Each family alone where there are two, then each half at each roulette, and both halves at
+    // the chosen split beside each family alone (again).
+    let weigh_alone_first = alone.len() > 1;
+    let alone_runs = alone.len() * if weigh_alone_first { 2 } else { 1 };
+    let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone_runs + 1 };
     let per_run = pilot_budget(budget, pixel_ratio, runs);
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
     let mut reason = format!("pilot on {width}x{height}:");
@@ -263,11 +267,11 @@ pub fn allocate(
         alone_tracers.push(tracer);
     }
     let mut alone_batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
-    for j in 1..=PILOT_BATCHES {
+    for j in (1..=PILOT_BATCHES).filter(|_| weigh_alone_first) {
         for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
             pilot_batch(tracer.as_mut(), b, per_run, 1)?;
         }
-        if alone.len() > 1 && j == PILOT_BATCHES {
+        if j == PILOT_BATCHES {
             let (measured, best, ratio) = compare(&alone, &alone_batches, pixel_ratio);
             if ratio >= EARLY_STOP_RATIO {
                 let pilot_seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
