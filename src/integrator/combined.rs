@@ -110,6 +110,21 @@ pub struct Allocation {
 }
 
 impl Allocation {
+    /// Family `method` traced alone at query roulette `roulette` (for `ellipsoidal`), chosen by
+    /// a pilot of `pilot_seconds` for `reason`.
+    fn alone(method: Method, roulette: f32, reason: String, pilot_seconds: f64) -> Self {
+        Self { ellipsoidal_share: 1.0, query_roulette: roulette, alone: Some(method), reason, pilot_seconds }
+    }
+
+    /// What the render traces, in words, with the roulette of `ellipsoidal` alone (the end of
+    /// `reason`).
+    fn choice_words(&self) -> String {
+        match self.alone {
+            Some(Method::Ellipsoidal) => format!("{}, query roulette {}", self.renders(), self.query_roulette),
+            _ => self.renders().to_string(),
+        }
+    }
+
     /// What the render traces, in words (metadata `combined_renders`).
     pub fn renders(&self) -> &'static str {
         match self.alone {
@@ -254,14 +269,7 @@ pub fn allocate(
     let alone_roulette = settings.query_roulette.unwrap_or(1.0);
     let mut alone_tracers = Vec::new();
     for &method in &alone {
-        let alone_settings = Allocation {
-            ellipsoidal_share: 1.0,
-            query_roulette: alone_roulette,
-            alone: Some(method),
-            reason: String::new(),
-            pilot_seconds: 0.0,
-        }
-        .render_settings(&pilot);
+        let alone_settings = Allocation::alone(method, alone_roulette, String::new(), 0.0).render_settings(&pilot);
         let mut tracer = create_integrator(ctx, scene, &alone_settings)?;
         tracer.warm_up()?;
         alone_tracers.push(tracer);
@@ -275,27 +283,16 @@ pub fn allocate(
             let (measured, best, ratio) = compare(&alone, &alone_batches, pixel_ratio);
             if ratio >= EARLY_STOP_RATIO {
                 let pilot_seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
+                let mut allocation = Allocation::alone(best, alone_roulette, String::new(), pilot_seconds);
                 let words: Vec<String> = measured.iter().map(|m| words_of(m, m.method.name())).collect();
-                let allocation = Allocation {
-                    ellipsoidal_share: 1.0,
-                    query_roulette: alone_roulette,
-                    alone: Some(best),
-                    reason: String::new(),
-                    pilot_seconds,
-                };
-                let reason = format!(
+                allocation.reason = format!(
                     "{reason} after {j} batches each, each family alone, variance x time per sample {}: {} {ratio:.3} \
-                     times ahead, {}{}",
+                     times ahead, {}",
                     words.join(" vs "),
                     best.name(),
-                    allocation.renders(),
-                    if best == Method::Ellipsoidal {
-                        format!(", query roulette {alone_roulette}")
-                    } else {
-                        String::new()
-                    }
+                    allocation.choice_words()
                 );
-                return Ok(Allocation { reason, ..allocation });
+                return Ok(allocation);
             }
         }
     }
@@ -367,11 +364,8 @@ pub fn allocate(
         allocation.reason,
         "; then at that split, variance x time per sample {}: {}",
         words.join(" vs "),
-        allocation.renders()
+        allocation.choice_words()
     );
-    if allocation.alone == Some(Method::Ellipsoidal) {
-        let _ = write!(allocation.reason, ", query roulette {alone_roulette}");
-    }
     Ok(allocation)
 }
 
