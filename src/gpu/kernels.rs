@@ -78,7 +78,7 @@ type KernelKey = (&'static str, Option<&'static str>, String, Vec<(String, u64)>
 /// The kernels one device has built, so that a process builds each specialisation once: the
 /// renders of `equal-time` and `bench`, a viewer's rebuilt tracers and the Python package's
 /// renderers reuse the pipelines of earlier renders instead of building them again (on CPU
-/// Vulkan about 1 s per render of an ellipsoidal method even with the driver's disk cache).
+/// Vulkan about 0.5 s per render of an ellipsoidal method even with the driver's disk cache).
 #[derive(Default)]
 pub struct KernelCache {
     built: std::sync::Mutex<std::collections::HashMap<KernelKey, (wgpu::ComputePipeline, wgpu::BindGroupLayout)>>,
@@ -145,10 +145,16 @@ impl Kernel {
         used: &[(&str, f64)],
     ) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
         let name = source.name;
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(name),
-            source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(source.wgsl)),
-        });
+        // The driver receives the kernel with its constants substituted and the branches they
+        // rule out removed (`specialise`), so nothing is left for the pipeline to override.
+        let (shader, overrides) = if super::specialise::pruning() {
+            let module = super::specialise::specialise(source, used).unwrap_or_else(|e| panic!("{e}"));
+            (wgpu::ShaderSource::Naga(Cow::Owned(module)), &[][..])
+        } else {
+            (wgpu::ShaderSource::Wgsl(Cow::Borrowed(source.wgsl)), used)
+        };
+        let module =
+            ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(name), source: shader });
         let entries: Vec<wgpu::BindGroupLayoutEntry> = source
             .bindings
             .iter()
@@ -181,7 +187,7 @@ impl Kernel {
             module: &module,
             entry_point: Some(name),
             compilation_options: wgpu::PipelineCompilationOptions {
-                constants: used,
+                constants: overrides,
                 zero_initialize_workgroup_memory: false,
             },
             cache: None,

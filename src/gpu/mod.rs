@@ -7,6 +7,7 @@ pub mod layout;
 pub mod packing;
 pub mod profiler;
 pub mod resources;
+pub mod specialise;
 
 pub use context::GpuContext;
 pub use kernels::Kernel;
