@@ -476,7 +476,8 @@ fn combined_matches_direct_and_path() {
 /// `ellipsoidal`, and of both halves, whose samples also pay for the family weights; the render
 /// is then `direct`'s own from the same seed, bit for bit. At 1 mm `ellipsoidal` is hundreds of
 /// times ahead of `direct`, so far that the pilot traces `ellipsoidal` alone without measuring
-/// the halves (`auto::EARLY_STOP_RATIO`); with a time budget, where the pilot would weigh a
+/// the halves (`auto::EARLY_STOP_RATIO`); a short time budget does not measure them either
+/// (`combined::HALVES_PILOT_SHARE`). With a time budget, where the pilot would weigh a
 /// query roulette for both halves, `ellipsoidal` alone makes every query.
 #[test]
 fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
@@ -494,6 +495,13 @@ fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
     let same = render(&ctx, &scene, &direct, Budget::Samples(64), |_| {}).unwrap().film;
     assert!(same.mean_rgb()[0] > 0.0, "light reaches the gate");
     assert!(output.film.data == same.data, "the combined render is direct's own image");
+    // A second of rendering cannot pay for weighing the halves (on lavapipe the families' first
+    // batches alone take more than a fiftieth of it): the families render more batches instead.
+    let short = render(&ctx, &scene, &wide, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
+    let allocation = short.allocation.expect("a combined render reports its allocation");
+    assert_eq!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
+    assert!(allocation.reason.contains("each family alone"), "the halves are not measured: {}", allocation.reason);
+    assert!(!allocation.reason.contains("(direct half)"), "the halves are not measured: {}", allocation.reason);
     let narrow = RenderSettings { gate: Gate::Box { start: 3.14, end: 3.141 }, ..wide };
     let output = render(&ctx, &scene, &narrow, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
     let allocation = output.allocation.expect("a combined render reports its allocation");

@@ -88,6 +88,17 @@ pub fn check_settings(settings: &RenderSettings) -> Result<()> {
 /// 1 / MAX_SHARE of the other's samples.
 pub const MAX_SHARE: f64 = 8.0;
 
+/// Share of a time budget (dimensionless) within which a combined render's whole pilot must be
+/// predicted to fit, from the families' first batches alone, for it to go on and weigh both
+/// halves; otherwise the families alone render as many batches again and the render traces the
+/// one that leads over all of them. At its floor of
+/// batches the whole pilot renders about as many batches as the families' first ones times the
+/// candidate roulettes plus three (each roulette's halves about one batch of each family, the
+/// last weighing two and the halves), and a short render cannot pay that: on the fence at 1 ns
+/// (87,000 triangles, 64×64, 4 s) nine runs at their floor left `combined` 108 samples per pixel
+/// where `direct` traced 278, at 1.8 times `direct`'s error.
+pub const HALVES_PILOT_SHARE: f64 = 0.1;
+
 /// How a combined render splits its samples between its halves, and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Allocation {
@@ -214,7 +225,9 @@ fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
 /// from `auto::pilot_seed`, its films discarded. Unless the split is given, each family alone
 /// (`ellipsoidal` making every query, or with `settings.query_roulette` where given) renders
 /// batches first, and where one leads the other `auto::EARLY_STOP_RATIO`-fold the render traces
-/// it alone ([`Allocation::alone`]). Otherwise, for each candidate roulette
+/// it alone ([`Allocation::alone`]); where the rest of the pilot would not fit in
+/// [`HALVES_PILOT_SHARE`] of a time budget, the families render as many batches again and the
+/// render traces the leader over all of them alone. Otherwise, for each candidate roulette
 /// ([`roulette_candidates`]) both halves (one sample each per pixel sample) measure their
 /// variance and time per sample, [`ellipsoidal_share`] splits the samples, and the roulette of
 /// the least [`equal_time_error`] at its split wins. The weights of both halves change with the
@@ -265,7 +278,8 @@ pub fn allocate(
     // samples also pay for the family weights, and at such a margin they have not been measured
     // ahead. (Not after half the batches, as `auto` may stop: there one firefly in a `direct`
     // batch of the glossy box at 10 cm, where `direct` leads 7-fold, put `ellipsoidal` 11 times
-    // ahead.)
+    // ahead.) The same holds where weighing the halves would not fit in `HALVES_PILOT_SHARE` of
+    // a time budget.
     let alone_roulette = settings.query_roulette.unwrap_or(1.0);
     let mut alone_tracers = Vec::new();
     for &method in &alone {
@@ -275,25 +289,48 @@ pub fn allocate(
         alone_tracers.push(tracer);
     }
     let mut alone_batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
-    for j in (1..=PILOT_BATCHES).filter(|_| weigh_alone_first) {
-        for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
-            pilot_batch(tracer.as_mut(), b, per_run, 1)?;
-        }
-        if j == PILOT_BATCHES {
-            let (measured, best, ratio) = compare(&alone, &alone_batches, pixel_ratio);
-            if ratio >= EARLY_STOP_RATIO {
-                let pilot_seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
-                let mut allocation = Allocation::alone(best, alone_roulette, String::new(), pilot_seconds);
-                let words: Vec<String> = measured.iter().map(|m| words_of(m, m.method.name())).collect();
-                allocation.reason = format!(
-                    "{reason} after {j} batches each, each family alone, variance x time per sample {}: {} {ratio:.3} \
-                     times ahead, {}",
-                    words.join(" vs "),
-                    best.name(),
-                    allocation.choice_words()
-                );
-                return Ok(allocation);
+    if weigh_alone_first {
+        for _ in 0..PILOT_BATCHES {
+            for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
+                pilot_batch(tracer.as_mut(), b, per_run, 1)?;
             }
+        }
+        let (mut measured, mut best, mut ratio) = compare(&alone, &alone_batches, pixel_ratio);
+        let first_seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
+        let predicted = first_seconds * (roulettes.len() + 3) as f64;
+        let mut batches = PILOT_BATCHES;
+        let why = match budget {
+            _ if ratio >= EARLY_STOP_RATIO => Some(format!("{} {ratio:.3} times ahead", best.name())),
+            Budget::Time(t) if predicted > HALVES_PILOT_SHARE * t.as_secs_f64() => {
+                // The families alone again, in place of the halves' runs: 8 batches each chose
+                // the wrong one in 1 render of 6 on the box at 1 m and on the glossy box at
+                // 1 cm and at 10 cm, where one leads 3 to 6-fold.
+                for _ in 0..PILOT_BATCHES {
+                    for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
+                        pilot_batch(tracer.as_mut(), b, per_run, 1)?;
+                    }
+                }
+                batches += PILOT_BATCHES;
+                (measured, best, ratio) = compare(&alone, &alone_batches, pixel_ratio);
+                Some(format!(
+                    "{} ahead ({ratio:.3} times); weighing both halves would take the pilot to about {predicted:.2} s \
+                     of the {:.2} s budget",
+                    best.name(),
+                    t.as_secs_f64()
+                ))
+            }
+            _ => None,
+        };
+        if let Some(why) = why {
+            let seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
+            let mut allocation = Allocation::alone(best, alone_roulette, String::new(), seconds);
+            let words: Vec<String> = measured.iter().map(|m| words_of(m, m.method.name())).collect();
+            allocation.reason = format!(
+                "{reason} after {batches} batches each, each family alone, variance x time per sample {}: {why}, {}",
+                words.join(" vs "),
+                allocation.choice_words()
+            );
+            return Ok(allocation);
         }
     }
     pilot_seconds += alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
