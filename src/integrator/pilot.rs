@@ -171,7 +171,10 @@ pub(super) fn pilot_batch(
         PilotBudget::Seconds(_) if batches.count == 0 => unit,
         PilotBudget::Seconds(total) => {
             let per_sample = batches.seconds / batches.samples as f64;
-            let left = (total - batches.wall_seconds).max(0.0) / (PILOT_BATCHES - batches.count) as f64;
+            // Beyond PILOT_BATCHES (`combined`'s second round of each family alone) what is
+            // left of the budget goes to the next batch alone.
+            let batches_left = PILOT_BATCHES.saturating_sub(batches.count).max(1);
+            let left = (total - batches.wall_seconds).max(0.0) / batches_left as f64;
             let odd = batches.count % 2 == 1;
             let share = left / per_sample.max(1e-12) * if odd { 4.0 / 3.0 } else { 2.0 / 3.0 };
             let k = (share as u32).div_ceil(unit) * unit;
