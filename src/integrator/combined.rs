@@ -91,12 +91,12 @@ pub const MAX_SHARE: f64 = 8.0;
 /// Share of a time budget (dimensionless) within which a combined render's whole pilot must be
 /// predicted to fit, from the families' first batches alone, for it to go on and weigh both
 /// halves; otherwise the families alone render as many batches again and the render traces the
-/// one that leads over all of them. At its floor of
-/// batches the whole pilot renders about as many batches as the families' first ones times the
-/// candidate roulettes plus three (each roulette's halves about one batch of each family, the
-/// last weighing two and the halves), and a short render cannot pay that: on the fence at 1 ns
-/// (87,000 triangles, 64×64, 4 s) nine runs at their floor left `combined` 108 samples per pixel
-/// where `direct` traced 278, at 1.8 times `direct`'s error.
+/// one that leads over all of them. At its floor of batches the whole pilot renders about as
+/// many batches as the families' first ones times the candidate roulettes plus three (each
+/// roulette's halves about one batch of each family, the last weighing two and the halves), and
+/// a short render cannot pay that: on the fence at 1 ns (87,140 triangles, 64×64, 4 s) nine runs
+/// at their floor left `combined` 108 samples per pixel where `direct` traced 278, at 1.8 times
+/// `direct`'s error.
 pub const HALVES_PILOT_SHARE: f64 = 0.1;
 
 /// How a combined render splits its samples between its halves, and why.
@@ -290,11 +290,16 @@ pub fn allocate(
     }
     let mut alone_batches: Vec<Batches> = alone.iter().map(|_| Batches::default()).collect();
     if weigh_alone_first {
-        for _ in 0..PILOT_BATCHES {
-            for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
-                pilot_batch(tracer.as_mut(), b, per_run, 1)?;
+        // A round of batches of each family alone, interleaved so that both are timed alike.
+        let mut round = |batches: &mut Vec<Batches>| -> Result<()> {
+            for _ in 0..PILOT_BATCHES {
+                for (tracer, b) in alone_tracers.iter_mut().zip(batches.iter_mut()) {
+                    pilot_batch(tracer.as_mut(), b, per_run, 1)?;
+                }
             }
-        }
+            Ok(())
+        };
+        round(&mut alone_batches)?;
         let (mut measured, mut best, mut ratio) = compare(&alone, &alone_batches, pixel_ratio);
         let first_seconds = alone_batches.iter().map(|b| b.wall_seconds).sum::<f64>();
         let predicted = first_seconds * (roulettes.len() + 3) as f64;
@@ -304,12 +309,8 @@ pub fn allocate(
             Budget::Time(t) if predicted > HALVES_PILOT_SHARE * t.as_secs_f64() => {
                 // The families alone again, in place of the halves' runs: 8 batches each chose
                 // the wrong one in 1 render of 6 on the box at 1 m and on the glossy box at
-                // 1 cm and at 10 cm, where one leads 3 to 6-fold.
-                for _ in 0..PILOT_BATCHES {
-                    for (tracer, b) in alone_tracers.iter_mut().zip(&mut alone_batches) {
-                        pilot_batch(tracer.as_mut(), b, per_run, 1)?;
-                    }
-                }
+                // 1 cm and at 10 cm, where one leads 3 to 7-fold.
+                round(&mut alone_batches)?;
                 batches += PILOT_BATCHES;
                 (measured, best, ratio) = compare(&alone, &alone_batches, pixel_ratio);
                 Some(format!(
