@@ -361,6 +361,47 @@ fn the_query_roulette_keeps_its_share_of_the_multi_bounce_queries() {
     );
 }
 
+/// The roulette's pilot measures the rouletted queries' variance from the differences of
+/// batches of the same samples at p = 1 and p = 1/8 (`query_roulette::trial_variance`), which
+/// holds only if the roulette changes nothing else a sample draws. With at most two scattering
+/// vertices, from one seed: where the image at p = 1 equals the one-bounce image (no two-bounce
+/// query added light there), so does the image at p = 1/8; elsewhere the light p = 1/8 adds,
+/// divided by 8, is a part of what p = 1 adds (the queries it kept, each as at p = 1).
+#[test]
+fn the_query_roulette_changes_nothing_but_the_rouletted_queries() {
+    let ctx = common::gpu();
+    let scene = common::cornell_box();
+    let gate = Gate::Box { start: 3.14, end: 3.15 };
+    let film = |max_bounces: u32, p: f32| {
+        let s = RenderSettings {
+            max_bounces,
+            query_roulette: Some(p),
+            width: 16,
+            height: 16,
+            ..settings(Method::Ellipsoidal, gate.clone(), 452)
+        };
+        common::render_films(&ctx, &scene, &s, 1, 4).remove(0).data
+    };
+    let (one_bounce, all, eighth) = (film(1, 1.0), film(2, 1.0), film(2, 0.125));
+    let (mut added, mut kept) = (0, 0);
+    for ((&base, &a), &e) in one_bounce.iter().zip(&all).zip(&eighth) {
+        if a == base {
+            assert_eq!(e, base, "p = 1/8 changed a value that no two-bounce query lit");
+            continue;
+        }
+        added += 1;
+        let (from_all, from_kept) = (a as f64 - base as f64, (e as f64 - base as f64) / 8.0);
+        assert!(from_all > 0.0, "a box gate's two-bounce light is positive: {a} against {base}");
+        assert!(
+            (-1e-6 * from_all..=from_all * (1.0 + 1e-4) + 1e-9).contains(&from_kept),
+            "p = 1/8 added {from_kept} x 8 where p = 1 added {from_all}"
+        );
+        kept += (from_kept > 0.0) as u32;
+    }
+    println!("{added} values lit by two-bounce queries, {kept} of them by queries p = 1/8 kept");
+    assert!(added > 100 && kept > 10, "too little two-bounce light to check: {added} values, {kept} kept");
+}
+
 /// The needle guard leaves out a set of connections that grows with the guard, and every
 /// contribution of a box gate is non-negative: so the bias of the default guard (1e-6) is at
 /// most that of a guard 10^4 times wider, which this bounds by the noise of the comparison with

@@ -68,6 +68,8 @@ pub(super) struct Batches {
     values: usize,
     /// The last batch's samples per pixel and image while it waits for its pair.
     unpaired: Option<(u32, Vec<f64>)>,
+    /// The last batch's samples per pixel and image (see [`Batches::last`]).
+    last: (u32, Vec<f64>),
     /// One estimate per pair of consecutive batches (a, b) of the per-sample variance summed
     /// over the values: sum_i (x_a,i - x_b,i)^2 / (1/k_a + 1/k_b).
     pair_variances: Vec<f64>,
@@ -85,6 +87,7 @@ impl Batches {
         }
         self.groups.add(k as f64, sums.into_iter());
         self.values = image.len();
+        self.last = (k, image.to_vec());
         match self.unpaired.take() {
             None => self.unpaired = Some((k, image.to_vec())),
             Some((k_a, a)) => {
@@ -120,6 +123,12 @@ impl Batches {
             return mean;
         }
         median(slopes).clamp(MARGINAL_SHARE_FLOOR * mean, mean)
+    }
+
+    /// The last batch's samples per pixel and estimate (pixels x bins x channels; empty before
+    /// the first batch).
+    pub(super) fn last(&self) -> (u32, &[f64]) {
+        (self.last.0, &self.last.1)
     }
 
     /// The per-sample variance summed over the values: the median of the pairs' estimates

@@ -17,18 +17,27 @@
 //! both at p = 1 and at p = [`TRIAL`] (on `auto`'s smaller image, from its own seed, films
 //! discarded), solves for A, B, D and E, and takes the p that minimises V(p) C(p), the error at
 //! equal time: p = sqrt(B D / (A E)), clamped to [`TRIAL`] ..= 1 (it never extrapolates below
-//! what it measured). Variances that contradict the model (a smaller one at p = TRIAL than at
-//! p = 1: rare heavy contributions the short pilot drew at p = 1 and not at TRIAL, as in fog on
-//! the road scene's pedestrian gate, where every query is best) give 1. With a sample budget
-//! (`--spp`, shards, checkpoints), a sample stays what it was: every query is made, unless
-//! `--query-roulette` says otherwise.
+//! what it measured).
+//!
+//! Both probabilities trace the same samples (one seed, batches of the same sizes), and a
+//! query's decision is drawn apart from everything else a sample draws, so a sample at TRIAL is
+//! the sample at 1 plus D = sum over its rouletted queries of Q (I / TRIAL - 1), which has mean
+//! zero whatever the rest drew: V(TRIAL) = V(1) + E[D^2], E[D^2] = B (1 / TRIAL - 1). The
+//! squared differences of the paired batches measure E[D^2] alone, and the differences of their
+//! passes' times E ([`PairedBatches`]). Measured apart, as the difference of the two pilots' own
+//! variances, B carried the noise of A twice: on the fence at 1 ns it came out negative in most
+//! pilots, which then took every query, at about 1.7 times the error of TRIAL. Where no
+//! rouletted query added light in the pilot (B = 0) it takes every query.
+//!
+//! With a sample budget (`--spp`, shards, checkpoints), a sample stays what it was: every query
+//! is made, unless `--query-roulette` says otherwise.
 
 use std::fmt::Write as _;
 
-use anyhow::Result;
+use anyhow::{Result, ensure};
 
 use super::auto::{EARLY_STOP_BATCHES, PILOT_BATCHES, pilot_budget, pilot_resolution, pilot_seed};
-use super::pilot::{Batches, pilot_batch};
+use super::pilot::{Batches, PilotBudget, pilot_batch};
 use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::gpu::GpuContext;
 use crate::scene::PreparedScene;
@@ -86,6 +95,56 @@ fn optimum(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f6
     }
 }
 
+/// What the pilot's pairs of batches of the same samples at p = 1 and at p = `TRIAL` measure
+/// beside each probability's own batches (the module's header): a sample at TRIAL is the sample
+/// at 1 plus D = sum over its rouletted queries of Q (I / TRIAL - 1), which has mean zero
+/// whatever the rest of the sample drew.
+#[derive(Default)]
+pub struct PairedBatches {
+    /// Per pair, k |x_TRIAL - x_1|^2 summed over the values (k samples per pixel in each batch),
+    /// whose expectation is E[D^2] summed over the values (radiance squared).
+    squares: Vec<f64>,
+    /// Seconds of the passes at 1 less those of the passes at TRIAL, summed over the pairs.
+    seconds_saved: f64,
+    /// Samples per pixel of each probability's batches in all.
+    samples: u64,
+}
+
+impl PairedBatches {
+    /// Adds a pair of batches of `k` samples per pixel, estimates `all` (p = 1) and `trial`,
+    /// whose passes took `seconds_all` and `seconds_trial`.
+    pub fn add(&mut self, k: u32, all: &[f64], trial: &[f64], seconds_all: f64, seconds_trial: f64) {
+        let squares: f64 = all.iter().zip(trial).map(|(a, t)| (t - a) * (t - a)).sum();
+        self.squares.push(k as f64 * squares);
+        self.seconds_saved += seconds_all - seconds_trial;
+        self.samples += k as u64;
+    }
+
+    /// The variance per sample at TRIAL (radiance squared, summed over the values) from the one
+    /// at 1, `v_all`: V(TRIAL) = V(1) + E[D^2], E[D^2] the mean of the pairs' squares without the
+    /// largest where there are three or more. A rouletted query of rare and large weight (8
+    /// times its contribution where kept) shows in one pair as a square many times the others;
+    /// left in, one such pair in a pilot of 8 decided for every query on the fence at 1 ns,
+    /// where the renders at p = 1/8 had 0.6 times the error of those at 1 (one firefly does not
+    /// decide, as `auto`'s medians of pairs have it; one in every pair or two still does).
+    pub fn trial_variance(&self, v_all: f64) -> f64 {
+        let mut squares = self.squares.clone();
+        squares.sort_by(f64::total_cmp);
+        if squares.len() >= 3 {
+            squares.pop();
+        }
+        v_all + squares.iter().sum::<f64>() / squares.len().max(1) as f64
+    }
+
+    /// The seconds per sample at TRIAL from those at 1, `c_all`: less the seconds the pairs'
+    /// passes at TRIAL saved per sample. The pairs trace the same samples one after the other,
+    /// with the same dispatches, so each pass's fixed cost and the host's drift cancel in the
+    /// difference.
+    pub fn trial_seconds_per_sample(&self, c_all: f64) -> f64 {
+        c_all - self.seconds_saved / self.samples.max(1) as f64
+    }
+}
+
 /// Does a render of `settings` make queries the roulette may skip? Paths of two or more
 /// scattering vertices, outside NLOS captures (whose three-bounce queries are the signal).
 pub fn has_multi_bounce_queries(settings: &RenderSettings) -> bool {
@@ -128,22 +187,36 @@ pub fn choose(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
     all.warm_up()?;
     trial.warm_up()?;
     let (mut b_all, mut b_trial) = (Batches::default(), Batches::default());
-    let per_sample = |b: &Batches| b.seconds_per_sample();
-    let figures = |a: &Batches, t: &Batches| (a.variance(), per_sample(a), t.variance(), per_sample(t));
+    // Batch j at TRIAL traces the samples of batch j at 1 (same seed, same sizes).
+    let mut pairs = PairedBatches::default();
+    let figures = |a: &Batches, pairs: &PairedBatches| {
+        // The mean seconds per sample at 1, each pass's fixed cost included: the two
+        // probabilities' own fits over passes of one and two samples left that cost out but
+        // scattered by a factor of ten, and a fit below the pairs' savings gave TRIAL a negative
+        // time. The fixed cost counts in D alone (the savings leave it out of E), which moves the
+        // choice towards every query.
+        let (v_all, c_all) = (a.variance(), a.seconds / a.samples.max(1) as f64);
+        (v_all, c_all, pairs.trial_variance(v_all), pairs.trial_seconds_per_sample(c_all))
+    };
     let mut batches = 0;
     while batches < PILOT_BATCHES {
+        let (before_all, before_trial) = (b_all.seconds, b_trial.seconds);
         pilot_batch(all.as_mut(), &mut b_all, per_probability, 1)?;
-        pilot_batch(trial.as_mut(), &mut b_trial, per_probability, 1)?;
+        let (k, x_all) = b_all.last();
+        pilot_batch(trial.as_mut(), &mut b_trial, PilotBudget::Samples(k), 1)?;
+        let (k_trial, x_trial) = b_trial.last();
+        ensure!(k_trial == k, "the query roulette's pilot traced {k_trial} samples at {TRIAL} against {k} at 1");
+        pairs.add(k, x_all, x_trial, b_all.seconds - before_all, b_trial.seconds - before_trial);
         batches += 1;
         if batches == EARLY_STOP_BATCHES {
-            let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &b_trial);
+            let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &pairs);
             let p = optimum(v_all, c_all, v_trial, c_trial, TRIAL as f64);
             if p >= EARLY_STOP_ALL || p <= TRIAL as f64 / EARLY_STOP_LEAST {
                 break;
             }
         }
     }
-    let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &b_trial);
+    let (v_all, c_all, v_trial, c_trial) = figures(&b_all, &pairs);
     let p = probability(v_all, c_all, v_trial, c_trial, TRIAL as f64);
     let mut reason =
         format!("pilot on {width}x{height}, {batches} batches each: variance per sample {v_all:.3e} with ");
@@ -207,5 +280,49 @@ mod tests {
         assert_eq!(probability(1.0, 2.0, 8.0, 1.0, 0.125), 1.0);
         // A pilot that saw nothing at all.
         assert_eq!(probability(0.0, 1.0, 0.0, 0.5, 0.125), 1.0);
+    }
+
+    #[test]
+    fn paired_batches_measure_the_rouletted_variance_and_time() {
+        // Per value and sample, X_1 = Z + Q and X_TRIAL = Z + Q I / TRIAL from the same draws:
+        // Z uniform on (-sqrt 3, sqrt 3) (variance 1), Q = 4 with probability 1/64, I a
+        // Bernoulli(TRIAL). E[D^2] = E[Q^2] (1 / TRIAL - 1) = 0.25 x 7 per value.
+        let (values, k) = (4096usize, 2u32);
+        let mut seed = 11u64;
+        let mut uniform = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let trial = TRIAL as f64;
+        let mut pairs = PairedBatches::default();
+        for j in 0..8 {
+            let (mut all, mut rouletted) = (vec![0.0; values], vec![0.0; values]);
+            for (a, t) in all.iter_mut().zip(&mut rouletted) {
+                for _ in 0..k {
+                    let z = (2.0 * uniform() - 1.0) * 3f64.sqrt();
+                    let q = if uniform() < 1.0 / 64.0 { 4.0 } else { 0.0 };
+                    let kept = uniform() < trial;
+                    *a += (z + q) / k as f64;
+                    *t += (z + if kept { q / trial } else { 0.0 }) / k as f64;
+                }
+            }
+            // Passes of 5 ms plus 3 ms a sample at 1 and 1 ms a sample at TRIAL, with jitter.
+            let jitter = 1e-3 * (j % 3) as f64;
+            pairs.add(k, &all, &rouletted, 5e-3 + 3e-3 * k as f64 + jitter, 5e-3 + 1e-3 * k as f64 + jitter);
+        }
+        let v_all = values as f64 * (1.0 + 16.0 / 64.0 * (1.0 - 1.0 / 64.0));
+        let measured = (pairs.trial_variance(v_all) - v_all) / values as f64;
+        // About 900 hits of Q among the 7 pairs kept, each D^2 of 49 or 1 / 4: a few per cent of
+        // standard error.
+        assert!((measured / 1.75 - 1.0).abs() < 0.15, "E[D^2] per value {measured}, expected 1.75");
+        let c_trial = pairs.trial_seconds_per_sample(3e-3);
+        assert!((c_trial - 1e-3).abs() < 1e-12, "seconds per sample at TRIAL {c_trial}");
+
+        // One pair of a huge square (a kept query of rare, large weight) does not decide.
+        let mut firefly = PairedBatches::default();
+        for square in [1.0, 1.2, 0.8, 1.1, 0.9, 1.0, 1000.0, 1.0] {
+            firefly.add(1, &[0.0], &[f64::sqrt(square)], 0.0, 0.0);
+        }
+        assert!((firefly.trial_variance(2.0) - 3.0).abs() < 1e-9, "{}", firefly.trial_variance(2.0));
     }
 }
