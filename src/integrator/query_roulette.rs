@@ -74,8 +74,8 @@ pub struct Choice {
 /// C(p) = D + E p fitted to a pilot's variance per sample v (radiance squared) and seconds per
 /// sample c at p = 1 and at p = `trial`: sqrt(B D / (A E)), clamped to `trial` ..= 1. D <= 0
 /// (the rouletted queries are all the time) gives `trial`; A <= 0 or E <= 0 (nothing else
-/// varies, or they cost nothing) give 1, and so does B <= 0, which the model cannot give (the
-/// variances are the pilot's noise, or rare contributions it drew at p = 1 only).
+/// varies, or they cost nothing) give 1, and so does B <= 0 (with [`PairedBatches`], B = 0:
+/// no rouletted query added light in the pilot, which is no evidence that they never do).
 pub fn probability(v_all: f64, c_all: f64, v_trial: f64, c_trial: f64, trial: f64) -> f32 {
     optimum(v_all, c_all, v_trial, c_trial, trial).clamp(trial, 1.0) as f32
 }
