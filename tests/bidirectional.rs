@@ -362,7 +362,7 @@ fn the_query_roulette_keeps_its_share_of_the_multi_bounce_queries() {
 }
 
 /// The roulette's pilot measures the rouletted queries' variance from the differences of
-/// batches of the same samples at p = 1 and p = 1/8 (`query_roulette::trial_variance`), which
+/// batches of the same samples at p = 1 and p = 1/8 (`query_roulette::PairedBatches`), which
 /// holds only if the roulette changes nothing else a sample draws. With at most two scattering
 /// vertices, from one seed: where the image at p = 1 equals the one-bounce image (no two-bounce
 /// query added light there), so does the image at p = 1/8; elsewhere the light p = 1/8 adds,
