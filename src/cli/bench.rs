@@ -249,11 +249,13 @@ impl Variant {
             anyhow::ensure!(
                 matches!(method, Method::Ellipsoidal | Method::Auto),
                 "`{s}`: only ellipsoidal and auto (for its ellipsoidal candidate) take options (K, exhaustive, \
-                 split=R, bottom=N, reflection, wide, roulette=P), combined roulette=P and path \
+                 split=R, bottom=N, arcs, reflection, wide, roulette=P), combined roulette=P and path \
                  medium-connections=on|off"
             );
             if option == "exhaustive" {
                 variant.query.split = 0.0;
+            } else if option == "arcs" {
+                variant.query.reflection_weights = false;
             } else if option == "reflection" {
                 variant.query.reflection_weights = true;
             } else if option == "wide" {
@@ -269,7 +271,7 @@ impl Variant {
                     n.parse().map_err(|_| anyhow::anyhow!("`{s}`: bottom=N needs a whole number, got `{n}`"))?;
             } else {
                 variant.connections_per_query = option.parse().map_err(|_| {
-                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, reflection, wide)")
+                    anyhow::anyhow!("`{s}`: `{option}` is not an option of ellipsoidal (K, exhaustive, split=R, bottom=N, arcs, reflection, wide)")
                 })?;
             }
         }
@@ -297,8 +299,8 @@ impl Variant {
             if self.query.bottom_nodes != default.bottom_nodes {
                 name += &format!(":bottom={}", self.query.bottom_nodes);
             }
-            if self.query.reflection_weights {
-                name += ":reflection";
+            if !self.query.reflection_weights {
+                name += ":arcs";
             }
             if self.query.wide {
                 name += ":wide";
@@ -320,5 +322,22 @@ impl Variant {
             query_roulette: self.query_roulette,
             ..base.clone()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Variant;
+
+    #[test]
+    fn query_weights_name_what_differs_from_the_default() {
+        let default = Variant::parse("ellipsoidal").unwrap();
+        assert!(default.query.reflection_weights, "reflection weights are the default");
+        assert_eq!(default.name(), "ellipsoidal");
+        assert_eq!(Variant::parse("ellipsoidal:reflection").unwrap().name(), "ellipsoidal");
+        let arcs = Variant::parse("ellipsoidal:2:arcs").unwrap();
+        assert!(!arcs.query.reflection_weights);
+        assert_eq!(arcs.name(), "ellipsoidal:2:arcs");
+        assert!(Variant::parse("direct:arcs").is_err(), "direct takes no query options");
     }
 }
