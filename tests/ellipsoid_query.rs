@@ -343,8 +343,11 @@ fn check_twin_against_device(settings: QuerySettings) {
     let scene = common::sphere_scene(32);
     let render = RenderSettings { width: 4, height: 4, query: settings, ..Default::default() };
     let tracer = PathTracer::new(&ctx, &scene, &render).unwrap();
-    let constants =
-        [("QUERY_WIDE", settings.wide as u32 as f64), ("QUERY_BOTTOM_NODES", settings.device_bottom_nodes() as f64)];
+    let constants = [
+        ("QUERY_WIDE", settings.wide as u32 as f64),
+        ("QUERY_BOTTOM_NODES", settings.device_bottom_nodes() as f64),
+        ("QUERY_REFLECTION_WEIGHTS", settings.reflection_weights as u32 as f64),
+    ];
     let (fs, fc, tau_e) = spheroids(&scene)[2];
     let keys = 2000u32;
     let mut input = Vec::new();
