@@ -65,7 +65,7 @@ class Renderer:
         connections_per_query: Optional[int] = None,
         query_split: float = 1.0,
         query_bottom_nodes: int = 31,
-        query_weights: str = "reflection",
+        query_weights: str = "arcs",
         query_tree: str = "binary",
         medium_connections: bool = False,
     ) -> None: ...

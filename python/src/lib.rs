@@ -264,7 +264,7 @@ impl Renderer {
     /// A renderer of `scene` with the command line's defaults (see gatetrace.Renderer).
     #[new]
     #[pyo3(signature = (scene, *, method="path", max_bounces=8, res=(256, 256), rr_depth=None, samples_per_pass=None,
-        connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="reflection",
+        connections_per_query=None, query_split=1.0, query_bottom_nodes=31, query_weights="arcs",
         query_tree="binary", query_roulette=None, medium_connections=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(

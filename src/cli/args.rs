@@ -142,8 +142,8 @@ pub struct RenderArgs {
     /// CPU Vulkan)
     #[arg(long, value_name = "TREE", value_enum, default_value = "binary")]
     pub query_tree: QueryTree,
-    /// Ellipsoid queries pick triangles by arc angle times a bound on the reflected light, or by
-    /// arc angle alone (default: reflection).
+    /// Ellipsoid queries pick triangles by arc angle, or times a bound on the reflected light
+    /// (default: reflection for --nlos, else arcs).
     #[arg(long, value_name = "WEIGHTS", value_enum)]
     pub query_weights: Option<QueryWeights>,
     /// --nlos, ellipsoidal, transient gate: spp of a pilot that shares out the bins' samples

@@ -299,8 +299,8 @@ impl Variant {
             if self.query.bottom_nodes != default.bottom_nodes {
                 name += &format!(":bottom={}", self.query.bottom_nodes);
             }
-            if !self.query.reflection_weights {
-                name += ":arcs";
+            if self.query.reflection_weights {
+                name += ":reflection";
             }
             if self.query.wide {
                 name += ":wide";
@@ -332,12 +332,12 @@ mod tests {
     #[test]
     fn query_weights_name_what_differs_from_the_default() {
         let default = Variant::parse("ellipsoidal").unwrap();
-        assert!(default.query.reflection_weights, "reflection weights are the default");
+        assert!(!default.query.reflection_weights, "arc weights are the default");
         assert_eq!(default.name(), "ellipsoidal");
-        assert_eq!(Variant::parse("ellipsoidal:reflection").unwrap().name(), "ellipsoidal");
-        let arcs = Variant::parse("ellipsoidal:2:arcs").unwrap();
-        assert!(!arcs.query.reflection_weights);
-        assert_eq!(arcs.name(), "ellipsoidal:2:arcs");
+        assert_eq!(Variant::parse("ellipsoidal:arcs").unwrap().name(), "ellipsoidal");
+        let reflection = Variant::parse("ellipsoidal:2:reflection").unwrap();
+        assert!(reflection.query.reflection_weights);
+        assert_eq!(reflection.name(), "ellipsoidal:2:reflection");
         assert!(Variant::parse("direct:arcs").is_err(), "direct takes no query options");
     }
 }

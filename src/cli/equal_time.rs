@@ -21,7 +21,7 @@ pub struct EqualTimeArgs {
     /// Methods to compare, comma-separated: path, direct, ellipsoidal, combined, auto, and
     /// ellipsoidal (or auto, for its ellipsoidal candidate) with options after colons: K (render
     /// --connections-per-query), exhaustive (render --query-split 0), split=R, bottom=N,
-    /// reflection (render --query-weights reflection), wide (render --query-tree wide) or
+    /// reflection or arcs (render --query-weights), wide (render --query-tree wide) or
     /// roulette=P (render --query-roulette), e.g. ellipsoidal:4:exhaustive;
     /// combined:roulette=P; and path:medium-connections=on (render --medium-connections on).
     #[arg(long, value_delimiter = ',', default_value = "path,direct", value_parser = parse_variant)]

@@ -107,7 +107,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         query: gatetrace::integrator::QuerySettings {
             split: args.query_split,
             bottom_nodes: args.query_bottom_nodes,
-            reflection_weights: args.query_weights != Some(QueryWeights::Arcs),
+            reflection_weights: args.query_weights == Some(QueryWeights::Reflection),
             wide: args.query_tree == QueryTree::Wide,
             ..Default::default()
         },

@@ -40,8 +40,8 @@ pub struct QuerySettings {
     pub allowance: u32,
     /// Weigh a triangle's pick by its arcs' angle times the reflection factor (an estimate of
     /// its contribution per radian, zero only where the contribution is; see
-    /// `ellipsoid::query::reflection_factor`; true, the default); false (`render --query-weights
-    /// arcs`; the exhaustive query's): by the arcs' angle alone. Both unbiased.
+    /// `ellipsoid::query::reflection_factor`); false (the default; `render --nlos` sets it): by
+    /// the arcs' angle alone. Both unbiased.
     pub reflection_weights: bool,
     /// Walk the wide BVH (four children per node, a stack of subtrees; `render --query-tree
     /// wide`) instead of the binary one (false, the default). Unbiased like the rest; on
@@ -50,8 +50,7 @@ pub struct QuerySettings {
 }
 
 impl QuerySettings {
-    /// The exhaustive query (every node the spheroid may touch, up to the allowance), its triangles
-    /// weighed by their arcs alone.
+    /// The exhaustive query (every node the spheroid may touch, up to the allowance).
     pub const EXHAUSTIVE: Self =
         Self { split: 0.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false, wide: false };
 
@@ -66,7 +65,7 @@ impl QuerySettings {
 
 impl Default for QuerySettings {
     fn default() -> Self {
-        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: true, wide: false }
+        Self { split: 1.0, bottom_nodes: 31, allowance: 4096, reflection_weights: false, wide: false }
     }
 }
 
