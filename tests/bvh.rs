@@ -416,7 +416,7 @@ fn deep_traversals_are_right_or_reported() {
     // visits every node before reaching the wall behind them. Lavapipe ends a shader's loops
     // after 65535 iterations in total; a traversal cut short must be counted, never silent.
     let n = 120_000;
-    let scene = slab_field(true, "deep_traversal");
+    let scene = slab_field(Slabs::OnAxis, "deep_traversal");
     assert!(scene.bvh.nodes.len() > 65_535, "{} nodes", scene.bvh.nodes.len());
     let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, Vec3::new(-1.0, 0.0, 0.0), Vec3::X, 1e30, NONE);
     assert_eq!(scene.triangles[cpu.triangle as usize].source, n as u32, "the CPU twin hits the wall");
@@ -436,17 +436,30 @@ fn deep_traversals_are_right_or_reported() {
     assert_eq!(tracer.truncated_traversals().unwrap(), truncated, "short traversals are not cut");
 }
 
+/// Where `slab_field` puts its slabs.
+#[derive(Clone, Copy, PartialEq)]
+enum Slabs {
+    /// Left out: the wall alone.
+    None,
+    /// Around the x axis, which every ray of the test crosses.
+    OnAxis,
+    /// 3 m higher (y), beside every camera and shadow ray: a BVH as large, which no ray of the
+    /// test traverses deeply.
+    Aside,
+}
+
 /// The slab field of `deep_traversals_are_right_or_reported` (120,000 triangles whose boxes all
 /// contain the x axis, which every triangle misses) in front of a double-sided wall at x = 20,
-/// lit by a point light near a camera that looks along the axis; `slabs = false` leaves them
-/// out.
-fn slab_field(slabs: bool, name: &str) -> gatetrace::scene::PreparedScene {
+/// lit by a point light near a camera that looks along the axis; `slabs` may leave them out
+/// or move them aside.
+fn slab_field(slabs: Slabs, name: &str) -> gatetrace::scene::PreparedScene {
     use common::gltf_builder::{Camera, Material, Mesh, PointLight, Scene};
     use gatetrace::scene::{PreparedScene, load_gltf};
     let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
-    for i in 0..if slabs { 120_000 } else { 0 } {
+    let lift = if slabs == Slabs::Aside { 3.0 } else { 0.0 };
+    for i in 0..if slabs == Slabs::None { 0 } else { 120_000 } {
         let x = i as f32 * 1e-4;
-        for p in [[x, 1.0, -0.9], [x, 1.0, 1.0], [x, -0.9, 1.0]] {
+        for p in [[x, 1.0 + lift, -0.9], [x, 1.0 + lift, 1.0], [x, -0.9 + lift, 1.0]] {
             mesh.indices.push(mesh.positions.len() as u32);
             mesh.positions.push(p);
         }
@@ -459,7 +472,7 @@ fn slab_field(slabs: bool, name: &str) -> gatetrace::scene::PreparedScene {
         material: Some(0),
     };
     let gltf = Scene {
-        meshes: if slabs { vec![mesh, wall] } else { vec![wall] },
+        meshes: if slabs == Slabs::None { vec![wall] } else { vec![mesh, wall] },
         materials: vec![Material { double_sided: true, ..Material::diffuse([0.5; 3]) }],
         // Looking along +x (-z turned by -90 degrees about y); a field of view narrow enough
         // that no camera ray meets a slab.
@@ -482,8 +495,8 @@ fn deep_traversals_resume_until_they_are_complete() {
     // those of the wall alone (same random numbers, same hits, same lights).
     use gatetrace::integrator::{Method, create_integrator};
     let ctx = common::gpu();
-    let with = slab_field(true, "slabs_with");
-    let without = slab_field(false, "slabs_without");
+    let with = slab_field(Slabs::OnAxis, "slabs_with");
+    let without = slab_field(Slabs::None, "slabs_without");
     let steps = with.wide.nodes.len() + with.wide.leaves;
     assert!(steps as u32 > 4 * wide::TRAVERSAL_BUDGET, "{steps} steps to visit every node and leaf");
     for method in [Method::Path, Method::Direct] {
@@ -504,5 +517,27 @@ fn deep_traversals_resume_until_they_are_complete() {
             );
         }
         println!("{method:?}: image mean {mean:.5} with and without the slabs");
+    }
+    // The path tracer gives shadow rays no resume passes while its film is backed up before
+    // each pass: the first pass here cut shadow rays short, was undone and traced again with
+    // resume passes (the image above), which the tracer then keeps. Beside the rays a BVH as
+    // large needs none: nothing is cut short, and the image is the wall's.
+    let settings = RenderSettings { width: 4, height: 4, max_bounces: 1, seed: 3, ..Default::default() };
+    let render = |scene| {
+        let mut tracer = PathTracer::new(&ctx, scene, &settings).unwrap();
+        assert_eq!(tracer.shadow_resume_passes(), 0, "a new path tracer starts without resume passes");
+        tracer.render_samples(16).unwrap();
+        (tracer.shadow_resume_passes(), tracer.film().unwrap(), tracer.truncated_traversals().unwrap())
+    };
+    let (resumes, _, cut) = render(&with);
+    assert!(resumes > 0 && cut == 0, "slabs on the axis: {resumes} resume passes, {cut} traversals cut short");
+    let aside = slab_field(Slabs::Aside, "slabs_aside");
+    assert!(aside.wide.traversals_can_stop(), "the BVH of the slabs aside has resumable traversals");
+    let (resumes, a, cut) = render(&aside);
+    let (_, b, _) = render(&without);
+    assert_eq!((resumes, cut), (0, 0), "slabs aside: resume passes and traversals cut short");
+    let mean = b.mean_rgb()[0] as f32;
+    for (i, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
+        assert!((x - y).abs() <= 1e-4 * y.abs().max(mean), "path, element {i}: {x} with the slabs aside, {y} without");
     }
 }

@@ -26,8 +26,9 @@
 //!     [setup_dispatch(shadow_rays)      BVHs whose traversals can stop (RESUMABLE): the shadow
 //!      trace_shadow_rays                rays extend_paths queued (it traces them itself in
 //!      setup_dispatch(shadow_resume)    smaller BVHs), resume passes for those that stopped
-//!      trace_shadow_rays(resume)] x R   at the budget (empty when none did), and a count of
-//!      setup_dispatch(shadow_cut)]      any still unfinished as cut short
+//!      trace_shadow_rays(resume)] x R   at the budget (empty when none did; R = 0 while the
+//!      setup_dispatch(shadow_cut)]      film is backed up, see render_pass), and a count of
+//!                                       any still unfinished as cut short
 //!     accumulate                        contributions -> film (W, bin), per pixel
 //! accumulate                            SUM_PER_PATH (gates of one bin, BVHs without resumable
 //!                                       traversals) instead: the paths' sums -> film, once
@@ -99,7 +100,19 @@ pub struct PathTracer<'a> {
     /// Paths sum their own gate-weighted contributions (SUM_PER_PATH): accumulate runs once per
     /// wave instead of after every round.
     sum_per_path: bool,
+    /// A copy of the film before the pass, one buffer per film chunk, while passes run no
+    /// resume passes (see [`PathTracer::render_pass`]); None once a pass needed them, and in
+    /// renders without shadow-ray stages or with films above MOST_BACKED_UP_FILM_BYTES.
+    film_backup: Option<Vec<wgpu::Buffer>>,
 }
+
+/// Largest film (bytes, all chunks) the path tracer backs up before each pass so that its
+/// shadow rays can go without resume passes. On lavapipe a resume pass costs two dispatches
+/// of about 0.1 ms even when empty, six to eight of them per round in a large BVH: on the fence
+/// (8 bounces) a 1-spp pass of a 32x32 image took 15 ms with them and 10 ms without, of which
+/// about 4 ms is the samples' own work. Films this large take passes long enough for that to
+/// vanish, and the copy stays far below a pass's time.
+const MOST_BACKED_UP_FILM_BYTES: u64 = 64 << 20;
 
 /// Most resume passes a round of the path tracer runs for shadow rays that stopped at the
 /// traversal budget (a resume pass costs two empty dispatches when every ray was decided):
@@ -193,6 +206,29 @@ impl<'a> PathTracer<'a> {
                 vertices_per_round,
             }))
         };
+        let film_chunks: Vec<&wgpu::Buffer> = crate::gpu::resources::chunk_names("film")[..film.chunks as usize]
+            .iter()
+            .map(|n| r.get(n).unwrap())
+            .collect();
+        let film_bytes: u64 = film_chunks.iter().map(|b| b.size()).sum();
+        let film_backup = if matches!(&tracing, Tracing::Rounds(s) if s.shadow_resumes > 0)
+            && film_bytes <= MOST_BACKED_UP_FILM_BYTES
+        {
+            let mut backup = Vec::new();
+            for chunk in film_chunks {
+                backup.push(ctx.allocate("film_backup", chunk.size(), || {
+                    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("film_backup"),
+                        size: chunk.size(),
+                        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                        mapped_at_creation: false,
+                    })
+                })?);
+            }
+            Some(backup)
+        } else {
+            None
+        };
         let wf = Wavefront::new(
             ctx,
             params,
@@ -203,7 +239,30 @@ impl<'a> PathTracer<'a> {
             scene.wide.most_stops(),
             settings.gate.kind(),
         );
-        Ok(Self { wf, tracing, accumulate, accumulate_binding, sum_per_path })
+        Ok(Self { wf, tracing, accumulate, accumulate_binding, sum_per_path, film_backup })
+    }
+
+    /// Resume passes per round the next pass runs for shadow rays stopped at the traversal
+    /// budget: none while the film is backed up before each pass, else as many as a ray can
+    /// need (at most MAX_SHADOW_RESUMES); 0 where shadow rays have no stages of their own.
+    pub fn shadow_resume_passes(&self) -> u32 {
+        match &self.tracing {
+            Tracing::Rounds(s) if self.film_backup.is_none() => s.shadow_resumes,
+            _ => 0,
+        }
+    }
+
+    /// Copies the film into `film_backup`, or (`restore`) the backup into the film.
+    fn copy_film(&self, backup: &[wgpu::Buffer], restore: bool) {
+        let ctx = self.wf.ctx;
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("film_backup") });
+        for (name, copy) in crate::gpu::resources::chunk_names("film").iter().zip(backup) {
+            let film = self.wf.resources.get(name).unwrap();
+            let (from, to) = if restore { (copy, film) } else { (film, copy) };
+            encoder.copy_buffer_to_buffer(from, 0, to, 0, copy.size());
+        }
+        ctx.queue.submit([encoder.finish()]);
     }
 
     /// Waves a full pass takes (more than one when the image does not fit one wave).
@@ -238,7 +297,7 @@ impl<'a> PathTracer<'a> {
                         s.extend_paths.dispatch_indirect(pass, &s.extend_paths_bindings[parity], args, 0);
                         if s.shadow_resumes > 0 {
                             s.shadow_rays.encode(pass, args);
-                            for _ in 0..s.shadow_resumes {
+                            for _ in 0..self.shadow_resume_passes() {
                                 s.shadow_rays.encode_resume(pass, args);
                             }
                             s.shadow_rays.encode_cut(pass);
@@ -285,8 +344,31 @@ impl Integrator for PathTracer<'_> {
         &self.wf
     }
 
+    /// Traces a pass. While the film is backed up, its shadow rays get no resume passes: the
+    /// round's last shadow-ray stage counts a ray still unfinished as a traversal cut short,
+    /// and a pass whose count rose is undone (film and counters as before it) and traced again
+    /// with the resume passes, which every later pass keeps. The second tracing draws the same
+    /// samples, so the film is what a render with resume passes throughout would hold. In BVHs
+    /// of sensible quality no shadow ray stops at the budget, and the resume passes were only
+    /// dispatch overhead.
     fn render_pass(&mut self, samples: u32) -> Result<()> {
-        for wave in self.wf.pass_waves(samples)? {
+        let waves = self.wf.pass_waves(samples)?;
+        if let Some(backup) = &self.film_backup {
+            let before = self.wf.counters()?;
+            self.copy_film(backup, false);
+            for &wave in &waves {
+                self.render_wave(wave)?;
+            }
+            if self.wf.counters()?.truncated_traversals == before.truncated_traversals {
+                self.wf.pass_done(samples);
+                return Ok(());
+            }
+            self.copy_film(backup, true);
+            let counters = self.wf.resources.get("counters").unwrap();
+            self.wf.ctx.queue.write_buffer(counters, 0, bytemuck::bytes_of(&before));
+            self.film_backup = None;
+        }
+        for wave in waves {
             self.render_wave(wave)?;
         }
         self.wf.pass_done(samples);
