@@ -12,7 +12,8 @@
 //!                                       per pixel, in sample order
 //! ```
 //!
-//! Otherwise it runs in rounds of one vertex (two where paths sum their own contributions):
+//! Otherwise it runs in rounds of one vertex (two where paths sum their own contributions and
+//! trace their own shadow rays):
 //!
 //! ```text
 //! generate_camera_rays                  every slot -> next_ray_queue
@@ -22,7 +23,9 @@
 //!                                       ray, next ray (a closest-hit traversal that stops at
 //!                                       the budget goes back to the queue: one round later);
 //!                                       two vertices per round where paths sum their own
-//!                                       contributions (SUM_PER_PATH)
+//!                                       contributions (SUM_PER_PATH) and trace their shadow
+//!                                       rays; a queued one's contribution waits, and joins
+//!                                       the path's sum at its next vertex
 //!     [setup_dispatch(shadow_rays)      BVHs whose traversals can stop (RESUMABLE): the shadow
 //!      trace_shadow_rays                rays extend_paths queued (it traces them itself in
 //!      setup_dispatch(shadow_resume)    smaller BVHs), resume passes for those that stopped
@@ -30,8 +33,8 @@
 //!      setup_dispatch(shadow_cut)]      film is backed up, see render_pass), and a count of
 //!                                       any still unfinished as cut short
 //!     accumulate                        contributions -> film (W, bin), per pixel
-//! accumulate                            SUM_PER_PATH (gates of one bin, BVHs without resumable
-//!                                       traversals) instead: the paths' sums -> film, once
+//! accumulate                            SUM_PER_PATH (gates of one bin) instead: the paths'
+//!                                       sums (and last waiting contributions) -> film, once
 //! ```
 //!
 //! The stages of one vertex are fused into extend_paths (shaders/lib/path_vertex.wesl
@@ -52,7 +55,7 @@ use crate::scene::PreparedScene;
 /// (target_slots_per_wave: more on a GPU).
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 18;
 /// Vertices extend_paths adds to a path per round when paths sum their own contributions
-/// (SUM_PER_PATH). On lavapipe (Cornell box, 64x64, 5 bounces, median of 3 alternating runs)
+/// (SUM_PER_PATH) in BVHs whose traversals cannot stop. On lavapipe (Cornell box, 64x64, 5 bounces, median of 3 alternating runs)
 /// 2 vertices per round traced 2.32 M samples/s, 3 traced 2.26 M and 6 (every vertex in one
 /// round) 2.05 M, against 1.90 M for 1: beyond 2 the lanes of ended paths idle more than the
 /// saved round trips of the path state gain.
@@ -97,8 +100,10 @@ pub struct PathTracer<'a> {
     tracing: Tracing,
     accumulate: Kernel,
     accumulate_binding: wgpu::BindGroup,
-    /// Paths sum their own gate-weighted contributions (SUM_PER_PATH): accumulate runs once per
-    /// wave instead of after every round.
+    /// Paths sum their own gate-weighted contributions (SUM_PER_PATH; every gate of one bin):
+    /// accumulate runs once per wave instead of after every round. A next-event contribution
+    /// whose shadow ray is queued waits in `contributions` and joins its path's sum at the
+    /// path's next vertex, or in accumulate.
     sum_per_path: bool,
     /// A copy of the film before the pass, one buffer per film chunk, while passes run no
     /// resume passes (see [`PathTracer::render_pass`]); None once a pass needed them, and in
@@ -128,11 +133,14 @@ impl<'a> PathTracer<'a> {
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let params = super::render_params(scene, settings);
         let resumable = scene.wide.traversals_can_stop();
-        let sum_per_path = settings.gate.kind() != crate::film::GateKind::Transient && !resumable;
+        let sum_per_path = settings.gate.kind() != crate::film::GateKind::Transient;
+        // Next-event contributions wait in `contributions` for their queued shadow rays
+        // (path_vertex.wesl contribute; media scenes trace them on the spot).
+        let queued_next_event = resumable && !scene.scene.has_media();
         let medium_connections = uses_medium_connections(scene, settings);
         // Emission, next-event estimation, and a medium connection.
         let contributions_per_slot = if medium_connections { 3 } else { 2 };
-        let whole_paths = sum_per_path && !crate::bvh::small_scene_triangles(&scene.triangles).is_empty();
+        let whole_paths = sum_per_path && !resumable && !crate::bvh::small_scene_triangles(&scene.triangles).is_empty();
 
         // Slots per wave: within the largest per-slot buffer's binding.
         let largest_per_slot =
@@ -156,7 +164,7 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "shadow_queue", size_of::<ShadowRay>() as u64 * slots, none)?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
-        let contribution_slots = if sum_per_path { 1 } else { slots };
+        let contribution_slots = if sum_per_path && !queued_next_event { 1 } else { slots };
         r.storage_zeroed(
             ctx,
             "contributions",
@@ -167,7 +175,10 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "path_radiance", path_radiance_bytes, none)?;
         // trace_shadow_rays can clear light-tracing splats; the path tracer has none.
         r.storage_zeroed(ctx, "splats", size_of::<Splat>() as u64, none)?;
-        let vertices_per_round = if sum_per_path { VERTICES_PER_ROUND_SUMMING } else { 1 };
+        // Not where traversals can stop: a second vertex would resume the first's stopped
+        // traversal in the same invocation (beyond lavapipe's loop limit), or overwrite its
+        // waiting contribution.
+        let vertices_per_round = if sum_per_path && !resumable { VERTICES_PER_ROUND_SUMMING } else { 1 };
         constants.push(("LIGHT_STRATEGY", settings.light_strategy as u32 as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("MEDIUM_CONNECTIONS", medium_connections as u32 as f64));
