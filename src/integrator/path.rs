@@ -55,10 +55,10 @@ use crate::scene::PreparedScene;
 /// (target_slots_per_wave: more on a GPU).
 const TARGET_SLOTS_PER_WAVE: u64 = 1 << 18;
 /// Vertices extend_paths adds to a path per round when paths sum their own contributions
-/// (SUM_PER_PATH) in BVHs whose traversals cannot stop. On lavapipe (Cornell box, 64x64, 5 bounces, median of 3 alternating runs)
-/// 2 vertices per round traced 2.32 M samples/s, 3 traced 2.26 M and 6 (every vertex in one
-/// round) 2.05 M, against 1.90 M for 1: beyond 2 the lanes of ended paths idle more than the
-/// saved round trips of the path state gain.
+/// (SUM_PER_PATH) in BVHs whose traversals cannot stop. On lavapipe (Cornell box, 64x64, 5
+/// bounces, median of 3 alternating runs) 2 vertices per round traced 2.32 M samples/s, 3
+/// traced 2.26 M and 6 (every vertex in one round) 2.05 M, against 1.90 M for 1: beyond 2 the
+/// lanes of ended paths idle more than the saved round trips of the path state gain.
 const VERTICES_PER_ROUND_SUMMING: u32 = 2;
 /// Pipelines and bind groups of the wavefront rounds (`[even, odd]` rounds swap ray_queue and
 /// next_ray_queue).
