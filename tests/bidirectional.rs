@@ -2,7 +2,8 @@
 //! estimator of the same images: the Cornell box at the steady state, at box, Gaussian and CW
 //! gates, its glossy variant, a mix of area and point lights, and double-sided materials; the
 //! transient cube against the box gate over the same range; the per-strategy debug images
-//! against the full render; and the gate-before-ray statistics.
+//! against the full render; the camera pilot's scales of the MIS weights; and the
+//! gate-before-ray statistics.
 //! Both sides' variances are measured over independent batches.
 
 mod common;
@@ -92,6 +93,50 @@ fn direct_matches_path_with_a_point_light() {
 #[test]
 fn direct_matches_path_with_double_sided_materials() {
     assert_direct_matches_path("double-sided", &modified_cornell_box(false, true), Gate::None, 32, 180);
+}
+
+/// The camera pilot's per-pixel scales of the camera's density (`RenderSettings::
+/// camera_pilot_spp`) move weight between the camera's strategies and light tracing and leave
+/// the image as it was: `direct` with them against `path`, on the Cornell box lit also by a
+/// point light beside the camera (a time-of-flight camera's illuminator), steady and behind a
+/// box gate. The scales must differ across the image, from 1 to at least 2 (light tracing
+/// keeps weight where the pilot found the camera's strategies noisy, and little elsewhere).
+#[test]
+fn direct_with_the_camera_pilots_scales_matches_path() {
+    let ctx = common::gpu();
+    let mut scene = load_gltf(&common::repo_path("assets/scenes/cornell_box.gltf")).unwrap();
+    let camera = scene.camera;
+    scene.point_lights.push(PointLight {
+        position: camera.position + 0.1 * camera.right + 0.3 * camera.forward,
+        intensity: glam::Vec3::new(4.0, 4.0, 3.0),
+        spot: None,
+    });
+    let scene = PreparedScene::new(scene).unwrap();
+    for (label, gate, seed) in
+        [("steady", Gate::None, 300), ("box [3.3, 3.5)", Gate::Box { start: 3.3, end: 3.5 }, 310)]
+    {
+        let with_scales = RenderSettings { camera_pilot_spp: Some(16), ..settings(Method::Direct, gate.clone(), seed) };
+        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &with_scales).unwrap();
+        let direct = common::films_of(&mut tracer, BATCHES, 32);
+        assert_eq!(tracer.camera_pilot_spp(), 16, "{label}: the pilot ran");
+        let scales = tracer.camera_mis_scales();
+        let (low, high) = scales.iter().fold((f32::MAX, 0.0f32), |(l, h), &s| (l.min(s), h.max(s)));
+        assert!(low == 1.0 && high >= 2.0, "{label}: scales from {low} to {high}");
+        let path = common::render_films(&ctx, &scene, &settings(Method::Path, gate.clone(), seed + 1), BATCHES, 32);
+        common::assert_films_agree(&format!("camera scales, {label}"), &direct, &path, 8, ALPHA);
+        if gate != Gate::None {
+            // combined: both halves weigh with the scales of its one pilot.
+            let combined = RenderSettings {
+                ellipsoidal_share: Some(1.0),
+                connections_per_query: 1,
+                ..RenderSettings { method: Method::Combined, ..with_scales }
+            };
+            let mut tracer = gatetrace::integrator::combined::CombinedTracer::new(&ctx, &scene, &combined).unwrap();
+            let films = common::films_of(&mut tracer, BATCHES, 16);
+            assert_eq!(tracer.camera_pilot_spp(), 16, "{label}: combined's pilot ran");
+            common::assert_films_agree(&format!("combined with camera scales, {label}"), &films, &path, 8, ALPHA);
+        }
+    }
 }
 
 #[test]

@@ -106,7 +106,9 @@ fn metadata(path: &Path) -> serde_json::Value {
 /// A render of many samples stopped by `signal_name` once it has saved a checkpoint: the exit
 /// status is 128 + the signal, the image holds the samples taken (its metadata says how many
 /// and why it stopped), and `--resume` to a few samples more gives the image of an
-/// uninterrupted render of as many samples, bit for bit.
+/// uninterrupted render of as many samples, bit for bit. `direct` renders with a camera pilot
+/// (`--camera-pilot 16`, which its default takes from 256 spp on), whose scales the checkpoint
+/// keeps.
 fn interrupt_and_resume(method: &str, signal_name: &str, status: i32, dir: &Path) {
     let args = |out: &str| -> Vec<String> {
         [
@@ -125,7 +127,9 @@ fn interrupt_and_resume(method: &str, signal_name: &str, status: i32, dir: &Path
             out,
         ]
         .map(String::from)
-        .to_vec()
+        .into_iter()
+        .chain(if method == "direct" { vec!["--camera-pilot".into(), "16".into()] } else { vec![] })
+        .collect()
     };
     let out = dir.join("stopped.npy");
     let mut child = gatetrace()

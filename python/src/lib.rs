@@ -403,6 +403,7 @@ impl Renderer {
                 truncated_traversals: tracer.truncated_traversals().map_err(runtime_error)? - truncated_before,
                 stats: None,
                 target_pilot_spp: tracer.target_pilot_spp(),
+                camera_pilot_spp: tracer.camera_pilot_spp(),
                 band_index: tracer.band_index_report(),
                 band_index_off: tracer.band_index_off(),
                 samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),

@@ -151,6 +151,11 @@ pub struct RenderArgs {
     /// with --time it stops after an eighth of the budget).
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     pub target_pilot: Option<u32>,
+    /// direct, one-bin gate: spp of a pilot (then discarded) whose per-pixel variance shares
+    /// each pixel's light between camera paths and light tracing in the MIS weights (default 16
+    /// with --time or from 256 spp, else 0; with --time no pass starts after 1/8 of the budget).
+    #[arg(long, value_name = "SPP")]
+    pub camera_pilot: Option<u32>,
     /// --nlos, ellipsoidal, transient gate: connect through the band index of three-bounce
     /// shells (auto: on above 16 hidden triangles; with --time, not where its build would
     /// outlast the budget)

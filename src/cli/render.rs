@@ -117,6 +117,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         },
         nlos: None,
         target_pilot_spp: args.target_pilot.unwrap_or(0),
+        camera_pilot_spp: args.camera_pilot,
         band_index: false,
         ellipsoidal_share: args.ellipsoidal_share,
         query_roulette: args.query_roulette,
@@ -216,7 +217,13 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
     let bars = indicatif::MultiProgress::new();
     if let (Some(shard), Some(scene), Budget::Samples(total)) = (args.shard, &static_scene, budget) {
         let (_, path, settings) = &frames[0];
-        return super::merge::render_shard(&ctx, scene, &scene_path, &args, shard, settings, total, path, &bars);
+        // Every shard takes the camera pilot the whole render would, not one of its slice.
+        let mut settings = settings.clone();
+        if settings.camera_pilot_spp.is_none() {
+            settings.camera_pilot_spp =
+                Some(gatetrace::integrator::bidirectional::default_camera_pilot(&settings, budget));
+        }
+        return super::merge::render_shard(&ctx, scene, &scene_path, &args, shard, &settings, total, path, &bars);
     }
     // A sequence shows a bar over its frames above each frame's bar over passes.
     let frames_bar = sequence.then(|| {

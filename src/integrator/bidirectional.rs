@@ -42,8 +42,9 @@
 //!
 //! `options` holds the methods' limits, defaults, checks of settings and strategy counters;
 //! `target_visits` how extra visits of stratified bins are shared out (band index or pilot
-//! render).
+//! render); `camera_pilot` the per-pixel scales of the camera's density in `direct`'s weights.
 
+pub mod camera_pilot;
 mod options;
 mod stats;
 mod target_visits;
@@ -59,6 +60,7 @@ use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
+pub use camera_pilot::{camera_pilot_applies, default_camera_pilot};
 pub use options::{
     DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, FamilyRole,
     MAX_BOUNCES, MAX_CONNECTIONS_PER_QUERY, StrategyStats, check_media, check_tracer_settings,
@@ -141,6 +143,18 @@ pub struct BidirectionalTracer<'a> {
     /// The built band index's masses per pixel and stratum (empty without one): they share out
     /// the target lengths' extra visits instead of a pilot render.
     band_masses: Vec<f32>,
+    /// Samples per pixel of the camera pilot this tracer runs itself
+    /// (`RenderSettings::camera_pilot_spp`; 0 where it does not apply, the scales do not fit a
+    /// binding, or the tracer is a combined render's half).
+    camera_pilot_asked: u32,
+    /// The camera pilot is still to run (before the next pass).
+    camera_pilot_pending: bool,
+    /// Samples per pixel of the camera pilot whose scales the film's samples use; 0: none (a
+    /// time budget cut it short, or none was asked for).
+    camera_pilot_traced: u32,
+    /// What camera_mis_scales holds, one scale per pixel (empty where the kernels keep no
+    /// scales).
+    camera_mis_scales: Vec<f32>,
     /// Bytes one binding may hold.
     binding_limit: u64,
     /// `target_visits` holds visit tables of the gate it was built for (a target pilot or a band
@@ -260,6 +274,19 @@ impl<'a> BidirectionalTracer<'a> {
         if keeps_visit_tables {
             r.storage_zeroed(ctx, "target_visits", visits_bytes, wgpu::BufferUsages::empty())?;
         }
+        // The camera pilot's scales, one per pixel (see camera_pilot), where they fit a binding:
+        // a direct render runs its own pilot; a combined render's halves keep the scales its
+        // pilot writes (CombinedTracer passes them settings with a pilot only where it applies).
+        let camera_scales = settings.camera_pilot_spp.unwrap_or(0) > 0
+            && pixels * 4 <= limit
+            && (family.is_some() || camera_pilot_applies(settings));
+        let camera_pilot_spp =
+            if camera_scales && family.is_none() { settings.camera_pilot_spp.unwrap_or(0) } else { 0 };
+        let camera_tiles = camera_pilot::camera_scale_tiles(settings.width, settings.height);
+        let camera_mis_scales = vec![1.0f32; if camera_scales { camera_tiles.count() } else { 0 }];
+        if camera_scales {
+            r.storage_zeroed(ctx, "pixel_moments", pixels * 4, wgpu::BufferUsages::empty())?;
+        }
         let splat_film_bytes = super::film_elements(settings)? * super::FILM_ELEMENT_BYTES;
         ensure!(
             splat_film_bytes <= limit,
@@ -354,6 +381,9 @@ impl<'a> BidirectionalTracer<'a> {
         };
         constants.push(("BAND_INDEX", band_index_planned as u32 as f64));
         constants.push(("STATS", settings.stats as u32 as f64));
+        constants.push(("CAMERA_MIS_SCALES", camera_scales as u32 as f64));
+        constants.push(("PIXEL_MOMENTS", camera_scales as u32 as f64));
+        constants.push(("CAMERA_SCALE_TILE", camera_tiles.size as f64));
         constants.push(("ELLIPSOIDAL", ellipsoidal as u32 as f64));
         if let Some((s, t)) = settings.debug_strategy {
             constants.push(("DEBUG_S", s as f64));
@@ -442,6 +472,10 @@ impl<'a> BidirectionalTracer<'a> {
             band_index_deferred: None,
             band_index_result,
             band_masses: Vec::new(),
+            camera_pilot_asked: camera_pilot_spp,
+            camera_pilot_pending: camera_pilot_spp > 0,
+            camera_pilot_traced: 0,
+            camera_mis_scales,
             binding_limit: limit,
             keeps_visit_tables,
         })
@@ -532,6 +566,10 @@ impl Integrator for BidirectionalTracer<'_> {
         self.target_pilot_traced
     }
 
+    fn camera_pilot_spp(&self) -> u32 {
+        self.camera_pilot_traced
+    }
+
     fn samples_to_visit_every_bin(&self) -> Option<u64> {
         let t = &self.wf.params.target_length;
         (t.strata > 0).then(|| crate::film::target::samples_to_visit_every_bin(t))
@@ -565,16 +603,21 @@ impl Integrator for BidirectionalTracer<'_> {
         if self.target_pilot_pending {
             self.run_target_pilot()?;
         }
+        if self.camera_pilot_pending {
+            self.run_camera_pilot()?;
+        }
         Ok(())
     }
 
     fn warm_up(&mut self) -> Result<()> {
         let pilot = std::mem::take(&mut self.target_pilot_pending);
+        let camera_pilot = std::mem::take(&mut self.camera_pilot_pending);
         let band_index = self.band_index.take();
         let seed = self.wf.params.seed;
         self.render_pass(1)?;
         self.restart(seed);
         self.target_pilot_pending = pilot;
+        self.camera_pilot_pending = camera_pilot;
         self.band_index = band_index;
         Ok(())
     }
@@ -592,6 +635,8 @@ impl Integrator for BidirectionalTracer<'_> {
         )?;
         state.push("splat_film", &splats);
         state.push("target_pilot", &[self.target_pilot_pending as u32, self.target_pilot_traced]);
+        state.push("camera_pilot", &[self.camera_pilot_pending as u32, self.camera_pilot_traced]);
+        state.push("camera_mis_scales", &self.camera_mis_scales);
         state.push(super::query_roulette::STATE_BLOB, &[self.wf.params.query_roulette.to_bits()]);
         Ok(state)
     }
@@ -599,6 +644,8 @@ impl Integrator for BidirectionalTracer<'_> {
     fn load_state(&mut self, state: &super::checkpoint::RenderState) -> Result<()> {
         let splats: Vec<[u32; 4]> = state.values("splat_film", self.wf.film_element_count() as usize)?;
         let flags: Vec<u32> = state.values("target_pilot", 2)?;
+        let camera_flags: Vec<u32> = state.values("camera_pilot", 2)?;
+        let scales: Vec<f32> = state.values("camera_mis_scales", self.camera_mis_scales.len())?;
         self.wf.load_state(self.method, state)?;
         // The state's parameters say whether its render had a band index; this one uses its own.
         self.wf.params.target_length.band_index = matches!(self.band_index_result, Some(Ok(_))) as u32;
@@ -610,6 +657,9 @@ impl Integrator for BidirectionalTracer<'_> {
         self.wf.ctx.queue.write_buffer(self.wf.resources.get("splat_film").unwrap(), 0, bytemuck::cast_slice(&splats));
         self.target_pilot_pending = flags[0] != 0;
         self.target_pilot_traced = flags[1];
+        self.camera_pilot_pending = camera_flags[0] != 0;
+        self.camera_pilot_traced = camera_flags[1];
+        self.write_camera_mis_scales(scales);
         Ok(())
     }
 
@@ -624,6 +674,7 @@ impl Integrator for BidirectionalTracer<'_> {
         // As a new tracer: the pilot (where the gate's tables fit) shapes the extra visits again.
         self.target_pilot_pending = self.target_pilot_fits();
         self.target_pilot_traced = 0;
+        self.restart_camera_pilot();
     }
 
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
@@ -633,6 +684,7 @@ impl Integrator for BidirectionalTracer<'_> {
             // A new pilot shapes them again where the new gate's tables fit the buffer.
             self.target_pilot_pending = self.target_pilot_fits();
             self.target_pilot_traced = 0;
+            self.restart_camera_pilot();
             self.reset_film();
         }
         Ok(moved)

@@ -30,6 +30,7 @@ use super::auto::{
     CandidateFigures, EARLY_STOP_RATIO, PILOT_BATCHES, candidate_methods, candidate_settings, compare, pilot_budget,
     pilot_resolution, pilot_seed,
 };
+use super::bidirectional::camera_pilot::{CAMERA_PILOT_BUDGET_SHARE, camera_pilot_applies, camera_tile_scales};
 pub use super::bidirectional::{Family, FamilyRole};
 use super::pilot::{Batches, pilot_batch};
 use super::{
@@ -429,6 +430,15 @@ pub struct CombinedTracer<'a> {
     direct: BidirectionalTracer<'a>,
     ellipsoidal: BidirectionalTracer<'a>,
     share: f64,
+    /// Samples per pixel (of the leading half) of the camera pilot whose scales both halves
+    /// weigh with (`RenderSettings::camera_pilot_spp`; 0: none).
+    camera_pilot_asked: u32,
+    /// The camera pilot is still to run (before the next pass).
+    camera_pilot_pending: bool,
+    /// Samples per pixel of the camera pilot whose scales weigh the film's samples; 0: none.
+    camera_pilot_traced: u32,
+    /// The render's time budget (s), a share of which the camera pilot may take.
+    time_budget: Option<f64>,
 }
 
 impl<'a> CombinedTracer<'a> {
@@ -438,11 +448,62 @@ impl<'a> CombinedTracer<'a> {
     pub fn new(ctx: &'a GpuContext, scene: &PreparedScene, settings: &RenderSettings) -> Result<Self> {
         check_settings(settings)?;
         let share = settings.ellipsoidal_share.unwrap_or(1.0);
+        // Both halves weigh with the scales of one camera pilot, which this tracer runs: a path's
+        // weights in either half read the same camera density (see bidirectional::camera_pilot).
+        let camera_pilot = match camera_pilot_applies(settings) {
+            true => settings.camera_pilot_spp.unwrap_or(0),
+            false => 0,
+        };
         let half = |family: Family| {
             let role = FamilyRole { family, ratio: settings.connections_per_query as f64 * share, medium_ratio: share };
-            BidirectionalTracer::with_family(ctx, scene, &family.settings(settings), Some(role))
+            let half_settings = RenderSettings { camera_pilot_spp: Some(camera_pilot), ..family.settings(settings) };
+            BidirectionalTracer::with_family(ctx, scene, &half_settings, Some(role))
         };
-        Ok(Self { direct: half(Family::Direct)?, ellipsoidal: half(Family::Ellipsoidal)?, share })
+        let (direct, ellipsoidal) = (half(Family::Direct)?, half(Family::Ellipsoidal)?);
+        // Where the scales do not fit a binding neither half keeps them.
+        let camera_pilot = if direct.keeps_camera_scales() { camera_pilot } else { 0 };
+        Ok(Self {
+            direct,
+            ellipsoidal,
+            share,
+            camera_pilot_asked: camera_pilot,
+            camera_pilot_pending: camera_pilot > 0,
+            camera_pilot_traced: 0,
+            time_budget: None,
+        })
+    }
+
+    /// The camera pilot of both halves (as `direct`'s, bidirectional::camera_pilot): the
+    /// halves render `camera_pilot_asked` samples per pixel of the leading half at the split,
+    /// every scale [`CAMERA_PILOT_SCALE`](super::bidirectional::camera_pilot::CAMERA_PILOT_SCALE),
+    /// and the scales follow the direct half's camera strategies (its film), whose density they
+    /// scale against light tracing and the ellipsoidal family. Both halves then take the same
+    /// scales; a pilot a time budget cut short leaves them 1.
+    fn run_camera_pilot(&mut self) -> Result<()> {
+        self.camera_pilot_pending = false;
+        let start = std::time::Instant::now();
+        let limit = self.time_budget.map(|seconds| seconds * CAMERA_PILOT_BUDGET_SHARE);
+        self.direct.begin_camera_pilot();
+        self.ellipsoidal.begin_camera_pilot();
+        let asked = self.camera_pilot_asked as u64;
+        while self.samples_done() < asked && !limit.is_some_and(|limit| start.elapsed().as_secs_f64() >= limit) {
+            let n = (asked - self.samples_done()).min(self.samples_per_pass() as u64) as u32;
+            self.render_pass(n)?;
+        }
+        let complete = self.samples_done() >= asked;
+        let scales = match complete {
+            true => {
+                let (means, variances) = self.direct.camera_pilot_moments()?;
+                let width = self.direct.wavefront().params.width;
+                camera_tile_scales(self.direct.camera_tiles(), width, &means, &variances)
+            }
+            false => vec![1.0; self.direct.camera_mis_scales().len()],
+        };
+        let traced = if complete { self.samples_done() as u32 } else { 0 };
+        self.direct.finish_camera_pilot(scales.clone(), traced);
+        self.ellipsoidal.finish_camera_pilot(scales, traced);
+        self.camera_pilot_traced = traced;
+        Ok(())
     }
 
     /// The half with more samples per pixel (the direct one at equal shares), whose samples a
@@ -468,6 +529,7 @@ impl Integrator for CombinedTracer<'_> {
     /// `samples` more of the leading half (see `halves`), then the other up to its share of the
     /// leading half's samples (at least one).
     fn render_pass(&mut self, samples: u32) -> Result<()> {
+        self.prepare()?;
         let (leading, other, share) = self.halves();
         leading.render_pass(samples)?;
         let due = ((leading.samples_done() as f64 * share).round() as u64).max(1);
@@ -495,12 +557,32 @@ impl Integrator for CombinedTracer<'_> {
     fn restart(&mut self, seed: u32) {
         self.direct.restart(seed);
         self.ellipsoidal.restart(ellipsoidal_half_seed(seed));
+        self.camera_pilot_pending = self.camera_pilot_asked > 0;
+        self.camera_pilot_traced = 0;
     }
 
     fn set_gate(&mut self, scene: &PreparedScene, settings: &RenderSettings) -> Result<bool> {
         let direct = Family::Direct.settings(settings);
         let ellipsoidal = Family::Ellipsoidal.settings(settings);
-        Ok(self.direct.set_gate(scene, &direct)? && self.ellipsoidal.set_gate(scene, &ellipsoidal)?)
+        let moved = self.direct.set_gate(scene, &direct)? && self.ellipsoidal.set_gate(scene, &ellipsoidal)?;
+        if moved {
+            self.camera_pilot_pending = self.camera_pilot_asked > 0;
+            self.camera_pilot_traced = 0;
+        }
+        Ok(moved)
+    }
+
+    fn camera_pilot_spp(&self) -> u32 {
+        self.camera_pilot_traced
+    }
+
+    fn warm_up(&mut self) -> Result<()> {
+        let pilot = std::mem::take(&mut self.camera_pilot_pending);
+        let seed = self.direct.wavefront().params.seed;
+        self.render_pass(1)?;
+        self.restart(seed);
+        self.camera_pilot_pending = pilot;
+        Ok(())
     }
 
     /// The sum of the two halves' estimates, its samples per pixel those of the leading half.
@@ -535,11 +617,16 @@ impl Integrator for CombinedTracer<'_> {
     fn set_time_budget(&mut self, seconds: Option<f64>) {
         self.direct.set_time_budget(seconds);
         self.ellipsoidal.set_time_budget(seconds);
+        self.time_budget = seconds;
     }
 
     fn prepare(&mut self) -> Result<()> {
         self.direct.prepare()?;
-        self.ellipsoidal.prepare()
+        self.ellipsoidal.prepare()?;
+        if self.camera_pilot_pending {
+            self.run_camera_pilot()?;
+        }
+        Ok(())
     }
 
     fn save_state(&self) -> Result<checkpoint::RenderState> {

@@ -80,6 +80,9 @@ pub fn render_metadata(
             ));
         }
     }
+    if matches!(settings.method, Method::Direct | Method::Combined | Method::Auto) {
+        metadata.push(("camera_pilot_spp".into(), output.camera_pilot_spp.into()));
+    }
     if matches!(settings.method, Method::Ellipsoidal | Method::Auto) {
         let g = settings.ellipsoid_guards;
         metadata.push(("connections_per_query".into(), settings.connections_per_query.into()));

@@ -104,6 +104,11 @@ pub trait Integrator: Send {
     fn target_pilot_spp(&self) -> u32 {
         0
     }
+    /// Samples per pixel of the camera pilot whose scales weigh the film's samples (see
+    /// `RenderSettings::camera_pilot_spp`), 0 for none.
+    fn camera_pilot_spp(&self) -> u32 {
+        0
+    }
     /// What became of the band index of an NLOS capture (`RenderSettings::band_index`): its
     /// size and build time, or why the capture went without; None when it was not asked for.
     fn band_index_report(&self) -> Option<String> {
@@ -200,6 +205,15 @@ impl RenderSettings {
         ensure!(
             self.target_pilot_spp == 0 || self.method == Method::Ellipsoidal,
             "--target-pilot applies to --method ellipsoidal only"
+        );
+        ensure!(
+            self.camera_pilot_spp.is_none_or(|spp| spp == 0 || bidirectional::camera_pilot_applies(self)),
+            "--camera-pilot applies to --method direct with a camera (not --nlos), a gate of one bin and no \
+             --debug-strategy"
+        );
+        ensure!(
+            self.camera_pilot_spp.is_none_or(|spp| spp != 1),
+            "--camera-pilot 1: the pilot's variance needs at least 2 samples per pixel (or 0 for none)"
         );
         ensure!(
             self.debug_strategy.is_none() || self.method == Method::Direct,

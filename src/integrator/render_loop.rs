@@ -101,6 +101,9 @@ pub struct RenderOutput {
     /// Samples per pixel of the pilot render traced before the film's and discarded (see
     /// `RenderSettings::target_pilot_spp`).
     pub target_pilot_spp: u32,
+    /// Samples per pixel of the camera pilot whose per-pixel scales weigh the film's samples
+    /// (see `RenderSettings::camera_pilot_spp`), 0 for none.
+    pub camera_pilot_spp: u32,
     /// Why a capture that asked for the band index went without it (see
     /// [`Integrator::band_index_off`]).
     pub band_index_off: Option<String>,
@@ -161,6 +164,7 @@ impl RenderOutput {
             truncated_traversals: 0,
             stats: None,
             target_pilot_spp: 0,
+            camera_pilot_spp: 0,
             band_index: None,
             band_index_off: None,
             samples_to_visit_every_bin: None,
@@ -349,10 +353,18 @@ pub fn render_resumable(
             pilot_seconds: 0.0,
         }),
     };
-    let render_settings = match &roulette {
+    let mut render_settings = match &roulette {
         Some(r) => RenderSettings { query_roulette: Some(r.probability), ..render_settings },
         None => render_settings,
     };
+    // direct and combined (also as auto's choice): the camera pilot, by the whole render's
+    // budget, or as the resumed render had it.
+    if render_settings.camera_pilot_spp.is_none() {
+        render_settings.camera_pilot_spp = Some(match resume {
+            Some(state) => super::bidirectional::camera_pilot::saved_camera_pilot(state),
+            None => super::bidirectional::default_camera_pilot(&render_settings, budget),
+        });
+    }
     let mut tracer = create_integrator(ctx, scene, &render_settings)?;
     if let Budget::Time(_) = budget {
         // A device may compile kernels at their first dispatch (lavapipe does): a pass of one
@@ -389,6 +401,7 @@ pub fn render_resumable(
     let truncated_traversals = tracer.truncated_traversals()?;
     let stats = if settings.stats { tracer.stats_report()? } else { None };
     let target_pilot_spp = tracer.target_pilot_spp();
+    let camera_pilot_spp = tracer.camera_pilot_spp();
     let state = match start_at.keep_state {
         true => Some(checkpoint::RenderState { rendering_seconds: rendering.as_secs_f64(), ..tracer.save_state()? }),
         false => None,
@@ -400,6 +413,7 @@ pub fn render_resumable(
         truncated_traversals,
         stats,
         target_pilot_spp,
+        camera_pilot_spp,
         band_index: tracer.band_index_report(),
         band_index_off: tracer.band_index_off(),
         samples_to_visit_every_bin: tracer.samples_to_visit_every_bin(),

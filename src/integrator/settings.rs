@@ -109,6 +109,13 @@ pub struct RenderSettings {
     /// the samples. `--target-pilot`; `render --nlos` gives `ellipsoidal`
     /// [`super::bidirectional::DEFAULT_NLOS_TARGET_PILOT`].
     pub target_pilot_spp: u32,
+    /// `direct` with a camera and a gate of one bin: samples per pixel of the camera pilot,
+    /// traced before the first pass and then discarded, whose per-pixel variance scales the
+    /// camera's density in the MIS weights (see [`super::bidirectional::camera_pilot`]); 0:
+    /// none, the textbook power heuristic. None: a render chooses
+    /// ([`super::bidirectional::default_camera_pilot`] of its budget), an integrator built
+    /// directly takes none. `render --camera-pilot`.
+    pub camera_pilot_spp: Option<u32>,
     /// `ellipsoidal` NLOS captures on a transient gate: build the band index (see
     /// [`crate::nlos::band_index`]) before the first pass and draw each connection between a pixel's
     /// laser spot and its sensed point from it, instead of descending the whole BVH (`render
@@ -169,6 +176,7 @@ impl Default for RenderSettings {
             ellipsoid_guards: EllipsoidGuards::default(),
             nlos: None,
             target_pilot_spp: 0,
+            camera_pilot_spp: None,
             band_index: false,
             ellipsoidal_share: None,
             query_roulette: None,

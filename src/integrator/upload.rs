@@ -151,6 +151,8 @@ pub fn upload_scene(
     r.storage_init(ctx, "wall_points", &wall_points)?;
     // Extra target-length visits come from a pilot render (BidirectionalTracer), if any.
     r.storage_init(ctx, "target_visits", &[0u32])?;
+    r.uniform_slice_init(ctx, "camera_mis_scales", &[[0u32; 4]; super::bidirectional::camera_pilot::SCALE_WORDS]);
+    r.storage_init(ctx, "pixel_moments", &[0.0f32])?;
     let film_len = film_elements(settings)?;
     check_film_memory(ctx, settings, film_len)?;
     let film = r.storage_chunked_zeroed(ctx, "film", film_len, FILM_ELEMENT_BYTES, limit)?;
