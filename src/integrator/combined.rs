@@ -30,7 +30,7 @@ use super::auto::{
     CandidateFigures, EARLY_STOP_RATIO, PILOT_BATCHES, candidate_methods, candidate_settings, compare, pilot_budget,
     pilot_resolution, pilot_seed,
 };
-use super::bidirectional::camera_pilot::{CAMERA_PILOT_BUDGET_SHARE, camera_pilot_applies, camera_tile_scales};
+use super::bidirectional::camera_pilot::{camera_pilot_applies, trace_camera_pilot};
 pub use super::bidirectional::{Family, FamilyRole};
 use super::pilot::{Batches, pilot_batch};
 use super::{
@@ -481,25 +481,12 @@ impl<'a> CombinedTracer<'a> {
     /// scales; a pilot a time budget cut short leaves them 1.
     fn run_camera_pilot(&mut self) -> Result<()> {
         self.camera_pilot_pending = false;
-        let start = std::time::Instant::now();
-        let limit = self.time_budget.map(|seconds| seconds * CAMERA_PILOT_BUDGET_SHARE);
+        let (asked, budget) = (self.camera_pilot_asked, self.time_budget);
         self.direct.begin_camera_pilot();
         self.ellipsoidal.begin_camera_pilot();
-        let asked = self.camera_pilot_asked as u64;
-        while self.samples_done() < asked && !limit.is_some_and(|limit| start.elapsed().as_secs_f64() >= limit) {
-            let n = (asked - self.samples_done()).min(self.samples_per_pass() as u64) as u32;
-            self.render_pass(n)?;
-        }
-        let complete = self.samples_done() >= asked;
-        let scales = match complete {
-            true => {
-                let (means, variances) = self.direct.camera_pilot_moments()?;
-                let width = self.direct.wavefront().params.width;
-                camera_tile_scales(self.direct.camera_tiles(), width, &means, &variances)
-            }
-            false => vec![1.0; self.direct.camera_mis_scales().len()],
-        };
-        let traced = if complete { self.samples_done() as u32 } else { 0 };
+        let complete = trace_camera_pilot(self, asked, budget)?;
+        let scales = self.direct.camera_pilot_scales(complete)?;
+        let traced = if complete { asked } else { 0 };
         self.direct.finish_camera_pilot(scales.clone(), traced);
         self.ellipsoidal.finish_camera_pilot(scales, traced);
         self.camera_pilot_traced = traced;

@@ -112,7 +112,7 @@ pub fn camera_tile_scales(tiles: CameraTiles, width: u32, means: &[f64], varianc
 }
 /// A render with a time budget stops its pilot after this share of the budget and goes without
 /// scales (every pixel 1) if it is not complete by then.
-pub(crate) const CAMERA_PILOT_BUDGET_SHARE: f64 = 1.0 / 8.0;
+const CAMERA_PILOT_BUDGET_SHARE: f64 = 1.0 / 8.0;
 
 /// Whether `settings` can take a camera pilot: `direct` or `combined` (whose halves share one
 /// set of scales, see `combined::CombinedTracer`), a camera (not an NLOS capture), and a gate of
@@ -165,6 +165,20 @@ pub fn camera_mis_scales(means: &[f64], variances: &[f64]) -> Vec<f32> {
         .collect()
 }
 
+/// Traces a camera pilot's `asked` samples per pixel on `tracer` (after `begin_camera_pilot` on
+/// the tracers whose films it reads) in full passes; with a time budget of `budget` seconds no
+/// pass starts after [`CAMERA_PILOT_BUDGET_SHARE`] of it. Whether all were traced.
+pub(crate) fn trace_camera_pilot(tracer: &mut dyn Integrator, asked: u32, budget: Option<f64>) -> Result<bool> {
+    let start = Instant::now();
+    let limit = budget.map(|seconds| seconds * CAMERA_PILOT_BUDGET_SHARE);
+    let asked = asked as u64;
+    while tracer.samples_done() < asked && !limit.is_some_and(|limit| start.elapsed().as_secs_f64() >= limit) {
+        let n = (asked - tracer.samples_done()).min(tracer.samples_per_pass() as u64) as u32;
+        tracer.render_pass(n)?;
+    }
+    Ok(tracer.samples_done() >= asked)
+}
+
 impl BidirectionalTracer<'_> {
     /// Runs the camera pilot of a render of its own (`direct`): `camera_pilot_asked` samples
     /// per pixel, in full passes, with every pixel's scale [`CAMERA_PILOT_SCALE`]; each pixel's
@@ -174,24 +188,11 @@ impl BidirectionalTracer<'_> {
     /// [`CAMERA_PILOT_BUDGET_SHARE`] of it, and a pilot cut short leaves every scale 1.
     pub(super) fn run_camera_pilot(&mut self) -> Result<()> {
         self.camera_pilot_pending = false;
-        let start = Instant::now();
-        let limit = self.time_budget.map(|seconds| seconds * CAMERA_PILOT_BUDGET_SHARE);
+        let (asked, budget) = (self.camera_pilot_asked, self.time_budget);
         self.begin_camera_pilot();
-        let asked = self.camera_pilot_asked as u64;
-        while self.samples_done() < asked && !limit.is_some_and(|limit| start.elapsed().as_secs_f64() >= limit) {
-            let n = (asked - self.samples_done()).min(self.samples_per_pass() as u64) as u32;
-            self.render_pass(n)?;
-        }
-        let traced = self.samples_done();
-        let scales = match traced >= asked {
-            true => {
-                let (means, variances) = self.camera_pilot_moments()?;
-                camera_tile_scales(self.camera_tiles(), self.wf.params.width, &means, &variances)
-            }
-            false => vec![1.0; self.camera_mis_scales.len()],
-        };
-        let traced = if traced >= asked { traced as u32 } else { 0 };
-        self.finish_camera_pilot(scales, traced);
+        let complete = trace_camera_pilot(self, asked, budget)?;
+        let scales = self.camera_pilot_scales(complete)?;
+        self.finish_camera_pilot(scales, if complete { asked } else { 0 });
         Ok(())
     }
 
@@ -235,6 +236,16 @@ impl BidirectionalTracer<'_> {
                 (mean, variance)
             })
             .unzip())
+    }
+
+    /// The scales of the pilot since `begin_camera_pilot` from this tracer's film and sums of
+    /// squares ([`camera_tile_scales`]), or every scale 1 where the pilot was cut short.
+    pub(crate) fn camera_pilot_scales(&self, complete: bool) -> Result<Vec<f32>> {
+        if !complete {
+            return Ok(vec![1.0; self.camera_mis_scales.len()]);
+        }
+        let (means, variances) = self.camera_pilot_moments()?;
+        Ok(camera_tile_scales(self.camera_tiles(), self.wf.params.width, &means, &variances))
     }
 
     /// The end of a camera pilot: `scales` (one per pixel) written, `traced` samples per pixel
