@@ -131,9 +131,16 @@ fn direct_with_the_camera_pilots_scales_matches_path() {
                 connections_per_query: 1,
                 ..RenderSettings { method: Method::Combined, ..with_scales }
             };
-            let mut tracer = gatetrace::integrator::combined::CombinedTracer::new(&ctx, &scene, &combined).unwrap();
-            let films = common::films_of(&mut tracer, BATCHES, 16);
-            assert_eq!(tracer.camera_pilot_spp(), 16, "{label}: combined's pilot ran");
+            let mut own = gatetrace::integrator::combined::CombinedTracer::new(&ctx, &scene, &combined).unwrap();
+            // A pilot's candidates take the scales of one camera pilot: adopted, they stay
+            // (no pilot of its own runs at the first pass).
+            let mut adopting = gatetrace::integrator::combined::CombinedTracer::new(&ctx, &scene, &combined).unwrap();
+            adopting.adopt_camera_mis_scales(scales, 16);
+            adopting.render_pass(1).unwrap();
+            assert_eq!((adopting.camera_mis_scales(), adopting.camera_pilot_spp()), (scales, 16), "{label}: adopted");
+            let films = common::films_of(&mut own, BATCHES, 16);
+            assert_eq!(own.camera_pilot_spp(), 16, "{label}: combined's pilot ran");
+            assert_ne!(own.camera_mis_scales(), scales, "{label}: combined's own pilot measured its scales");
             common::assert_films_agree(&format!("combined with camera scales, {label}"), &films, &path, 8, ALPHA);
         }
     }

@@ -39,7 +39,8 @@
 
 use anyhow::{Result, ensure};
 
-use super::pilot::{Batches, PilotBudget, per_sample_variances, pilot_batch};
+use super::bidirectional::resolve_camera_pilot;
+use super::pilot::{Batches, CameraScalesOnce, PilotBudget, per_sample_variances, pilot_batch};
 use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::film::Gate;
 use crate::gpu::GpuContext;
@@ -245,10 +246,15 @@ pub fn choose(
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = pilot_budget(budget, pixel_ratio, methods.len());
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
+    // Each candidate weighs as its render would: `direct` with the camera scales of a camera
+    // pilot where its render runs one.
+    let mut camera_scales = CameraScalesOnce::default();
     let mut tracers = Vec::new();
     for &method in &methods {
-        let mut tracer = create_integrator(ctx, scene, &candidate_settings(&pilot, method))?;
+        let candidate = resolve_camera_pilot(&candidate_settings(&pilot, method), budget);
+        let mut tracer = create_integrator(ctx, scene, &candidate)?;
         tracer.warm_up()?;
+        camera_scales.prepare(tracer.as_mut())?;
         tracers.push(tracer);
     }
     // The methods' batches alternate, so the pilot can stop after EARLY_STOP_BATCHES of each
@@ -276,7 +282,7 @@ pub fn choose(
         chosen.name(),
         ratio
     );
-    let pilot_seconds = batches.iter().map(|b| b.wall_seconds).sum();
+    let pilot_seconds = camera_scales.seconds + batches.iter().map(|b| b.wall_seconds).sum::<f64>();
     Ok(MethodChoice { chosen, candidates, pilot_resolution: (width, height), reason, pilot_seconds })
 }
 

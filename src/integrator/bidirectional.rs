@@ -60,7 +60,7 @@ use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
-pub use camera_pilot::{camera_pilot_applies, default_camera_pilot};
+pub use camera_pilot::{camera_pilot_applies, default_camera_pilot, resolve_camera_pilot};
 pub use options::{
     DEFAULT_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_CONNECTIONS_PER_QUERY, DEFAULT_NLOS_TARGET_PILOT, Family, FamilyRole,
     MAX_BOUNCES, MAX_CONNECTIONS_PER_QUERY, StrategyStats, check_media, check_tracer_settings,
@@ -568,6 +568,19 @@ impl Integrator for BidirectionalTracer<'_> {
 
     fn camera_pilot_spp(&self) -> u32 {
         self.camera_pilot_traced
+    }
+
+    /// As stored (every one 1 after a pilot cut short).
+    fn camera_mis_scales(&self) -> &[f32] {
+        &self.camera_mis_scales
+    }
+
+    fn adopt_camera_mis_scales(&mut self, scales: &[f32], traced: u32) {
+        if self.keeps_camera_scales() {
+            assert_eq!(scales.len(), self.camera_mis_scales.len(), "camera scales of an image of another size");
+            self.camera_pilot_pending = false;
+            self.finish_camera_pilot(scales.to_vec(), traced);
+        }
     }
 
     fn samples_to_visit_every_bin(&self) -> Option<u64> {

@@ -95,6 +95,17 @@ pub trait Integrator: Send {
     fn truncated_traversals(&self) -> Result<u64> {
         Ok(self.wavefront().counters()?.truncated_traversals as u64)
     }
+    /// The scales of the camera's density in the MIS weights the film's samples are weighed
+    /// with, one per tile (`bidirectional::camera_pilot`): empty for a method without them,
+    /// every one 1 before its camera pilot has run.
+    fn camera_mis_scales(&self) -> &[f32] {
+        &[]
+    }
+    /// Weighs the film's samples from now on with `scales` (one per tile of an image of this
+    /// tracer's size), which the camera pilot of `traced` samples per pixel of another tracer
+    /// measured, in place of a camera pilot of its own: a pilot's candidates share one (see
+    /// `pilot::CameraScalesOnce`). Nothing for a tracer that does not weigh with camera scales.
+    fn adopt_camera_mis_scales(&mut self, _scales: &[f32], _traced: u32) {}
     /// What `--stats` prints about the work done so far, if the method keeps statistics.
     fn stats_report(&self) -> Result<Option<String>> {
         Ok(None)

@@ -11,6 +11,39 @@ use anyhow::Result;
 use super::Integrator;
 use super::auto::PILOT_BATCHES;
 
+/// One camera pilot for all of a pilot's tracers that weigh with camera scales (`direct`, and
+/// both halves of `combined`; docs/design.md section 4.2, "Camera scales"), so that each is
+/// measured as its render will weigh: the first such tracer runs the camera pilot its render
+/// would run (of the render's samples per pixel, on the pilot's image), and later ones adopt its
+/// scales, being of the same image. `combined`'s halves thus weigh with the scales of `direct`
+/// alone, where their render measures them on its direct half (both with every camera density
+/// scaled alike): one pilot of `direct` costs a sixth of one of both halves on the fence.
+#[derive(Default)]
+pub(super) struct CameraScalesOnce {
+    /// The first tracer's scales and its camera pilot's samples per pixel.
+    scales: Option<(Vec<f32>, u32)>,
+    /// Seconds spent in [`Self::prepare`] (camera pilot and other work before a first pass).
+    pub seconds: f64,
+}
+
+impl CameraScalesOnce {
+    /// Readies `tracer`, after its warm-up, for its pilot batches: the work its render does
+    /// before the first pass (`Integrator::prepare`), with the camera scales of the first tracer
+    /// that weighed with them; timed in `seconds`, so that no batch's time holds it.
+    pub fn prepare(&mut self, tracer: &mut dyn Integrator) -> Result<()> {
+        let start = Instant::now();
+        if let Some((scales, traced)) = &self.scales {
+            tracer.adopt_camera_mis_scales(scales, *traced);
+        }
+        tracer.prepare()?;
+        if self.scales.is_none() && !tracer.camera_mis_scales().is_empty() {
+            self.scales = Some((tracer.camera_mis_scales().to_vec(), tracer.camera_pilot_spp()));
+        }
+        self.seconds += start.elapsed().as_secs_f64();
+        Ok(())
+    }
+}
+
 /// How much pilot each method gets.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum PilotBudget {

@@ -136,6 +136,13 @@ pub fn default_camera_pilot(settings: &RenderSettings, budget: Budget) -> u32 {
     if camera_pilot_applies(settings) && enough { CAMERA_PILOT_SPP } else { 0 }
 }
 
+/// `settings` with the camera pilot of its render under `budget` resolved: as given, else
+/// [`default_camera_pilot`].
+pub fn resolve_camera_pilot(settings: &RenderSettings, budget: Budget) -> RenderSettings {
+    let spp = settings.camera_pilot_spp.unwrap_or_else(|| default_camera_pilot(settings, budget));
+    RenderSettings { camera_pilot_spp: Some(spp), ..settings.clone() }
+}
+
 /// The camera pilot of the render a checkpoint holds, for its resumption when the settings
 /// leave it to the renderer: [`CAMERA_PILOT_SPP`] where the state keeps scales (which its
 /// loading restores; the pilot does not run again), 0 otherwise.
@@ -255,12 +262,6 @@ impl BidirectionalTracer<'_> {
         self.camera_pilot_traced = traced;
         // Writes the parameters with a new seed and the film's first sample.
         self.reset_film();
-    }
-
-    /// The scales the film's samples are weighed with, one per tile ([`CameraTiles`]; empty
-    /// without a camera pilot, every one 1 before it has run or after one cut short), as stored.
-    pub fn camera_mis_scales(&self) -> &[f32] {
-        &self.camera_mis_scales
     }
 
     /// As a new tracer: every scale 1, and the pilot (if it runs its own) before the next pass.
