@@ -17,7 +17,9 @@ use super::auto::PILOT_BATCHES;
 /// would run (of the render's samples per pixel, on the pilot's image), and later ones adopt its
 /// scales, being of the same image. `combined`'s halves thus weigh with the scales of `direct`
 /// alone, where their render measures them on its direct half (both with every camera density
-/// scaled alike): one pilot of `direct` costs a sixth of one of both halves on the fence.
+/// scaled alike): one of both halves at a split of 1 would cost about 4 of `direct`'s on the
+/// fence, where an ellipsoidal sample costs 3.3 direct ones (docs/benchmarks.md, "The paper's
+/// applications").
 #[derive(Default)]
 pub(super) struct CameraScalesOnce {
     /// The first tracer's scales and its camera pilot's samples per pixel.
