@@ -338,6 +338,14 @@ pub fn render_resumable(
     // ellipsoidal (also as auto's choice): the query roulette, from a pilot with a time budget
     // (counted against it), or from the resumed state; combined: its allocation's.
     let roulette = match resume {
+        // A family alone is that method's render: `ellipsoidal` alone chooses its roulette as
+        // `ellipsoidal` does (the allocation's pilot weighed it making every query), unless given.
+        _ if allocation.as_ref().is_some_and(|a| a.alone == Some(Method::Ellipsoidal))
+            && settings.query_roulette.is_none() =>
+        {
+            let ellipsoidal = RenderSettings { query_roulette: None, ..render_settings.clone() };
+            Some(query_roulette::choose(ctx, scene, &ellipsoidal, budget)?)
+        }
         _ if allocation.is_some() => {
             allocation.as_ref().filter(|a| a.alone != Some(Method::Direct)).map(|a| query_roulette::Choice {
                 probability: a.query_roulette,
