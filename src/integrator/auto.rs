@@ -18,8 +18,9 @@
 //! Estimating the variances: each method renders a few independent batches; the squared
 //! differences of consecutive pairs of them, summed over the image's values (pixel, bin,
 //! channel), give estimates of its variance per sample, and the median of the pairs' estimates
-//! is taken (a firefly in one batch moves one pair's estimate, not the median). A narrow gate
-//! makes that
+//! is taken (a firefly in one batch moves one pair's estimate, not the median), or their mean
+//! where the median is zero (the light the method found came in rare batches: see
+//! `pilot::Batches::variance`). A narrow gate makes that
 //! spread blind where it matters most: a `direct` pilot that found none of a gate's rare paths
 //! has zero spread, though its true variance is huge, and per pixel the other pilot is often
 //! too sparse to show it (a pixel where one batch of 8 holds all of `ellipsoidal`'s light
