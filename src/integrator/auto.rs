@@ -20,7 +20,8 @@
 //! channel), give estimates of its variance per sample, and the median of the pairs' estimates
 //! is taken (a firefly in one batch moves one pair's estimate, not the median), or their mean
 //! where the median is zero (the light the method found came in rare batches: see
-//! `pilot::Batches::variance`). A narrow gate makes that
+//! `pilot::Batches::variance`), and at least their mean for a pilot that found less light than
+//! the reference below (`per_sample_variances`). A narrow gate makes that
 //! spread blind where it matters most: a `direct` pilot that found none of a gate's rare paths
 //! has zero spread, though its true variance is huge, and per pixel the other pilot is often
 //! too sparse to show it (a pixel where one batch of 8 holds all of `ellipsoidal`'s light
@@ -72,12 +73,19 @@ pub const SAMPLE_BUDGET_DIVISOR: u64 = 16;
 /// The pilot's image keeps at least this many pixels (below, it is the render's own image).
 pub const PILOT_MIN_PIXELS: u32 = 1024;
 
+/// The image of a combined render's allocation pilot keeps at least this many pixels (16x16):
+/// its runs (up to nine with a time budget) mostly render at their floor of batches, which then
+/// costs about 1/16 of the full image's where `auto`'s 32x32 costs 1/4 of it (docs/methods.md,
+/// "The gate-width sweep": on the fence at 1 m, 1.09 times `direct`'s error where 32x32 left
+/// 1.36).
+pub const ALLOCATION_MIN_PIXELS: u32 = 256;
+
 /// The pilot's image is at most this many times smaller than the render's along each axis.
 pub const PILOT_MAX_SHRINK: u32 = 4;
 
 /// The pilot renders the same camera at a resolution shrunk by an integer factor f along each
-/// axis, the largest f <= [`PILOT_MAX_SHRINK`] that divides both and leaves
-/// [`PILOT_MIN_PIXELS`] pixels (so the image keeps its aspect exactly): its
+/// axis, the largest f <= [`PILOT_MAX_SHRINK`] that divides both and leaves `min_pixels`
+/// pixels ([`PILOT_MIN_PIXELS`] for `auto`; the image keeps its aspect exactly): its
 /// floor of [`PILOT_BATCHES`] one-sample batches then costs about 1/f^2 of that at full size.
 /// The variance of one sample of a pixel's estimate barely depends on the pixel's size (a
 /// camera sample averages radiance over the pixel whatever its size; a light-tracing splat is
@@ -86,10 +94,10 @@ pub const PILOT_MAX_SHRINK: u32 = 4;
 /// radiance varies within a pixel: on the glossy box `path`'s variance per sample is 17x
 /// `direct`'s at 32x32 and 11x at 64x64, docs/methods.md, `auto`); times per sample are
 /// scaled by the pixel count (`Batches::seconds_per_sample`). Returns (width, height, f).
-pub fn pilot_resolution(width: u32, height: u32) -> (u32, u32, u32) {
+pub fn pilot_resolution(width: u32, height: u32, min_pixels: u32) -> (u32, u32, u32) {
     let pixels = width as u64 * height as u64;
     let fits = |f: u32| {
-        width.is_multiple_of(f) && height.is_multiple_of(f) && pixels / (f as u64 * f as u64) >= PILOT_MIN_PIXELS as u64
+        width.is_multiple_of(f) && height.is_multiple_of(f) && pixels / (f as u64 * f as u64) >= min_pixels as u64
     };
     let f = (1..=PILOT_MAX_SHRINK).rev().find(|&f| fits(f)).unwrap_or(1);
     (width / f, height / f, f)
@@ -243,7 +251,7 @@ pub fn choose(
             pilot_seconds: 0.0,
         });
     }
-    let (width, height, shrink) = pilot_resolution(settings.width, settings.height);
+    let (width, height, shrink) = pilot_resolution(settings.width, settings.height, PILOT_MIN_PIXELS);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = pilot_budget(budget, pixel_ratio, methods.len());
     let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
@@ -328,15 +336,18 @@ mod tests {
     use super::*;
     #[test]
     fn pilot_images_keep_a_thousand_pixels_and_shrink_at_most_fourfold() {
-        assert_eq!(pilot_resolution(16, 16), (16, 16, 1));
-        assert_eq!(pilot_resolution(32, 32), (32, 32, 1));
-        assert_eq!(pilot_resolution(64, 64), (32, 32, 2));
-        assert_eq!(pilot_resolution(66, 64), (33, 32, 2));
-        assert_eq!(pilot_resolution(65, 64), (65, 64, 1));
-        assert_eq!(pilot_resolution(128, 128), (32, 32, 4));
-        assert_eq!(pilot_resolution(1920, 1080), (480, 270, 4));
-        assert_eq!(pilot_resolution(4096, 1), (4096, 1, 1));
-        assert_eq!(pilot_resolution(96, 96), (32, 32, 3));
+        assert_eq!(pilot_resolution(16, 16, PILOT_MIN_PIXELS), (16, 16, 1));
+        assert_eq!(pilot_resolution(32, 32, PILOT_MIN_PIXELS), (32, 32, 1));
+        assert_eq!(pilot_resolution(64, 64, PILOT_MIN_PIXELS), (32, 32, 2));
+        assert_eq!(pilot_resolution(66, 64, PILOT_MIN_PIXELS), (33, 32, 2));
+        assert_eq!(pilot_resolution(65, 64, PILOT_MIN_PIXELS), (65, 64, 1));
+        assert_eq!(pilot_resolution(128, 128, PILOT_MIN_PIXELS), (32, 32, 4));
+        assert_eq!(pilot_resolution(1920, 1080, PILOT_MIN_PIXELS), (480, 270, 4));
+        assert_eq!(pilot_resolution(4096, 1, PILOT_MIN_PIXELS), (4096, 1, 1));
+        assert_eq!(pilot_resolution(96, 96, PILOT_MIN_PIXELS), (32, 32, 3));
+        assert_eq!(pilot_resolution(64, 64, ALLOCATION_MIN_PIXELS), (16, 16, 4));
+        assert_eq!(pilot_resolution(128, 128, ALLOCATION_MIN_PIXELS), (32, 32, 4));
+        assert_eq!(pilot_resolution(32, 32, ALLOCATION_MIN_PIXELS), (16, 16, 2));
     }
 
     #[test]

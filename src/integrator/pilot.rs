@@ -1,9 +1,10 @@
 //! The pilots' measurement, shared by `auto` (one pilot per candidate method), `combined` (its
 //! halves, each family alone and both halves together) and the query roulette: batches of a
 //! few samples per pixel on the pilot's image, each method's variance per sample from the
-//! medians of consecutive batch pairs (their means where the medians are zero), what a pilot
-//! missed charged against the most
-//! trustworthy one (see `auto`'s header), and a sample's time without each pass's fixed cost.
+//! medians of consecutive batch pairs (their means where the medians are zero, and at least
+//! their means for a pilot that found less light than the most trustworthy one), what a pilot
+//! missed charged against that one (see `auto`'s header), and a sample's time without each
+//! pass's fixed cost.
 
 use std::time::Instant;
 
@@ -181,11 +182,14 @@ impl Batches {
     /// 3 and `combined` traced it alone, where `ellipsoidal` had about 1/4,000 of its error.
     pub(super) fn variance(&self) -> f64 {
         let median = median(self.pair_variances.clone());
-        if median > 0.0 {
-            median
-        } else {
-            self.pair_variances.iter().sum::<f64>() / self.pair_variances.len().max(1) as f64
-        }
+        if median > 0.0 { median } else { self.pair_mean_variance() }
+    }
+
+    /// The per-sample variance summed over the values from every pair alike: the mean of the
+    /// pairs' estimates (unbiased, rare batches of light and fireflies included; zero for no
+    /// pairs).
+    fn pair_mean_variance(&self) -> f64 {
+        self.pair_variances.iter().sum::<f64>() / self.pair_variances.len().max(1) as f64
     }
 }
 
@@ -264,7 +268,8 @@ pub(super) fn per_sample_variances(pilots: &[&Batches]) -> Vec<f64> {
     // A rare-event pilot's variance moves with the share of the rare paths it drew, and so does
     // its mean: a less trustworthy method's variance is scaled by the reference's mean over its
     // own (summed magnitudes of the groups' means), which is exact where its variance is
-    // proportional to its mean (hits of one size). A pilot that found nothing is left to the
+    // proportional to its mean (hits of one size), after its variance was taken from all its
+    // pairs where its mean is the smaller (below). A pilot that found nothing is left to the
     // groups' test below.
     let magnitude = |m: &Batches| {
         (0..m.groups.weighted_sum.len()).map(|g| m.groups.get(g, m.count, m.samples).0.abs()).sum::<f64>()
@@ -275,6 +280,17 @@ pub(super) fn per_sample_variances(pilots: &[&Batches]) -> Vec<f64> {
     for (i, m) in pilots.iter().enumerate() {
         if i == reference {
             continue;
+        }
+        // A less trustworthy pilot that found less light than the reference drew fewer of its
+        // rare paths than their share, and its batches that found them are its variance, not
+        // fireflies on top of it (a firefly raises a pilot's mean): its variance is at least the
+        // mean of its pairs' estimates. The median of 4 pairs leaves out the one batch of 8 that found
+        // a 1 mm gate's light: on the glossy box there (16x16) a `direct` pilot's pairs gave 0,
+        // 2.2e-6, 2.6e-5 and 1.4e-2, its mean was 0.44 of `ellipsoidal`'s, and the median put it
+        // 12.8 times ahead of `ellipsoidal`, which has 1/24 of its error. (Where the pairs are
+        // alike their mean is close to their median, and the larger of the two is kept.)
+        if noise[i] > noise[reference] && magnitude(m) < magnitude(r) {
+            variances[i] = variances[i].max(m.pair_mean_variance());
         }
         if noise[i] > noise[reference] && magnitude(m) > 0.0 {
             variances[i] *= magnitude(r) / magnitude(m);
@@ -406,6 +422,39 @@ mod tests {
         assert!((b.variance() - expected).abs() < 1e-9, "{} against {expected}", b.variance());
         // Nothing at all: no variance.
         assert_eq!(batches(&vec![vec![0.0; values]; 8], 1).variance(), 0.0);
+    }
+
+    #[test]
+    fn a_pilot_short_of_light_keeps_its_rare_batches() {
+        // B sees 1 per value in every batch; A (a `direct` pilot behind a narrow gate) finds
+        // 0.01 +- 0.001 in seven batches and 4 in one, about half of B's light: its pairs give
+        // 4096 x 0.002^2 / 2 three times and 4096 x 3.989^2 / 2 once, so the median of the four
+        // leaves the batch of light out. A's variance is the mean of its pairs, scaled by B's
+        // mean over its own (the charge of `per_sample_variances`); its mean is within the
+        // spread of its batches, so no miss is charged on top.
+        let values = 4096;
+        let a: Vec<Vec<f64>> = (0..8)
+            .map(|j| vec![if j == 3 { 4.0 } else { 0.01 + if j % 2 == 0 { 0.001 } else { -0.001 } }; values])
+            .collect();
+        let mut seed = 23;
+        let b: Vec<Vec<f64>> =
+            (0..8).map(|_| normals(&mut seed, values).into_iter().map(|z| 1.0 + 0.01 * z).collect()).collect();
+        let (a, b) = (batches(&a, 1), batches(&b, 1));
+        let (v_a, v_b) = two_variances(&a, &b);
+        let pairs = [4096.0 * 0.002f64.powi(2) / 2.0, 4096.0 * 3.989f64.powi(2) / 2.0];
+        let mean_of_pairs = (3.0 * pairs[0] + pairs[1]) / 4.0;
+        let mean_a = (4.0 + 7.0 * 0.01 + 0.001) / 8.0;
+        let b_over_a = b.groups.get(0, b.count, b.samples).0 / (mean_a * values as f64);
+        let expected = mean_of_pairs * b_over_a / values as f64;
+        assert!((v_a / expected - 1.0).abs() < 1e-6, "A's variance {v_a}, expected {expected}");
+        assert!((v_b / 1e-4 - 1.0).abs() < 0.1, "B's variance stays its own: {v_b}");
+        // A's batch of light pushing its mean above B's is a firefly: the median stays.
+        let over: Vec<Vec<f64>> = (0..8)
+            .map(|j| vec![if j == 3 { 16.0 } else { 0.01 + if j % 2 == 0 { 0.001 } else { -0.001 } }; values])
+            .collect();
+        let over = batches(&over, 1);
+        let (v_over, _) = two_variances(&over, &b);
+        assert!(v_over < 1e-3, "a firefly above B's mean stays out of the variance: {v_over}");
     }
 
     #[test]

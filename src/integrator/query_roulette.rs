@@ -36,7 +36,7 @@ use std::fmt::Write as _;
 
 use anyhow::{Result, ensure};
 
-use super::auto::{EARLY_STOP_BATCHES, PILOT_BATCHES, pilot_budget, pilot_resolution, pilot_seed};
+use super::auto::{EARLY_STOP_BATCHES, PILOT_BATCHES, PILOT_MIN_PIXELS, pilot_budget, pilot_resolution, pilot_seed};
 use super::pilot::{Batches, PilotBudget, pilot_batch};
 use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::gpu::GpuContext;
@@ -172,7 +172,7 @@ pub fn choose(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
     if let Budget::Samples(_) = budget {
         return Ok(given(1.0, "every query (a sample budget)"));
     }
-    let (width, height, _) = pilot_resolution(settings.width, settings.height);
+    let (width, height, _) = pilot_resolution(settings.width, settings.height, PILOT_MIN_PIXELS);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_probability = pilot_budget(budget, pixel_ratio, 2);
     let pilot = |p: f32| RenderSettings {

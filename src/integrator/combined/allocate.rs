@@ -6,8 +6,8 @@ use std::fmt::Write as _;
 use anyhow::Result;
 
 use super::super::auto::{
-    CandidateFigures, EARLY_STOP_RATIO, PILOT_BATCHES, candidate_methods, candidate_settings, compare, pilot_budget,
-    pilot_resolution, pilot_seed,
+    ALLOCATION_MIN_PIXELS, CandidateFigures, EARLY_STOP_RATIO, PILOT_BATCHES, candidate_methods, candidate_settings,
+    compare, pilot_budget, pilot_resolution, pilot_seed,
 };
 use super::super::bidirectional::camera_pilot::resolve_camera_pilot;
 use super::super::pilot::{Batches, CameraScalesOnce, pilot_batch};
@@ -149,7 +149,7 @@ fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
 /// The allocation of the combined render `settings`: its samples' split
 /// (`settings.ellipsoidal_share` where given) and its query roulette (`settings.query_roulette`
 /// where given). Whatever is not given a pilot chooses, on the image of `auto::pilot_resolution`
-/// from `auto::pilot_seed`, its films discarded. Unless the split is given, each family alone
+/// keeping `auto::ALLOCATION_MIN_PIXELS` pixels, from `auto::pilot_seed`, its films discarded. Unless the split is given, each family alone
 /// (`ellipsoidal` making every query, or with `settings.query_roulette` where given) renders
 /// batches first, and where one leads the other `auto::EARLY_STOP_RATIO`-fold the render traces
 /// it alone ([`Allocation::alone`]); where the rest of the pilot would not fit in
@@ -180,7 +180,7 @@ pub fn allocate(
             pilot_seconds: 0.0,
         });
     }
-    let (width, height, _) = pilot_resolution(settings.width, settings.height);
+    let (width, height, _) = pilot_resolution(settings.width, settings.height, ALLOCATION_MIN_PIXELS);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let alone = alone_candidates(settings, scene);
     // Each family alone where there are two, then each half at each roulette, and both halves at
