@@ -122,6 +122,7 @@ pub fn run(mut args: RenderArgs) -> Result<()> {
         ellipsoidal_share: args.ellipsoidal_share,
         query_roulette: args.query_roulette,
         medium_connections: args.medium_connections == Switch::On,
+        wave_bytes: None,
     };
     // A capture's own defaults, and its band index (`auto` is decided once the scene is loaded:
     // capture::prepare_capture).

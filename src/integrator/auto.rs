@@ -42,7 +42,7 @@
 use anyhow::{Result, ensure};
 
 use super::bidirectional::resolve_camera_pilot;
-use super::pilot::{Batches, CameraScalesOnce, PilotBudget, per_sample_variances, pilot_batch};
+use super::pilot::{Batches, CameraScalesOnce, PILOT_WAVE_BYTES, PilotBudget, per_sample_variances, pilot_batch};
 use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::film::Gate;
 use crate::gpu::GpuContext;
@@ -114,6 +114,18 @@ pub fn pilot_seed(seed: u32) -> u32 {
     x ^= x >> 15;
     x = x.wrapping_mul(0x846c_a68b);
     x ^ (x >> 16)
+}
+
+/// The settings of a pilot's renders of `settings` on a `width` x `height` image: its own seed
+/// ([`pilot_seed`]) and waves of at most [`PILOT_WAVE_BYTES`].
+pub fn pilot_settings(settings: &RenderSettings, width: u32, height: u32) -> RenderSettings {
+    RenderSettings {
+        width,
+        height,
+        seed: pilot_seed(settings.seed),
+        wave_bytes: Some(PILOT_WAVE_BYTES),
+        ..settings.clone()
+    }
 }
 
 /// What the pilot measured of one method.
@@ -254,7 +266,7 @@ pub fn choose(
     let (width, height, shrink) = pilot_resolution(settings.width, settings.height, PILOT_MIN_PIXELS);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_method = pilot_budget(budget, pixel_ratio, methods.len());
-    let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
+    let pilot = pilot_settings(settings, width, height);
     // Each candidate weighs as its render would: `direct` with the camera scales of a camera
     // pilot where its render runs one.
     let mut camera_scales = CameraScalesOnce::default();

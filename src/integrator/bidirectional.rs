@@ -52,9 +52,7 @@ mod target_visits;
 use anyhow::{Result, ensure};
 
 pub use super::check_settings;
-use super::wavefront::{
-    DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves, target_slots_per_wave,
-};
+use super::wavefront::{DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves, wave_target};
 use super::{Integrator, Method, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::resources::read_buffer;
@@ -244,7 +242,7 @@ impl<'a> BidirectionalTracer<'a> {
             .unwrap()
             .min(MAX_SLOTS_PER_DISPATCH / 2)
             .min(MAX_SLOTS_PER_DISPATCH / queries_per_slot);
-        let target = target_slots_per_wave(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, per_slot.iter().sum());
+        let target = wave_target(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, per_slot.iter().sum(), settings);
         let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, target)?;
         let slots = slots_per_wave;
 

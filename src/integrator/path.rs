@@ -45,7 +45,7 @@
 
 use anyhow::Result;
 
-use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves, target_slots_per_wave};
+use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves, wave_target};
 use super::{Integrator, LightStrategy, RenderSettings, Wavefront};
 use crate::gpu::layout::{Contribution, Hit, PathState, QueueCounters, ShadowRay, Splat, WaveParams};
 use crate::gpu::{GpuContext, Kernel};
@@ -150,7 +150,7 @@ impl<'a> PathTracer<'a> {
         let bytes_per_slot = (size_of::<PathState>() + size_of::<Hit>() + 8 + size_of::<ShadowRay>()) as u64
             + contributions_per_slot * size_of::<Contribution>() as u64
             + 12;
-        let target = target_slots_per_wave(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, bytes_per_slot);
+        let target = wave_target(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, bytes_per_slot, settings);
         let (samples_per_pass, slots_per_wave) = plan_waves(settings, limit / largest_per_slot, target)?;
         // Whole paths keep their state in registers: the rounds' per-slot buffers get one element.
         let slots = if whole_paths { 1 } else { slots_per_wave };

@@ -48,6 +48,15 @@ impl CameraScalesOnce {
     }
 }
 
+/// Most bytes of per-slot state a pilot's tracer keeps in one wave
+/// (`RenderSettings::wave_bytes`): a pilot's image is small and each of its tracers renders a
+/// few batches, mostly of one or two samples per pixel, yet without a bound each took a full
+/// render's wave (on CPU Vulkan 2^16 slots, 0.18 GB for `direct` on the fence), which the device
+/// clears before its first use, a page at a time. At 16 MiB a 16x16 pilot still traces about 23
+/// `direct` samples per pixel in one pass, and every pilot at least
+/// `wavefront::BOUNDED_WAVE_SAMPLES`.
+pub const PILOT_WAVE_BYTES: u64 = 16 << 20;
+
 /// How much pilot each method gets.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum PilotBudget {

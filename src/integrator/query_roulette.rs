@@ -36,7 +36,9 @@ use std::fmt::Write as _;
 
 use anyhow::{Result, ensure};
 
-use super::auto::{EARLY_STOP_BATCHES, PILOT_BATCHES, PILOT_MIN_PIXELS, pilot_budget, pilot_resolution, pilot_seed};
+use super::auto::{
+    EARLY_STOP_BATCHES, PILOT_BATCHES, PILOT_MIN_PIXELS, pilot_budget, pilot_resolution, pilot_settings,
+};
 use super::pilot::{Batches, PilotBudget, pilot_batch};
 use super::{Budget, Method, RenderSettings, create_integrator};
 use crate::gpu::GpuContext;
@@ -175,13 +177,7 @@ pub fn choose(ctx: &GpuContext, scene: &PreparedScene, settings: &RenderSettings
     let (width, height, _) = pilot_resolution(settings.width, settings.height, PILOT_MIN_PIXELS);
     let pixel_ratio = (settings.width as f64 * settings.height as f64) / (width as f64 * height as f64);
     let per_probability = pilot_budget(budget, pixel_ratio, 2);
-    let pilot = |p: f32| RenderSettings {
-        width,
-        height,
-        seed: pilot_seed(settings.seed),
-        query_roulette: Some(p),
-        ..settings.clone()
-    };
+    let pilot = |p: f32| RenderSettings { query_roulette: Some(p), ..pilot_settings(settings, width, height) };
     let mut all = create_integrator(ctx, scene, &pilot(1.0))?;
     let mut trial = create_integrator(ctx, scene, &pilot(TRIAL))?;
     all.warm_up()?;

@@ -137,6 +137,13 @@ pub struct RenderSettings {
     /// (medium connections, docs/design.md section 4.1; `render --medium-connections`). Off by
     /// default: free flights alone place them.
     pub medium_connections: bool,
+    /// Most bytes of per-slot state (subpath vertices, queues, path states) one wave holds;
+    /// None: the tracer's own target for the device. A wave below one sample of every pixel
+    /// still holds that sample. Pilots, whose images are small and whose tracers live for a few
+    /// batches, ask for [`super::pilot::PILOT_WAVE_BYTES`]: the device clears a tracer's
+    /// buffers before their first use, and on CPU Vulkan clearing a full wave for each of a
+    /// pilot's tracers was most of its start-up.
+    pub wave_bytes: Option<u64>,
 }
 
 /// The two numerical guards of ellipsoidal connections, relative (dimensionless). Each leaves
@@ -181,6 +188,7 @@ impl Default for RenderSettings {
             ellipsoidal_share: None,
             query_roulette: None,
             medium_connections: false,
+            wave_bytes: None,
         }
     }
 }

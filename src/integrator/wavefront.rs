@@ -372,6 +372,25 @@ pub(super) fn target_slots_per_wave(on_cpu: bool, cpu_target: u64, bytes_per_slo
     (GPU_WAVE_BYTES / bytes_per_slot.max(1)).clamp(cpu_target, GPU_MAX_TARGET_SLOTS.max(cpu_target))
 }
 
+/// Samples of every pixel a wave bounded by `RenderSettings::wave_bytes` still holds (where the
+/// device's bindings fit them): a pilot's batches, one pass each, alternate sizes so that the
+/// time of a sample can be told from a pass's fixed cost (`pilot::pilot_batch`).
+pub(super) const BOUNDED_WAVE_SAMPLES: u64 = 4;
+
+/// Slots a wave of `settings` aims for at `bytes_per_slot` of per-slot state:
+/// [`target_slots_per_wave`], within `settings.wave_bytes` where a pilot sets it (yet at least
+/// [`BOUNDED_WAVE_SAMPLES`] samples of every pixel).
+pub(super) fn wave_target(on_cpu: bool, cpu_target: u64, bytes_per_slot: u64, settings: &RenderSettings) -> u64 {
+    let target = target_slots_per_wave(on_cpu, cpu_target, bytes_per_slot);
+    match settings.wave_bytes {
+        Some(bytes) => {
+            let pixels = settings.width as u64 * settings.height as u64;
+            target.min((bytes / bytes_per_slot.max(1)).max(pixels * BOUNDED_WAVE_SAMPLES)).max(1)
+        }
+        None => target,
+    }
+}
+
 /// Samples per pass and slots per wave of a render: as many slots as `target` (or the requested
 /// samples per pass) asks for, within one dispatch and within `fit` slots (what the device's
 /// bindings hold).
@@ -555,5 +574,19 @@ mod tests {
         // ...and at most GPU_MAX_TARGET_SLOTS (path: a few hundred bytes).
         assert_eq!(target_slots_per_wave(false, 1 << 18, 300), GPU_MAX_TARGET_SLOTS);
         assert_eq!(target_slots_per_wave(false, 1 << 18, 0), GPU_MAX_TARGET_SLOTS);
+    }
+
+    #[test]
+    fn a_pilots_wave_holds_its_bytes_yet_a_few_samples_of_every_pixel() {
+        let pilot = |width, height| RenderSettings { width, height, wave_bytes: Some(16 << 20), ..Default::default() };
+        // Without a bound, the tracer's own target.
+        assert_eq!(wave_target(true, 1 << 16, 2800, &RenderSettings::default()), 1 << 16);
+        // `direct` on the fence (2,800 bytes a slot): 16 MiB hold 5,991 slots, 23 samples of 16x16.
+        assert_eq!(wave_target(true, 1 << 16, 2800, &pilot(16, 16)), (16 << 20) / 2800);
+        // An `ellipsoidal` slot of 14 KiB: 16 MiB hold 1,170 slots, yet a 32x32 pilot keeps 4 samples
+        // of each pixel in one pass.
+        assert_eq!(wave_target(true, 1 << 16, 14 << 10, &pilot(32, 32)), 1024 * BOUNDED_WAVE_SAMPLES);
+        // Never more than the tracer's own target.
+        assert_eq!(wave_target(true, 1 << 10, 100, &pilot(16, 16)), 1 << 10);
     }
 }

@@ -7,7 +7,7 @@ use anyhow::Result;
 
 use super::super::auto::{
     ALLOCATION_MIN_PIXELS, CandidateFigures, EARLY_STOP_RATIO, PILOT_BATCHES, candidate_methods, candidate_settings,
-    compare, pilot_budget, pilot_resolution, pilot_seed,
+    compare, pilot_budget, pilot_resolution, pilot_settings,
 };
 use super::super::bidirectional::camera_pilot::resolve_camera_pilot;
 use super::super::pilot::{Batches, CameraScalesOnce, pilot_batch};
@@ -149,7 +149,7 @@ fn roulette_candidates(settings: &RenderSettings, budget: Budget) -> Vec<f32> {
 /// The allocation of the combined render `settings`: its samples' split
 /// (`settings.ellipsoidal_share` where given) and its query roulette (`settings.query_roulette`
 /// where given). Whatever is not given a pilot chooses, on the image of `auto::pilot_resolution`
-/// keeping `auto::ALLOCATION_MIN_PIXELS` pixels, from `auto::pilot_seed`, its films discarded. Unless the split is given, each family alone
+/// keeping `auto::ALLOCATION_MIN_PIXELS` pixels, with `auto::pilot_settings`, its films discarded. Unless the split is given, each family alone
 /// (`ellipsoidal` making every query, or with `settings.query_roulette` where given) renders
 /// batches first, and where one leads the other `auto::EARLY_STOP_RATIO`-fold the render traces
 /// it alone ([`Allocation::alone`]); where the rest of the pilot would not fit in
@@ -189,7 +189,7 @@ pub fn allocate(
     let alone_runs = alone.len() * if weigh_alone_first { 2 } else { 1 };
     let runs = 2 * roulettes.len() + if alone.is_empty() { 0 } else { alone_runs + 1 };
     let per_run = pilot_budget(budget, pixel_ratio, runs);
-    let pilot = RenderSettings { width, height, seed: pilot_seed(settings.seed), ..settings.clone() };
+    let pilot = pilot_settings(settings, width, height);
     let mut reason = format!("pilot on {width}x{height}:");
     let mut pilot_seconds = 0.0;
 
