@@ -107,7 +107,7 @@ fn metadata(path: &Path) -> serde_json::Value {
 /// status is 128 + the signal, the image holds the samples taken (its metadata says how many
 /// and why it stopped), and `--resume` to a few samples more gives the image of an
 /// uninterrupted render of as many samples, bit for bit. `direct` renders with a camera pilot
-/// (`--camera-pilot 16`, which its default takes from 256 spp on), whose scales the checkpoint
+/// (`--camera-pilot 16`; its default runs one from 256 spp on), whose scales the checkpoint
 /// keeps.
 fn interrupt_and_resume(method: &str, signal_name: &str, status: i32, dir: &Path) {
     let args = |out: &str| -> Vec<String> {

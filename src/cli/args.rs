@@ -152,7 +152,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "SPP", allow_hyphen_values = true)]
     pub target_pilot: Option<u32>,
     /// direct, one-bin gate: spp of a pilot (then discarded) whose per-pixel variance shares
-    /// each pixel's light between camera paths and light tracing in the MIS weights (default 16
+    /// each pixel's light between camera paths and light tracing in the MIS weights (default 4
     /// with --time or from 256 spp, else 0; with --time no pass starts after 1/8 of the budget).
     #[arg(long, value_name = "SPP")]
     pub camera_pilot: Option<u32>,
