@@ -137,9 +137,10 @@ pub struct RenderSettings {
     /// (medium connections, docs/design.md section 4.1; `render --medium-connections`). Off by
     /// default: free flights alone place them.
     pub medium_connections: bool,
-    /// Most bytes of per-slot state (subpath vertices, queues, path states) one wave holds;
-    /// None: the tracer's own target for the device. A wave below one sample of every pixel
-    /// still holds that sample. Pilots, whose images are small and whose tracers live for a few
+    /// Most bytes of per-slot state (subpath vertices, queues, path states) one wave aims for;
+    /// None: the tracer's own target for the device. A bounded wave still holds
+    /// `wavefront::BOUNDED_WAVE_SAMPLES` samples of every pixel where the device's bindings fit
+    /// them. Pilots, whose images are small and whose tracers live for a few
     /// batches, ask for [`super::pilot::PILOT_WAVE_BYTES`]: the device clears a tracer's
     /// buffers before their first use, and on CPU Vulkan clearing a full wave for each of a
     /// pilot's tracers was most of its start-up.
