@@ -73,6 +73,34 @@ fn a_saved_state_continues_the_render() {
 }
 
 /// Asserts that `resumed` equals `whole` bit for bit, and that the films are not black.
+/// A warm-up pass (one sample of the image's first pixels, `Integrator::warm_up`) leaves the
+/// render that follows it as it would have been without: same pilots, same samples, bit for bit.
+#[test]
+fn a_warm_up_leaves_the_render_after_it_unchanged() {
+    let ctx = common::gpu();
+    let cornell = common::cornell_box();
+    // 40x40 holds more pixels than the warm-up's block, so the warm-up covers part of the image.
+    let base =
+        RenderSettings { width: 40, height: 40, max_bounces: 4, samples_per_pass: Some(4), ..Default::default() };
+    let gated = Gate::Box { start: 3.14, end: 3.19 };
+    let transient = Gate::Transient { start: 3.0, width: 0.1, bins: 8 };
+    for settings in [
+        RenderSettings { method: Method::Path, ..base.clone() },
+        RenderSettings { method: Method::Direct, gate: gated.clone(), camera_pilot_spp: Some(2), ..base.clone() },
+        RenderSettings { method: Method::Ellipsoidal, gate: transient.clone(), ..base.clone() },
+        RenderSettings { method: Method::Combined, gate: gated.clone(), camera_pilot_spp: Some(2), ..base.clone() },
+    ] {
+        let label = format!("{} {}", settings.method.name(), settings.gate.describe());
+        let mut fresh = create_integrator(&ctx, &cornell, &settings).unwrap();
+        fresh.render_samples(4).unwrap();
+        let mut warmed = create_integrator(&ctx, &cornell, &settings).unwrap();
+        warmed.warm_up().unwrap();
+        assert_eq!(warmed.samples_done(), 0, "{label}: the warm-up's sample stayed in the film");
+        warmed.render_samples(4).unwrap();
+        check(&label, &warmed.film().unwrap(), &fresh.film().unwrap());
+    }
+}
+
 fn check(label: &str, resumed: &Film, whole: &Film) {
     assert_eq!((resumed.spp, resumed.bins), (whole.spp, whole.bins), "{label}");
     assert!(whole.data.iter().any(|&v| v > 0.0), "{label}: the film is black");

@@ -620,13 +620,18 @@ impl Integrator for BidirectionalTracer<'_> {
         Ok(())
     }
 
+    fn limit_pass_pixels(&mut self, pixels: Option<u32>) {
+        self.wf.pass_pixels = pixels;
+    }
+
     fn warm_up(&mut self) -> Result<()> {
         let pilot = std::mem::take(&mut self.target_pilot_pending);
         let camera_pilot = std::mem::take(&mut self.camera_pilot_pending);
         let band_index = self.band_index.take();
         let seed = self.wf.params.seed;
-        self.render_pass(1)?;
+        let traced = self.warm_up_pass();
         self.restart(seed);
+        traced?;
         self.target_pilot_pending = pilot;
         self.camera_pilot_pending = camera_pilot;
         self.band_index = band_index;

@@ -234,11 +234,17 @@ impl Integrator for CombinedTracer<'_> {
         }
     }
 
+    fn limit_pass_pixels(&mut self, pixels: Option<u32>) {
+        self.direct.limit_pass_pixels(pixels);
+        self.ellipsoidal.limit_pass_pixels(pixels);
+    }
+
     fn warm_up(&mut self) -> Result<()> {
         let pilot = std::mem::take(&mut self.camera_pilot_pending);
         let seed = self.direct.wavefront().params.seed;
-        self.render_pass(1)?;
+        let traced = self.warm_up_pass();
         self.restart(seed);
+        traced?;
         self.camera_pilot_pending = pilot;
         Ok(())
     }

@@ -145,15 +145,26 @@ pub trait Integrator: Send {
     fn prepare(&mut self) -> Result<()> {
         Ok(())
     }
-    /// Traces one sample per pixel and discards it, so that a device that compiles kernels at
-    /// their first dispatch (lavapipe does) does so before a time budget starts; then restarts
-    /// from the render's seed, so the render that follows is the one it would have been without.
-    /// Work that belongs to the render (a pilot) is left for its first pass.
+    /// Traces later passes over only the first `pixels` pixels of the image (all of them with
+    /// None): the warm-up pass's block ([`wavefront::WARM_UP_PIXELS`]).
+    fn limit_pass_pixels(&mut self, pixels: Option<u32>);
+    /// Traces one sample of each of the first [`wavefront::WARM_UP_PIXELS`] pixels and discards
+    /// it, so that a device that compiles kernels at their first dispatch (lavapipe does) does
+    /// so, and clears the buffers it clears at their first use, before a time budget starts;
+    /// then restarts from the render's seed, so the render that follows is the one it would
+    /// have been without. Work that belongs to the render (a pilot) is left for its first pass.
     fn warm_up(&mut self) -> Result<()> {
         let seed = self.wavefront().params.seed;
-        self.render_pass(1)?;
+        self.warm_up_pass()?;
         self.restart(seed);
         Ok(())
+    }
+    /// The pass of [`Self::warm_up`], without the restart: one sample of the warm-up's block.
+    fn warm_up_pass(&mut self) -> Result<()> {
+        self.limit_pass_pixels(Some(wavefront::WARM_UP_PIXELS));
+        let traced = self.render_pass(1);
+        self.limit_pass_pixels(None);
+        traced
     }
     /// Everything the render has accumulated so far (see [`checkpoint`]), to continue it in
     /// another process. `rendering_seconds` is left 0 for the caller to fill in.

@@ -407,6 +407,10 @@ impl Integrator for PathTracer<'_> {
         self.wf.restart(seed, &[]);
     }
 
+    fn limit_pass_pixels(&mut self, pixels: Option<u32>) {
+        self.wf.pass_pixels = pixels;
+    }
+
     fn set_gate(&mut self, scene: &crate::scene::PreparedScene, settings: &RenderSettings) -> Result<bool> {
         let moved = self.wf.set_gate(&settings.gate, super::target_sampler(scene, settings))?;
         if moved {

@@ -100,6 +100,9 @@ pub struct Wavefront<'a> {
     /// The host copy of `target_visits` (per pixel, `strata + 1` cumulative extra visits of
     /// the stratified bins); empty while `params.target_length.extra` is 0.
     pub target_visits: Vec<u32>,
+    /// Most pixels a pass traces, from the first; None for all of them. A warm-up pass
+    /// (`Integrator::warm_up`) traces `WARM_UP_PIXELS`.
+    pub pass_pixels: Option<u32>,
 }
 
 impl<'a> Wavefront<'a> {
@@ -129,6 +132,7 @@ impl<'a> Wavefront<'a> {
             samples_in_film: 0,
             next_sample: 0,
             target_visits: Vec::new(),
+            pass_pixels: None,
         }
     }
 
@@ -163,10 +167,15 @@ impl<'a> Wavefront<'a> {
         Ok(true)
     }
 
-    /// The waves of the next pass of `samples` (1 ..= samples_per_pass) samples per pixel.
+    /// The waves of the next pass of `samples` (1 ..= samples_per_pass) samples per pixel, over
+    /// the first `pass_pixels` pixels where that is set.
     pub fn pass_waves(&self, samples: u32) -> Result<Vec<WaveParams>> {
         assert!(samples >= 1 && samples <= self.samples_per_pass);
-        waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)
+        let waves = waves_of_pass(&self.params, self.slots_per_wave, self.next_sample, samples)?;
+        Ok(match self.pass_pixels {
+            Some(limit) => first_pixels(waves, limit),
+            None => waves,
+        })
     }
 
     /// Records that a pass of `samples` samples per pixel has been added to the film.
@@ -447,6 +456,27 @@ pub(super) fn waves_of_pass(
     Ok(waves)
 }
 
+/// Pixels a warm-up pass traces (`Integrator::warm_up`): one workgroup of the kernels' 64
+/// invocations, enough for every kernel a pass dispatches to run, so that a device compiling
+/// kernels at their first dispatch (lavapipe) has compiled them all. What a warm-up costs then
+/// is that compilation and the clearing of buffers at their first use, not its samples: a pass
+/// of the whole image took seconds at 256x256 on 327,680 triangles.
+pub const WARM_UP_PIXELS: u32 = 64;
+
+/// `waves` cut to their first `limit` pixels: waves past them dropped, the one across the limit
+/// shortened (at least one pixel is kept).
+fn first_pixels(waves: Vec<WaveParams>, limit: u32) -> Vec<WaveParams> {
+    let limit = limit.max(1);
+    waves
+        .into_iter()
+        .filter(|w| w.pixel_base < limit)
+        .map(|w| {
+            let pixel_count = w.pixel_count.min(limit - w.pixel_base);
+            WaveParams { pixel_count, slot_count: pixel_count * w.samples, ..w }
+        })
+        .collect()
+}
+
 /// Bytes of one film element (pixel, bin, channel): a 128-bit fixed-point sum
 /// (`crate::film::fixed`).
 pub const FILM_ELEMENT_BYTES: u64 = 16;
@@ -588,5 +618,27 @@ mod tests {
         assert_eq!(wave_target(true, 1 << 16, 14 << 10, &pilot(32, 32)), 1024 * BOUNDED_WAVE_SAMPLES);
         // Never more than the tracer's own target.
         assert_eq!(wave_target(true, 1 << 10, 100, &pilot(16, 16)), 1 << 10);
+    }
+
+    #[test]
+    fn a_warm_up_pass_traces_only_its_first_pixels() {
+        let params = RenderParams { width: 64, height: 64, ..Default::default() };
+        // A pass of 64x64 in waves of 1,500 slots at 1 sample: three waves, cut to 1,024 pixels.
+        let waves = waves_of_pass(&params, 1500, 7, 1).unwrap();
+        assert_eq!(waves.len(), 3);
+        let cut = first_pixels(waves, 1024);
+        assert_eq!(cut.len(), 1);
+        assert_eq!((cut[0].pixel_base, cut[0].pixel_count, cut[0].slot_count, cut[0].sample_base), (0, 1024, 1024, 7));
+        // Across a wave boundary, at 2 samples a pixel: 750 pixels a wave.
+        let cut = first_pixels(waves_of_pass(&params, 1500, 0, 2).unwrap(), 1000);
+        let spans: Vec<_> = cut.iter().map(|w| (w.pixel_base, w.pixel_count, w.slot_count)).collect();
+        assert_eq!(spans, [(0, 750, 1500), (750, 250, 500)]);
+        // An image smaller than the limit is traced whole.
+        let small = RenderParams { width: 16, height: 16, ..Default::default() };
+        let cut = first_pixels(waves_of_pass(&small, 1 << 16, 0, 1).unwrap(), 1024);
+        assert_eq!(cut.iter().map(|w| w.pixel_count).sum::<u32>(), 256);
+        // The warm-up's block is one workgroup.
+        let cut = first_pixels(waves_of_pass(&small, 1 << 16, 0, 1).unwrap(), WARM_UP_PIXELS);
+        assert_eq!((cut.len(), cut[0].pixel_count), (1, 64));
     }
 }
