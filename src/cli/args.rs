@@ -108,7 +108,8 @@ pub struct RenderArgs {
     /// Samples per pixel (default 64 unless --time is given).
     #[arg(long, conflicts_with = "time", allow_hyphen_values = true)]
     pub spp: Option<u64>,
-    /// Render for this many seconds instead of --spp (rendering only, in whole passes).
+    /// Render for this many seconds instead of --spp (rendering and pilots only, in whole passes of
+    /// every pixel, at least one: a warning says when a pass ran well past it).
     #[arg(long, value_name = "SECONDS", allow_hyphen_values = true)]
     pub time: Option<f64>,
     /// Samples per pixel of one pass (default: chosen from the image size).

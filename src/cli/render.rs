@@ -379,7 +379,10 @@ fn render_one(
         Ok(if stop { ControlFlow::Break(()) } else { ControlFlow::Continue(()) })
     })?;
     bar.finish_and_clear();
-    bars.suspend(|| print_warnings(&output.truncated_traversals_warning()));
+    bars.suspend(|| {
+        print_warnings(&output.truncated_traversals_warning());
+        print_warnings(&output.budget_overrun_warning(budget));
+    });
 
     let gate = &settings.gate;
     let film = &output.film;

@@ -154,6 +154,23 @@ impl RenderOutput {
         ))
     }
 
+    /// A warning for a render with a time budget that ran well past it (by a fifth and by more
+    /// than a quarter of a second), or None: a time budget counts whole passes, at least one
+    /// sample of every pixel, and its pilots, so on a large image of a heavy scene one pass can
+    /// outlast the whole budget.
+    pub fn budget_overrun_warning(&self, budget: Budget) -> Option<String> {
+        let Budget::Time(budget) = budget else { return None };
+        let (asked, took) = (budget.as_secs_f64(), self.rendering.as_secs_f64());
+        (took > 1.2 * asked && took - asked > 0.25).then(|| {
+            format!(
+                "the render took {took:.2} s of rendering for a --time budget of {asked:.2} s ({} spp): a time \
+                 budget counts its pilots and whole passes of every pixel, at least one, and a pass here took \
+                 longer than the time left; a smaller image (--res) fits the budget better",
+                self.film.spp
+            )
+        })
+    }
+
     /// The black image of a render that traced nothing (no path can reach its gate), after
     /// `elapsed` of setup.
     pub fn black(settings: &RenderSettings, elapsed: Duration) -> Self {
@@ -435,7 +452,7 @@ pub fn render_resumable(
 
 #[cfg(test)]
 mod pass_sizer_tests {
-    use super::PassSizer;
+    use super::{Budget, Duration, PassSizer, RenderOutput, RenderSettings};
 
     #[test]
     fn passes_fit_the_time_left() {
@@ -447,5 +464,26 @@ mod pass_sizer_tests {
         assert_eq!(sizer.next(0.1, 64), None, "one sample would overrun");
         sizer.record(1, 0.01);
         assert_eq!(sizer.next(0.1, 64), Some(9), "the latest pass's rate counts");
+    }
+
+    #[test]
+    fn a_render_well_past_its_time_budget_says_so() {
+        let settings = RenderSettings { width: 8, height: 8, ..Default::default() };
+        let took = |seconds: f64| RenderOutput {
+            rendering: Duration::from_secs_f64(seconds),
+            ..RenderOutput::black(&settings, Duration::ZERO)
+        };
+        let two = Budget::Time(Duration::from_secs(2));
+        assert!(
+            took(5.2)
+                .budget_overrun_warning(two)
+                .unwrap()
+                .contains("5.20 s of rendering for a --time budget of 2.00 s")
+        );
+        // Within a fifth, or within a quarter second of a short budget: no warning.
+        assert!(took(2.3).budget_overrun_warning(two).is_none());
+        assert!(took(0.3).budget_overrun_warning(Budget::Time(Duration::from_millis(100))).is_none());
+        // A budget of samples takes the time it takes.
+        assert!(took(100.0).budget_overrun_warning(Budget::Samples(4)).is_none());
     }
 }
