@@ -256,6 +256,64 @@ fn bidirectional_films_are_the_same_bits_however_additions_are_ordered_and_group
     }
 }
 
+#[test]
+fn accumulate_leaves_no_contribution_behind() {
+    // accumulate reads a slot's contributions only up to the strategies its subpaths reach and
+    // clears what it reads: a contribution written beyond would stay, and be added in a later
+    // wave. After each pass no contribution may hold light (one whose shadow ray was blocked
+    // keeps its path length, harmlessly): direct, ellipsoidal with
+    // its K connections queued for shadow rays (the fence's BVH can stop traversals) and with
+    // media (every ray queued), and the combined render's halves.
+    let ctx = common::gpu();
+    let load = |name: &str| {
+        PreparedScene::new(gatetrace::scene::load_scene_with(&common::repo_path(name), &Default::default()).unwrap())
+            .unwrap()
+    };
+    let (cornell, fence, fog) =
+        (common::cornell_box(), load("assets/scenes/fence.gltf"), load("assets/scenes/fog_box.xml"));
+    let gated = Gate::Box { start: 3.14, end: 3.3 };
+    for (label, scene, method, gate, k) in [
+        ("box direct", &cornell, Method::Direct, Gate::None, 1),
+        ("fence direct", &fence, Method::Direct, Gate::Box { start: 11.3, end: 11.6 }, 1),
+        ("fence ellipsoidal", &fence, Method::Ellipsoidal, Gate::Box { start: 11.3, end: 11.6 }, 4),
+        ("fog ellipsoidal", &fog, Method::Ellipsoidal, gated.clone(), 4),
+        (
+            "box ellipsoidal transient",
+            &cornell,
+            Method::Ellipsoidal,
+            Gate::Transient { start: 3.0, width: 0.1, bins: 6 },
+            2,
+        ),
+    ] {
+        let settings = RenderSettings {
+            width: 16,
+            height: 16,
+            max_bounces: 5,
+            method,
+            gate,
+            connections_per_query: k,
+            ..Default::default()
+        };
+        let mut tracer = BidirectionalTracer::new(&ctx, scene, &settings).unwrap();
+        for _ in 0..2 {
+            tracer.render_samples(2).unwrap();
+            let buffer = tracer.resources().get("contributions").unwrap();
+            let left: Vec<[f32; 4]> =
+                gatetrace::gpu::resources::read_buffer(&ctx, buffer, (buffer.size() / 16) as usize).unwrap();
+            let nonzero: Vec<(usize, [f32; 4])> =
+                left.iter().copied().enumerate().filter(|(_, c)| c[..3].iter().any(|&x| x != 0.0)).collect();
+            assert!(
+                nonzero.is_empty(),
+                "{label}: {} of {} contributions left after a pass: {:?}",
+                nonzero.len(),
+                left.len(),
+                &nonzero[..nonzero.len().min(4)]
+            );
+        }
+        assert!(tracer.film().unwrap().mean_rgb()[0] > 0.0, "{label}: the film is black");
+    }
+}
+
 /// Renders `scene` with `direct` and with `ellipsoidal` (BATCHES x spp each) and asserts
 /// agreement.
 fn assert_ellipsoidal_matches_direct(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {

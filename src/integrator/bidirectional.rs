@@ -349,6 +349,7 @@ impl<'a> BidirectionalTracer<'a> {
         constants.push(("CAMERA_VERTICES_TRACED", camera_traced as f64));
         constants.push(("LIGHT_VERTICES_TRACED", light_traced as f64));
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
+        constants.push(("CONTRIBUTIONS_PER_STRATEGY", if inline_shadow_rays { 1.0 } else { k as f64 }));
         constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
         if let Some(role) = family {
             ensure!(

@@ -175,6 +175,9 @@ impl<'a> PathTracer<'a> {
         r.storage_zeroed(ctx, "path_radiance", path_radiance_bytes, none)?;
         // trace_shadow_rays can clear light-tracing splats; the path tracer has none.
         r.storage_zeroed(ctx, "splats", size_of::<Splat>() as u64, none)?;
+        // accumulate reads subpath lengths only for bidirectional methods
+        // (CONTRIBUTIONS_PER_STRATEGY 0 here).
+        r.storage_zeroed(ctx, "subpath_lengths", 4, none)?;
         // Not where traversals can stop: a second vertex would resume the first's stopped
         // traversal in the same invocation (beyond lavapipe's loop limit), or overwrite its
         // waiting contribution.
