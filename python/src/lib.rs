@@ -417,6 +417,7 @@ impl Renderer {
         let mut metadata = self.metadata(&settings, gate, &output)?;
         let mut warnings = Vec::new();
         warnings.extend(output.truncated_traversals_warning());
+        warnings.extend(output.budget_overrun_warning(budget));
         warnings.extend(output.unvisited_bins_warning());
         warnings.extend(black_image_warning(&self.scene, &settings, gate, &output.film));
         if !warnings.is_empty() {

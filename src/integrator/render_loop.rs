@@ -163,9 +163,9 @@ impl RenderOutput {
         let (asked, took) = (budget.as_secs_f64(), self.rendering.as_secs_f64());
         (took > 1.2 * asked && took - asked > 0.25).then(|| {
             format!(
-                "the render took {took:.2} s of rendering for a --time budget of {asked:.2} s ({} spp): a time \
+                "the render took {took:.2} s of rendering for a time budget of {asked:.2} s ({} spp): a time \
                  budget counts its pilots and whole passes of every pixel, at least one, and a pass here took \
-                 longer than the time left; a smaller image (--res) fits the budget better",
+                 longer than the time left; a smaller image fits the budget better",
                 self.film.spp
             )
         })
@@ -475,10 +475,7 @@ mod pass_sizer_tests {
         };
         let two = Budget::Time(Duration::from_secs(2));
         assert!(
-            took(5.2)
-                .budget_overrun_warning(two)
-                .unwrap()
-                .contains("5.20 s of rendering for a --time budget of 2.00 s")
+            took(5.2).budget_overrun_warning(two).unwrap().contains("5.20 s of rendering for a time budget of 2.00 s")
         );
         // Within a fifth, or within a quarter second of a short budget: no warning.
         assert!(took(2.3).budget_overrun_warning(two).is_none());
