@@ -180,6 +180,55 @@ fn quadrature(
     bins
 }
 
+/// The reference of every pixel (sensed point, laser spot, laser power) per bin and channel,
+/// [pixel][bin][channel], and the variance of its error: the mean of two quadratures whose lines
+/// run in different directions, so that their errors (largest where lines graze a bin's edge)
+/// fall in different places; their difference squared bounds the variance of the mean's error.
+/// Pixels are integrated on every core.
+fn reference_bins(
+    hidden: &[Hidden],
+    wall_albedo: DVec3,
+    wall_normal: DVec3,
+    points: &[(DVec3, DVec3, DVec3)],
+) -> (Vec<f64>, Vec<f64>) {
+    let pixel = |&(sensed, spot, power): &(DVec3, DVec3, DVec3)| {
+        let one = quadrature(hidden, wall_albedo, wall_normal, sensed, spot, LINES, 0);
+        let other = quadrature(hidden, wall_albedo, wall_normal, sensed, spot, LINES, 1);
+        let mut values = Vec::with_capacity(BINS * 3);
+        for (k, (f, g)) in one.iter().zip(&other).enumerate() {
+            // The device resolves path lengths, and so bin edges, to an f32 unit in the last place:
+            // a bin's value is defined to no better than that share of its width.
+            let edge = (START + WIDTH * (k + 1) as f64) as f32;
+            let resolution = (f32::from_bits(edge.to_bits() + 1) - edge) as f64 / WIDTH;
+            for ch in 0..3 {
+                let value = 0.5 * (f[ch] + g[ch]) * power[ch];
+                values.push((value, ((f[ch] - g[ch]) * power[ch]).powi(2) + (value * resolution).powi(2)));
+            }
+        }
+        values
+    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let per_thread = points.len().div_ceil(threads);
+    let values: Vec<(f64, f64)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = points
+            .chunks(per_thread)
+            .map(|chunk| scope.spawn(move || chunk.iter().flat_map(pixel).collect::<Vec<_>>()))
+            .collect();
+        workers.into_iter().flat_map(|w| w.join().unwrap()).collect()
+    });
+    values.into_iter().unzip()
+}
+
+/// The reference of scan `key`, computed by `compute` once per process: the tests of one scan
+/// with different methods share it.
+fn reference_of(key: &str, compute: impl FnOnce() -> (Vec<f64>, Vec<f64>)) -> (Vec<f64>, Vec<f64>) {
+    type References = std::collections::HashMap<String, (Vec<f64>, Vec<f64>)>;
+    static REFERENCES: std::sync::Mutex<Option<References>> = std::sync::Mutex::new(None);
+    // Held while computing, so that two tests of one scan compute it once.
+    let mut references = REFERENCES.lock().unwrap_or_else(|e| e.into_inner());
+    references.get_or_insert_with(Default::default).entry(key.to_owned()).or_insert_with(compute).clone()
+}
+
 /// Compares renders of `spp` samples per pixel in BATCHES batches with the quadrature, bin by
 /// bin after summing groups of `group` neighbouring bins (1: the 4 ps bins themselves).
 fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, group: usize) {
@@ -201,28 +250,15 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
         .collect();
     assert!(hidden.len() >= 2 && hidden.iter().all(|h| (h.v[0].z - 0.5).abs() < 1e-6));
 
-    // The reference: the mean of two quadratures whose lines run in different directions, so
-    // that their errors (largest where lines graze a bin's edge) fall in different places; their
-    // difference squared bounds the variance of the mean's error.
-    let mut reference = Vec::with_capacity(pixels * BINS * 3);
-    let mut quadrature_var = Vec::with_capacity(pixels * BINS * 3);
-    for px in 0..pixels {
-        let (sensed, spot) = (points[px].position.as_dvec3(), points[pixels + px].position.as_dvec3());
-        let power = points[pixels + px].power.as_dvec3();
-        let one = quadrature(&hidden, wall_albedo, wall_normal, sensed, spot, LINES, 0);
-        let other = quadrature(&hidden, wall_albedo, wall_normal, sensed, spot, LINES, 1);
-        for (k, (f, g)) in one.iter().zip(&other).enumerate() {
-            // The device resolves path lengths, and so bin edges, to an f32 unit in the last place:
-            // a bin's value is defined to no better than that share of its width.
-            let edge = (START + WIDTH * (k + 1) as f64) as f32;
-            let resolution = (f32::from_bits(edge.to_bits() + 1) - edge) as f64 / WIDTH;
-            for ch in 0..3 {
-                let value = 0.5 * (f[ch] + g[ch]) * power[ch];
-                reference.push(value);
-                quadrature_var.push(((f[ch] - g[ch]) * power[ch]).powi(2) + (value * resolution).powi(2));
-            }
-        }
-    }
+    let (reference, quadrature_var) = reference_of(&format!("{aim:?}"), || {
+        let points: Vec<(DVec3, DVec3, DVec3)> = (0..pixels)
+            .map(|px| {
+                let (sensed, spot) = (points[px].position.as_dvec3(), points[pixels + px].position.as_dvec3());
+                (sensed, spot, points[pixels + px].power.as_dvec3())
+            })
+            .collect();
+        reference_bins(&hidden, wall_albedo, wall_normal, &points)
+    });
 
     let ctx = common::gpu();
     let films = common::render_films(&ctx, &scene, &s, BATCHES, spp);
