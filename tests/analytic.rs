@@ -37,7 +37,7 @@ fn pixels_on_an_emitter_return_its_radiance() {
     let ctx = common::gpu();
     for (bounces, gate) in [(0, Gate::None), (4, Gate::None), (0, Gate::Box { start: 1.0, end: 1.5 })] {
         let settings = RenderSettings { width: 16, height: 12, max_bounces: bounces, gate, ..Default::default() };
-        let film = common::render_films(&ctx, &scene, &settings, 1, 8).remove(0);
+        let film = common::render_films(ctx, &scene, &settings, 1, 8).remove(0);
         for v in &film.data {
             // The sum of 8 equal f32 values divided by 8 is exact.
             assert_eq!(*v, 7.5, "a pixel on the emitter must read its radiance exactly ({bounces} bounces)");
@@ -46,7 +46,7 @@ fn pixels_on_an_emitter_return_its_radiance() {
     // A gate beyond every path length gives black, not NaN.
     let settings =
         RenderSettings { width: 16, height: 12, gate: Gate::Box { start: 5.0, end: 6.0 }, ..Default::default() };
-    let film = common::render_films(&ctx, &scene, &settings, 1, 4).remove(0);
+    let film = common::render_films(ctx, &scene, &settings, 1, 4).remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
 }
 
@@ -54,7 +54,7 @@ fn pixels_on_an_emitter_return_its_radiance() {
 fn one_sided_emitters_are_dark_from_behind() {
     let scene = emitter_wall(7.5, false, 0.9, "emitter_back");
     let ctx = common::gpu();
-    let film = common::render_films(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 4)
+    let film = common::render_films(ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 4)
         .remove(0);
     assert!(film.data.iter().all(|&v| v == 0.0));
 }
@@ -108,7 +108,7 @@ fn first_return_of_a_plane_lit_from_the_camera() {
     let settings = RenderSettings { width: w, height: h, max_bounces: 3, gate, ..Default::default() };
     let ctx = common::gpu();
     let batches = 16;
-    let stats = common::render_batches(&ctx, &scene, &settings, batches, 16);
+    let stats = common::render_batches(ctx, &scene, &settings, batches, 16);
     let (mean, var) = (stats.mean(), stats.var_of_mean());
     let threshold = t_critical(sidak(0.01, (w * h) as usize), (batches - 1) as f64);
     // Lengths are computed in f32 on the device: allow a few f32 ulps of 4 m at bin edges.
@@ -174,7 +174,7 @@ fn smooth_gates_weigh_each_path_by_its_length() {
             gate: gate.clone(),
             ..Default::default()
         };
-        let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
+        let stats = common::render_batches(ctx, &scene, &settings, batches, 64);
         let (mean, var) = (stats.mean(), stats.var_of_mean());
         let (kind, g, table) = (gate.kind(), gate.to_gpu(), gate.table());
         let w = |l: f64| gatetrace::film::gate::gate_weight(kind, &g, &table, l as f32) as f64;
@@ -215,8 +215,8 @@ fn transient_bins_sum_to_the_steady_image_of_the_same_run() {
     let spp = 32;
     let steady = RenderSettings { width: 32, height: 32, max_bounces: 5, seed: 3, ..Default::default() };
     let transient = RenderSettings { gate: Gate::Transient { start: 0.0, width: 0.25, bins: 80 }, ..steady.clone() };
-    let a = common::render_films(&ctx, &scene, &steady, 1, spp).remove(0);
-    let b = common::render_films(&ctx, &scene, &transient, 1, spp).remove(0).sum_bins();
+    let a = common::render_films(ctx, &scene, &steady, 1, spp).remove(0);
+    let b = common::render_films(ctx, &scene, &transient, 1, spp).remove(0).sum_bins();
     let tolerance = 82.0 * f32::EPSILON;
     let mut nonzero = 0;
     for (x, y) in a.data.iter().zip(&b.data) {
@@ -238,7 +238,7 @@ fn gates_no_path_can_reach_are_black_without_tracing() {
     for gate in [Gate::Box { start: 1.0, end: 1.94 }, Gate::Box { start: 50.0, end: 51.0 }] {
         let settings = RenderSettings { width: 8, height: 8, max_bounces: 5, gate, ..Default::default() };
         assert!(unreachable_gate(&scene, &settings).is_some());
-        let out = render(&ctx, &scene, &settings, Budget::Samples(1_000_000), |_| panic!("nothing is traced")).unwrap();
+        let out = render(ctx, &scene, &settings, Budget::Samples(1_000_000), |_| panic!("nothing is traced")).unwrap();
         assert_eq!(out.film.spp, 0);
         assert!(out.film.data.iter().all(|&v| v == 0.0));
     }
@@ -254,7 +254,7 @@ fn cw_gates_accumulate_signed_weights() {
     let scene = common::cornell_box();
     let base = RenderSettings { width: 16, height: 16, max_bounces: 4, seed: 8, ..Default::default() };
     let render =
-        |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, 8).remove(0);
+        |gate: Gate| common::render_films(ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, 8).remove(0);
     let steady = render(Gate::None);
     let cw0 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 0.0 });
     let cw180 = render(Gate::Cw { frequency_hz: 100e6, phase_deg: 180.0 });
@@ -326,7 +326,7 @@ fn pixels_partly_on_the_light_read_radiance_times_coverage() {
     let settings = RenderSettings { width: w, height: h, max_bounces: 0, seed: 21, ..Default::default() };
     let ctx = common::gpu();
     let (batches, spp) = (16, 256);
-    let stats = common::render_batches(&ctx, &scene, &settings, batches, spp);
+    let stats = common::render_batches(ctx, &scene, &settings, batches, spp);
     let (mean, var) = (stats.mean(), stats.var_of_mean());
     let pixels = (w * h) as usize;
     let p_each = sidak(0.01, pixels);
@@ -366,7 +366,7 @@ fn long_renders_do_not_drift() {
     let scene = emitter_wall(0.1, true, 0.5, "long_render");
     let ctx = common::gpu();
     let settings = RenderSettings { width: 1, height: 2, max_bounces: 0, ..Default::default() };
-    let film = common::render_films(&ctx, &scene, &settings, 1, 1 << 22).remove(0);
+    let film = common::render_films(ctx, &scene, &settings, 1, 1 << 22).remove(0);
     for v in &film.data {
         assert!((v - 0.1).abs() <= 0.1 * f32::EPSILON, "mean {v} after 2^22 samples of 0.1");
     }
@@ -389,7 +389,7 @@ fn one_sided_emitters_light_only_their_front() {
             &format!("one_sided_{facing_floor}"),
         );
         let settings = RenderSettings { width: 16, height: 16, max_bounces: 3, ..Default::default() };
-        common::render_films(&ctx, &scene, &settings, 1, 16).remove(0)
+        common::render_films(ctx, &scene, &settings, 1, 16).remove(0)
     };
     let away = render(false);
     assert!(away.data.iter().all(|&v| v == 0.0), "an emitter facing away lights nothing");
@@ -446,7 +446,7 @@ fn spot_lights_the_plane(profile: gatetrace::scene::SpotFalloff) {
     for method in methods {
         let settings =
             RenderSettings { width: PLANE_RES, height: PLANE_RES, max_bounces: 1, method, ..Default::default() };
-        let stats = common::render_batches(&ctx, &scene, &settings, batches, 64);
+        let stats = common::render_batches(ctx, &scene, &settings, batches, 64);
         let (mean, var) = (stats.mean(), stats.var_of_mean());
         let (mut lit, mut dark, mut edge) = (0, 0, 0);
         for y in 0..PLANE_RES {
@@ -539,7 +539,7 @@ fn first_return_of_a_plane_lit_by_a_directional_light() {
     for method in [Method::Path, Method::Direct, Method::Ellipsoidal] {
         let gate = Gate::Transient { start, width, bins: bins as u32 };
         let settings = RenderSettings { width: w, height: h, max_bounces: 3, gate, method, ..Default::default() };
-        let films = common::render_films(&ctx, &scene, &settings, batches, 16);
+        let films = common::render_films(ctx, &scene, &settings, batches, 16);
         let mut stats = common::stats::BatchStats::new(films[0].data.len());
         for f in &films {
             stats.add(&f.data);

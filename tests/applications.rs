@@ -31,7 +31,7 @@ fn gated_mean(scene: &PreparedScene, gate: Gate, method: Method) -> f64 {
     let ctx = common::gpu();
     let settings =
         RenderSettings { width: 16, height: 16, max_bounces: 3, gate, method, seed: 5, ..Default::default() };
-    let film = common::render_films(&ctx, scene, &settings, 1, 16).remove(0);
+    let film = common::render_films(ctx, scene, &settings, 1, 16).remove(0);
     film.mean_rgb()[0]
 }
 
@@ -69,7 +69,7 @@ fn cw_room_code_selects_the_figure_depth() {
     let scene = PreparedScene::new(load_gltf(&common::repo_path("assets/scenes/cw_room.gltf")).unwrap()).unwrap();
     let render = |gate: Gate| {
         let settings = RenderSettings { width: 16, height: 16, max_bounces: 3, gate, seed: 9, ..Default::default() };
-        common::render_films(&ctx, &scene, &settings, 1, 64).remove(0)
+        common::render_films(ctx, &scene, &settings, 1, 64).remove(0)
     };
     let (gated, steady) = (render(scene_gate("cw_room.gltf")), render(Gate::None));
     let centre = |film: &gatetrace::film::Film| -> f64 {
@@ -185,8 +185,8 @@ fn combined_matches_path_on_the_proximity_scene() {
         ellipsoidal_share: (method == Method::Combined).then_some(1.0),
         ..Default::default()
     };
-    let combined = common::render_films(&ctx, &scene, &settings(Method::Combined, 91), BATCHES, 16);
-    let reference = common::render_films(&ctx, &scene, &settings(Method::Path, 92), BATCHES, 256);
+    let combined = common::render_films(ctx, &scene, &settings(Method::Combined, 91), BATCHES, 16);
+    let reference = common::render_films(ctx, &scene, &settings(Method::Path, 92), BATCHES, 256);
     assert!(combined.iter().all(|f| f.mean_rgb()[0] > 0.0), "every combined batch holds the gate's light");
     common::assert_films_agree("combined vs path, proximity at 0.95 s", &combined, &reference, 8, 0.01);
 }

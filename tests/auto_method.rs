@@ -32,7 +32,7 @@ fn pilot_picks_ellipsoidal_for_a_millimetre_gate_and_path_for_a_metre() {
     // At 1 mm (0.03 % of the box's path lengths) the pilots measured ratios of hundreds in
     // ellipsoidal's favour; at 1 m, path's by 5-7x over direct (docs/methods.md, `auto`).
     for (gate, expected) in [("box:3.14..3.141", Method::Ellipsoidal), ("box:3.14..4.14", Method::Path)] {
-        let output = render(&ctx, &scene, &auto_settings(gate), Budget::Samples(256), |_| {}).unwrap();
+        let output = render(ctx, &scene, &auto_settings(gate), Budget::Samples(256), |_| {}).unwrap();
         let choice = output.choice.expect("auto reports its choice");
         assert_eq!(choice.chosen, expected, "gate {gate}: {}", choice.reason);
         assert_eq!(output.film.spp, 256, "the film holds the budget's samples, the pilot's discarded");
@@ -58,7 +58,7 @@ fn pilot_renders_a_smaller_image_and_the_render_is_the_chosen_methods() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let settings = RenderSettings { width: 64, height: 64, ..auto_settings("box:3.14..3.141") };
-    let auto = render(&ctx, &scene, &settings, Budget::Samples(16), |_| {}).unwrap();
+    let auto = render(ctx, &scene, &settings, Budget::Samples(16), |_| {}).unwrap();
     let choice = auto.choice.expect("auto reports its choice");
     assert_eq!(choice.chosen, Method::Ellipsoidal, "{}", choice.reason);
     assert_eq!(choice.pilot_resolution, (32, 32));
@@ -70,8 +70,8 @@ fn pilot_renders_a_smaller_image_and_the_render_is_the_chosen_methods() {
     // The pilot ran from a seed of its own: the image is ellipsoidal's with the same seed, bit
     // for bit (the film's sums are exact), where another seed differs by the noise itself.
     let direct = gatetrace::integrator::auto::candidate_settings(&settings, Method::Ellipsoidal);
-    let same = render(&ctx, &scene, &direct, Budget::Samples(16), |_| {}).unwrap().film;
-    let other = render(&ctx, &scene, &RenderSettings { seed: 12, ..direct }, Budget::Samples(16), |_| {}).unwrap().film;
+    let same = render(ctx, &scene, &direct, Budget::Samples(16), |_| {}).unwrap().film;
+    let other = render(ctx, &scene, &RenderSettings { seed: 12, ..direct }, Budget::Samples(16), |_| {}).unwrap().film;
     let largest = same.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
     let difference = |a: &[f32], b: &[f32]| a.iter().zip(b).fold(0.0f32, |m, (x, y)| m.max((x - y).abs())) / largest;
     assert!(largest > 0.0);
@@ -87,7 +87,7 @@ fn pilot_renders_a_smaller_image_and_the_render_is_the_chosen_methods() {
 fn steady_state_pilots_path_and_direct_and_directional_lights_get_all_three() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let output = render(&ctx, &scene, &auto_settings("none"), Budget::Samples(4), |_| {}).unwrap();
+    let output = render(ctx, &scene, &auto_settings("none"), Budget::Samples(4), |_| {}).unwrap();
     let choice = output.choice.unwrap();
     let methods: Vec<Method> = choice.candidates.iter().map(|c| c.method).collect();
     assert_eq!(methods, [Method::Path, Method::Direct], "ellipsoidal needs a gate: {choice:?}");
@@ -96,7 +96,7 @@ fn steady_state_pilots_path_and_direct_and_directional_lights_get_all_three() {
 
     let path = common::repo_path("assets/scenes/cornell_box_directional.gltf");
     let scene = gatetrace::scene::PreparedScene::new(gatetrace::scene::load_gltf(&path).unwrap()).unwrap();
-    let output = render(&ctx, &scene, &auto_settings("box:3.6..3.7"), Budget::Samples(4), |_| {}).unwrap();
+    let output = render(ctx, &scene, &auto_settings("box:3.6..3.7"), Budget::Samples(4), |_| {}).unwrap();
     // Ellipsoidal connections serve directional lights too: every method is measured.
     let choice = output.choice.unwrap();
     assert_eq!(choice.candidates.len(), 3, "{choice:?}");
@@ -109,7 +109,7 @@ fn a_time_budget_counts_the_pilot() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let budget = Budget::Time(std::time::Duration::from_secs_f64(2.0));
-    let output = render(&ctx, &scene, &auto_settings("box:3.14..3.19"), budget, |_| {}).unwrap();
+    let output = render(ctx, &scene, &auto_settings("box:3.14..3.19"), budget, |_| {}).unwrap();
     let choice = output.choice.unwrap();
     let rendering = output.rendering.as_secs_f64();
     assert!(choice.pilot_seconds > 0.0 && choice.pilot_seconds < rendering, "{choice:?} in {rendering} s");

@@ -91,7 +91,7 @@ fn capture(
         target_pilot_spp: if band_index { capture.target_pilot_spp } else { 0 },
         ..capture
     };
-    let mut tracer = BidirectionalTracer::new(&ctx, &scene, &settings).unwrap();
+    let mut tracer = BidirectionalTracer::new(ctx, &scene, &settings).unwrap();
     let films = common::films_of(&mut tracer, batches, spp);
     assert_eq!(tracer.truncated_traversals().unwrap(), 0);
     (films, tracer.band_index_report())
@@ -196,7 +196,7 @@ fn a_cluster_of_large_triangles_over_fine_bins_is_filled_in_ranges_of_strata() {
             band_index,
             ..common::example_capture(4, 4, gate.clone(), LaserAim::Confocal, Method::Ellipsoidal)
         };
-        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &settings).unwrap();
+        let mut tracer = BidirectionalTracer::new(ctx, &scene, &settings).unwrap();
         let films = common::films_of(&mut tracer, BATCHES, spp);
         (films, tracer.band_index_report())
     };
@@ -248,7 +248,7 @@ fn a_build_past_the_time_budget_waits_for_the_next_render() {
         band_index: true,
         ..common::example_capture(4, 4, gate, LaserAim::Confocal, Method::Ellipsoidal)
     };
-    let mut tracer = BidirectionalTracer::new(&ctx, &scene, &settings).unwrap();
+    let mut tracer = BidirectionalTracer::new(ctx, &scene, &settings).unwrap();
     tracer.set_time_budget(Some(1e-6));
     tracer.render_samples(1).unwrap();
     let why = tracer.band_index_off().expect("a build within a microsecond");
@@ -387,7 +387,7 @@ fn wgsl_strip_point_matches_its_twin() {
     let ctx = common::gpu();
     let scene = common::nlos_sphere_scene(2, false);
     let settings = gatetrace::integrator::RenderSettings { width: 4, height: 4, ..Default::default() };
-    let tracer = gatetrace::integrator::PathTracer::new(&ctx, &scene, &settings).unwrap();
+    let tracer = gatetrace::integrator::PathTracer::new(ctx, &scene, &settings).unwrap();
     let mut rng = gatetrace::rng::Rng::new(13, 0, 0);
     let mut input = Vec::new();
     let mut expected = Vec::new();
@@ -407,7 +407,7 @@ fn wgsl_strip_point_matches_its_twin() {
         let b = l[0].min(l[1]).max(l[0].max(l[1]).min(l[2]));
         expected.push((strip_point(v, l, lo, hi, u1, u2), tent_cdf(a, b, c, hi) - tent_cdf(a, b, c, lo), v));
     }
-    let out = common::run_probe(&ctx, &tracer, "probe_strip", &[], &input, expected.len());
+    let out = common::run_probe(ctx, &tracer, "probe_strip", &[], &input, expected.len());
     for (i, (o, (p, share, v))) in out.iter().zip(&expected).enumerate() {
         let size = v[0].distance(v[1]).max(v[0].distance(v[2])).max(v[1].distance(v[2]));
         let got = Vec3::new(o[0], o[1], o[2]);

@@ -23,8 +23,8 @@ fn settings(method: Method, gate: Gate, seed: u32) -> RenderSettings {
 /// Renders `scene` with `path` and with `direct` (BATCHES x spp each) and asserts agreement.
 fn assert_direct_matches_path(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {
     let ctx = common::gpu();
-    let path = common::render_films(&ctx, scene, &settings(Method::Path, gate.clone(), seed), BATCHES, spp);
-    let direct = common::render_films(&ctx, scene, &settings(Method::Direct, gate, seed + 1), BATCHES, spp);
+    let path = common::render_films(ctx, scene, &settings(Method::Path, gate.clone(), seed), BATCHES, spp);
+    let direct = common::render_films(ctx, scene, &settings(Method::Direct, gate, seed + 1), BATCHES, spp);
     assert!(direct.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: direct renders black");
     common::assert_films_agree(label, &direct, &path, 8, ALPHA);
 }
@@ -116,13 +116,13 @@ fn direct_with_the_camera_pilots_scales_matches_path() {
         [("steady", Gate::None, 300), ("box [3.3, 3.5)", Gate::Box { start: 3.3, end: 3.5 }, 310)]
     {
         let with_scales = RenderSettings { camera_pilot_spp: Some(16), ..settings(Method::Direct, gate.clone(), seed) };
-        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &with_scales).unwrap();
+        let mut tracer = BidirectionalTracer::new(ctx, &scene, &with_scales).unwrap();
         let direct = common::films_of(&mut tracer, BATCHES, 32);
         assert_eq!(tracer.camera_pilot_spp(), 16, "{label}: the pilot ran");
         let scales = tracer.camera_mis_scales();
         let (low, high) = scales.iter().fold((f32::MAX, 0.0f32), |(l, h), &s| (l.min(s), h.max(s)));
         assert!(low == 1.0 && high >= 2.0, "{label}: scales from {low} to {high}");
-        let path = common::render_films(&ctx, &scene, &settings(Method::Path, gate.clone(), seed + 1), BATCHES, 32);
+        let path = common::render_films(ctx, &scene, &settings(Method::Path, gate.clone(), seed + 1), BATCHES, 32);
         common::assert_films_agree(&format!("camera scales, {label}"), &direct, &path, 8, ALPHA);
         if gate != Gate::None {
             // combined: both halves weigh with the scales of its one pilot.
@@ -131,10 +131,10 @@ fn direct_with_the_camera_pilots_scales_matches_path() {
                 connections_per_query: 1,
                 ..RenderSettings { method: Method::Combined, ..with_scales }
             };
-            let mut own = gatetrace::integrator::combined::CombinedTracer::new(&ctx, &scene, &combined).unwrap();
+            let mut own = gatetrace::integrator::combined::CombinedTracer::new(ctx, &scene, &combined).unwrap();
             // A pilot's candidates take the scales of one camera pilot: adopted, they stay
             // (no pilot of its own runs at the first pass).
-            let mut adopting = gatetrace::integrator::combined::CombinedTracer::new(&ctx, &scene, &combined).unwrap();
+            let mut adopting = gatetrace::integrator::combined::CombinedTracer::new(ctx, &scene, &combined).unwrap();
             adopting.adopt_camera_mis_scales(scales, 16);
             adopting.render_pass(1).unwrap();
             assert_eq!((adopting.camera_mis_scales(), adopting.camera_pilot_spp()), (scales, 16), "{label}: adopted");
@@ -151,10 +151,10 @@ fn transient_bins_sum_to_the_box_gate_over_their_range() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let transient = Gate::Transient { start: 1.94, width: 0.1, bins: 12 };
-    let cube = common::render_films(&ctx, &scene, &settings(Method::Direct, transient, 200), BATCHES, 32);
+    let cube = common::render_films(ctx, &scene, &settings(Method::Direct, transient, 200), BATCHES, 32);
     let summed: Vec<Film> = cube.iter().map(Film::sum_bins).collect();
     let gate = Gate::Box { start: 1.94, end: 1.94 + 12.0 * 0.1 };
-    let boxed = common::render_films(&ctx, &scene, &settings(Method::Direct, gate, 201), BATCHES, 32);
+    let boxed = common::render_films(ctx, &scene, &settings(Method::Direct, gate, 201), BATCHES, 32);
     common::assert_films_agree("sum of 12 bins vs box [1.94, 3.14)", &summed, &boxed, 8, ALPHA);
 }
 
@@ -167,7 +167,7 @@ fn debug_strategy_images_sum_to_the_full_render() {
     let base =
         RenderSettings { width: 16, height: 16, max_bounces: 3, method: Method::Direct, seed: 7, ..Default::default() };
     let render = |s: &RenderSettings| {
-        let mut tracer = BidirectionalTracer::new(&ctx, &scene, s).unwrap();
+        let mut tracer = BidirectionalTracer::new(ctx, &scene, s).unwrap();
         tracer.render_samples(16).unwrap();
         tracer.film().unwrap()
     };
@@ -193,7 +193,7 @@ fn zero_weight_connections_trace_no_shadow_ray() {
     let scene = common::cornell_box();
     let render = |gate: Gate| {
         let s = RenderSettings { stats: true, ..settings(Method::Direct, gate, 300) };
-        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
+        let mut tracer = BidirectionalTracer::new(ctx, &scene, &s).unwrap();
         tracer.render_samples(4).unwrap();
         tracer.strategy_stats().unwrap().to_vec()
     };
@@ -245,7 +245,7 @@ fn bidirectional_films_are_the_same_bits_however_additions_are_ordered_and_group
         };
         let render = |per_pass: u32| {
             let s = RenderSettings { samples_per_pass: Some(per_pass), ..base.clone() };
-            let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
+            let mut tracer = BidirectionalTracer::new(ctx, &scene, &s).unwrap();
             tracer.render_samples(48).unwrap();
             tracer.film().unwrap()
         };
@@ -293,12 +293,12 @@ fn accumulate_leaves_no_contribution_behind() {
             connections_per_query: k,
             ..Default::default()
         };
-        let mut tracer = BidirectionalTracer::new(&ctx, scene, &settings).unwrap();
+        let mut tracer = BidirectionalTracer::new(ctx, scene, &settings).unwrap();
         for _ in 0..2 {
             tracer.render_samples(2).unwrap();
             let buffer = tracer.resources().get("contributions").unwrap();
             let left: Vec<[f32; 4]> =
-                gatetrace::gpu::resources::read_buffer(&ctx, buffer, (buffer.size() / 16) as usize).unwrap();
+                gatetrace::gpu::resources::read_buffer(ctx, buffer, (buffer.size() / 16) as usize).unwrap();
             let nonzero: Vec<(usize, [f32; 4])> =
                 left.iter().copied().enumerate().filter(|(_, c)| c[..3].iter().any(|&x| x != 0.0)).collect();
             assert!(
@@ -317,8 +317,8 @@ fn accumulate_leaves_no_contribution_behind() {
 /// agreement.
 fn assert_ellipsoidal_matches_direct(label: &str, scene: &PreparedScene, gate: Gate, spp: u32, seed: u32) {
     let ctx = common::gpu();
-    let direct = common::render_films(&ctx, scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, spp);
-    let ellipsoidal = common::render_films(&ctx, scene, &settings(Method::Ellipsoidal, gate, seed + 1), BATCHES, spp);
+    let direct = common::render_films(ctx, scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, spp);
+    let ellipsoidal = common::render_films(ctx, scene, &settings(Method::Ellipsoidal, gate, seed + 1), BATCHES, spp);
     assert!(ellipsoidal.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: ellipsoidal renders black");
     common::assert_films_agree(label, &ellipsoidal, &direct, 8, ALPHA);
 }
@@ -404,9 +404,9 @@ fn ellipsoidal_with_four_connections_per_query_matches_direct() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let gate = Gate::Box { start: 3.14, end: 3.19 };
-    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), 440), BATCHES, 32);
+    let direct = common::render_films(ctx, &scene, &settings(Method::Direct, gate.clone(), 440), BATCHES, 32);
     let four = RenderSettings { connections_per_query: 4, ..settings(Method::Ellipsoidal, gate, 441) };
-    let ellipsoidal = common::render_films(&ctx, &scene, &four, BATCHES, 16);
+    let ellipsoidal = common::render_films(ctx, &scene, &four, BATCHES, 16);
     common::assert_films_agree("ellipsoidal K = 4 box [3.14, 3.19)", &ellipsoidal, &direct, 8, ALPHA);
 }
 
@@ -420,9 +420,9 @@ fn ellipsoidal_with_a_query_roulette_matches_direct() {
         ("box [3.14, 3.19)", common::cornell_box(), Gate::Box { start: 3.14, end: 3.19 }, 446),
         ("glossy box [3.0, 3.3)", glossy_cornell_box(), Gate::Box { start: 3.0, end: 3.3 }, 448),
     ] {
-        let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, 32);
+        let direct = common::render_films(ctx, &scene, &settings(Method::Direct, gate.clone(), seed), BATCHES, 32);
         let rouletted = RenderSettings { query_roulette: Some(0.25), ..settings(Method::Ellipsoidal, gate, seed + 1) };
-        let ellipsoidal = common::render_films(&ctx, &scene, &rouletted, BATCHES, 32);
+        let ellipsoidal = common::render_films(ctx, &scene, &rouletted, BATCHES, 32);
         common::assert_films_agree(
             &format!("ellipsoidal, query roulette 0.25, {label}"),
             &ellipsoidal,
@@ -444,7 +444,7 @@ fn the_query_roulette_keeps_its_share_of_the_multi_bounce_queries() {
     let queries = |p: f32| {
         let s =
             RenderSettings { stats: true, query_roulette: Some(p), ..settings(Method::Ellipsoidal, gate.clone(), 450) };
-        let mut tracer = BidirectionalTracer::new(&ctx, &scene, &s).unwrap();
+        let mut tracer = BidirectionalTracer::new(ctx, &scene, &s).unwrap();
         tracer.render_samples(8).unwrap();
         let stats = tracer.strategy_stats().unwrap().to_vec();
         let count = |one: bool| -> u64 {
@@ -489,7 +489,7 @@ fn the_query_roulette_changes_nothing_but_the_rouletted_queries() {
             height: 16,
             ..settings(Method::Ellipsoidal, gate.clone(), 452)
         };
-        common::render_films(&ctx, &scene, &s, 1, 4).remove(0).data
+        common::render_films(ctx, &scene, &s, 1, 4).remove(0).data
     };
     let (one_bounce, all, eighth) = (film(1, 1.0), film(2, 1.0), film(2, 0.125));
     let (mut added, mut kept) = (0, 0);
@@ -523,13 +523,13 @@ fn ellipsoidal_with_a_much_wider_needle_guard_still_matches_direct() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let gate = Gate::Box { start: 3.14, end: 3.19 };
-    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, gate.clone(), 450), BATCHES, 32);
+    let direct = common::render_films(ctx, &scene, &settings(Method::Direct, gate.clone(), 450), BATCHES, 32);
     let wide = RenderSettings {
         ellipsoid_guards: EllipsoidGuards { needle: 1e-2, ..Default::default() },
         stats: true,
         ..settings(Method::Ellipsoidal, gate, 451)
     };
-    let mut tracer = BidirectionalTracer::new(&ctx, &scene, &wide).unwrap();
+    let mut tracer = BidirectionalTracer::new(ctx, &scene, &wide).unwrap();
     let films = common::films_of(&mut tracer, BATCHES, 32);
     println!("{}", tracer.stats_report().unwrap().unwrap());
     let queries: u64 = tracer.strategy_stats().unwrap().iter().map(|s| s.evaluated).sum();
@@ -614,9 +614,9 @@ fn combined_matches_direct_and_path() {
             query_roulette: roulette,
             ..settings(Method::Combined, gate.clone(), seed)
         };
-        let combined = common::render_films(&ctx, scene, &s, BATCHES, 16);
+        let combined = common::render_films(ctx, scene, &s, BATCHES, 16);
         assert!(combined.iter().any(|f| f.mean_rgb()[0] != 0.0), "{label}: combined renders black");
-        let reference = common::render_films(&ctx, scene, &settings(reference, gate, seed + 1), BATCHES, 32);
+        let reference = common::render_films(ctx, scene, &settings(reference, gate, seed + 1), BATCHES, 32);
         common::assert_films_agree(label, &combined, &reference, 8, ALPHA);
     }
 }
@@ -638,22 +638,22 @@ fn combined_traces_a_family_alone_where_its_pilot_finds_it_ahead() {
         connections_per_query: 4,
         ..settings(Method::Combined, Gate::Box { start: 3.14, end: 4.14 }, 41)
     };
-    let output = render(&ctx, &scene, &wide, Budget::Samples(64), |_| {}).unwrap();
+    let output = render(ctx, &scene, &wide, Budget::Samples(64), |_| {}).unwrap();
     let allocation = output.allocation.expect("a combined render reports its allocation");
     assert_eq!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
     let direct = RenderSettings { method: Method::Direct, connections_per_query: 1, ..wide.clone() };
-    let same = render(&ctx, &scene, &direct, Budget::Samples(64), |_| {}).unwrap().film;
+    let same = render(ctx, &scene, &direct, Budget::Samples(64), |_| {}).unwrap().film;
     assert!(same.mean_rgb()[0] > 0.0, "light reaches the gate");
     assert!(output.film.data == same.data, "the combined render is direct's own image");
     // A second of rendering cannot pay for weighing the halves (on lavapipe the families' first
     // batches alone take more than a fiftieth of it): the families render more batches instead.
-    let short = render(&ctx, &scene, &wide, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
+    let short = render(ctx, &scene, &wide, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
     let allocation = short.allocation.expect("a combined render reports its allocation");
     assert_eq!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
     assert!(allocation.reason.contains("each family alone"), "the halves are not measured: {}", allocation.reason);
     assert!(!allocation.reason.contains("(direct half)"), "the halves are not measured: {}", allocation.reason);
     let narrow = RenderSettings { gate: Gate::Box { start: 3.14, end: 3.141 }, ..wide };
-    let output = render(&ctx, &scene, &narrow, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
+    let output = render(ctx, &scene, &narrow, Budget::Time(std::time::Duration::from_secs(1)), |_| {}).unwrap();
     let allocation = output.allocation.expect("a combined render reports its allocation");
     assert_ne!(allocation.alone, Some(Method::Direct), "{}", allocation.reason);
     assert_eq!(allocation.alone, Some(Method::Ellipsoidal), "{}", allocation.reason);
@@ -688,7 +688,7 @@ fn combined_direct_weights_from_sums_equal_the_walk_of_each_path() {
     ] {
         let s = RenderSettings { stats: true, query_roulette: roulette, ..settings(Method::Direct, gate, 31) };
         let role = FamilyRole { family: Family::Direct, ratio, medium_ratio: ratio / 4.0 };
-        let mut tracer = BidirectionalTracer::with_family(&ctx, scene, &s, Some(role)).unwrap();
+        let mut tracer = BidirectionalTracer::with_family(ctx, scene, &s, Some(role)).unwrap();
         tracer.render_samples(16).unwrap();
         let (checked, differing) = tracer.family_weights_checked();
         assert_eq!(differing, 0, "{label}: {differing} of {checked} weights differ from the walk of their path");
@@ -703,7 +703,7 @@ fn combined_direct_weights_from_sums_equal_the_walk_of_each_path() {
 fn combined_refuses_what_it_cannot_render() {
     let ctx = common::gpu();
     let error =
-        |scene: &PreparedScene, s: &RenderSettings| match gatetrace::integrator::create_integrator(&ctx, scene, s) {
+        |scene: &PreparedScene, s: &RenderSettings| match gatetrace::integrator::create_integrator(ctx, scene, s) {
             Ok(_) => panic!("combined accepted {s:?}"),
             Err(e) => e.to_string(),
         };
@@ -714,7 +714,7 @@ fn combined_refuses_what_it_cannot_render() {
             .unwrap();
     let gated = settings(Method::Combined, Gate::Box { start: 3.0, end: 3.2 }, 1);
     assert!(error(&directional, &gated).contains("directional lights"));
-    let mut tracer = gatetrace::integrator::create_integrator(&ctx, &common::cornell_box(), &gated).unwrap();
+    let mut tracer = gatetrace::integrator::create_integrator(ctx, &common::cornell_box(), &gated).unwrap();
     tracer.render_samples(1).unwrap();
     let why = tracer.save_state().unwrap_err().to_string();
     assert!(why.contains("--method combined cannot"), "{why}");

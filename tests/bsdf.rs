@@ -110,14 +110,14 @@ fn evaluation_inputs(seed: u32) -> Vec<[f32; 4]> {
 fn wgsl_bsdf_matches_cpu_twin() {
     let ctx = common::gpu();
     let scene = glossy_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     for material in [(1.0, 0.3, false), (0.4, 0.05, false), (0.0, 1.0, false)] {
         let bsdf = probe_bsdf(material.0, material.1, material.2);
         // Sampling: the same numbers give the same direction, pdf; evaluation at random
         // directions of the upper hemisphere.
         let input = sampling_inputs(3);
         let dirs = evaluation_inputs(4);
-        let (sampled, evaluated) = (run(&ctx, &tracer, 12, material, &input), run(&ctx, &tracer, 13, material, &dirs));
+        let (sampled, evaluated) = (run(ctx, &tracer, 12, material, &input), run(ctx, &tracer, 13, material, &dirs));
         assert_matches_twin(&format!("{material:?}"), &bsdf, &input, &sampled, &dirs, &evaluated);
     }
 }
@@ -191,14 +191,14 @@ fn bsdf_sampling_follows_its_pdf() {
     // pdf integrated per cell; Pearson chi-square with low-count cells pooled; Sidak-corrected.
     let ctx = common::gpu();
     let scene = glossy_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let configs = [(1.0, 0.3, 0.8), (1.0, 0.1, 0.35), (0.5, 0.2, 0.6), (1.0, 0.6, 0.15), (0.0, 1.0, 0.5)];
     let n = 200_000usize;
     for (c, &(metallic, alpha, cos_wo)) in configs.iter().enumerate() {
         let material = (metallic, alpha, false);
         let bsdf = probe_bsdf(metallic, alpha, false);
         let input: Vec<[f32; 4]> = uniforms(n, 10 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-        let (stat, dof, p, failed) = sampling_chi2(&run(&ctx, &tracer, 12, material, &input), &bsdf, cos_wo);
+        let (stat, dof, p, failed) = sampling_chi2(&run(ctx, &tracer, 12, material, &input), &bsdf, cos_wo);
         println!(
             "metallic {metallic} alpha {alpha} cos_wo {cos_wo}: chi2 {stat:.1} dof {dof} p {p:.3}, {failed} rejected"
         );
@@ -214,7 +214,7 @@ fn white_furnace_albedo_matches_quadrature_and_stays_below_one() {
     let ctx = common::gpu();
     let scene = glossy_scene();
     let tracer =
-        PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, gate: Gate::None, ..Default::default() })
+        PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, gate: Gate::None, ..Default::default() })
             .unwrap();
     let n = 100_000;
     for (metallic, alpha) in [(1.0f32, 0.05f32), (1.0, 0.3), (1.0, 0.8), (0.5, 0.3), (0.0, 1.0)] {
@@ -223,7 +223,7 @@ fn white_furnace_albedo_matches_quadrature_and_stays_below_one() {
             let wo = wo_of(cos_wo);
             let input: Vec<[f32; 4]> = uniforms(n, 99).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
             // Estimate from sampling: mean of f cos / pdf (0 for rejected samples).
-            let weights: Vec<f64> = run(&ctx, &tracer, 12, (metallic, alpha, true), &input)
+            let weights: Vec<f64> = run(ctx, &tracer, 12, (metallic, alpha, true), &input)
                 .iter()
                 .map(|g| {
                     if g[3] <= 0.0 {
@@ -315,14 +315,14 @@ fn assert_matches_twin(
 fn wgsl_plastic_matches_cpu_twin() {
     let ctx = common::gpu();
     let (scene, plastics) = plastic_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let input = sampling_inputs(5);
     let dirs = evaluation_inputs(6);
     for &m in &plastics {
         let bsdf = Bsdf::at(&scene, m, PROBE_UV);
         assert!(bsdf.plastic.is_some());
-        let sampled = run_material(&ctx, &tracer, 12, m, &input);
-        let evaluated = run_material(&ctx, &tracer, 13, m, &dirs);
+        let sampled = run_material(ctx, &tracer, 12, m, &input);
+        let evaluated = run_material(ctx, &tracer, 13, m, &dirs);
         assert_matches_twin(&format!("plastic {m}"), &bsdf, &input, &sampled, &dirs, &evaluated);
     }
 }
@@ -331,7 +331,7 @@ fn wgsl_plastic_matches_cpu_twin() {
 fn plastic_sampling_follows_its_pdf() {
     let ctx = common::gpu();
     let (scene, plastics) = plastic_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let n = 200_000usize;
     let plastics = rough(&scene, &plastics);
     let cosines = [0.9f32, 0.4, 0.12];
@@ -341,7 +341,7 @@ fn plastic_sampling_follows_its_pdf() {
         for (c, &cos_wo) in cosines.iter().enumerate() {
             let input: Vec<[f32; 4]> =
                 uniforms(n, 40 + c as u32 + 10 * m).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-            let (stat, dof, p, failed) = sampling_chi2(&run_material(&ctx, &tracer, 12, m, &input), &bsdf, cos_wo);
+            let (stat, dof, p, failed) = sampling_chi2(&run_material(ctx, &tracer, 12, m, &input), &bsdf, cos_wo);
             println!("plastic {m} cos_wo {cos_wo}: chi2 {stat:.1} dof {dof} p {p:.3}, {failed} rejected");
             assert!(p > sidak(ALPHA, tests), "plastic {m} cos_wo {cos_wo}: chi2 {stat:.1}, dof {dof}, p {p:.2e}");
         }
@@ -367,7 +367,7 @@ fn plastic_albedo_from_sampling_matches_quadrature() {
     let ctx = common::gpu();
     let (scene, plastics) = plastic_scene();
     let tracer =
-        PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, gate: Gate::None, ..Default::default() })
+        PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, gate: Gate::None, ..Default::default() })
             .unwrap();
     let n = 100_000;
     for &m in &rough(&scene, &plastics) {
@@ -375,7 +375,7 @@ fn plastic_albedo_from_sampling_matches_quadrature() {
         for cos_wo in [1.0f32, 0.5, 0.1] {
             let wo = wo_of(cos_wo);
             let input: Vec<[f32; 4]> = uniforms(n, 77).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-            let out = run_material(&ctx, &tracer, 12, m, &input);
+            let out = run_material(ctx, &tracer, 12, m, &input);
             for k in 0..3 {
                 let weights: Vec<f64> = out
                     .iter()
@@ -492,7 +492,7 @@ fn glass_scene(thin: bool) -> (PreparedScene, u32) {
 fn a_dielectric_reflects_and_refracts_as_fresnel_and_snell_say() {
     let ctx = common::gpu();
     let (scene, glass) = glass_scene(false);
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let bsdf = Bsdf::at(&scene, glass, PROBE_UV);
     let d = bsdf.dielectric.expect("a dielectric");
     assert!((d.eta - 1.5046 / 1.000277).abs() < 1e-6);
@@ -500,7 +500,7 @@ fn a_dielectric_reflects_and_refracts_as_fresnel_and_snell_say() {
     for (c, cos_wo) in [1.0f32, 0.8, 0.5, 0.2, 0.05].into_iter().enumerate() {
         let wo = wo_of(cos_wo);
         let input: Vec<[f32; 4]> = uniforms(n, 200 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-        let sampled = run_material(&ctx, &tracer, 12, glass, &input);
+        let sampled = run_material(ctx, &tracer, 12, glass, &input);
         let mut reflected = 0usize;
         for (i, (x, g)) in input.iter().zip(&sampled).enumerate() {
             let s = bsdf.sample(wo, x[0], Vec2::new(x[1], x[2]));
@@ -550,7 +550,7 @@ fn a_thin_pane_reflects_2f_over_1_plus_f_and_passes_the_rest_straight_on() {
     use gatetrace::scene::bsdf::{fresnel_dielectric, thin_reflectance};
     let ctx = common::gpu();
     let (scene, pane) = glass_scene(true);
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let bsdf = Bsdf::at(&scene, pane, PROBE_UV);
     let d = bsdf.dielectric.expect("a dielectric");
     assert!(d.thin && (d.eta - 1.5 / 1.000277).abs() < 1e-6);
@@ -561,7 +561,7 @@ fn a_thin_pane_reflects_2f_over_1_plus_f_and_passes_the_rest_straight_on() {
         assert!((r - 2.0 * f / (1.0 + f)).abs() < 1e-6, "cos {cos_wo}: {r} vs 2F / (1 + F)");
         let wo = wo_of(cos_wo);
         let input: Vec<[f32; 4]> = uniforms(n, 400 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-        let sampled = run_material(&ctx, &tracer, 12, pane, &input);
+        let sampled = run_material(ctx, &tracer, 12, pane, &input);
         let mut reflected = 0usize;
         for (i, (x, g)) in input.iter().zip(&sampled).enumerate() {
             let s = bsdf.sample(wo, x[0], Vec2::new(x[1], x[2]));
@@ -602,7 +602,7 @@ fn a_conductor_of_a_named_material_takes_the_exact_fresnel_term() {
 
     let ctx = common::gpu();
     let (scene, _) = plastic_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let ball = scene.scene.triangles[scene.scene.node("ball").unwrap().triangles.start].material;
     let bsdf = Bsdf::at(&scene, ball, PROBE_UV);
     let (e, kk) = bsdf.conductor_index.expect("the ball's conductor has its index");
@@ -610,7 +610,7 @@ fn a_conductor_of_a_named_material_takes_the_exact_fresnel_term() {
     let input = sampling_inputs(8);
     let dirs = evaluation_inputs(9);
     let (sampled, evaluated) =
-        (run_material(&ctx, &tracer, 12, ball, &input), run_material(&ctx, &tracer, 13, ball, &dirs));
+        (run_material(ctx, &tracer, 12, ball, &input), run_material(ctx, &tracer, 13, ball, &dirs));
     assert_matches_twin("gold", &bsdf, &input, &sampled, &dirs, &evaluated);
 }
 
@@ -636,7 +636,7 @@ fn rough_glass_scene() -> (PreparedScene, u32) {
 fn a_rough_dielectric_matches_its_twin_and_samples_its_density_on_both_sides() {
     let ctx = common::gpu();
     let (scene, glass) = rough_glass_scene();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let bsdf = Bsdf::at(&scene, glass, PROBE_UV);
     let d = bsdf.dielectric.expect("a dielectric");
     assert!((d.alpha - 0.2).abs() < 1e-6 && (d.eta - 1.5046 / 1.000277).abs() < 1e-6);
@@ -650,7 +650,7 @@ fn a_rough_dielectric_matches_its_twin_and_samples_its_density_on_both_sides() {
     for (c, cos_wo) in cosines.into_iter().enumerate() {
         let wo = wo_of(cos_wo);
         let input: Vec<[f32; 4]> = uniforms(n, 300 + c as u32).iter().map(|u| [u[0], u[1], u[2], cos_wo]).collect();
-        let sampled = run_material(&ctx, &tracer, 12, glass, &input);
+        let sampled = run_material(ctx, &tracer, 12, glass, &input);
         let (mut weights, mut refracted) = (0.0f64, 0usize);
         for (i, (x, g)) in input.iter().zip(&sampled).enumerate() {
             let s = bsdf.sample(wo, x[0], Vec2::new(x[1], x[2]));

@@ -293,14 +293,14 @@ fn gpu_traversal_matches_cpu_twin() {
             assert!(scene.wide.nodes.len() > wide::TOP_NODES, "{} wide nodes", scene.wide.nodes.len());
         }
         let tracer =
-            PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
+            PathTracer::new(ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
         let rays = random_rays(4096, scene.triangles.len(), 5);
         let mut input = Vec::new();
         for (o, d, t_max, ignore) in &rays {
             input.push([o.x * scale, o.y * scale, o.z * scale, t_max.min(1e30)]);
             input.push([d.x, d.y, d.z, f32::from_bits(*ignore)]);
         }
-        let out = common::run_probe(&ctx, &tracer, "probe_trace", &[], &input, 2 * rays.len());
+        let out = common::run_probe(ctx, &tracer, "probe_trace", &[], &input, 2 * rays.len());
         let mut hits = 0;
         for (i, (o, d, t_max, ignore)) in rays.iter().enumerate() {
             let o = *o * scale;
@@ -366,11 +366,11 @@ fn split_buffers_render_identically() {
     let ctx = common::gpu();
     // The tiny limit also splits each pass into several waves of a few pixels. The film's
     // fixed-point sums are exact, so the different grouping of additions changes no bit.
-    let tiled = PathTracer::new(&ctx, &scene, &split).unwrap();
+    let tiled = PathTracer::new(ctx, &scene, &split).unwrap();
     assert!(tiled.waves_per_pass() > 1);
     drop(tiled);
-    let a = common::render_films(&ctx, &scene, &base, 1, 16).remove(0);
-    let b = common::render_films(&ctx, &scene, &split, 1, 16).remove(0);
+    let a = common::render_films(ctx, &scene, &base, 1, 16).remove(0);
+    let b = common::render_films(ctx, &scene, &split, 1, 16).remove(0);
     assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the test image is nearly black");
     assert_eq!(a.data, b.data, "limit {limit} B, {bins} bins: split layout changed the image");
     // Ellipsoid queries read the split node surfaces too. Their light-tracing image is one
@@ -390,8 +390,8 @@ fn split_buffers_render_identically() {
     let gate = Gate::Box { start: 0.0, end: 10.0 };
     let base = RenderSettings { method: Method::Ellipsoidal, gate, width: 4, height: 4, ..base };
     let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
-    let a = common::render_films(&ctx, &scene, &base, 1, 64).remove(0);
-    let b = common::render_films(&ctx, &scene, &split, 1, 64).remove(0);
+    let a = common::render_films(ctx, &scene, &base, 1, 64).remove(0);
+    let b = common::render_films(ctx, &scene, &split, 1, 64).remove(0);
     let lit = a.data.iter().filter(|&&v| v > 0.0).count();
     assert!(lit > 20, "the ellipsoidal test image is nearly black ({lit} of 48 values lit)");
     assert_eq!(a.data, b.data, "ellipsoidal, limit {limit} B: split node surfaces changed the image");
@@ -403,8 +403,8 @@ fn split_buffers_render_identically() {
     let query = gatetrace::integrator::QuerySettings { wide: true, ..Default::default() };
     let base = RenderSettings { query, ..base };
     let split = RenderSettings { binding_limit: Some(limit), ..base.clone() };
-    let a = common::render_films(&ctx, &scene, &base, 1, 64).remove(0);
-    let b = common::render_films(&ctx, &scene, &split, 1, 64).remove(0);
+    let a = common::render_films(ctx, &scene, &base, 1, 64).remove(0);
+    let b = common::render_films(ctx, &scene, &split, 1, 64).remove(0);
     assert!(a.data.iter().filter(|&&v| v > 0.0).count() > 20, "the wide ellipsoidal test image is nearly black");
     assert_eq!(a.data, b.data, "wide ellipsoidal, limit {limit} B: split child surfaces changed the image");
 }
@@ -421,16 +421,16 @@ fn deep_traversals_are_right_or_reported() {
     let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, Vec3::new(-1.0, 0.0, 0.0), Vec3::X, 1e30, NONE);
     assert_eq!(scene.triangles[cpu.triangle as usize].source, n as u32, "the CPU twin hits the wall");
     let ctx = common::gpu();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 2, height: 2, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 2, height: 2, ..Default::default() }).unwrap();
     // One ray does a closest-hit and an any-hit traversal: about twice the loop budget.
     let input = [[-1.0, 0.0, 0.0, 1e30], [1.0, 0.0, 0.0, f32::from_bits(NONE)]];
-    let out = common::run_probe(&ctx, &tracer, "probe_trace", &[], &input, 2);
+    let out = common::run_probe(ctx, &tracer, "probe_trace", &[], &input, 2);
     let right = out[0][1].to_bits() == cpu.triangle && (out[0][0] - 21.0).abs() < 1e-4 && out[1][0] == 1.0;
     let truncated = tracer.truncated_traversals().unwrap();
     assert!(right || truncated > 0, "a traversal went wrong without being reported: {out:?}");
     // A ray that starts past the slabs needs few visits and must be right either way.
     let input = [[11.0, 0.0, 0.0, 1e30], [1.0, 0.0, 0.0, f32::from_bits(NONE)]];
-    let out = common::run_probe(&ctx, &tracer, "probe_trace", &[], &input, 2);
+    let out = common::run_probe(ctx, &tracer, "probe_trace", &[], &input, 2);
     assert_eq!(out[0][1].to_bits(), cpu.triangle);
     assert_eq!(out[1][0], 1.0);
     assert_eq!(tracer.truncated_traversals().unwrap(), truncated, "short traversals are not cut");
@@ -502,7 +502,7 @@ fn deep_traversals_resume_until_they_are_complete() {
     for method in [Method::Path, Method::Direct] {
         let settings = RenderSettings { width: 4, height: 4, max_bounces: 1, method, seed: 3, ..Default::default() };
         let render = |scene| {
-            let mut tracer = create_integrator(&ctx, scene, &settings).unwrap();
+            let mut tracer = create_integrator(ctx, scene, &settings).unwrap();
             tracer.render_samples(16).unwrap();
             (tracer.film().unwrap(), tracer.truncated_traversals().unwrap())
         };
@@ -524,7 +524,7 @@ fn deep_traversals_resume_until_they_are_complete() {
     // large needs none: nothing is cut short, and the image is the wall's.
     let settings = RenderSettings { width: 4, height: 4, max_bounces: 1, seed: 3, ..Default::default() };
     let render = |scene| {
-        let mut tracer = PathTracer::new(&ctx, scene, &settings).unwrap();
+        let mut tracer = PathTracer::new(ctx, scene, &settings).unwrap();
         assert_eq!(tracer.shadow_resume_passes(), 0, "a new path tracer starts without resume passes");
         tracer.render_samples(16).unwrap();
         (tracer.shadow_resume_passes(), tracer.film().unwrap(), tracer.truncated_traversals().unwrap())

@@ -30,7 +30,7 @@ fn settings(method: Method, gate: Gate, seed: u32) -> RenderSettings {
 /// Renders `name` with `method` (BATCHES x spp) and compares it with the peer's `key`.
 fn check(name: &str, method: Method, gate: Gate, spp: u32, seed: u32, key: &str) {
     let ctx = common::gpu();
-    let films = common::render_films(&ctx, &scene(name), &settings(method, gate, seed), BATCHES, spp);
+    let films = common::render_films(ctx, &scene(name), &settings(method, gate, seed), BATCHES, spp);
     let label = format!("{name}_{}_{key}", method.name());
     check_image(&label, &films, &format!("{name}_peer/{key}"));
 }
@@ -61,7 +61,7 @@ fn thin_lens_transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
     let gate = Gate::Transient { start: 1.9, width: 0.1, bins: 20 };
     let films =
-        common::render_films(&ctx, &scene("cornell_box_thin_lens"), &settings(Method::Path, gate, 4), BATCHES, 64);
+        common::render_films(ctx, &scene("cornell_box_thin_lens"), &settings(Method::Path, gate, 4), BATCHES, 64);
     check_transient("cornell_box_thin_lens_transient", &films, "cornell_box_thin_lens_peer/transient_1_9_step_0_1", 20);
 }
 
@@ -84,7 +84,7 @@ fn spot_light_box_gate_matches_peer_with_ellipsoidal_connections() {
 fn spot_light_transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
     let gate = Gate::Transient { start: 2.8, width: 0.1, bins: 20 };
-    let films = common::render_films(&ctx, &scene("cornell_box_spot"), &settings(Method::Path, gate, 14), BATCHES, 64);
+    let films = common::render_films(ctx, &scene("cornell_box_spot"), &settings(Method::Path, gate, 14), BATCHES, 64);
     let bins =
         check_transient("cornell_box_spot_transient", &films, "cornell_box_spot_peer/transient_2_8_step_0_1", 20);
     // Nothing arrives before the shortest path (spot -> floor -> camera).
@@ -121,8 +121,8 @@ fn directional_light_direct_matches_path_at_a_box_gate() {
         ("directional box [3.6, 3.7)", scene("cornell_box_directional"), 23),
         ("glossy directional box [3.6, 3.7)", PreparedScene::new(glossy).unwrap(), 33),
     ] {
-        let path = common::render_films(&ctx, &scene, &small(Method::Path, seed), BATCHES, 64);
-        let direct = common::render_films(&ctx, &scene, &small(Method::Direct, seed + 1), BATCHES, 64);
+        let path = common::render_films(ctx, &scene, &small(Method::Path, seed), BATCHES, 64);
+        let direct = common::render_films(ctx, &scene, &small(Method::Direct, seed + 1), BATCHES, 64);
         assert!(path.iter().any(|f| f.mean_rgb()[0] > 0.0), "{label}: the gate holds light");
         common::assert_films_agree(label, &direct, &path, 8, common::peer::ALPHA);
     }
@@ -163,8 +163,8 @@ fn directional_light_ellipsoidal_matches_direct() {
         ),
     ] {
         let small = |method, seed| RenderSettings { width: 32, height: 32, ..settings(method, gate.clone(), seed) };
-        let direct = common::render_films(&ctx, &scene, &small(Method::Direct, seed), BATCHES, 64);
-        let ellipsoidal = common::render_films(&ctx, &scene, &small(Method::Ellipsoidal, seed + 1), BATCHES, spp);
+        let direct = common::render_films(ctx, &scene, &small(Method::Direct, seed), BATCHES, 64);
+        let ellipsoidal = common::render_films(ctx, &scene, &small(Method::Ellipsoidal, seed + 1), BATCHES, spp);
         assert!(direct.iter().any(|f| f.mean_rgb()[0] > 0.0), "{label}: the gate holds light");
         common::assert_films_agree(label, &ellipsoidal, &direct, 8, common::peer::ALPHA);
     }

@@ -21,7 +21,7 @@ fn settings(gate: Gate, seed: u32) -> RenderSettings {
 fn steady_image_matches_peer() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let films = common::render_films(&ctx, &scene, &settings(Gate::None, 1), BATCHES, 64);
+    let films = common::render_films(ctx, &scene, &settings(Gate::None, 1), BATCHES, 64);
     check_image("cornell_box_steady", &films, "cornell_box_peer/steady");
 }
 
@@ -29,7 +29,7 @@ fn steady_image_matches_peer() {
 fn box_gate_matches_peer() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let films = common::render_films(&ctx, &scene, &settings(Gate::Box { start: 3.14, end: 3.19 }, 2), BATCHES, 64);
+    let films = common::render_films(ctx, &scene, &settings(Gate::Box { start: 3.14, end: 3.19 }, 2), BATCHES, 64);
     check_image("cornell_box_gate_3_14_3_19", &films, "cornell_box_peer/gate_3_14_3_19");
 }
 
@@ -38,7 +38,7 @@ fn direct_steady_image_matches_peer() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let settings = RenderSettings { method: Method::Direct, ..settings(Gate::None, 21) };
-    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 64);
+    let films = common::render_films(ctx, &scene, &settings, BATCHES, 64);
     check_image("cornell_box_direct_steady", &films, "cornell_box_peer/steady");
 }
 
@@ -47,7 +47,7 @@ fn direct_box_gate_matches_peer() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let settings = RenderSettings { method: Method::Direct, ..settings(Gate::Box { start: 3.14, end: 3.19 }, 22) };
-    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 64);
+    let films = common::render_films(ctx, &scene, &settings, BATCHES, 64);
     check_image("cornell_box_direct_gate_3_14_3_19", &films, "cornell_box_peer/gate_3_14_3_19");
 }
 
@@ -56,7 +56,7 @@ fn transient_cube_matches_peer_per_bin() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let gate = Gate::Transient { start: 1.94, width: 0.1, bins: 20 };
-    let films = common::render_films(&ctx, &scene, &settings(gate, 3), BATCHES, 64);
+    let films = common::render_films(ctx, &scene, &settings(gate, 3), BATCHES, 64);
     let bins = check_transient("cornell_box_transient", &films, "cornell_box_peer/transient_1_94_step_0_1", 20);
     // The light seen directly (its nearest point is 1.9403 m from the pinhole) reaches the
     // camera in the first bin, [1.94, 2.04).
@@ -69,7 +69,7 @@ fn russian_roulette_keeps_the_steady_image_unbiased() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
     let settings = RenderSettings { rr_depth: Some(1), ..settings(Gate::None, 4) };
-    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 64);
+    let films = common::render_films(ctx, &scene, &settings, BATCHES, 64);
     check_image("cornell_box_steady_rr1", &films, "cornell_box_peer/steady");
 }
 
@@ -89,7 +89,7 @@ fn light_sampling_bsdf_sampling_and_mis_agree() {
             light_strategy: strategy,
             ..Default::default()
         };
-        common::render_films(&ctx, &scene, &settings, BATCHES, 64)
+        common::render_films(ctx, &scene, &settings, BATCHES, 64)
     };
     let mis = render(LightStrategy::Mis, 11);
     let others = [

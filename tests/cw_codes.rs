@@ -44,7 +44,7 @@ fn cw_codes_weigh_paths_as_their_integrated_transient() {
     };
     let spp = 64;
     let render =
-        |gate: Gate| common::render_films(&ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, spp).remove(0);
+        |gate: Gate| common::render_films(ctx, &scene, &RenderSettings { gate, ..base.clone() }, 1, spp).remove(0);
     let transient = render(Gate::Transient { start: 0.0, width, bins });
     let pixels = 16;
     let bins = bins as usize;

@@ -11,7 +11,7 @@ use gatetrace::ellipsoid::stress::{Family, Report, compare, generate, run_on_dev
 fn run(family: Family, count: usize, seed: u64) -> Report {
     let ctx = common::gpu();
     let configs = generate(family, count, seed);
-    let device = run_on_device(&ctx, &configs).unwrap();
+    let device = run_on_device(ctx, &configs).unwrap();
     let report = compare(&family.name(), &configs, &device);
     println!("{}", report.row());
     report
@@ -178,7 +178,7 @@ fn bvh_queries_find_every_intersected_triangle() {
     for (name, scene) in [("cornell box", common::cornell_box()), ("soup", common::soup_scene(2000, 12, "query_soup"))]
     {
         let tracer =
-            PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+            PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
         let mut v = || glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
         let queries: Vec<_> = (0..400u32)
             .map(|i| {
@@ -187,7 +187,7 @@ fn bvh_queries_find_every_intersected_triangle() {
                 (fs, fc, fs.distance(fc) + extra, v().y + 0.5, [i, 17, 23])
             })
             .collect();
-        let results = run_queries_with(&ctx, &tracer, EXHAUSTIVE, &queries);
+        let results = run_queries_with(ctx, &tracer, EXHAUSTIVE, &queries);
         let (mut cut, mut nodes) = (0, 0u64);
         for ((fs, fc, tau, _, _), &(tri, total, _, _, point, visited)) in queries.iter().zip(&results) {
             let thetas = oracle_thetas(&scene, *fs, *fc, *tau);
@@ -229,11 +229,11 @@ fn check_picks(
     use gatetrace::integrator::{PathTracer, RenderSettings};
     let ctx = common::gpu();
     let scene = common::soup_scene(2000, 12, "reservoir_soup");
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     let (fs, fc, tau) = (glam::Vec3::new(-0.2, 0.1, 0.0), glam::Vec3::new(0.25, -0.1, 0.1), 0.9f32);
     let n = 40_000u32;
     let queries: Vec<_> = (0..n).map(|i| (fs, fc, tau, 0.5, [i, 99, 7])).collect();
-    let results = run_queries_with(&ctx, &tracer, constants, &queries);
+    let results = run_queries_with(ctx, &tracer, constants, &queries);
     let weights: Vec<f64> =
         oracle_thetas(&scene, fs, fc, tau).iter().enumerate().map(|(i, theta)| theta * factor(&scene, i)).collect();
     let total: f64 = weights.iter().sum();
@@ -347,7 +347,7 @@ fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
         gatetrace::scene::load_gltf(&gltf.write(&common::scratch_dir("ellipsoid_quad"), "quad.gltf")).unwrap(),
     )
     .unwrap();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 4, height: 4, ..Default::default() }).unwrap();
     // The quad's two triangles (the emitter far above is never reached by these spheroids).
     let quad: Vec<Triangle> = scene.triangles[..]
         .iter()
@@ -397,7 +397,7 @@ fn ellipsoidal_vertex_sampling_agrees_with_area_sampling() {
                 (fs.as_vec3(), fc.as_vec3(), tau as f32, u_theta as f32, [i as u32, 5, 6])
             })
             .collect();
-        let device: Vec<f64> = run_queries(&ctx, &tracer, &queries)
+        let device: Vec<f64> = run_queries(ctx, &tracer, &queries)
             .iter()
             .map(|&(tri, total, _, j, x, _)| {
                 if tri == gatetrace::gpu::layout::NONE {

@@ -239,7 +239,7 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
     let wide = constants.contains(&("QUERY_WIDE", 1.0));
     let query = QuerySettings { wide, ..Default::default() };
     let settings = RenderSettings { width: 4, height: 4, query, ..Default::default() };
-    let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &settings).unwrap();
     let spheroids = spheroids(&scene);
     let limit =
         common::stats::t_critical(common::stats::sidak(ALPHA, spheroids.len() * (GROUPS + 1)), keys as f64 - 1.0);
@@ -264,7 +264,7 @@ fn check_device(constants: &[(&'static str, f64)], keys: u32) -> f64 {
             input.push([fc.x, fc.y, fc.z, 0.5]);
             input.push([f32::from_bits(k), f32::from_bits(s as u32), f32::from_bits(0x5eed), 0.0]);
         }
-        let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", constants, &input, 2 * keys as usize);
+        let out = common::run_probe(ctx, &tracer, "probe_ellipsoid_query", constants, &input, 2 * keys as usize);
         let samples: Vec<Vec<f64>> = out
             .chunks(2)
             .map(|o| {
@@ -342,7 +342,7 @@ fn check_twin_against_device(settings: QuerySettings) {
     let ctx = common::gpu();
     let scene = common::sphere_scene(32);
     let render = RenderSettings { width: 4, height: 4, query: settings, ..Default::default() };
-    let tracer = PathTracer::new(&ctx, &scene, &render).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &render).unwrap();
     let constants = [
         ("QUERY_WIDE", settings.wide as u32 as f64),
         ("QUERY_BOTTOM_NODES", settings.device_bottom_nodes() as f64),
@@ -357,7 +357,7 @@ fn check_twin_against_device(settings: QuerySettings) {
         input.push([b.x, b.y, b.z, 0.5]);
         input.push([f32::from_bits(k), f32::from_bits(7), f32::from_bits(9), 0.0]);
     }
-    let out = common::run_probe(&ctx, &tracer, "probe_ellipsoid_query", &constants, &input, 2 * keys as usize);
+    let out = common::run_probe(ctx, &tracer, "probe_ellipsoid_query", &constants, &input, 2 * keys as usize);
     let query = Query {
         focus_s: fs.as_vec3().as_dvec3(),
         focus_c: fc.as_vec3().as_dvec3(),

@@ -49,7 +49,7 @@ fn a_saved_state_continues_the_render() {
         (Method::Ellipsoidal, transient.clone()),
     ] {
         let settings = RenderSettings { method, gate: gate.clone(), ..base.clone() };
-        let (resumed, whole) = continued_and_uninterrupted(&ctx, &cornell, &settings, 12, 8);
+        let (resumed, whole) = continued_and_uninterrupted(ctx, &cornell, &settings, 12, 8);
         assert_eq!(resumed.spp, 20);
         check(&format!("{} {}", method.name(), gate.describe()), &resumed, &whole);
     }
@@ -68,7 +68,7 @@ fn a_saved_state_continues_the_render() {
             Method::Ellipsoidal,
         )
     };
-    let (resumed, whole) = continued_and_uninterrupted(&ctx, &letter, &settings, 8, 8);
+    let (resumed, whole) = continued_and_uninterrupted(ctx, &letter, &settings, 8, 8);
     check("NLOS confocal ellipsoidal with a target pilot", &resumed, &whole);
 }
 
@@ -91,9 +91,9 @@ fn a_warm_up_leaves_the_render_after_it_unchanged() {
         RenderSettings { method: Method::Combined, gate: gated.clone(), camera_pilot_spp: Some(2), ..base.clone() },
     ] {
         let label = format!("{} {}", settings.method.name(), settings.gate.describe());
-        let mut fresh = create_integrator(&ctx, &cornell, &settings).unwrap();
+        let mut fresh = create_integrator(ctx, &cornell, &settings).unwrap();
         fresh.render_samples(4).unwrap();
-        let mut warmed = create_integrator(&ctx, &cornell, &settings).unwrap();
+        let mut warmed = create_integrator(ctx, &cornell, &settings).unwrap();
         warmed.warm_up().unwrap();
         assert_eq!(warmed.samples_done(), 0, "{label}: the warm-up's sample stayed in the film");
         warmed.render_samples(4).unwrap();

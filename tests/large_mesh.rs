@@ -56,10 +56,10 @@ fn ellipsoidal_on_a_large_mesh_is_never_cut_short_and_agrees_with_direct() {
         seed,
         ..Default::default()
     };
-    let mut direct = BidirectionalTracer::new(&ctx, &scene, &settings(Method::Direct, 600)).unwrap();
+    let mut direct = BidirectionalTracer::new(ctx, &scene, &settings(Method::Direct, 600)).unwrap();
     let direct_films = common::films_of(&mut direct, 16, 32);
     let mut ellipsoidal =
-        BidirectionalTracer::new(&ctx, &scene, &RenderSettings { stats: true, ..settings(Method::Ellipsoidal, 601) })
+        BidirectionalTracer::new(ctx, &scene, &RenderSettings { stats: true, ..settings(Method::Ellipsoidal, 601) })
             .unwrap();
     let ellipsoidal_films = common::films_of(&mut ellipsoidal, 16, 8);
     let (iterations, tested) = ellipsoidal.query_cost().unwrap();

@@ -23,12 +23,12 @@ fn direction(theta: f32) -> Vec3 {
 fn wgsl_phase_sampling_matches_its_twin_and_its_density() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
     let mut rng = Rng::new(5, 0, 0);
     let gs = [-0.6f32, 0.0, 0.5, 0.9];
     let input: Vec<[f32; 4]> =
         (0..8192).map(|i| [rng.next_f32(), rng.next_f32(), gs[i % 4], 3.0 * rng.next_f32()]).collect();
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 22.0)], &input, input.len());
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 22.0)], &input, input.len());
     for (i, (x, g)) in input.iter().zip(&out).enumerate() {
         let (w, pdf) = sample_hg(direction(x[3]), x[2], [x[0], x[1]]);
         let gpu = Vec3::new(g[0], g[1], g[2]);
@@ -43,7 +43,7 @@ fn wgsl_phase_sampling_matches_its_twin_and_its_density() {
         let n = 40;
         let input: Vec<[f32; 4]> =
             (0..100_000).map(|_| [rng.next_f32(), rng.next_f32(), g, 3.0 * rng.next_f32()]).collect();
-        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 22.0)], &input, input.len());
+        let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 22.0)], &input, input.len());
         let mut observed = vec![0.0; n];
         for (x, o) in input.iter().zip(&out) {
             let mu = Vec3::new(o[0], o[1], o[2]).dot(direction(x[3]).normalize()).clamp(-1.0, 1.0);
@@ -158,7 +158,7 @@ fn lamp_films(scene: &PreparedScene) -> Vec<gatetrace::film::Film> {
         seed: 3,
         ..Default::default()
     };
-    common::render_films(&common::gpu(), scene, &settings, 8, 1024)
+    common::render_films(common::gpu(), scene, &settings, 8, 1024)
 }
 
 /// A camera standing in a purely absorbing fog (albedo 0, extinction 0.4 m^-1; `LoadOptions::fog`,
@@ -252,7 +252,7 @@ fn assert_furnace_is_white(scene: gatetrace::scene::Scene, seed: u32) {
     let max_bounces = scene.settings.max_bounces.unwrap();
     let scene = PreparedScene::new(scene).unwrap();
     let settings = RenderSettings { width: 8, height: 8, max_bounces, seed, ..Default::default() };
-    let films = common::render_films(&common::gpu(), &scene, &settings, 8, 256);
+    let films = common::render_films(common::gpu(), &scene, &settings, 8, 256);
     let limit = t_critical(sidak(0.001, 3), (films.len() - 1) as f64);
     for c in 0..3 {
         let x: Vec<f64> =
@@ -428,7 +428,7 @@ fn fog_box_transient(
         seed: 11,
         ..Default::default()
     };
-    common::render_films(&common::gpu(), &fog_box(name, medium, files, ""), &settings, 8, 256)
+    common::render_films(common::gpu(), &fog_box(name, medium, files, ""), &settings, 8, 256)
 }
 
 /// The Cornell box holding a cube of fog whose medium is `medium` (an XML `<medium
@@ -509,8 +509,8 @@ fn direct_agrees_with_path_in_media() {
     ];
     for (k, (scene, name)) in scenes.iter().enumerate() {
         let settings = |method, seed| connection_settings("transient:1.94,0.1,12", method, seed);
-        let path = common::render_films(&ctx, scene, &settings(Method::Path, 31 + k as u32), 8, 256);
-        let direct = common::render_films(&ctx, scene, &settings(Method::Direct, 41 + k as u32), 8, 64);
+        let path = common::render_films(ctx, scene, &settings(Method::Path, 31 + k as u32), 8, 256);
+        let direct = common::render_films(ctx, scene, &settings(Method::Direct, 41 + k as u32), 8, 64);
         common::assert_films_agree(&format!("direct against path in {name}"), &direct, &path, 4, 0.001);
     }
 }
@@ -540,8 +540,8 @@ fn ellipsoidal_agrees_with_direct_in_media() {
     .enumerate()
     {
         let settings = |method, seed| connection_settings(gate, method, seed);
-        let direct = common::render_films(&ctx, scene, &settings(Method::Direct, 61 + k as u32), 8, 4 * spp);
-        let ellipsoidal = common::render_films(&ctx, scene, &settings(Method::Ellipsoidal, 71 + k as u32), 8, spp);
+        let direct = common::render_films(ctx, scene, &settings(Method::Direct, 61 + k as u32), 8, 4 * spp);
+        let ellipsoidal = common::render_films(ctx, scene, &settings(Method::Ellipsoidal, 71 + k as u32), 8, spp);
         common::assert_films_agree(
             &format!("ellipsoidal against direct in {name} on {gate}"),
             &ellipsoidal,
@@ -560,9 +560,9 @@ fn ellipsoidal_with_a_query_roulette_agrees_with_direct_in_media() {
     let ctx = common::gpu();
     let fog = fog_box("roulette_fog_box", CONNECTED_FOG, &[], FOG_SPOT);
     let gate = "box:2.6..2.62";
-    let direct = common::render_films(&ctx, &fog, &connection_settings(gate, Method::Direct, 81), 8, 128);
+    let direct = common::render_films(ctx, &fog, &connection_settings(gate, Method::Direct, 81), 8, 128);
     let rouletted = RenderSettings { query_roulette: Some(0.25), ..connection_settings(gate, Method::Ellipsoidal, 82) };
-    let ellipsoidal = common::render_films(&ctx, &fog, &rouletted, 8, 32);
+    let ellipsoidal = common::render_films(ctx, &fog, &rouletted, 8, 32);
     common::assert_films_agree(
         &format!("ellipsoidal, query roulette 0.25, against direct on {gate}"),
         &ellipsoidal,
@@ -594,8 +594,8 @@ fn fog_that_fills_all_space_bounds_no_path_length() {
     let gate = "box:12..12.5";
     let settings = |method, seed| RenderSettings { max_bounces: 5, ..connection_settings(gate, method, seed) };
     assert_eq!(gatetrace::integrator::unreachable_gate(&thin, &settings(Method::Direct, 0)), None);
-    let direct = common::render_films(&ctx, &thin, &settings(Method::Direct, 91), 8, 512);
-    let ellipsoidal = common::render_films(&ctx, &thin, &settings(Method::Ellipsoidal, 93), 8, 128);
+    let direct = common::render_films(ctx, &thin, &settings(Method::Direct, 91), 8, 512);
+    let ellipsoidal = common::render_films(ctx, &thin, &settings(Method::Ellipsoidal, 93), 8, 128);
     for (method, films) in [("direct", &direct), ("ellipsoidal", &ellipsoidal)] {
         let total: f64 = films.iter().flat_map(|f| f.data.iter()).map(|&v| v as f64).sum();
         assert!(total > 0.0, "{method} renders nothing behind {gate}");
@@ -626,11 +626,11 @@ fn combined_agrees_with_direct_in_media() {
     .enumerate()
     {
         let settings = |method, seed| connection_settings(gate, method, seed);
-        let direct = common::render_films(&ctx, scene, &settings(Method::Direct, 91 + k as u32), 8, 128);
+        let direct = common::render_films(ctx, scene, &settings(Method::Direct, 91 + k as u32), 8, 128);
         let roulette = (k == 2).then_some(0.25);
         let combined_settings =
             RenderSettings { query_roulette: roulette, ..settings(Method::Combined, 95 + k as u32) };
-        let combined = common::render_films(&ctx, scene, &combined_settings, 8, 24);
+        let combined = common::render_films(ctx, scene, &combined_settings, 8, 24);
         common::assert_films_agree(
             &format!("combined against direct in {name} on {gate}"),
             &combined,
@@ -679,10 +679,10 @@ fn a_directional_light_in_media_agrees_with_path() {
     for (k, (scene, name, gate, bounces, path_spp, spp)) in cases.into_iter().enumerate() {
         let settings =
             |method, seed| RenderSettings { max_bounces: bounces, ..connection_settings(gate, method, seed) };
-        let path = common::render_films(&ctx, scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
+        let path = common::render_films(ctx, scene, &settings(Method::Path, 81 + k as u32), 8, path_spp);
         for method in [Method::Direct, Method::Ellipsoidal] {
             let seed = 83 + 2 * (method == Method::Ellipsoidal) as u32;
-            let films = common::render_films(&ctx, scene, &settings(method, seed + k as u32), 8, spp);
+            let films = common::render_films(ctx, scene, &settings(method, seed + k as u32), 8, spp);
             common::assert_films_agree(
                 &format!("{} against path with a directional light in {name} on {gate}", method.name()),
                 &films,
@@ -741,7 +741,7 @@ fn auto_leaves_out_path_where_a_delta_light_stands_in_fog() {
     let ctx = common::gpu();
     let settings = RenderSettings { seed: 7, ..steady };
     let output =
-        gatetrace::integrator::render(&ctx, &spot_in_fog, &settings, gatetrace::integrator::Budget::Samples(2), |_| {})
+        gatetrace::integrator::render(ctx, &spot_in_fog, &settings, gatetrace::integrator::Budget::Samples(2), |_| {})
             .unwrap();
     let choice = output.choice.unwrap();
     assert_eq!((choice.chosen, choice.pilot_seconds), (Method::Direct, 0.0), "{choice:?}");
@@ -787,7 +787,7 @@ fn medium_connections_agree_with_free_flights_alone() {
                 medium_connections,
                 ..Default::default()
             };
-            common::render_films(&ctx, scene, &settings, 8, spp)
+            common::render_films(ctx, scene, &settings, 8, spp)
         };
         let label = format!("medium connections in {name} on {gate}");
         common::assert_films_agree(&label, &render(true), &render(false), 4, 0.001);
@@ -950,7 +950,7 @@ fn an_albedo_grid_weighs_each_collision_by_the_albedo_where_it_lies() {
 fn medium_connection_placement_stays_accurate_in_f32() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = PathTracer::new(&ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &RenderSettings { width: 8, height: 8, ..Default::default() }).unwrap();
     let mut rng = Rng::new(23, 0, 0);
     let mut u = move || rng.next_f32();
     let n = 30_000;
@@ -974,7 +974,7 @@ fn medium_connection_placement_stays_accurate_in_f32() {
         };
         input.extend([[o.x, o.y, o.z, r], [w.x, w.y, w.z, 0.0], [y.x, y.y, y.z, 0.0]]);
     }
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 23.0)], &input, n);
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 23.0)], &input, n);
     let (mut t_errors, mut rate_errors) = (Vec::new(), Vec::new());
     for (i, g) in out.iter().enumerate() {
         let [a, w, y] = [input[3 * i], input[3 * i + 1], input[3 * i + 2]];

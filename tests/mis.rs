@@ -357,7 +357,7 @@ fn combined_weights_in_wgsl_match_the_twin() {
     let scene = common::cornell_box();
     let gate = Gate::Box { start: 3.0, end: 3.3 };
     let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate, ..Default::default() };
-    let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
+    let tracer = PathTracer::new(ctx, &scene, &settings).unwrap();
     let sampler = target_sampler(&scene, &settings).unwrap();
     let mut rng = Xorshift64Star(0xC0FF_EE00_1234_5678);
     let (mut input, mut cases) = (Vec::new(), Vec::new());
@@ -415,7 +415,7 @@ fn combined_weights_in_wgsl_match_the_twin() {
     let placed_in_media = cases.iter().filter(|c| (1..c.0.len() - 1).any(|m| in_medium(&c.0, m))).count();
     assert!(placed_in_media > cases.len() / 10, "only {placed_in_media} paths have vertices in a medium");
     let extra = [("FUNCTION", 20.0), ("HAS_DIELECTRIC", 1.0), ("HAS_MEDIA", 1.0)];
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &extra, &input, cases.len());
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &extra, &input, cases.len());
     for (i, ((path, family, own, p_tau, ratio, medium_ratio), o)) in cases.iter().zip(&out).enumerate() {
         assert!((o[1] - p_tau).abs() <= 1e-4 * p_tau, "path {i}: target density GPU {} CPU {p_tau}", o[1]);
         let twin = combined_weight(path, *family, *own, o[1], *ratio, *medium_ratio, 1e-6);

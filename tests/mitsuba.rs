@@ -178,10 +178,10 @@ fn a_mitsuba_scene_agrees_with_mitransient_rendering_the_same_file() {
     assert_eq!(scene.settings.max_bounces, Some(5));
     scene.settings = SceneSettings::default();
     let scene = PreparedScene::new(scene).unwrap();
-    let transient = path_agrees_with_peer(&ctx, &scene, "mitsuba_box", 5, 3);
+    let transient = path_agrees_with_peer(ctx, &scene, "mitsuba_box", 5, 3);
     for method in [Method::Direct, Method::Ellipsoidal] {
         let settings = RenderSettings { method, seed: 5, ..transient.clone() };
-        let films = common::render_films(&ctx, &scene, &settings, 8, 128);
+        let films = common::render_films(ctx, &scene, &settings, 8, 128);
         check_transient(&format!("mitsuba_box_transient_{method:?}"), &films, "mitsuba_box_peer/transient_16x16", 20);
     }
 }
@@ -196,8 +196,8 @@ fn the_mitsuba_cornell_box_renders_as_the_gltf_one() {
     let gltf = common::cornell_box();
     for method in [Method::Path, Method::Direct] {
         let settings = RenderSettings { width: 32, height: 32, max_bounces: 5, method, ..Default::default() };
-        let a = common::render_films(&ctx, &xml, &RenderSettings { seed: 1, ..settings.clone() }, 8, 32);
-        let b = common::render_films(&ctx, &gltf, &RenderSettings { seed: 2, ..settings }, 8, 32);
+        let a = common::render_films(ctx, &xml, &RenderSettings { seed: 1, ..settings.clone() }, 8, 32);
+        let b = common::render_films(ctx, &gltf, &RenderSettings { seed: 2, ..settings }, 8, 32);
         common::assert_films_agree(&format!("XML and glTF Cornell box, {method:?}"), &a, &b, 8, 0.01);
     }
 }
@@ -272,13 +272,13 @@ fn a_black_plastic_reflects_through_its_coat_with_every_method() {
         gate: Gate::parse("transient:1.94,0.25,6").unwrap(),
         ..Default::default()
     };
-    let reference = common::render_films(&ctx, &scene, &RenderSettings { seed: 1, ..settings.clone() }, 8, 256);
+    let reference = common::render_films(ctx, &scene, &RenderSettings { seed: 1, ..settings.clone() }, 8, 256);
     for (method, reflection_weights) in
         [(Method::Direct, false), (Method::Ellipsoidal, false), (Method::Ellipsoidal, true)]
     {
         let mut s = RenderSettings { method, seed: 2, ..settings.clone() };
         s.query.reflection_weights = reflection_weights;
-        let films = common::render_films(&ctx, &scene, &s, 8, 64);
+        let films = common::render_films(ctx, &scene, &s, 8, 64);
         let label = format!("black plastic floor, {method:?}, reflection weights {reflection_weights}");
         common::assert_films_agree(&label, &films, &reference, 4, 0.01);
     }
@@ -297,21 +297,21 @@ fn glass_agrees_with_mitransient_with_path_direct_and_combined() {
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
     assert_eq!(scene.settings.max_bounces, Some(7));
     let scene = PreparedScene::new(scene).unwrap();
-    let transient = path_agrees_with_peer(&ctx, &scene, "glass_box", 7, 7);
+    let transient = path_agrees_with_peer(ctx, &scene, "glass_box", 7, 7);
     // The light's reflection in the sphere (Fresnel reflectance about 4%) is found only by camera
     // subpaths that choose to reflect there, as in path tracing; at 16×16 one pixel holds it, and
     // its part beyond 2.54 m (bin 6) needs thousands of samples per pixel to be seen at all.
     let direct = RenderSettings { method: Method::Direct, seed: 9, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &direct, 8, 512);
+    let films = common::render_films(ctx, &scene, &direct, 8, 512);
     check_transient("glass_box_transient_direct", &films, "glass_box_peer/transient_16x16", 20);
     let steady = RenderSettings { width: 64, height: 64, gate: Gate::None, seed: 11, ..direct.clone() };
-    let films = common::render_films(&ctx, &scene, &steady, 8, 32);
+    let films = common::render_films(ctx, &scene, &steady, 8, 32);
     check_image("glass_box_steady_direct", &films, "glass_box_peer/steady");
     let combined = RenderSettings { method: Method::Combined, seed: 13, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &combined, 8, 512);
+    let films = common::render_films(ctx, &scene, &combined, 8, 512);
     check_transient("glass_box_transient_combined", &films, "glass_box_peer/transient_16x16", 20);
     let error = gatetrace::integrator::create_integrator(
-        &ctx,
+        ctx,
         &scene,
         &RenderSettings { method: Method::Ellipsoidal, ..transient.clone() },
     )
@@ -339,15 +339,15 @@ fn glass_and_plastic_agree_with_mitransient_with_every_method() {
     assert!(material("glass ball").dielectric.is_some() && material("plastic block").plastic.is_some());
     assert!(material("floor").base_color_texture.is_some());
     let scene = PreparedScene::new(scene).unwrap();
-    let transient = path_agrees_with_peer(&ctx, &scene, "glass_plastic_box", 7, 29);
+    let transient = path_agrees_with_peer(ctx, &scene, "glass_plastic_box", 7, 29);
     let direct = RenderSettings { method: Method::Direct, seed: 31, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &direct, 8, 256);
+    let films = common::render_films(ctx, &scene, &direct, 8, 256);
     check_transient("glass_plastic_box_transient_direct", &films, "glass_plastic_box_peer/transient_16x16", 20);
     let steady = RenderSettings { width: 64, height: 64, gate: Gate::None, seed: 32, ..direct };
-    let films = common::render_films(&ctx, &scene, &steady, 8, 16);
+    let films = common::render_films(ctx, &scene, &steady, 8, 16);
     check_image("glass_plastic_box_steady_direct", &films, "glass_plastic_box_peer/steady");
     let combined = RenderSettings { method: Method::Combined, seed: 33, ..transient };
-    let films = common::render_films(&ctx, &scene, &combined, 8, 256);
+    let films = common::render_films(ctx, &scene, &combined, 8, 256);
     check_transient("glass_plastic_box_transient_combined", &films, "glass_plastic_box_peer/transient_16x16", 20);
 }
 
@@ -372,23 +372,23 @@ fn rough_glass_agrees_with_mitransient_and_its_strategies_agree_in_time() {
     let scene = PreparedScene::new(scene).unwrap();
     assert!(scene.has_rough_dielectric());
     let steady = RenderSettings { width: 64, height: 64, max_bounces: 7, seed: 17, ..Default::default() };
-    let films = common::render_films(&ctx, &scene, &steady, 8, 64);
+    let films = common::render_films(ctx, &scene, &steady, 8, 64);
     check_image("rough_glass_box_steady", &films, "rough_glass_box_peer/steady");
     let transient =
         RenderSettings { width: 16, height: 16, gate: Gate::parse("transient:1.94,0.1,20").unwrap(), ..steady.clone() };
-    light_strategies_agree_per_bin("rough glass", &ctx, &scene, &transient, 512, 18);
+    light_strategies_agree_per_bin("rough glass", ctx, &scene, &transient, 512, 18);
     let direct = RenderSettings { method: Method::Direct, seed: 19, ..steady.clone() };
-    let films = common::render_films(&ctx, &scene, &direct, 8, 16);
+    let films = common::render_films(ctx, &scene, &direct, 8, 16);
     check_image("rough_glass_box_steady_direct", &films, "rough_glass_box_peer/steady");
-    let path = common::render_films(&ctx, &scene, &RenderSettings { seed: 20, ..transient.clone() }, 8, 512);
+    let path = common::render_films(ctx, &scene, &RenderSettings { seed: 20, ..transient.clone() }, 8, 512);
     let direct = RenderSettings { method: Method::Direct, seed: 21, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &direct, 8, 256);
+    let films = common::render_films(ctx, &scene, &direct, 8, 256);
     common::assert_films_agree("rough glass, direct against path", &films, &path, 4, 0.001);
     let combined = RenderSettings { method: Method::Combined, seed: 22, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &combined, 8, 128);
+    let films = common::render_films(ctx, &scene, &combined, 8, 128);
     common::assert_films_agree("rough glass, combined against path", &films, &path, 4, 0.001);
     let ellipsoidal = RenderSettings { method: Method::Ellipsoidal, ..transient.clone() };
-    let error = gatetrace::integrator::create_integrator(&ctx, &scene, &ellipsoidal)
+    let error = gatetrace::integrator::create_integrator(ctx, &scene, &ellipsoidal)
         .err()
         .expect("ellipsoidal connections alone cannot sample paths through rough glass");
     let text = format!("{error:#}");
@@ -417,16 +417,16 @@ fn fog_agrees_with_mitransient_with_path() {
     assert!(fog.albedo.abs_diff_eq(Vec3::new(0.9, 0.7, 0.4), 1e-6));
     assert_eq!(scene.camera_medium, None);
     let scene = PreparedScene::new(scene).unwrap();
-    let transient = path_agrees_with_peer(&ctx, &scene, "fog_box", 7, 17);
-    light_strategies_agree_per_bin("fog", &ctx, &scene, &transient, 256, 19);
+    let transient = path_agrees_with_peer(ctx, &scene, "fog_box", 7, 17);
+    light_strategies_agree_per_bin("fog", ctx, &scene, &transient, 256, 19);
     let direct = RenderSettings { method: Method::Direct, seed: 29, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &direct, 8, 128);
+    let films = common::render_films(ctx, &scene, &direct, 8, 128);
     check_transient("fog_box_transient_direct", &films, "fog_box_peer/transient_16x16", 20);
     let ellipsoidal = RenderSettings { method: Method::Ellipsoidal, seed: 31, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &ellipsoidal, 8, 128);
+    let films = common::render_films(ctx, &scene, &ellipsoidal, 8, 128);
     check_transient("fog_box_transient_ellipsoidal", &films, "fog_box_peer/transient_16x16", 20);
     let combined = RenderSettings { method: Method::Combined, seed: 37, ..transient.clone() };
-    let films = common::render_films(&ctx, &scene, &combined, 8, 64);
+    let films = common::render_films(ctx, &scene, &combined, 8, 64);
     check_transient("fog_box_transient_combined", &films, "fog_box_peer/transient_16x16", 20);
     let settings = RenderSettings { method: Method::Auto, ..transient };
     assert_eq!(
@@ -470,11 +470,11 @@ fn a_fog_slab_before_a_target_agrees_with_mitransient_as_a_transient_and_behind_
     for (method, spp, seed) in [(Method::Path, 512, 41), (Method::Direct, 128, 43), (Method::Ellipsoidal, 64, 47)] {
         let name = method.name();
         let settings = RenderSettings { method, seed, ..transient.clone() };
-        let films = common::render_films(&ctx, &scene, &settings, 8, spp);
+        let films = common::render_films(ctx, &scene, &settings, 8, spp);
         check_transient(&format!("fog_slab_transient_{name}"), &films, "fog_slab_peer/transient_16x16", bins);
 
         let gated = RenderSettings { gate: Gate::parse("box:6.0..6.5").unwrap(), seed: seed + 1, ..settings };
-        let films = common::render_films(&ctx, &scene, &gated, 8, spp);
+        let films = common::render_films(ctx, &scene, &gated, 8, spp);
         common::peer::check_image_values(&format!("fog_slab_gate_{name}"), &films, &[16, 16, 3], &gate_mean, &gate_var);
     }
 }
@@ -497,12 +497,12 @@ fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
     assert!(!ball.null && (ball.dielectric.unwrap().eta - 1.33).abs() < 1e-6);
     assert_eq!((ball.media.interior, ball.media.exterior), (Some(0), None));
     let scene = PreparedScene::new(scene).unwrap();
-    let transient = path_agrees_with_peer(&ctx, &scene, "murky_glass_box", 31, 23);
+    let transient = path_agrees_with_peer(ctx, &scene, "murky_glass_box", 31, 23);
     // `direct` through the glass into the medium (delta vertices on the sphere, scattering
     // vertices inside it at the water's index) against `path`, at 8 bounces.
     let settings = |method, seed| RenderSettings { method, seed, max_bounces: 8, ..transient.clone() };
-    let path = common::render_films(&ctx, &scene, &settings(Method::Path, 25), 8, 256);
-    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, 27), 8, 64);
+    let path = common::render_films(ctx, &scene, &settings(Method::Path, 25), 8, 256);
+    let direct = common::render_films(ctx, &scene, &settings(Method::Direct, 27), 8, 64);
     common::assert_films_agree("murky glass, direct against path", &direct, &path, 4, 0.001);
     // The same sphere frosted (rough glass, GGX alpha 0.3) with a lamp at its centre: connections
     // end on its surface (one that leaves through it starts in the medium beyond), and the lamp's
@@ -520,8 +520,8 @@ fn a_medium_inside_glass_agrees_with_mitransient_with_path() {
     std::fs::write(dir.join("scene.xml"), frosted).unwrap();
     let scene = PreparedScene::new(load_scene_with(&dir.join("scene.xml"), &LoadOptions::default()).unwrap()).unwrap();
     assert!(scene.has_rough_dielectric());
-    let path = common::render_films(&ctx, &scene, &settings(Method::Path, 28), 8, 256);
-    let direct = common::render_films(&ctx, &scene, &settings(Method::Direct, 30), 8, 64);
+    let path = common::render_films(ctx, &scene, &settings(Method::Path, 28), 8, 256);
+    let direct = common::render_films(ctx, &scene, &settings(Method::Direct, 30), 8, 64);
     common::assert_films_agree("frosted murky glass, direct against path", &direct, &path, 4, 0.001);
 }
 
@@ -545,6 +545,6 @@ fn a_heterogeneous_medium_agrees_with_mitransient_with_path() {
     assert_eq!(grid.albedo.as_ref().map(Vec::len), Some(3 * 12 * 12 * 12));
     let scene = PreparedScene::new(scene).unwrap();
     let steady = RenderSettings { width: 32, height: 32, max_bounces: 31, seed: 41, ..Default::default() };
-    let films = common::render_films(&ctx, &scene, &steady, 8, 64);
+    let films = common::render_films(ctx, &scene, &steady, 8, 64);
     check_image("smoke_box_steady", &films, "smoke_box_peer/steady");
 }

@@ -67,7 +67,7 @@ fn compare_with_peer(name: &str, aim: LaserAim, method: Method, spp: u32, block:
     assert_eq!(shape, vec![16, 16, 100, 3]);
     let per_pixel = 100 * 3;
     let scale = |i: usize| power[if power.len() == 1 { 0 } else { i / per_pixel }] as f64;
-    let films = common::render_films(&ctx, &scene, &settings(aim, method), BATCHES, spp);
+    let films = common::render_films(ctx, &scene, &settings(aim, method), BATCHES, spp);
     let scaled: Vec<Vec<f32>> = films
         .iter()
         .map(|film| film.data.iter().enumerate().map(|(i, &v)| (v as f64 * scale(i)) as f32).collect())
@@ -273,7 +273,7 @@ fn xml_capture_agrees_with_peer(
     let ctx = common::gpu();
     let (prepared, settings) = xml_capture_with(scene, scan, method, options);
     assert_eq!((settings.width, settings.height, settings.max_bounces), (8, 8, 3));
-    let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, spp);
+    let films = common::render_films(ctx, &prepared.scene, &settings, BATCHES, spp);
     let batches: Vec<Vec<f32>> = films.into_iter().map(|f| f.data).collect();
     let (shape, peer_mean) = common::reference(&format!("{scene}_peer/{scan}_mean.npy"));
     let (_, peer_var) = common::reference(&format!("{scene}_peer/{scan}_var.npy"));
@@ -352,7 +352,7 @@ fn the_wide_objects_capture_starves_no_bin_that_holds_light() {
     use gatetrace::film::target::BAND_EXTRA_VISITS_PER_BIN;
     let ctx = common::gpu();
     let (prepared, settings) = xml_capture("nlos_panels", "confocal", Method::Ellipsoidal);
-    let mut tracer = gatetrace::integrator::create_integrator(&ctx, &prepared.scene, &settings).unwrap();
+    let mut tracer = gatetrace::integrator::create_integrator(ctx, &prepared.scene, &settings).unwrap();
     tracer.prepare().unwrap();
     let t = tracer.wavefront().params.target_length;
     let rows = &tracer.wavefront().target_visits;
@@ -540,7 +540,7 @@ fn confocal_shell_connections_match_quadrature_with_visibility(name: &str) -> ga
         .collect();
 
     let ctx = common::gpu();
-    let films = common::render_films(&ctx, &prepared.scene, &settings, BATCHES, 4096);
+    let films = common::render_films(ctx, &prepared.scene, &settings, BATCHES, 4096);
     common::quadrature::assert_point_totals_match(
         &format!("{name}, confocal, shell connections"),
         &films,
@@ -784,7 +784,7 @@ fn cells_on_an_edge_of_the_wall_are_sensed_and_lit() {
     }
     let ctx = common::gpu();
     let pixel_totals = |method: Method, spp: u32| -> Vec<f64> {
-        let film = common::render_films(&ctx, &scene, &capture_settings(method), 1, spp).remove(0);
+        let film = common::render_films(ctx, &scene, &capture_settings(method), 1, spp).remove(0);
         film.data.chunks(film.data.len() / (n * n)).map(|c| c.iter().map(|&v| v as f64).sum()).collect()
     };
     let ellipsoidal = pixel_totals(Method::Ellipsoidal, 4);
@@ -835,8 +835,8 @@ fn a_capture_needs_no_camera_or_light() {
     let ctx = common::gpu();
     for method in [Method::Path, Method::Ellipsoidal] {
         let s = settings(SPOT, method);
-        let ours = common::render_films(&ctx, &bare, &s, 1, 64).remove(0);
-        let full = common::render_films(&ctx, &example_scene(), &s, 1, 64).remove(0);
+        let ours = common::render_films(ctx, &bare, &s, 1, 64).remove(0);
+        let full = common::render_films(ctx, &example_scene(), &s, 1, 64).remove(0);
         assert!(ours.data.iter().any(|&v| v > 0.0), "{}: black capture", method.name());
         assert_eq!(ours.data, full.data, "{}: the bare scene renders another capture", method.name());
     }

@@ -261,7 +261,7 @@ fn compare_with_quadrature(scan: &str, aim: LaserAim, method: Method, spp: u32, 
     });
 
     let ctx = common::gpu();
-    let films = common::render_films(&ctx, &scene, &s, BATCHES, spp);
+    let films = common::render_films(ctx, &scene, &s, BATCHES, spp);
     // [pixel][bin][channel] values summed over groups of `group` bins.
     let coarsen = |v: &[f64]| -> Vec<f64> {
         let mut out = vec![0.0; v.len() / group];
@@ -444,7 +444,7 @@ fn shell_connections_match_quadrature_on_a_convex_sphere(scan: &str, aim: LaserA
 
     let ctx = common::gpu();
     let settings = RenderSettings { band_index: true, target_pilot_spp: 0, seed: 41, ..base };
-    let films = common::render_films(&ctx, &scene, &settings, BATCHES, 3200);
+    let films = common::render_films(ctx, &scene, &settings, BATCHES, 3200);
     common::quadrature::assert_point_totals_match(
         &format!("{scan} scan, shell connections"),
         &films,

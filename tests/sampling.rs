@@ -261,10 +261,10 @@ fn assert_close(what: &str, i: usize, gpu: f32, cpu: f32, abs: f32, rel: f32) {
 fn wgsl_sampling_matches_cpu_twins() {
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let tracer = tracer_for(ctx, &scene, Gate::None);
     let input = uniform_inputs(4096, 1);
     let run = |f: u32, input: &[[f32; 4]]| {
-        common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
+        common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
     };
 
     for (i, (x, g)) in input.iter().zip(run(0, &input)).enumerate() {
@@ -308,9 +308,9 @@ fn wgsl_camera_and_lights_match_cpu_twins() {
     use gatetrace::scene::camera::camera_direction;
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let tracer = tracer_for(ctx, &scene, Gate::None);
     let run = |f: u32, input: &[[f32; 4]]| {
-        common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
+        common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
     };
     let camera = scene.scene.camera.to_gpu(32, 24);
     let film: Vec<[f32; 4]> = uniform_inputs(2048, 2).iter().map(|x| [x[0] * 32.0, x[1] * 24.0, 0.0, 0.0]).collect();
@@ -322,9 +322,9 @@ fn wgsl_camera_and_lights_match_cpu_twins() {
     }
     // Light selection and sampling over several area lights and a point light.
     let lights = gatetrace::scene::PreparedScene::new(light_test_scene()).unwrap();
-    let tracer = tracer_for(&ctx, &lights, Gate::None);
+    let tracer = tracer_for(ctx, &lights, Gate::None);
     let input = uniform_inputs(4096, 3);
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 6.0)], &input, input.len());
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 6.0)], &input, input.len());
     for (i, (x, g)) in input.iter().zip(out).enumerate() {
         let c = lights.lights.sample(&lights.triangles, x[0], Vec2::new(x[1], x[2]));
         for k in 0..3 {
@@ -355,8 +355,8 @@ fn wgsl_gates_match_cpu_twin() {
     ];
     let lengths: Vec<[f32; 4]> = uniform_inputs(4096, 4).iter().map(|x| [1.5 + 3.5 * x[0], 0.0, 0.0, 0.0]).collect();
     for gate in gates {
-        let tracer = tracer_for(&ctx, &scene, gate.clone());
-        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 4.0)], &lengths, lengths.len());
+        let tracer = tracer_for(ctx, &scene, gate.clone());
+        let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 4.0)], &lengths, lengths.len());
         let (kind, g, tab) = (gate.kind(), gate.to_gpu(), gate.table());
         for (i, (x, o)) in lengths.iter().zip(out).enumerate() {
             let w = gate_weight(kind, &g, &tab, x[0]);
@@ -382,7 +382,7 @@ fn wgsl_fixed_point_sums_match_cpu_twin() {
     use gatetrace::film::fixed::{fixed_from_f32, to_words};
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let tracer = tracer_for(ctx, &scene, Gate::None);
     let seed = gatetrace::integrator::Integrator::wavefront(&tracer).params.seed;
     // Values across the whole range, both signs, denormals, and ones rounded at random.
     let mut values: Vec<f32> =
@@ -395,7 +395,7 @@ fn wgsl_fixed_point_sums_match_cpu_twin() {
             [a, f32::from_bits(i as u32 * 7919), -values[(i * 31) % values.len()] * 0.37, f32::from_bits(i as u32)]
         })
         .collect();
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 11.0)], &input, input.len());
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 11.0)], &input, input.len());
     for (x, g) in input.iter().zip(out) {
         let (a, b) = (fixed_from_f32(x[0], x[1].to_bits(), seed), fixed_from_f32(x[2], x[3].to_bits(), seed));
         let expected = to_words(a.unwrap_or(0).wrapping_add(b.unwrap_or(0)));
@@ -409,9 +409,9 @@ fn wgsl_surfaces_match_cpu_twin() {
     use gatetrace::scene::surface::{offset_ray_origin, surface_at};
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let tracer = tracer_for(ctx, &scene, Gate::None);
     let run = |f: u32, input: &[[f32; 4]]| {
-        common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
+        common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], input, input.len())
     };
     let input: Vec<[f32; 4]> = uniform_inputs(2048, 9)
         .iter()
@@ -445,11 +445,11 @@ fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
     )
     .unwrap();
     let lens = scene.scene.camera.lens.expect("the scene has a thin lens");
-    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let tracer = tracer_for(ctx, &scene, Gate::None);
     let camera = scene.scene.camera.to_gpu(32, 24);
     let input: Vec<[f32; 4]> = uniform_inputs(2048, 7).iter().map(|x| [x[0] * 32.0, x[1] * 24.0, x[2], x[3]]).collect();
     let run =
-        |f: u32| common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], &input, input.len());
+        |f: u32| common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", f as f64)], &input, input.len());
     let (directions, origins, coordinates) = (run(16), run(17), run(18));
     for (i, x) in input.iter().enumerate() {
         let (origin, direction) = camera_ray(&camera, Vec2::new(x[0], x[1]), Vec2::new(x[2], x[3]), 32, 24);
@@ -483,7 +483,7 @@ fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
     let spot_scene = gatetrace::scene::PreparedScene::new(spot_scene).unwrap();
     let light = spot_scene.scene.point_lights[0].clone();
     let cone = light.spot.unwrap();
-    let tracer = tracer_for(&ctx, &spot_scene, Gate::None);
+    let tracer = tracer_for(ctx, &spot_scene, Gate::None);
     // Directions concentrated about the axis (half of them inside the outer cone).
     let input: Vec<[f32; 4]> = uniform_inputs(4096, 8)
         .iter()
@@ -492,7 +492,7 @@ fn wgsl_thin_lens_and_spot_light_match_cpu_twins() {
             [w.x, w.y, w.z, 0.0]
         })
         .collect();
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 19.0)], &input, input.len());
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 19.0)], &input, input.len());
     let mut inside = 0;
     for (i, (x, g)) in input.iter().zip(out).enumerate() {
         let w = Vec3::new(x[0], x[1], x[2]).normalize();
@@ -517,7 +517,7 @@ fn double_f32_sums_and_products_are_exact() {
     // zero) or a fused multiply-add computed unfused would make the error terms 0 and fail here.
     let ctx = common::gpu();
     let scene = common::cornell_box();
-    let tracer = tracer_for(&ctx, &scene, Gate::None);
+    let tracer = tracer_for(ctx, &scene, Gate::None);
     let mut rng = gatetrace::rng::Xorshift64Star(12345);
     let mut input: Vec<[f32; 4]> = (0..4096)
         .map(|_| {
@@ -525,7 +525,7 @@ fn double_f32_sums_and_products_are_exact() {
         })
         .collect();
     input.extend([[1.0, 1e-10, 4097.0, 4097.0], [-3.0, 3.0, 0.0, 1e20], [1e30, -1.0, 1e30, 0.5]]);
-    let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 21.0)], &input, input.len());
+    let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 21.0)], &input, input.len());
     let mut inexact_products = 0;
     for (x, g) in input.iter().zip(&out) {
         let (sum, product) = (x[0] as f64 + x[1] as f64, x[2] as f64 * x[3] as f64);

@@ -71,7 +71,7 @@ fn node_transforms_are_baked_and_the_camera_follows_its_parents() {
     let ctx = common::gpu();
     let prepared = PreparedScene::new(scene).unwrap();
     let film =
-        common::render_films(&ctx, &prepared, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 2)
+        common::render_films(ctx, &prepared, &RenderSettings { width: 8, height: 8, ..Default::default() }, 1, 2)
             .remove(0);
     assert!(film.data.iter().all(|&v| v == 2.0), "the rotated camera sees the emitter in every pixel");
 }
@@ -243,7 +243,7 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
         scene.textures[0].nearest = nearest;
         let scene = PreparedScene::new(scene).unwrap();
         let tracer = gatetrace::integrator::PathTracer::new(
-            &ctx,
+            ctx,
             &scene,
             &RenderSettings { width: 4, height: 4, ..Default::default() },
         )
@@ -252,7 +252,7 @@ fn base_color_textures_are_decoded_and_sampled_like_the_cpu_twin() {
         let input: Vec<[f32; 4]> = (0..2048)
             .map(|_| [f32::from_bits(0), 3.0 * rng.next_f32() - 1.0, 3.0 * rng.next_f32() - 1.0, 0.0])
             .collect();
-        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 7.0)], &input, input.len());
+        let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 7.0)], &input, input.len());
         for (x, g) in input.iter().zip(out) {
             let uv = glam::Vec2::new(x[1], x[2]);
             let c = texture_bilinear(&scene.texture_infos, &scene.texels, 0, uv);
@@ -302,8 +302,8 @@ fn textured_albedo_renders_like_the_equal_base_color() {
     assert!(textured.has_textures() && !plain.has_textures());
     let ctx = common::gpu();
     let settings = RenderSettings { width: 16, height: 16, max_bounces: 2, ..Default::default() };
-    let a = common::render_films(&ctx, &plain, &settings, 1, 8).remove(0);
-    let b = common::render_films(&ctx, &textured, &settings, 1, 8).remove(0);
+    let a = common::render_films(ctx, &plain, &settings, 1, 8).remove(0);
+    let b = common::render_films(ctx, &textured, &settings, 1, 8).remove(0);
     assert!(a.data.iter().all(|&v| v > 0.0));
     for (x, y) in a.data.iter().zip(&b.data) {
         assert!((x - y).abs() <= x * (1.0 / 2048.0 + 1e-6), "untextured {x} vs textured {y}");

@@ -80,14 +80,14 @@ fn wgsl_target_lengths_match_cpu_twin() {
     let scene = common::cornell_box();
     for (name, gate) in gates() {
         let settings = RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), ..Default::default() };
-        let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
+        let tracer = PathTracer::new(ctx, &scene, &settings).unwrap();
         let sampler: TargetSampler = target_sampler(&scene, &settings).unwrap();
         let input: Vec<[f32; 4]> = (0..4096u32)
             .map(|i| {
                 [(i as f32 + 0.37) / 4096.0, f32::from_bits(i.wrapping_mul(2_246_822_519)), f32::from_bits(i % 97), 0.0]
             })
             .collect();
-        let out = common::run_probe(&ctx, &tracer, "probe_functions", &[("FUNCTION", 14.0)], &input, input.len());
+        let out = common::run_probe(ctx, &tracer, "probe_functions", &[("FUNCTION", 14.0)], &input, input.len());
         for (i, (x, o)) in input.iter().zip(&out).enumerate() {
             let (l, w) = sampler.sample(x[0]);
             assert!((o[0] - l).abs() <= 1e-6 * l, "{name} record {i}: tau GPU {} CPU {l}", o[0]);
@@ -551,7 +551,7 @@ fn wgsl_stratified_target_lengths_match_cpu_twin() {
     for gate in transient_gates() {
         let settings =
             RenderSettings { width: 4, height: 4, max_bounces: 5, gate: gate.clone(), seed: 21, ..Default::default() };
-        let tracer = PathTracer::new(&ctx, &scene, &settings).unwrap();
+        let tracer = PathTracer::new(ctx, &scene, &settings).unwrap();
         let sampler = target_sampler(&scene, &settings).unwrap();
         let n = sampler.params.strata;
         // Each bin once a cycle, then with extra visits from random rows of the 16 pixels.
@@ -564,13 +564,13 @@ fn wgsl_stratified_target_lengths_match_cpu_twin() {
             let mut resources = tracer.resources().clone();
             let mut params = tracer.wavefront().params;
             params.target_length = t;
-            resources.uniform_init(&ctx, "params", &params);
-            resources.storage_init(&ctx, "target_visits", if t.extra > 0 { &rows[..] } else { &[0u32][..] }).unwrap();
+            resources.uniform_init(ctx, "params", &params);
+            resources.storage_init(ctx, "target_visits", if t.extra > 0 { &rows[..] } else { &[0u32][..] }).unwrap();
             let input: Vec<[f32; 4]> = (0..4096u32)
                 .map(|i| [f32::from_bits(i % 16), f32::from_bits(i.wrapping_mul(2_246_822_519) >> 12), 0.0, 0.0])
                 .collect();
             let out = common::run_probe_with(
-                &ctx,
+                ctx,
                 &resources,
                 tracer.constants(),
                 "probe_functions",

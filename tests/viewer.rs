@@ -118,7 +118,7 @@ fn headless(gate: Gate, spp: u32, batches: usize) -> Vec<Film> {
         seed: 77,
         ..Default::default()
     };
-    common::render_films(&ctx, &scene, &settings, batches, spp)
+    common::render_films(ctx, &scene, &settings, batches, spp)
 }
 
 /// Compares the quadrant means of `viewer` ([H, W, K] values as displayed) with those of the

@@ -14,12 +14,16 @@ use gatetrace::integrator::{Integrator, RenderSettings, create_integrator};
 use gatetrace::scene::{PreparedScene, load_gltf};
 use stats::BatchStats;
 
-/// The device every GPU test uses. Without an adapter the test fails (never skips).
-pub fn gpu() -> GpuContext {
-    match GpuContext::new() {
+/// The device every GPU test of a test binary uses, opened by the first: its kernel cache then
+/// serves every later test, which on lavapipe (compiling each kernel at its first dispatch)
+/// spares each test the compilation of the kernels an earlier one built. Without an adapter the
+/// test fails (never skips).
+pub fn gpu() -> &'static GpuContext {
+    static DEVICE: std::sync::OnceLock<GpuContext> = std::sync::OnceLock::new();
+    DEVICE.get_or_init(|| match GpuContext::new() {
         Ok(ctx) => ctx,
         Err(e) => panic!("GPU tests need a Vulkan adapter (CI installs lavapipe): {e:#}"),
-    }
+    })
 }
 
 pub fn repo_path(relative: &str) -> PathBuf {
