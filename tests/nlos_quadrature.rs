@@ -184,7 +184,7 @@ fn quadrature(
 /// [pixel][bin][channel], and the variance of its error: the mean of two quadratures whose lines
 /// run in different directions, so that their errors (largest where lines graze a bin's edge)
 /// fall in different places; their difference squared bounds the variance of the mean's error.
-/// Pixels are integrated on every core.
+/// Pixels are integrated on every core (rayon).
 fn reference_bins(
     hidden: &[Hidden],
     wall_albedo: DVec3,
@@ -207,15 +207,8 @@ fn reference_bins(
         }
         values
     };
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let per_thread = points.len().div_ceil(threads);
-    let values: Vec<(f64, f64)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = points
-            .chunks(per_thread)
-            .map(|chunk| scope.spawn(move || chunk.iter().flat_map(pixel).collect::<Vec<_>>()))
-            .collect();
-        workers.into_iter().flat_map(|w| w.join().unwrap()).collect()
-    });
+    use rayon::prelude::*;
+    let values: Vec<(f64, f64)> = points.par_iter().flat_map_iter(pixel).collect();
     values.into_iter().unzip()
 }
 
