@@ -59,6 +59,18 @@ fn device_bench_smoke_run_writes_every_measurement() {
             assert!(m["samples_per_second"].as_f64().unwrap() > 0.0, "larger image {}: no samples", m["method"]);
         }
     }
+    // Passes of 1 and 2 samples of every pixel on the largest mesh, and one too large, reported
+    // as skipped.
+    let waves = report["waves"]["measurements"].as_array().unwrap();
+    assert_eq!(waves.len(), 9, "three methods, three passes each");
+    for m in waves {
+        let (method, k) = (m["method"].as_str().unwrap(), m["samples_per_pass"].as_u64().unwrap());
+        match k {
+            1 | 2 => assert!(m["samples_per_second"].as_f64().unwrap() > 0.0, "waves: {method} at {k}: no samples"),
+            100_000 => assert!(m["skipped"].as_str().unwrap().contains("samples per pass"), "waves: {method}: {m}"),
+            _ => panic!("waves: {method}: unexpected {k} samples per pass"),
+        }
+    }
     // The peer is measured where its Python packages load, and otherwise the report says why.
     let peer = &report["peer"];
     match peer["skipped"].as_str() {

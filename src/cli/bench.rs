@@ -27,6 +27,11 @@ pub struct BenchArgs {
     /// Image sizes, comma-separated WIDTHxHEIGHT.
     #[arg(long, value_delimiter = ',', default_value = "64x64", value_parser = parse_resolution)]
     res: Vec<(u32, u32)>,
+    /// Samples per pixel of one pass, comma-separated, each measured (default: the renderer's
+    /// choice for the image and the device; a pass of K samples of a WxH image fills W*H*K
+    /// path slots, the wave a GPU keeps in flight).
+    #[arg(long, value_delimiter = ',')]
+    samples_per_pass: Vec<u32>,
     /// Scene, glTF 2.0 or Mitsuba 3 XML (default: the Cornell box).
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -53,6 +58,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         max_bounces: args.max_bounces,
         methods: args.methods,
         resolutions: args.res,
+        samples_per_pass: args.samples_per_pass,
         gates: (args.gate, args.ellipsoidal_gate),
         profile: args.profile,
         json: args.json,
@@ -76,6 +82,9 @@ pub struct BenchSettings {
     pub methods: Vec<Variant>,
     /// Image sizes (pixels).
     pub resolutions: Vec<(u32, u32)>,
+    /// Samples per pixel of one pass, each measured at every image size; empty: the renderer's
+    /// choice.
+    pub samples_per_pass: Vec<u32>,
     /// Gate of `path` and `direct`, and gate of `ellipsoidal` (which needs target lengths), as
     /// `render --gate` takes them.
     pub gates: (String, String),
@@ -103,8 +112,8 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
     println!("adapter: {}", ctx.adapter_description());
     println!("scene: {} ({} triangles), max bounces {}", scene_path.display(), scene.triangles.len(), s.max_bounces);
     println!(
-        "bench: {:<14} {:<20} {:>10} {:>8} {:>9} {:>11}",
-        "method", "gate", "resolution", "spp", "seconds", "Msamples/s"
+        "bench: {:<14} {:<20} {:>10} {:>6} {:>8} {:>9} {:>11}",
+        "method", "gate", "resolution", "spp/ps", "spp", "seconds", "Msamples/s"
     );
     for variant in &s.methods {
         let (spec, option) = if variant.method == Method::Ellipsoidal {
@@ -113,16 +122,46 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
             (&s.gates.0, "--gate")
         };
         let gate = Gate::parse(spec).with_context(|| format!("{option} {spec}"))?;
-        for &(width, height) in &s.resolutions {
-            let base =
-                RenderSettings { width, height, max_bounces: s.max_bounces, gate: gate.clone(), ..Default::default() };
+        let passes: Vec<Option<u32>> = match s.samples_per_pass.is_empty() {
+            true => vec![None],
+            false => s.samples_per_pass.iter().map(|&k| Some(k)).collect(),
+        };
+        for (&(width, height), samples_per_pass) in
+            s.resolutions.iter().flat_map(|r| passes.iter().map(move |&k| (r, k)))
+        {
+            let base = RenderSettings {
+                width,
+                height,
+                max_bounces: s.max_bounces,
+                gate: gate.clone(),
+                samples_per_pass,
+                ..Default::default()
+            };
             let settings = variant.settings(&base);
             if s.profile {
                 // A profiler of its own, so that each measurement's stages are its own.
                 ctx.enable_profiling()?;
             }
             let building = Instant::now();
-            let mut tracer = create_integrator(&ctx, &scene, &settings)?;
+            let mut tracer = match (create_integrator(&ctx, &scene, &settings), samples_per_pass) {
+                (Ok(tracer), _) => tracer,
+                // A requested pass the device cannot hold (too many path slots for its bindings)
+                // is reported, and a sweep goes on to its next value.
+                (Err(e), Some(k)) => {
+                    let why = format!("{e:#}");
+                    println!("bench: {:<14} {width}x{height}, {k} samples per pass: skipped: {why}", variant.name());
+                    rows.push(serde_json::json!({
+                        "method": variant.name(),
+                        "gate": spec,
+                        "width": width,
+                        "height": height,
+                        "samples_per_pass": k,
+                        "skipped": why,
+                    }));
+                    continue;
+                }
+                (Err(e), None) => return Err(e),
+            };
             tracer.render_pass(tracer.samples_per_pass())?;
             let setup_seconds = building.elapsed().as_secs_f64();
             tracer.reset_film();
@@ -134,10 +173,11 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
             let elapsed = start.elapsed().as_secs_f64();
             let samples = tracer.samples_done() as f64 * (width * height) as f64;
             println!(
-                "bench: {:<14} {:<20} {:>10} {:>8} {:>9.2} {:>11.3}",
+                "bench: {:<14} {:<20} {:>10} {:>6} {:>8} {:>9.2} {:>11.3}",
                 variant.name(),
                 spec,
                 format!("{width}x{height}"),
+                tracer.samples_per_pass(),
                 tracer.samples_done(),
                 elapsed,
                 samples / elapsed / 1e6
@@ -162,6 +202,7 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
                 "gate": spec,
                 "width": width,
                 "height": height,
+                "samples_per_pass": tracer.samples_per_pass(),
                 "spp": tracer.samples_done(),
                 "seconds": elapsed,
                 "samples_per_second": samples / elapsed,

@@ -20,13 +20,17 @@
 #     at equal time against a reference render.
 # Then `gatetrace bench` on the largest mesh at larger images (256x256 and 1024x1024, 2 s
 # each): a GPU keeps more paths in flight than a 64x64 image gives it.
+# Then `gatetrace bench` on the largest mesh at the first image size with several samples per
+# pass (a pass of K samples of a WxH image fills W*H*K path slots: the wave a GPU keeps in
+# flight), for the bidirectional methods, whose per-slot state bounds their waves on a GPU; a
+# pass too large for the device's bindings is reported as skipped.
 # Where Python can import mitsuba and mitransient with Mitsuba's variant --peer-variant (default
 # cuda_ad_rgb), tools/peer/throughput.py then measures the peer and every method side by side on
 # the same scenes (--peer-seconds each, default 4, 0.3 with --smoke); the JSON's "peer" holds
 # that, or why not.
 # --smoke runs the same on the Cornell box and a sphere of 1,280 triangles at 16x16 (one larger
-# image of 32x32) for a fraction of a second each (the test suite runs it on lavapipe:
-# tests/device_bench.rs).
+# image of 32x32; passes of 1, 2 and 100,000 samples, the last too large) for a fraction of a
+# second each (the test suite runs it on lavapipe: tests/device_bench.rs).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
@@ -44,7 +48,7 @@ while [ $# -gt 0 ]; do
         --smoke) smoke=1; shift ;;
         --peer-variant) peer_variant="$2"; shift 2 ;;
         --peer-seconds) peer_seconds="$2"; shift 2 ;;
-        -h|--help) sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "device_bench.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
@@ -65,6 +69,7 @@ if [ "$smoke" = 1 ]; then
     peer_seconds="${peer_seconds:-0.3}"
     large_resolutions=(32x32)
     large_seconds=0.2
+    wave_samples=1,2,100000
     frequencies=(8)
     scenes_dir="$work"
 else
@@ -75,6 +80,7 @@ else
     peer_seconds="${peer_seconds:-4}"
     large_resolutions=(256x256 1024x1024)
     large_seconds=2
+    wave_samples=16,32,64,128
     frequencies=(128 256)
 fi
 scenes=("$ROOT/assets/scenes/cornell_box.gltf")
@@ -107,6 +113,10 @@ for r in "${large_resolutions[@]}"; do
         --json "$work/large_$j.json" >&2
     j=$((j + 1))
 done
+
+echo "device_bench: $(basename "${scenes[-1]}") at $res with $wave_samples samples per pass" >&2
+"$exe" bench --scene "${scenes[-1]}" --methods direct,ellipsoidal,ellipsoidal:wide --seconds "$large_seconds" \
+    --res "$res" --samples-per-pass "$wave_samples" --json "$work/waves.json" >&2
 
 # The peer, side by side with every method, where its Python packages and variant load.
 if why=$(python3 -c "import mitsuba as mi; mi.set_variant('$peer_variant'); import mitransient" 2>&1); then
@@ -152,6 +162,7 @@ report = {
     "max_bounces": first["max_bounces"],
     "scenes": scenes,
     "larger_images": [json.load(open(f"{work}/large_{j}.json")) for j in range(large_count)],
+    "waves": json.load(open(f"{work}/waves.json")),
     "peer": json.load(open(f"{work}/peer.json")),
 }
 with open(out, "w") as f:
@@ -165,6 +176,9 @@ for b in report["larger_images"]:
     rates = ", ".join(f"{m['method']} {m['samples_per_second'] / 1e6:.3f}" for m in b["measurements"])
     size = f"{b['measurements'][0]['width']}x{b['measurements'][0]['height']}"
     print(f"  {b['scene'].split('/')[-1]} at {size}: M samples/s {rates}", file=sys.stderr)
+for m in report["waves"]["measurements"]:
+    rate = f"{m['samples_per_second'] / 1e6:.3f} M samples/s" if "samples_per_second" in m else "skipped"
+    print(f"  waves: {m['method']} {m['samples_per_pass']} samples per pass: {rate}", file=sys.stderr)
 for s in report["peer"].get("scenes", []):
     ratios = ", ".join(f"{m['method']} {m['per_peer']:.2f}x" for m in s["measurements"] if m["per_peer"])
     print(f"  {s['scene']}: against the peer {ratios}", file=sys.stderr)

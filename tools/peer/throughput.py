@@ -59,7 +59,7 @@ def gatetrace_bench(exe, scene_path, res, max_bounces, seconds, methods):
         m = re.match(r"scene: .* \((\d+) triangles\)", line)
         if m:
             triangles = int(m.group(1))
-        m = re.match(r"bench: (\S+)\s+(\S+)\s+\S+\s+\d+\s+[\d.]+\s+([\d.]+)$", line)
+        m = re.match(r"bench: (\S+)\s+(\S+)\s+\S+\s+\d+\s+\d+\s+[\d.]+\s+([\d.]+)$", line)
         if m:
             rows.append((m.group(1), m.group(2), float(m.group(3)) * 1e6))
     return adapter, triangles, rows
