@@ -1,14 +1,18 @@
 //! Interrupted and resumed renders: a saved state continues the render it came from, SIGINT and
 //! SIGTERM leave the image of the samples taken (and a checkpoint), and `--resume` finishes it
-//! as the uninterrupted render would have.
+//! as the uninterrupted render would have. Tracers built one after another on a device share
+//! the scene's arrays (`integrator::upload::scene_buffers`), and a scene rendered again after
+//! another one renders the same film.
 
 mod common;
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use gatetrace::film::{Film, Gate};
+use gatetrace::integrator::upload::scene_buffers;
 use gatetrace::integrator::{Method, RenderSettings, create_integrator};
 use gatetrace::scene::{PreparedScene, load_gltf_for_capture};
 
@@ -70,6 +74,43 @@ fn a_saved_state_continues_the_render() {
     };
     let (resumed, whole) = continued_and_uninterrupted(ctx, &letter, &settings, 8, 8);
     check("NLOS confocal ellipsoidal with a target pilot", &resumed, &whole);
+}
+
+#[test]
+fn tracers_of_one_scene_share_its_arrays_and_another_scene_does_not_change_its_film() {
+    let ctx = common::gpu();
+    let cornell = common::cornell_box();
+    let limit = ctx.max_binding_size();
+    let first = scene_buffers(ctx, &cornell, false, limit).unwrap();
+    let again = scene_buffers(ctx, &cornell, false, limit).unwrap();
+    assert!(Arc::ptr_eq(&first, &again), "a second tracer of the scene uploads it again");
+    assert!(first.resources.get("triangles").is_some() && first.resources.get("lights").is_some());
+    // The wide query's node surfaces are other arrays; a clone may be changed before it renders.
+    let wide = scene_buffers(ctx, &cornell, true, limit).unwrap();
+    assert_ne!(wide.resources.get("bvh_node_surfaces"), first.resources.get("bvh_node_surfaces"));
+    let clone = cornell.clone();
+    assert!(!Arc::ptr_eq(&scene_buffers(ctx, &clone, false, limit).unwrap(), &first), "a clone shares the upload");
+
+    // A film of the box, then one of another scene (its upload replaces the box's), then the
+    // box's again from a new tracer: the same bits.
+    let settings = RenderSettings {
+        width: 16,
+        height: 16,
+        max_bounces: 4,
+        method: Method::Direct,
+        gate: Gate::Box { start: 3.14, end: 3.19 },
+        ..Default::default()
+    };
+    let film = |scene: &PreparedScene| {
+        let mut tracer = create_integrator(ctx, scene, &settings).unwrap();
+        tracer.render_samples(4).unwrap();
+        tracer.film().unwrap()
+    };
+    let before = film(&cornell);
+    let sphere = common::sphere_scene(8);
+    let other = film(&sphere);
+    assert!(other.data.iter().any(|&v| v > 0.0), "the sphere's film is black");
+    check("the box after another scene", &film(&cornell), &before);
 }
 
 /// Asserts that `resumed` equals `whole` bit for bit, and that the films are not black.

@@ -28,6 +28,9 @@ pub struct GpuContext {
     pub profiler: Option<super::profiler::SharedProfiler>,
     /// The kernels built on this device so far, reused by later renders.
     pub kernels: super::kernels::KernelCache,
+    /// The arrays of the scene uploaded last, bound by every tracer of that scene
+    /// (`integrator::upload::scene_buffers`).
+    pub scene_buffers: super::resources::SharedBufferCache,
     /// Why the device was lost, once it has been (the driver's reason and message).
     lost: std::sync::Arc<std::sync::Mutex<Option<String>>>,
     /// The first error the device reported outside an error scope (running out of memory for
@@ -87,6 +90,7 @@ impl GpuContext {
             features,
             profiler: None,
             kernels: Default::default(),
+            scene_buffers: Default::default(),
             lost,
             uncaptured,
         })

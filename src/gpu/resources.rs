@@ -2,6 +2,7 @@
 //! kernels bind whatever they declare (see `Kernel::bind`).
 
 use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use anyhow::{Result, bail};
 use wgpu::util::DeviceExt as _;
@@ -23,6 +24,13 @@ impl Resources {
     /// Adds (or replaces) the buffer named `name`.
     pub fn insert(&mut self, name: &'static str, buffer: wgpu::Buffer) {
         self.buffers.insert(name, buffer);
+    }
+
+    /// Adds every buffer of `shared` under its name (handles to the same buffers).
+    pub fn share(&mut self, shared: &Resources) {
+        for (&name, buffer) in &shared.buffers {
+            self.insert(name, buffer.clone());
+        }
     }
 
     /// A copy with the buffers of names `a` and `b` exchanged (queue ping-pong).
@@ -297,5 +305,46 @@ mod tests {
         // The binary BVH's arrays take three chunks at most (its kernels' binding count).
         assert_eq!(ChunkLayout::new("bvh_nodes", 48, 32, 512).unwrap(), ChunkLayout { per_chunk: 16, chunks: 3 });
         assert!(ChunkLayout::new("bvh_nodes", 49, 32, 512).is_err(), "more than three chunks");
+    }
+}
+
+/// Buffers that every tracer of one scene on a device reads and none writes (the scene's
+/// arrays), with the layouts of the split ones by name: made once per device and key, then
+/// bound by each tracer (`integrator::upload::scene_buffers`).
+pub struct SharedBuffers {
+    /// The buffers, under their WGSL names.
+    pub resources: Resources,
+    /// The chunk layout of each split array among them.
+    pub layouts: HashMap<&'static str, ChunkLayout>,
+}
+
+/// The [`SharedBuffers`] a device made last and the key they were made for. One entry: a render's
+/// tracers (pilots, halves, the render itself) and later renders of the same scene share it,
+/// and another scene's buffers replace it.
+#[derive(Default)]
+pub struct SharedBufferCache {
+    last: Mutex<Option<([u64; 3], Arc<SharedBuffers>)>>,
+}
+
+impl SharedBufferCache {
+    /// The buffers made for `key`: the last ones where they were made for it, else `make`'s,
+    /// which then replace them.
+    pub fn get_or_make(
+        &self,
+        key: [u64; 3],
+        make: impl FnOnce() -> Result<SharedBuffers>,
+    ) -> Result<Arc<SharedBuffers>> {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((made_for, buffers)) = last.as_ref()
+            && *made_for == key
+        {
+            return Ok(buffers.clone());
+        }
+        // The previous buffers go first, so that a device never holds two scenes for the cache
+        // (tracers still rendering that scene keep their own handles to its buffers).
+        *last = None;
+        let buffers = Arc::new(make()?);
+        *last = Some((key, buffers.clone()));
+        Ok(buffers)
     }
 }

@@ -10,7 +10,7 @@ use crate::film::target::TargetSampler;
 use crate::gpu::layout::{
     MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, Medium, NONE, RenderParams, TargetParams, TriangleShading, WaveParams,
 };
-use crate::gpu::resources::ChunkLayout;
+use crate::gpu::resources::{ChunkLayout, SharedBuffers};
 use crate::gpu::{GpuContext, Resources};
 use crate::scene::PreparedScene;
 
@@ -94,21 +94,14 @@ pub fn upload_scene(
     let gate = &settings.gate;
     let mut r = Resources::default();
     r.uniform_init(ctx, "wave", &WaveParams::default());
-    let triangles = r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?;
-    // The kernels read shading data only for vertex normals and texture coordinates
-    // (scene.wesl `surface_at`): flat untextured scenes upload none (64 bytes a triangle, which
-    // would not fit the bindings of a 10-million-triangle mesh on lavapipe).
-    let shading: &[TriangleShading] =
-        if scene.has_shading_normals() || scene.has_textures() { &scene.shading } else { &scene.shading[..1] };
-    let triangle_shading = r.storage_chunked_init(ctx, "triangle_shading", shading, limit)?;
-    let bvh_nodes = r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?;
-    r.storage_init(ctx, "wide_nodes", &scene.wide.nodes)?;
+    let shared = scene_buffers(ctx, scene, settings.query.wide, limit)?;
+    r.share(&shared.resources);
+    let layout = |name: &str| shared.layouts[name];
+    let (triangles, triangle_shading) = (layout("triangles"), layout("triangle_shading"));
+    let (bvh_nodes, bvh_node_surfaces) = (layout("bvh_nodes"), layout("bvh_node_surfaces"));
     // The top of the tree again, for CPU devices (TOP_NODES_IN_UNIFORMS).
     let top = &scene.wide.nodes[..scene.wide.nodes.len().min(TOP_NODES)];
     r.uniform_slice_init(ctx, "top_wide_nodes", &padded_table(top, TOP_NODES));
-    // Queries over the wide BVH read one surface per wide node and slot in the same binding.
-    let surfaces = if settings.query.wide { &scene.child_surfaces } else { &scene.node_surfaces };
-    let bvh_node_surfaces = r.storage_chunked_init(ctx, "bvh_node_surfaces", surfaces, limit)?;
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
     let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();
@@ -116,27 +109,6 @@ pub fn upload_scene(
     r.uniform_slice_init(ctx, "small_scene_triangles", &padded_table(small_scene, max_small));
     r.uniform_slice_init(ctx, "small_scene_shading", &padded_table(&scene.shading[..small], max_small));
     r.uniform_slice_init(ctx, "small_scene_normals", &padded_table(&small_normals, max_small));
-    r.storage_init(ctx, "triangle_normals", &scene.normals)?;
-    r.storage_init(ctx, "materials", &scene.materials)?;
-    // One unused entry in scenes without media or grids (a binding cannot be empty).
-    let mut densities = Vec::new();
-    let mut media = Vec::new();
-    for m in &scene.scene.media {
-        media.push(m.to_gpu(densities.len() as u32));
-        densities.extend(m.grid.iter().flat_map(|g| g.densities()));
-    }
-    if media.is_empty() {
-        media.push(Medium::default());
-    }
-    if densities.is_empty() {
-        densities.push(0.0f32);
-    }
-    r.storage_init(ctx, "media", &media)?;
-    r.storage_init(ctx, "medium_densities", &densities)?;
-    r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
-    r.storage_init(ctx, "texels", &scene.texels)?;
-    r.storage_init(ctx, "lights", &scene.lights.lights)?;
-    r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
     let tables_in_uniforms =
         scene.materials.len() <= MAX_UNIFORM_MATERIALS && scene.lights.lights.len() <= MAX_UNIFORM_LIGHTS;
     r.uniform_slice_init(ctx, "uniform_materials", &padded_table(&scene.materials, MAX_UNIFORM_MATERIALS));
@@ -184,6 +156,60 @@ pub fn upload_scene(
         ("STRATIFIED_TARGETS", flag(params.target_length.strata > 0)),
     ];
     Ok((r, constants, film))
+}
+
+/// The scene's arrays on the device, which every method's kernels read and none writes:
+/// triangles, their shading and normals, both BVHs and the node surfaces of the ellipsoid
+/// queries (over the wide BVH's children where `wide`), materials, media, textures and lights,
+/// split into bindings of at most `limit` bytes. Uploaded once per device for a scene, `wide`
+/// and `limit` (`GpuContext::scene_buffers`): the tracers of one render (its pilots, the halves
+/// of `combined`, the render itself) and later renders of the same scene bind the same buffers.
+/// On the 1,310,720-triangle sphere, one upload took 1.3-1.4 s on lavapipe, and an
+/// `ellipsoidal --time` render made three.
+pub fn scene_buffers(
+    ctx: &GpuContext,
+    scene: &PreparedScene,
+    wide: bool,
+    limit: u64,
+) -> Result<std::sync::Arc<SharedBuffers>> {
+    ctx.scene_buffers.get_or_make([scene.upload_id(), wide as u64, limit], || {
+        let mut r = Resources::default();
+        let mut layouts = std::collections::HashMap::new();
+        layouts.insert("triangles", r.storage_chunked_init(ctx, "triangles", &scene.triangles, limit)?);
+        // The kernels read shading data only for vertex normals and texture coordinates
+        // (scene.wesl `surface_at`): flat untextured scenes upload none (64 bytes a triangle,
+        // which would not fit the bindings of a 10-million-triangle mesh on lavapipe).
+        let shading: &[TriangleShading] =
+            if scene.has_shading_normals() || scene.has_textures() { &scene.shading } else { &scene.shading[..1] };
+        layouts.insert("triangle_shading", r.storage_chunked_init(ctx, "triangle_shading", shading, limit)?);
+        layouts.insert("bvh_nodes", r.storage_chunked_init(ctx, "bvh_nodes", &scene.bvh.nodes, limit)?);
+        r.storage_init(ctx, "wide_nodes", &scene.wide.nodes)?;
+        // Queries over the wide BVH read one surface per wide node and slot in the same binding.
+        let surfaces = if wide { &scene.child_surfaces } else { &scene.node_surfaces };
+        layouts.insert("bvh_node_surfaces", r.storage_chunked_init(ctx, "bvh_node_surfaces", surfaces, limit)?);
+        r.storage_init(ctx, "triangle_normals", &scene.normals)?;
+        r.storage_init(ctx, "materials", &scene.materials)?;
+        // One unused entry in scenes without media or grids (a binding cannot be empty).
+        let mut densities = Vec::new();
+        let mut media = Vec::new();
+        for m in &scene.scene.media {
+            media.push(m.to_gpu(densities.len() as u32));
+            densities.extend(m.grid.iter().flat_map(|g| g.densities()));
+        }
+        if media.is_empty() {
+            media.push(Medium::default());
+        }
+        if densities.is_empty() {
+            densities.push(0.0f32);
+        }
+        r.storage_init(ctx, "media", &media)?;
+        r.storage_init(ctx, "medium_densities", &densities)?;
+        r.storage_init(ctx, "texture_infos", &scene.texture_infos)?;
+        r.storage_init(ctx, "texels", &scene.texels)?;
+        r.storage_init(ctx, "lights", &scene.lights.lights)?;
+        r.storage_init(ctx, "light_cdf", &scene.lights.cdf)?;
+        Ok(SharedBuffers { resources: r, layouts })
+    })
 }
 
 /// Refuses, before anything is allocated, a render whose films do not fit the memory available

@@ -44,6 +44,30 @@ pub struct PreparedScene {
     pub lights: LightTable,
     /// Ray-origin offset scale (m), 1e-6 of the extent of the scene's triangles.
     pub ray_epsilon: f32,
+    /// The key of the scene's arrays on a device ([`UploadId`]).
+    upload_id: UploadId,
+}
+
+/// A number unique to each [`PreparedScene`] of the process, under which a device keeps the
+/// scene's arrays once uploaded (`integrator::upload::scene_buffers`), so that every tracer of
+/// the scene on that device binds the same buffers. A clone gets a number of its own. The
+/// arrays of a scene must not change once it has been rendered: tracers built later would read
+/// the arrays as first uploaded.
+#[derive(Debug)]
+pub struct UploadId(u64);
+
+impl UploadId {
+    fn fresh() -> Self {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        Self(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+    }
+}
+
+impl Clone for UploadId {
+    /// A new number: a clone's arrays may be changed before it is rendered.
+    fn clone(&self) -> Self {
+        Self::fresh()
+    }
 }
 
 impl PreparedScene {
@@ -115,7 +139,14 @@ impl PreparedScene {
             texels,
             lights,
             ray_epsilon,
+            upload_id: UploadId::fresh(),
         })
+    }
+
+    /// The key of the scene's arrays on a device, unique to this scene in the process
+    /// ([`UploadId`]).
+    pub fn upload_id(&self) -> u64 {
+        self.upload_id.0
     }
 
     /// True when some triangle has vertex normals that differ from its geometric normal
