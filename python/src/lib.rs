@@ -216,14 +216,14 @@ impl Scene {
     /// Axis-aligned bounds of the scene (m): (min xyz, max xyz).
     #[getter]
     fn bounds(&self) -> ([f32; 3], [f32; 3]) {
-        let (lo, hi) = self.prepared.scene.bounds();
+        let (lo, hi) = self.prepared.bounds();
         (lo.to_array(), hi.to_array())
     }
 
     /// Shortest and longest optical path length (m) a path with at most `max_bounces`
     /// scattering vertices can have in this scene (bounds, not exact).
     fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
-        self.prepared.scene.path_length_bounds(max_bounces)
+        self.prepared.path_length_bounds(max_bounces)
     }
 
     fn __repr__(&self) -> String {

@@ -234,7 +234,7 @@ pub fn unreachable_gate(scene: &PreparedScene, settings: &RenderSettings) -> Opt
         // The bounds below run from the pinhole to the lights, which a capture does not use.
         return None;
     }
-    let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
+    let (shortest, longest) = scene.path_length_bounds(settings.max_bounces);
     let gate = &settings.gate;
     if let Some(end) = gate.max_length()
         && end <= shortest as f64
@@ -268,7 +268,7 @@ pub fn black_image_warning(
     if settings.nlos.is_some() || film.data.iter().any(|&v| v != 0.0) {
         return None;
     }
-    let (shortest, longest) = scene.scene.path_length_bounds(settings.max_bounces);
+    let (shortest, longest) = scene.path_length_bounds(settings.max_bounces);
     let mut warning = match unreachable_gate(scene, settings) {
         Some(reason) => format!("{reason}: the image is black; no samples were traced"),
         None => format!(

@@ -16,7 +16,7 @@ use crate::scene::PreparedScene;
 
 /// The render-wide parameters of `settings` on `scene`, shared by every method's kernels.
 pub fn render_params(scene: &PreparedScene, settings: &RenderSettings) -> RenderParams {
-    let (light_bounds_min, light_bounds_max) = scene.scene.light_bounds();
+    let (light_bounds_min, light_bounds_max) = scene.light_bounds();
     RenderParams {
         camera: scene.scene.camera.to_gpu(settings.width, settings.height),
         gate: settings.gate.to_gpu(),
@@ -56,20 +56,20 @@ pub fn target_sampler(scene: &PreparedScene, settings: &RenderSettings) -> Optio
         // segments counting the laser's and the sensor's, none longer than the diagonal of the
         // scene's bounds with both origins.
         Some(capture) => {
-            let (lo, hi) = scene.scene.bounds();
+            let (lo, hi) = scene.bounds();
             let (lo, hi) = (
                 lo.min(capture.sensor_origin).min(capture.laser_origin),
                 hi.max(capture.sensor_origin).max(capture.laser_origin),
             );
             (0.0, (settings.max_bounces as f32 + 1.0) * (hi - lo).length())
         }
-        None => match scene.scene.path_length_bounds(settings.max_bounces) {
+        None => match scene.path_length_bounds(settings.max_bounces) {
             // A CW gate weighs every length: its targets need a finite range.
             (shortest, longest)
                 if longest.is_infinite()
                     && matches!(settings.gate, crate::film::Gate::Cw { .. } | crate::film::Gate::CwCode { .. }) =>
             {
-                (shortest, scene.scene.finite_longest_path(settings.max_bounces))
+                (shortest, scene.finite_longest_path(settings.max_bounces))
             }
             bounds => bounds,
         },

@@ -416,17 +416,37 @@ impl Scene {
         self.nodes.iter().find(|n| n.name == name)
     }
 
-    /// Axis-aligned bounds of all triangles and the camera (its lens included) (m).
-    pub fn bounds(&self) -> (Vec3, Vec3) {
-        let lens = Vec3::splat(self.camera.lens_radius());
-        let mut lo = self.camera.position - lens;
-        let mut hi = self.camera.position + lens;
+    /// The corners' bounds and the nearest light of the scene's triangles, in one pass over them
+    /// ([`TriangleBounds`]; a [`PreparedScene`] keeps them).
+    pub fn triangle_bounds(&self) -> TriangleBounds {
+        let camera = self.camera.position;
+        let mut b = TriangleBounds::default();
         for t in &self.triangles {
             for p in t.positions {
-                lo = lo.min(p);
-                hi = hi.max(p);
+                b.all.0 = b.all.0.min(p);
+                b.all.1 = b.all.1.max(p);
+            }
+            if self.materials[t.material as usize].is_emissive() {
+                for p in t.positions {
+                    b.emitting.0 = b.emitting.0.min(p);
+                    b.emitting.1 = b.emitting.1.max(p);
+                }
+                b.nearest_emitter = b.nearest_emitter.min(distance_to_triangle(camera, t.positions));
             }
         }
+        b
+    }
+
+    /// Axis-aligned bounds of all triangles and the camera (its lens included) (m).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.bounds_with(&self.triangle_bounds())
+    }
+
+    /// [`Scene::bounds`] from the scene's [`TriangleBounds`].
+    pub fn bounds_with(&self, triangles: &TriangleBounds) -> (Vec3, Vec3) {
+        let lens = Vec3::splat(self.camera.lens_radius());
+        let mut lo = (self.camera.position - lens).min(triangles.all.0);
+        let mut hi = (self.camera.position + lens).max(triangles.all.1);
         for l in &self.point_lights {
             lo = lo.min(l.position);
             hi = hi.max(l.position);
@@ -437,37 +457,38 @@ impl Scene {
     /// The sphere bounding [`Scene::bounds`], as (centre, radius) (m), a little enlarged: where
     /// directional lights start their light.
     pub fn bounding_sphere(&self) -> (Vec3, f32) {
-        let (lo, hi) = self.bounds();
+        self.bounding_sphere_with(&self.triangle_bounds())
+    }
+
+    /// [`Scene::bounding_sphere`] from the scene's [`TriangleBounds`].
+    pub fn bounding_sphere_with(&self, triangles: &TriangleBounds) -> (Vec3, f32) {
+        let (lo, hi) = self.bounds_with(triangles);
         let radius = 0.5 * (hi - lo).length();
         (0.5 * (lo + hi), radius * (1.0 + 1e-4) + 1e-6)
     }
 
-    /// Axis-aligned bounds (m) of the points where a path can start on a light, the closing
+    /// Axis-aligned bounds of the points where a path can start on a light, the closing
     /// distances of camera subpaths (params.light_bounds_min/max): every emitting triangle and
     /// point light; with a directional light, all of space, since its wave reaches fog that
     /// fills the scene outside the geometry's bounds (a camera subpath's vertex there may be
     /// nearer to where the wave starts than to those bounds); an empty box (min > max) when the
     /// scene has no light.
     pub fn light_bounds(&self) -> (Vec3, Vec3) {
+        self.light_bounds_with(&self.triangle_bounds())
+    }
+
+    /// [`Scene::light_bounds`] from the scene's [`TriangleBounds`].
+    pub fn light_bounds_with(&self, triangles: &TriangleBounds) -> (Vec3, Vec3) {
         if !self.directional_lights.is_empty() {
             return (Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX));
         }
-        self.local_light_bounds()
+        self.local_light_bounds(triangles)
     }
 
     /// Axis-aligned bounds of every emitting triangle and point light (m); an empty box (min >
     /// max) when the scene has none.
-    fn local_light_bounds(&self) -> (Vec3, Vec3) {
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for t in &self.triangles {
-            if self.materials[t.material as usize].is_emissive() {
-                for p in t.positions {
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
-            }
-        }
+    fn local_light_bounds(&self, triangles: &TriangleBounds) -> (Vec3, Vec3) {
+        let (mut lo, mut hi) = triangles.emitting;
         for l in &self.point_lights {
             lo = lo.min(l.position);
             hi = hi.max(l.position);
@@ -496,24 +517,25 @@ impl Scene {
     /// no longest (infinity) where fog fills the space beyond those bounds
     /// ([`Scene::fog_beyond_bounds`]), in which paths scatter as far as they travel.
     pub fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
+        self.path_length_bounds_with(&self.triangle_bounds(), max_bounces)
+    }
+
+    /// [`Scene::path_length_bounds`] from the scene's [`TriangleBounds`].
+    pub fn path_length_bounds_with(&self, triangles: &TriangleBounds, max_bounces: u32) -> (f32, f32) {
         let camera = self.camera.position;
-        let mut shortest = f32::INFINITY;
-        for t in &self.triangles {
-            if self.materials[t.material as usize].is_emissive() {
-                shortest = shortest.min(distance_to_triangle(camera, t.positions));
-            }
-        }
+        let mut shortest = triangles.nearest_emitter;
         for l in &self.point_lights {
             shortest = shortest.min(camera.distance(l.position));
         }
         // A directional light's path length grows by at most the distance travelled, so no path
         // is shorter than the camera's own distance from where the wave starts.
-        let (centre, radius) = self.bounding_sphere();
+        let (centre, radius) = self.bounding_sphere_with(triangles);
         for l in &self.directional_lights {
             shortest = shortest.min((l.direction.dot(camera - centre) + radius).max(0.0));
         }
         let shortest = (shortest - self.camera.lens_radius()).max(0.0);
-        let longest = if self.fog_beyond_bounds().is_some() { f32::INFINITY } else { self.longest_path(max_bounces) };
+        let longest =
+            if self.fog_beyond_bounds().is_some() { f32::INFINITY } else { self.longest_path(triangles, max_bounces) };
         (shortest, longest)
     }
 
@@ -526,7 +548,12 @@ impl Scene {
     /// more); for ranges that must be finite (a CW gate's target lengths, the viewer's gate
     /// slider). The same as path_length_bounds' longest elsewhere.
     pub fn finite_longest_path(&self, max_bounces: u32) -> f32 {
-        let longest = self.longest_path(max_bounces);
+        self.finite_longest_path_with(&self.triangle_bounds(), max_bounces)
+    }
+
+    /// [`Scene::finite_longest_path`] from the scene's [`TriangleBounds`].
+    pub fn finite_longest_path_with(&self, triangles: &TriangleBounds, max_bounces: u32) -> f32 {
+        let longest = self.longest_path(triangles, max_bounces);
         match self.fog_beyond_bounds() {
             Some(sigma_t) => longest + 2.0 * max_bounces as f32 * FOG_TAIL_DEPTHS / sigma_t.max(1e-6),
             None => longest,
@@ -536,7 +563,7 @@ impl Scene {
     /// The longest optical path (m) with at most `max_bounces` scattering vertices, all of them
     /// on triangles (see [`Scene::path_length_bounds`]), enlarged by 1e-4 of itself against
     /// rounding.
-    fn longest_path(&self, max_bounces: u32) -> f32 {
+    fn longest_path(&self, triangles: &TriangleBounds, max_bounces: u32) -> f32 {
         let corners = |(lo, hi): (Vec3, Vec3)| -> [Vec3; 8] {
             std::array::from_fn(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
         };
@@ -546,19 +573,15 @@ impl Scene {
         };
         let lens = self.camera.lens_radius();
         let camera = [self.camera.position];
-        let (lo, hi) = self.local_light_bounds();
+        let (lo, hi) = self.local_light_bounds(triangles);
         let lights = if lo.cmple(hi).all() { corners((lo, hi)).to_vec() } else { Vec::new() };
         // A directional light's path starts on the plane tangent to the bounding sphere.
-        let directional = if self.directional_lights.is_empty() { 0.0 } else { 2.0 * self.bounding_sphere().1 };
+        let directional =
+            if self.directional_lights.is_empty() { 0.0 } else { 2.0 * self.bounding_sphere_with(triangles).1 };
         let longest = if max_bounces == 0 || self.triangles.is_empty() {
             lens + reach(&camera, &lights).max(directional)
         } else {
-            let mut lo = Vec3::INFINITY;
-            let mut hi = Vec3::NEG_INFINITY;
-            for p in self.triangles.iter().flat_map(|t| t.positions) {
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
+            let (lo, hi) = triangles.all;
             let surfaces = corners((lo, hi));
             lens + reach(&camera, &surfaces)
                 + (max_bounces - 1) as f32 * (hi - lo).length()
@@ -570,15 +593,36 @@ impl Scene {
     /// Diagonal of the triangles' bounds (m), the camera and point lights left out: the
     /// geometry's scale for relative tolerances.
     pub fn triangle_extent(&self) -> f32 {
-        let mut lo = glam::Vec3::INFINITY;
-        let mut hi = glam::Vec3::NEG_INFINITY;
-        for t in &self.triangles {
-            for p in t.positions {
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
-        (hi - lo).length().max(f32::MIN_POSITIVE)
+        self.triangle_bounds().extent()
+    }
+}
+
+/// What the bounds of a scene's path lengths and lights need from its triangles, gathered in one
+/// pass ([`Scene::triangle_bounds`]): a scene of ten million triangles takes a fraction of a
+/// second per pass, and every tracer asks for those bounds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleBounds {
+    /// Axis-aligned bounds of every triangle's corners (m); empty (min > max) without triangles.
+    pub all: (Vec3, Vec3),
+    /// The same of the emitting triangles (m); empty without.
+    pub emitting: (Vec3, Vec3),
+    /// Distance from the camera's pinhole to the nearest emitting triangle (m); infinite without.
+    pub nearest_emitter: f32,
+}
+
+impl TriangleBounds {
+    /// Diagonal of the triangles' bounds (m), at least the least positive f32
+    /// ([`Scene::triangle_extent`]).
+    pub fn extent(&self) -> f32 {
+        (self.all.1 - self.all.0).length().max(f32::MIN_POSITIVE)
+    }
+}
+
+impl Default for TriangleBounds {
+    /// No triangle: empty boxes, no emitter.
+    fn default() -> Self {
+        let empty = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        Self { all: empty, emitting: empty, nearest_emitter: f32::INFINITY }
     }
 }
 

@@ -3,9 +3,9 @@
 
 use anyhow::Result;
 
-use super::Scene;
 use super::lights::LightTable;
 use super::materials::gpu_materials_and_textures;
+use super::{Scene, TriangleBounds};
 use crate::bvh::Bvh;
 use crate::bvh::wide::WideBvh;
 use crate::gpu::layout::{
@@ -46,6 +46,9 @@ pub struct PreparedScene {
     pub ray_epsilon: f32,
     /// The key of the scene's arrays on a device ([`UploadId`]).
     upload_id: UploadId,
+    /// The bounds of its triangles and lights (`Scene::triangle_bounds`), which every tracer
+    /// asks for.
+    pub triangle_bounds: TriangleBounds,
 }
 
 /// A number unique to each [`PreparedScene`] of the process, under which a device keeps the
@@ -119,7 +122,8 @@ impl PreparedScene {
             });
         }
         let (materials, texture_infos, texels) = gpu_materials_and_textures(&scene);
-        let ray_epsilon = 1e-6 * scene.triangle_extent();
+        let triangle_bounds = scene.triangle_bounds();
+        let ray_epsilon = 1e-6 * triangle_bounds.extent();
         let wide = WideBvh::build(&bvh);
         let sums = bvh.surface_sums(&triangles);
         let node_surfaces = bvh.node_surfaces(&sums);
@@ -140,7 +144,28 @@ impl PreparedScene {
             lights,
             ray_epsilon,
             upload_id: UploadId::fresh(),
+            triangle_bounds,
         })
+    }
+
+    /// `Scene::path_length_bounds` from the bounds kept at preparation.
+    pub fn path_length_bounds(&self, max_bounces: u32) -> (f32, f32) {
+        self.scene.path_length_bounds_with(&self.triangle_bounds, max_bounces)
+    }
+
+    /// `Scene::finite_longest_path` from the bounds kept at preparation.
+    pub fn finite_longest_path(&self, max_bounces: u32) -> f32 {
+        self.scene.finite_longest_path_with(&self.triangle_bounds, max_bounces)
+    }
+
+    /// `Scene::light_bounds` from the bounds kept at preparation.
+    pub fn light_bounds(&self) -> (glam::Vec3, glam::Vec3) {
+        self.scene.light_bounds_with(&self.triangle_bounds)
+    }
+
+    /// `Scene::bounds` from the bounds kept at preparation.
+    pub fn bounds(&self) -> (glam::Vec3, glam::Vec3) {
+        self.scene.bounds_with(&self.triangle_bounds)
     }
 
     /// The key of the scene's arrays on a device, unique to this scene in the process

@@ -98,8 +98,8 @@ pub fn run_viewer(options: ViewOptions) -> Result<()> {
     }
     let scene = PreparedScene::new(scene)?;
     let ctx = GpuContext::new()?;
-    let shortest = scene.scene.path_length_bounds(options.max_bounces.max(1)).0;
-    let longest = scene.scene.finite_longest_path(options.max_bounces.max(1));
+    let shortest = scene.path_length_bounds(options.max_bounces.max(1)).0;
+    let longest = scene.finite_longest_path(options.max_bounces.max(1));
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title(format!("gatetrace — {}", options.scene.display()))
