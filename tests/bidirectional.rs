@@ -257,20 +257,37 @@ fn bidirectional_films_are_the_same_bits_however_additions_are_ordered_and_group
 }
 
 #[test]
-fn accumulate_leaves_no_contribution_behind() {
-    // accumulate reads a slot's contributions only up to the strategies its subpaths reach and
-    // clears what it reads: a contribution written beyond would stay, and be added in a later
-    // wave. After each pass no contribution may hold light (one whose shadow ray was blocked
-    // keeps its path length, harmlessly): direct, ellipsoidal with
-    // its K connections queued for shadow rays (the fence's BVH can stop traversals) and with
-    // media (every ray queued), and ellipsoidal behind a transient gate.
+fn accumulate_and_splats_leave_no_contribution_behind() {
+    // accumulate reads a slot's contributions only up to the strategies its subpaths reach, and
+    // splat_light_paths its splats only up to its light subpath's vertices and the end splats of
+    // connect_spherical; each clears what it reads: one written beyond would stay, and be added
+    // in a later wave. After each pass no contribution or splat may hold light (one whose shadow
+    // ray was blocked keeps its path length, harmlessly): direct, ellipsoidal with its K
+    // connections queued for shadow rays (the fence's BVH can stop traversals) and with media
+    // (every ray queued), ellipsoidal behind a transient gate, and ellipsoidal in fog with a
+    // directional light and with the box's light seen directly (connect_spherical splats at the
+    // end of a slot's range).
     let ctx = common::gpu();
-    let load = |name: &str| {
-        PreparedScene::new(gatetrace::scene::load_scene_with(&common::repo_path(name), &Default::default()).unwrap())
-            .unwrap()
+    let load_with = |name: &str, options: &gatetrace::scene::LoadOptions| {
+        PreparedScene::new(gatetrace::scene::load_scene_with(&common::repo_path(name), options).unwrap()).unwrap()
     };
+    let load = |name: &str| load_with(name, &Default::default());
     let (cornell, fence, fog) =
         (common::cornell_box(), load("assets/scenes/fence.gltf"), load("assets/scenes/fog_box.xml"));
+    let sunlit_fog = load_with(
+        "assets/scenes/cornell_box_directional.gltf",
+        &gatetrace::scene::LoadOptions {
+            fog: Some(gatetrace::scene::MediumDesc::parse_fog("0.2").unwrap()),
+            ..Default::default()
+        },
+    );
+    let foggy_box = load_with(
+        "assets/scenes/cornell_box.gltf",
+        &gatetrace::scene::LoadOptions {
+            fog: Some(gatetrace::scene::MediumDesc::parse_fog("0.2").unwrap()),
+            ..Default::default()
+        },
+    );
     let gated = Gate::Box { start: 3.14, end: 3.3 };
     for (label, scene, method, gate, k) in [
         ("box direct", &cornell, Method::Direct, Gate::None, 1),
@@ -282,6 +299,15 @@ fn accumulate_leaves_no_contribution_behind() {
             Method::Ellipsoidal,
             Gate::Transient { start: 3.0, width: 0.1, bins: 6 },
             1,
+        ),
+        ("sunlit fog ellipsoidal", &sunlit_fog, Method::Ellipsoidal, Gate::Box { start: 3.0, end: 3.5 }, 2),
+        // The light seen directly through the fog (connect_spherical's last splat).
+        (
+            "box in fog ellipsoidal transient",
+            &foggy_box,
+            Method::Ellipsoidal,
+            Gate::Transient { start: 2.0, width: 0.25, bins: 12 },
+            2,
         ),
     ] {
         let settings = RenderSettings {
@@ -296,18 +322,22 @@ fn accumulate_leaves_no_contribution_behind() {
         let mut tracer = BidirectionalTracer::new(ctx, scene, &settings).unwrap();
         for _ in 0..2 {
             tracer.render_samples(2).unwrap();
-            let buffer = tracer.resources().get("contributions").unwrap();
-            let left: Vec<[f32; 4]> =
-                gatetrace::gpu::resources::read_buffer(ctx, buffer, (buffer.size() / 16) as usize).unwrap();
-            let nonzero: Vec<(usize, [f32; 4])> =
-                left.iter().copied().enumerate().filter(|(_, c)| c[..3].iter().any(|&x| x != 0.0)).collect();
-            assert!(
-                nonzero.is_empty(),
-                "{label}: {} of {} contributions left after a pass: {:?}",
-                nonzero.len(),
-                left.len(),
-                &nonzero[..nonzero.len().min(4)]
-            );
+            // Contributions are 4 words (radiance, path length), splats 8 (radiance, path
+            // length, pixel, padding).
+            for (name, words) in [("contributions", 4), ("splats", 8)] {
+                let buffer = tracer.resources().get(name).unwrap();
+                let left: Vec<f32> =
+                    gatetrace::gpu::resources::read_buffer(ctx, buffer, (buffer.size() / 4) as usize).unwrap();
+                let nonzero: Vec<(usize, &[f32])> =
+                    left.chunks_exact(words).enumerate().filter(|(_, c)| c[..3].iter().any(|&x| x != 0.0)).collect();
+                assert!(
+                    nonzero.is_empty(),
+                    "{label}: {} of {} {name} left after a pass: {:?}",
+                    nonzero.len(),
+                    left.len() / words,
+                    &nonzero[..nonzero.len().min(4)]
+                );
+            }
         }
         assert!(tracer.film().unwrap().mean_rgb()[0] > 0.0, "{label}: the film is black");
     }

@@ -351,6 +351,12 @@ impl<'a> BidirectionalTracer<'a> {
         constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
         constants.push(("CONTRIBUTIONS_PER_STRATEGY", if inline_shadow_rays { 1.0 } else { k as f64 }));
         constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
+        constants.push(("SPLATS_PER_LIGHT_VERTEX", if ellipsoidal { k as f64 } else { 1.0 }));
+        // connect_spherical's splats at the end: one (a light seen directly, or an NLOS
+        // capture's spot seen from the sensed point), and one per camera vertex 1 ..= b joined
+        // to a directional light.
+        let end_splats = if ellipsoidal { 1 + if directional { b as u64 } else { 0 } } else { 0 };
+        constants.push(("END_SPLATS", end_splats as f64));
         if let Some(role) = family {
             ensure!(
                 scene.scene.directional_lights.is_empty(),
