@@ -11,6 +11,7 @@ pub mod wide;
 
 use glam::{DMat3, DVec3, Vec3};
 use obvhs::{BvhBuildParams, triangle::Triangle as ObvhsTriangle};
+use rayon::prelude::*;
 
 use crate::gpu::layout::{BvhNode, MAX_LEAF_TRIANGLES, NONE, NodeSurface, Triangle};
 use crate::gpu::packing::pack2x16float;
@@ -75,17 +76,19 @@ impl Bvh {
     /// nodes' [`Bvh::surface_sums`]: what the ellipsoid queries' stochastic descent weighs
     /// children by (shaders/lib/ellipsoid_query.wesl `node_estimate`).
     pub fn node_surfaces(&self, sums: &[SurfaceSums]) -> Vec<NodeSurface> {
-        sums.iter().zip(&self.nodes).map(|(s, node)| s.surface(node.min.as_dvec3(), node.max.as_dvec3())).collect()
+        sums.par_iter().zip(&self.nodes).map(|(s, node)| s.surface(node.min.as_dvec3(), node.max.as_dvec3())).collect()
     }
 
     /// Per node, the area of the triangles below it, of the emitting ones among them, and their
     /// area-weighted first and second moments of position, for `triangles` in BVH order, summed
     /// in f64: what [`Bvh::node_surfaces`] and `WideBvh::child_surfaces` are made from.
     pub fn surface_sums(&self, triangles: &[Triangle]) -> Vec<SurfaceSums> {
-        let mut sums = vec![SurfaceSums::ZERO; self.nodes.len()];
-        // Children follow their parent in depth-first order: fill from the back.
-        for i in (0..self.nodes.len()).rev() {
-            sums[i] = match self.nodes[i].leaf_range() {
+        // The leaves on every core (each leaf's triangles in order, so the sums are the same
+        // however many threads run) ...
+        let mut sums: Vec<SurfaceSums> = self
+            .nodes
+            .par_iter()
+            .map(|node| match node.leaf_range() {
                 Some(range) => range.fold(SurfaceSums::ZERO, |s, k| {
                     let t = &triangles[k as usize];
                     let a = t.v0.as_dvec3();
@@ -101,16 +104,21 @@ impl Bvh {
                         second: s.second + (outer(a) + outer(b) + outer(c) + outer(sum)) * (area / 12.0),
                     }
                 }),
-                None => {
-                    let (a, b) = (sums[i + 1], sums[self.nodes[i + 1].skip as usize]);
-                    SurfaceSums {
-                        area: a.area + b.area,
-                        light_area: a.light_area + b.light_area,
-                        first: a.first + b.first,
-                        second: a.second + b.second,
-                    }
-                }
-            };
+                None => SurfaceSums::ZERO,
+            })
+            .collect();
+        // ... then the inner nodes: children follow their parent in depth-first order, so fill
+        // from the back.
+        for i in (0..self.nodes.len()).rev() {
+            if self.nodes[i].leaf_range().is_none() {
+                let (a, b) = (sums[i + 1], sums[self.nodes[i + 1].skip as usize]);
+                sums[i] = SurfaceSums {
+                    area: a.area + b.area,
+                    light_area: a.light_area + b.light_area,
+                    first: a.first + b.first,
+                    second: a.second + b.second,
+                };
+            }
         }
         sums
     }

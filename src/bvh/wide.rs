@@ -160,18 +160,21 @@ impl WideBvh {
     /// child's triangles, from the binary nodes' `sums` (`Bvh::surface_sums`): their covariance
     /// is stored over the squared diagonal of the child's box as the kernels decode it.
     pub fn child_surfaces(&self, sums: &[super::SurfaceSums]) -> Vec<NodeSurface> {
-        let mut out = Vec::with_capacity(WIDTH * self.nodes.len());
-        for (node, sources) in self.nodes.iter().zip(&self.sources) {
-            for (slot, &k) in sources.iter().enumerate() {
-                out.push(if k == NONE {
-                    NodeSurface::default()
-                } else {
-                    let (lo, hi) = child_box(node, slot);
-                    sums[k as usize].surface(lo.as_dvec3(), hi.as_dvec3())
-                });
-            }
-        }
-        out
+        use rayon::prelude::*;
+        self.nodes
+            .par_iter()
+            .zip(&self.sources)
+            .flat_map_iter(|(node, sources)| {
+                sources.iter().enumerate().map(move |(slot, &k)| {
+                    if k == NONE {
+                        NodeSurface::default()
+                    } else {
+                        let (lo, hi) = child_box(node, slot);
+                        sums[k as usize].surface(lo.as_dvec3(), hi.as_dvec3())
+                    }
+                })
+            })
+            .collect()
     }
 
     /// Whether a traversal of this BVH can stop before it is complete (the RESUMABLE override):
