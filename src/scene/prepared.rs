@@ -2,6 +2,7 @@
 //! materials, textures and lights. CPU twins and tests read the same arrays the GPU gets.
 
 use anyhow::Result;
+use rayon::prelude::*;
 
 use super::lights::LightTable;
 use super::materials::gpu_materials_and_textures;
@@ -86,41 +87,43 @@ impl PreparedScene {
                 light_of_triangle[src as usize] = l as u32;
             }
         }
-        let mut triangles = Vec::with_capacity(bvh.order.len());
-        let mut normals = Vec::with_capacity(bvh.order.len());
-        let mut shading = Vec::with_capacity(bvh.order.len());
-        for &i in &bvh.order {
-            let t = &scene.triangles[i as usize];
-            let [a, b, c] = t.positions;
-            let geometric = super::surface::triangle_normal(t.positions);
-            normals.push(geometric);
-            triangles.push(Triangle {
-                v0: a,
-                material: t.material,
-                e1: b - a,
-                light: light_of_triangle[i as usize],
-                e2: c - a,
-                source: i,
-            });
-            let n = t.normals.unwrap_or([(b - a).cross(c - a).normalize(); 3]);
-            shading.push(TriangleShading {
-                n0: n[0],
-                u0: t.uvs[0].x,
-                n1: n[1],
-                v0: t.uvs[0].y,
-                n2: n[2],
-                u1: t.uvs[1].x,
-                v1: t.uvs[1].y,
-                u2: t.uvs[2].x,
-                v2: t.uvs[2].y,
-                flags: match t.normals {
-                    Some(n) if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) => {
-                        SHADING_HAS_NORMALS
-                    }
-                    _ => 0,
-                },
-            });
-        }
+        // Each triangle in BVH order on every core (each entry a function of its triangle alone).
+        let (triangles, (normals, shading)): (Vec<_>, (Vec<_>, Vec<_>)) = bvh
+            .order
+            .par_iter()
+            .map(|&i| {
+                let t = &scene.triangles[i as usize];
+                let [a, b, c] = t.positions;
+                let geometric = super::surface::triangle_normal(t.positions);
+                let triangle = Triangle {
+                    v0: a,
+                    material: t.material,
+                    e1: b - a,
+                    light: light_of_triangle[i as usize],
+                    e2: c - a,
+                    source: i,
+                };
+                let n = t.normals.unwrap_or([(b - a).cross(c - a).normalize(); 3]);
+                let shading = TriangleShading {
+                    n0: n[0],
+                    u0: t.uvs[0].x,
+                    n1: n[1],
+                    v0: t.uvs[0].y,
+                    n2: n[2],
+                    u1: t.uvs[1].x,
+                    v1: t.uvs[1].y,
+                    u2: t.uvs[2].x,
+                    v2: t.uvs[2].y,
+                    flags: match t.normals {
+                        Some(n) if !normals_are_flat(n, super::surface::octahedral_decode(geometric)) => {
+                            SHADING_HAS_NORMALS
+                        }
+                        _ => 0,
+                    },
+                };
+                (triangle, (geometric, shading))
+            })
+            .unzip();
         let (materials, texture_infos, texels) = gpu_materials_and_textures(&scene);
         let triangle_bounds = scene.triangle_bounds();
         let ray_epsilon = 1e-6 * triangle_bounds.extent();
