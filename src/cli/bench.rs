@@ -142,6 +142,12 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
                 // A profiler of its own, so that each measurement's stages are its own.
                 ctx.enable_profiling()?;
             }
+            // What names a measurement in the JSON, with its samples per pass.
+            let row = |k: u32| {
+                serde_json::json!({
+                    "method": variant.name(), "gate": spec, "width": width, "height": height, "samples_per_pass": k,
+                })
+            };
             let building = Instant::now();
             let mut tracer = match (create_integrator(&ctx, &scene, &settings), samples_per_pass) {
                 (Ok(tracer), _) => tracer,
@@ -150,14 +156,9 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
                 (Err(e), Some(k)) => {
                     let why = format!("{e:#}");
                     println!("bench: {:<14} {width}x{height}, {k} samples per pass: skipped: {why}", variant.name());
-                    rows.push(serde_json::json!({
-                        "method": variant.name(),
-                        "gate": spec,
-                        "width": width,
-                        "height": height,
-                        "samples_per_pass": k,
-                        "skipped": why,
-                    }));
+                    let mut skipped = row(k);
+                    skipped["skipped"] = why.into();
+                    rows.push(skipped);
                     continue;
                 }
                 (Err(e), None) => return Err(e),
@@ -197,20 +198,18 @@ pub fn run_bench(s: &BenchSettings, scene_path: &Path) -> Result<()> {
             for (label, ms, dispatches) in &stages {
                 println!("stage: {:<14} {label:<38} {ms:>10.1} ms {dispatches:>8} dispatches", variant.name());
             }
-            rows.push(serde_json::json!({
-                "method": variant.name(),
-                "gate": spec,
-                "width": width,
-                "height": height,
-                "samples_per_pass": tracer.samples_per_pass(),
-                "spp": tracer.samples_done(),
-                "seconds": elapsed,
-                "samples_per_second": samples / elapsed,
-                "setup_seconds": setup_seconds,
-                "stages": stages.iter().map(|(label, ms, dispatches)| serde_json::json!({
-                    "stage": label, "milliseconds": ms, "dispatches": dispatches,
-                })).collect::<Vec<_>>(),
-            }));
+            let mut measured = row(tracer.samples_per_pass());
+            measured["spp"] = tracer.samples_done().into();
+            measured["seconds"] = elapsed.into();
+            measured["samples_per_second"] = (samples / elapsed).into();
+            measured["setup_seconds"] = setup_seconds.into();
+            measured["stages"] = stages
+                .iter()
+                .map(|(label, ms, dispatches)| {
+                    serde_json::json!({"stage": label, "milliseconds": ms, "dispatches": dispatches})
+                })
+                .collect();
+            rows.push(measured);
         }
     }
     if let Some(path) = &s.json {
