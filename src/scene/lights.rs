@@ -6,7 +6,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::{Scene, medium};
+use super::{Scene, TriangleBounds, medium};
 use crate::gpu::layout::{
     LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_DOUBLE_SIDED, LIGHT_MEDIUM_SHIFT, LIGHT_POINT, LIGHT_SPOT_LINEAR_IN_ANGLE,
     Light, NONE, Triangle, VERTEX_IOR_SHIFT,
@@ -58,8 +58,10 @@ pub struct LightTable {
 }
 
 impl LightTable {
-    /// Builds the table; `bvh_position[i]` is where scene triangle `i` lies in BVH order.
-    pub fn build(scene: &Scene, bvh_position: &[u32]) -> Self {
+    /// Builds the table; `bvh_position[i]` is where scene triangle `i` lies in BVH order, and
+    /// `triangles` the scene's [`TriangleBounds`] (directional lights start on its bounding
+    /// sphere).
+    pub fn build(scene: &Scene, bvh_position: &[u32], triangles: &TriangleBounds) -> Self {
         let mut lights = Vec::new();
         let mut source_triangle = Vec::new();
         let mut power = Vec::new();
@@ -104,7 +106,7 @@ impl LightTable {
             });
             source_triangle.push(NONE);
         }
-        let (centre, radius) = scene.bounding_sphere();
+        let (centre, radius) = scene.bounding_sphere_with(triangles);
         for l in &scene.directional_lights {
             // Light subpaths start on the disk where the plane wave enters the bounding sphere.
             let disk = std::f32::consts::PI * radius * radius;

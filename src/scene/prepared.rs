@@ -80,7 +80,8 @@ impl PreparedScene {
         let positions: Vec<_> = scene.triangles.iter().map(|t| t.positions).collect();
         let bvh = Bvh::build(&positions);
         let position_of = bvh.positions();
-        let lights = LightTable::build(&scene, &position_of);
+        let triangle_bounds = scene.triangle_bounds();
+        let lights = LightTable::build(&scene, &position_of, &triangle_bounds);
         let mut light_of_triangle = vec![NONE; scene.triangles.len()];
         for (l, &src) in lights.source_triangle.iter().enumerate() {
             if src != NONE {
@@ -125,7 +126,6 @@ impl PreparedScene {
             })
             .unzip();
         let (materials, texture_infos, texels) = gpu_materials_and_textures(&scene);
-        let triangle_bounds = scene.triangle_bounds();
         let ray_epsilon = 1e-6 * triangle_bounds.extent();
         let wide = WideBvh::build(&bvh);
         let sums = bvh.surface_sums(&triangles);
