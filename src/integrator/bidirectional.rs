@@ -41,20 +41,22 @@
 //! `subpath_vertices[slot * stride ..]`, camera vertices first (see shaders/lib/subpath.wesl).
 //!
 //! `options` holds the methods' limits, defaults, checks of settings and strategy counters;
+//! `slot_layout` what a slot holds, how many slots a wave fits, and its buffers;
 //! `target_visits` how extra visits of stratified bins are shared out (band index or pilot
 //! render); `camera_pilot` the per-pixel scales of the camera's density in `direct`'s weights.
 
 pub mod camera_pilot;
 mod options;
+mod slot_layout;
 mod stats;
 mod target_visits;
 
 use anyhow::{Result, ensure};
 
 pub use super::check_settings;
-use super::wavefront::{DISPATCH_ARGS_BYTES, MAX_SLOTS_PER_DISPATCH, ShadowRayStages, plan_waves, wave_target};
+use super::wavefront::{DISPATCH_ARGS_BYTES, ShadowRayStages, plan_waves, wave_target};
 use super::{Integrator, Method, RenderSettings, Wavefront};
-use crate::gpu::layout::{Contribution, Hit, PathState, PathVertex, QueueCounters, ShadowRay, Splat, WaveParams};
+use crate::gpu::layout::{QueueCounters, WaveParams};
 use crate::gpu::resources::read_buffer;
 use crate::gpu::{GpuContext, Kernel};
 use crate::scene::PreparedScene;
@@ -64,6 +66,7 @@ pub use options::{
     MAX_BOUNCES, MAX_CONNECTIONS_PER_QUERY, StrategyStats, check_media, check_tracer_settings,
     default_connections_per_query, strategies,
 };
+use slot_layout::SlotLayout;
 
 /// Slots a wave aims for on a CPU device (target_slots_per_wave: more on a GPU): each slot
 /// holds two subpaths and all their connections (a few KiB).
@@ -199,51 +202,13 @@ impl<'a> BidirectionalTracer<'a> {
                 );
             }
         }
-        let b = super::kernel_bounces(settings);
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
-        let camera_vertices = b as u64 + 2;
-        let light_vertices = b as u64 + 1;
-        let contributions_per_slot = camera_vertices * (camera_vertices - 1) / 2;
+        let layout = SlotLayout::new(scene, settings);
+        let (b, ellipsoidal, resumable) = (layout.bounces, layout.ellipsoidal, layout.resumable);
+        let (inline_shadow_rays, medium_connections) = (layout.inline_shadow_rays, layout.medium_connections);
         let strategy_count = strategies(b).len() as u64;
-        let ellipsoidal = settings.method == Method::Ellipsoidal;
-        // Ellipsoidal connections join camera vertices 1 ..= b to directional lights directly
-        // (connect_spherical; a capture has none): one more splat per vertex, and one more
-        // camera vertex traced.
-        let directional = ellipsoidal && settings.nlos.is_none() && !scene.scene.directional_lights.is_empty();
-        // Ellipsoidal connections need two shadow rays each, and K slots per strategy. In BVHs
-        // whose traversals cannot stop, connect_ellipsoidal traces its shadow rays itself and
-        // sums a query's K camera-subpath contributions into one (see connections.wesl
-        // RESUMABLE): no shadow queue, one contribution per strategy.
-        let rays_per_connection = if ellipsoidal { 2 } else { 1 };
-        let k = settings.connections_per_query as u64;
-        let resumable = scene.wide.traversals_can_stop();
-        // In scenes with media every shadow ray is queued: trace_shadow_rays takes transmittances.
-        let inline_shadow_rays = ellipsoidal && !resumable && !scene.scene.has_media();
-        let medium_connections = ellipsoidal && scene.scene.has_media();
-        let contributions_per_slot = contributions_per_slot * if inline_shadow_rays { 1 } else { k };
-        let splats_per_slot = light_vertices * k + if directional { b as u64 } else { 0 };
-        let queued_rays_per_slot =
-            if inline_shadow_rays { 0 } else { rays_per_connection * (contributions_per_slot + splats_per_slot) };
-        // Ellipsoid queries of a slot: the pairs (s, t) with s, t >= 1 and s + t <= B + 1.
-        let queries_per_slot = if ellipsoidal { (b as u64 * (b as u64 + 1) / 2).max(1) } else { 1 };
-        // Per-slot sizes of the arrays that grow with the wave; each must fit one binding.
-        let per_slot = [
-            (camera_vertices + light_vertices) * size_of::<PathVertex>() as u64,
-            contributions_per_slot * size_of::<Contribution>() as u64,
-            splats_per_slot * size_of::<Splat>() as u64,
-            queued_rays_per_slot.max(1) * size_of::<ShadowRay>() as u64,
-            2 * size_of::<PathState>() as u64,
-            queries_per_slot * 16,
-        ];
-        let fit = per_slot
-            .iter()
-            .map(|&bytes| limit / bytes)
-            .min()
-            .unwrap()
-            .min(MAX_SLOTS_PER_DISPATCH / 2)
-            .min(MAX_SLOTS_PER_DISPATCH / queries_per_slot);
-        let target = wave_target(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, per_slot.iter().sum(), settings);
-        let (samples_per_pass, slots_per_wave) = plan_waves(settings, fit, target)?;
+        let target = wave_target(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, layout.bytes.total(), settings);
+        let (samples_per_pass, slots_per_wave) = plan_waves(settings, layout.fit(limit), target)?;
         let slots = slots_per_wave;
 
         let mut params = super::render_params(scene, settings);
@@ -295,31 +260,13 @@ impl<'a> BidirectionalTracer<'a> {
             settings.height,
             settings.gate.bins()
         );
+        layout.allocate(ctx, &mut r, slots)?;
         let none = wgpu::BufferUsages::empty();
-        r.storage_zeroed(ctx, "paths", 2 * slots * size_of::<PathState>() as u64, none)?;
-        r.storage_zeroed(ctx, "hits", 2 * slots * size_of::<Hit>() as u64, none)?;
-        r.storage_zeroed(ctx, "ray_queue", 2 * slots * 4, none)?;
-        r.storage_zeroed(ctx, "next_ray_queue", 2 * slots * 4, none)?;
-        r.storage_zeroed(ctx, "subpath_vertices", slots * per_slot[0], none)?;
-        r.storage_zeroed(ctx, "subpath_lengths", 2 * slots * 4, none)?;
-        r.storage_zeroed(ctx, "contributions", slots * per_slot[1], none)?;
-        // Only the path tracer sums contributions per path (accumulate SUM_PER_PATH).
-        r.storage_zeroed(ctx, "path_radiance", 4, none)?;
-        // With shadow rays traced on the spot, light-tracing contributions go straight to splat_film.
-        r.storage_zeroed(ctx, "splats", if inline_shadow_rays { per_slot[2] } else { slots * per_slot[2] }, none)?;
-        r.storage_zeroed(
-            ctx,
-            "shadow_queue",
-            if inline_shadow_rays { per_slot[3] } else { slots * per_slot[3] },
-            none,
-        )?;
         r.storage_zeroed(ctx, "counters", size_of::<QueueCounters>() as u64, none)?;
         r.storage_zeroed(ctx, "dispatch_args", DISPATCH_ARGS_BYTES, wgpu::BufferUsages::INDIRECT)?;
-        r.storage_zeroed(ctx, "ellipsoid_queries", if ellipsoidal { slots * per_slot[5] } else { 16 }, none)?;
         r.storage_zeroed(ctx, "splat_film", splat_film_bytes, none)?;
         // Three counters per strategy, then five for the ellipsoid queries' work and guards.
         r.storage_zeroed(ctx, "strategy_stats", 4 * (3 * strategy_count + QUERY_COUNTERS as u64), none)?;
-        r.storage_zeroed(ctx, "targets", 8 * slots, none)?;
         // The band index of an NLOS capture (built in `prepare`), or stand-ins for its buffers.
         let mut band_index_result = None;
         let mut band_index_planned = false;
@@ -333,30 +280,7 @@ impl<'a> BidirectionalTracer<'a> {
             crate::nlos::band_index::placeholders(ctx, &mut r)?;
         }
 
-        constants.push(("CAMERA_VERTICES", camera_vertices as f64));
-        constants.push(("LIGHT_VERTICES", light_vertices as f64));
-        // Ellipsoidal queries join camera vertex t - 1 and light vertex s - 1 with s, t >= 1
-        // (t >= 2 in a capture, whose sensed point is camera vertex 1) and s + t <= b + 1:
-        // deeper vertices are never used, so their rays are not traced. Connections to a
-        // directional light use camera vertices up to b.
-        let (camera_traced, light_traced) = if ellipsoidal {
-            let t_min = if settings.nlos.is_some() { 2 } else { 1 };
-            let camera_traced = if directional { b as u64 + 1 } else { (b as u64).max(t_min) };
-            (camera_traced, (b as u64 + 1).saturating_sub(t_min).max(1))
-        } else {
-            (camera_vertices, light_vertices)
-        };
-        constants.push(("CAMERA_VERTICES_TRACED", camera_traced as f64));
-        constants.push(("LIGHT_VERTICES_TRACED", light_traced as f64));
-        constants.push(("CONTRIBUTIONS_PER_SLOT", contributions_per_slot as f64));
-        constants.push(("CONTRIBUTIONS_PER_STRATEGY", if inline_shadow_rays { 1.0 } else { k as f64 }));
-        constants.push(("SPLATS_PER_SLOT", splats_per_slot as f64));
-        constants.push(("SPLATS_PER_LIGHT_VERTEX", if ellipsoidal { k as f64 } else { 1.0 }));
-        // connect_spherical's splats at the end: one (a light seen directly, or an NLOS
-        // capture's spot seen from the sensed point), and one per camera vertex 1 ..= b joined
-        // to a directional light.
-        let end_splats = if ellipsoidal { 1 + if directional { b as u64 } else { 0 } } else { 0 };
-        constants.push(("END_SPLATS", end_splats as f64));
+        constants.extend(layout.constants());
         if let Some(role) = family {
             ensure!(
                 scene.scene.directional_lights.is_empty(),
@@ -371,7 +295,7 @@ impl<'a> BidirectionalTracer<'a> {
             constants.push(("NEEDLE_GUARD", settings.ellipsoid_guards.needle as f64));
         }
         if ellipsoidal {
-            constants.push(("CONNECTIONS_PER_QUERY", k as f64));
+            constants.push(("CONNECTIONS_PER_QUERY", layout.connections_per_query as f64));
             constants.push(("LENGTH_GUARD", settings.ellipsoid_guards.length as f64));
             constants.push(("QUERY_SPLIT", settings.query.split as f64));
             constants.push(("QUERY_BOTTOM_NODES", settings.query.device_bottom_nodes() as f64));
