@@ -18,7 +18,7 @@ fn wgsl_structs_match_rust_structs() {
         Triangle { v0, material, e1, light, e2, source }
         TriangleShading { n0, u0, n1, v0, n2, u1, v1, u2, v2, flags }
         BvhNode { min, skip, max, leaf }
-        WideNode { origin, exponents, planes_xy, planes_z, parent, subtree, children }
+        WideNode { grid, planes_xy, planes_z, parent, subtree, children }
         NodeSurface { centroid, area, light_area, spread }
         Material { base_color, base_color_texture, emission, flags, metallic, alpha, eta, plastic_table,
                    specular, plastic_internal_reflectance, plastic_specular_weight, interior_medium, conductor_eta, exterior_medium,
@@ -104,4 +104,34 @@ fn kernel_u32_const(kernel: &str, name: &str) -> u32 {
         naga::Expression::Literal(naga::Literal::U32(v)) => v,
         ref e => panic!("{name} is not a u32 literal: {e:?}"),
     }
+}
+
+/// The BVH's nodes and node surfaces are stored as `NodeWords` (bindings.wesl) and unpacked by
+/// chunked.wesl: the words must be the bytes of one Rust `BvhNode` or `NodeSurface` each, as
+/// uploaded.
+#[test]
+fn node_words_are_the_bytes_of_one_node() {
+    let source = gatetrace::gpu::kernels::kernel_source("connect_ellipsoidal");
+    let module = naga::front::wgsl::parse_str(source.wgsl).expect("connect_ellipsoidal parses");
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).expect("layouts");
+    let mut checked = 0;
+    for (_, var) in module.global_variables.iter() {
+        let name = var.name.as_deref().unwrap_or_default();
+        let rust_size = if name.starts_with("bvh_node_surfaces") {
+            size_of::<NodeSurface>()
+        } else if name.starts_with("bvh_nodes") {
+            size_of::<BvhNode>()
+        } else {
+            continue;
+        };
+        let naga::TypeInner::Array { base, stride, .. } = module.types[var.ty].inner else {
+            panic!("{name} is not an array");
+        };
+        assert_eq!(module.types[base].name.as_deref(), Some("NodeWords"), "{name}'s elements");
+        assert_eq!(stride as usize, rust_size, "{name}: stride of its words vs the Rust struct");
+        assert_eq!(layouter[base].size as usize, rust_size, "{name}: size of its words vs the Rust struct");
+        checked += 1;
+    }
+    assert!(checked >= 2, "connect_ellipsoidal binds the BVH's nodes and node surfaces");
 }

@@ -232,10 +232,10 @@ fn quantise(boxes: &[(Vec3, Vec3)], parent: u32) -> WideNode {
             }
             e += 1;
         };
-        node.exponents |= ((e + 127) as u32) << (8 * axis);
+        node.grid[3] |= ((e + 127) as u32) << (8 * axis);
         planes[axis] = words;
     }
-    node.origin = Vec3::from(origin);
+    node.grid[..3].copy_from_slice(&origin.map(f32::to_bits));
     node.planes_xy = [planes[0][0], planes[0][1], planes[1][0], planes[1][1]];
     node.planes_z = planes[2];
     node
@@ -243,7 +243,7 @@ fn quantise(boxes: &[(Vec3, Vec3)], parent: u32) -> WideNode {
 
 /// The grid step 2^e (m) of each axis of `node`.
 fn steps(node: &WideNode) -> Vec3 {
-    let e = |axis: u32| f32::from_bits(((node.exponents >> (8 * axis)) & 255) << 23);
+    let e = |axis: u32| f32::from_bits(((node.exponents() >> (8 * axis)) & 255) << 23);
     Vec3::new(e(0), e(1), e(2))
 }
 
@@ -255,8 +255,8 @@ pub fn child_box(node: &WideNode, slot: usize) -> (Vec3, Vec3) {
     let [lx, hx, ly, hy] = node.planes_xy;
     let [lz, hz] = node.planes_z;
     (
-        node.origin + step * Vec3::new(byte(lx), byte(ly), byte(lz)),
-        node.origin + step * Vec3::new(byte(hx), byte(hy), byte(hz)),
+        node.origin() + step * Vec3::new(byte(lx), byte(ly), byte(lz)),
+        node.origin() + step * Vec3::new(byte(hx), byte(hy), byte(hz)),
     )
 }
 
@@ -264,7 +264,7 @@ pub fn child_box(node: &WideNode, slot: usize) -> (Vec3, Vec3) {
 /// the box within (0, t_max) or the slot is empty (twin of bvh.wesl `intersect_children`).
 pub fn intersect_children(node: &WideNode, origin: Vec3, inv_dir: Vec3, t_max: f32) -> [f32; WIDTH] {
     let scale = steps(node) * inv_dir;
-    let offset = (node.origin - origin) * inv_dir;
+    let offset = (node.origin() - origin) * inv_dir;
     let [lx, hx, ly, hy] = node.planes_xy;
     let [lz, hz] = node.planes_z;
     let plane = |w: u32, k: usize, axis: usize| (((w >> (8 * k)) & 255) as f32).mul_add(scale[axis], offset[axis]);

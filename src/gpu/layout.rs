@@ -149,10 +149,10 @@ impl BvhNode {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct WideNode {
-    /// Lower corner of the union of the children's boxes (m): the origin of the planes' grid.
-    pub origin: Vec3,
-    /// Biased exponents e + 127 of the grid steps 2^e (m): bits 0-7 x, 8-15 y, 16-23 z.
-    pub exponents: u32,
+    /// The planes' grid in one 16-byte word (one vector load in the kernels): its origin's f32
+    /// bits, then the biased exponents of its steps (see [`WideNode::origin`] and
+    /// [`WideNode::exponents`]).
+    pub grid: [u32; 4],
     /// Quantised lower and upper x planes, then y planes, one byte per child (child k in bits
     /// 8k..8k+7): a child's box is origin + step * [lo, hi] on each axis, rounded outwards.
     pub planes_xy: [u32; 4],
@@ -167,6 +167,18 @@ pub struct WideNode {
     /// Per slot: a child node's index (below [`WIDE_LEAF`]), a leaf `(count << 28) | first`
     /// (count 1 to 4, BVH positions as in [`BvhNode::leaf`]), or [`NONE`] for an empty slot.
     pub children: [u32; 4],
+}
+
+impl WideNode {
+    /// Origin of the planes' grid (m): the lower corner of the union of the children's boxes.
+    pub fn origin(&self) -> Vec3 {
+        Vec3::new(f32::from_bits(self.grid[0]), f32::from_bits(self.grid[1]), f32::from_bits(self.grid[2]))
+    }
+
+    /// Biased exponents e + 127 of the grid's steps 2^e (m): bits 0-7 x, 8-15 y, 16-23 z.
+    pub fn exponents(&self) -> u32 {
+        self.grid[3]
+    }
 }
 
 /// [`WideNode::children`] at or above this value are leaves (or [`NONE`]).
