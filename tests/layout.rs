@@ -106,32 +106,40 @@ fn kernel_u32_const(kernel: &str, name: &str) -> u32 {
     }
 }
 
-/// The BVH's nodes and node surfaces are stored as `NodeWords` (bindings.wesl) and unpacked by
-/// chunked.wesl: the words must be the bytes of one Rust `BvhNode` or `NodeSurface` each, as
-/// uploaded.
+/// Arrays stored as vector words (bindings.wesl: the BVH's nodes and node surfaces as
+/// `NodeWords`, unpacked by chunked.wesl; the shadow queue as `ShadowRayWords`, read and written by
+/// shadow_queue.wesl) hold the bytes of one Rust struct per element, as uploaded or as the host
+/// sizes them.
 #[test]
-fn node_words_are_the_bytes_of_one_node() {
-    let source = gatetrace::gpu::kernels::kernel_source("connect_ellipsoidal");
-    let module = naga::front::wgsl::parse_str(source.wgsl).expect("connect_ellipsoidal parses");
-    let mut layouter = naga::proc::Layouter::default();
-    layouter.update(module.to_ctx()).expect("layouts");
-    let mut checked = 0;
-    for (_, var) in module.global_variables.iter() {
-        let name = var.name.as_deref().unwrap_or_default();
-        let rust_size = if name.starts_with("bvh_node_surfaces") {
-            size_of::<NodeSurface>()
-        } else if name.starts_with("bvh_nodes") {
-            size_of::<BvhNode>()
-        } else {
-            continue;
+fn stored_words_are_the_bytes_of_one_struct() {
+    for (kernel, binding, words, rust_size) in [
+        ("connect_ellipsoidal", "bvh_nodes", "NodeWords", size_of::<BvhNode>()),
+        ("connect_ellipsoidal", "bvh_node_surfaces", "NodeWords", size_of::<NodeSurface>()),
+        ("trace_shadow_rays", "shadow_queue", "ShadowRayWords", size_of::<ShadowRay>()),
+    ] {
+        let source = gatetrace::gpu::kernels::kernel_source(kernel);
+        let module = naga::front::wgsl::parse_str(source.wgsl).unwrap_or_else(|e| panic!("{kernel} parses: {e}"));
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layouts");
+        // The binding and its chunks (bvh_nodes_1, ...), but not bvh_node_surfaces for bvh_nodes.
+        let chunk = |name: &str| {
+            name.strip_prefix(binding)
+                .is_some_and(|rest| rest.is_empty() || rest.trim_start_matches('_').parse::<u32>().is_ok())
         };
-        let naga::TypeInner::Array { base, stride, .. } = module.types[var.ty].inner else {
-            panic!("{name} is not an array");
-        };
-        assert_eq!(module.types[base].name.as_deref(), Some("NodeWords"), "{name}'s elements");
-        assert_eq!(stride as usize, rust_size, "{name}: stride of its words vs the Rust struct");
-        assert_eq!(layouter[base].size as usize, rust_size, "{name}: size of its words vs the Rust struct");
-        checked += 1;
+        let mut checked = 0;
+        for (_, var) in module.global_variables.iter() {
+            let name = var.name.as_deref().unwrap_or_default();
+            if !chunk(name) {
+                continue;
+            }
+            let naga::TypeInner::Array { base, stride, .. } = module.types[var.ty].inner else {
+                panic!("{name} is not an array");
+            };
+            assert_eq!(module.types[base].name.as_deref(), Some(words), "{name}'s elements");
+            assert_eq!(stride as usize, rust_size, "{name}: stride of its words vs the Rust struct");
+            assert_eq!(layouter[base].size as usize, rust_size, "{name}: size of its words vs the Rust struct");
+            checked += 1;
+        }
+        assert!(checked >= 1, "{kernel} binds {binding}");
     }
-    assert!(checked >= 2, "connect_ellipsoidal binds the BVH's nodes and node surfaces");
 }
