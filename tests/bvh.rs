@@ -188,10 +188,9 @@ fn wide_bvh_is_a_conservative_collapse() {
 
 #[test]
 fn wide_bvh_numbers_its_top_breadth_first() {
-    // The kernels read the first TOP_NODES nodes from a uniform copy on CPU devices: they must
-    // be the top of the tree (a breadth-first walk from the root in slot order), and the nodes
-    // below them keep the depth-first order of the collapse, which keeps a subtree's nodes close
-    // in memory. A soup of 16,000 triangles has a few thousand wide nodes, more than TOP_NODES.
+    // The first TOP_NODES nodes are the top of the tree (a breadth-first walk from the root in
+    // slot order), and the nodes below them keep the depth-first order of the collapse, which
+    // keeps a subtree's nodes close in memory. A soup of 16,000 triangles has a few thousand wide nodes, more than TOP_NODES.
     let soup = common::random_soup(16_000, 5);
     let wide = WideBvh::build(&Bvh::build(&soup));
     let n = wide.nodes.len();
@@ -282,8 +281,8 @@ fn gpu_traversal_matches_cpu_twin() {
     // f32; the device may fuse multiply-adds, which changes t by a few ulps (allowed: 1e-5
     // relative, about 80 ulps) and can flip a hit only for rays grazing an edge or a tie.
     let ctx = common::gpu();
-    // The large soup's tree outgrows the nodes CPU devices read from a uniform copy
-    // (wide::TOP_NODES), so its rays read nodes from both.
+    // The large soup's tree outgrows the top numbered breadth-first (wide::TOP_NODES), so its
+    // rays read nodes of both orders.
     for (name, scene, scale) in [
         ("cornell box", common::cornell_box(), 0.6f32),
         ("soup", common::soup_scene(2000, 11, "gpu_soup"), 0.4),

@@ -82,7 +82,6 @@ fn connect_direct_holds_the_longest_subpath() {
 #[test]
 fn uniform_tables_have_the_host_lengths() {
     for (name, host) in [
-        ("TOP_WIDE_NODES", gatetrace::bvh::wide::TOP_NODES),
         ("MAX_SMALL_SCENE_TRIANGLES", gatetrace::bvh::MAX_SMALL_SCENE_TRIANGLES),
         ("MAX_UNIFORM_MATERIALS", gatetrace::gpu::layout::MAX_UNIFORM_MATERIALS),
         ("MAX_UNIFORM_LIGHTS", gatetrace::gpu::layout::MAX_UNIFORM_LIGHTS),

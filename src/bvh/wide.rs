@@ -21,9 +21,9 @@ use crate::gpu::layout::{Hit, NONE, NodeSurface, Triangle, WIDE_LEAF, WideNode};
 /// Children per node.
 pub const WIDTH: usize = 4;
 
-/// Nodes at the top of the tree that the kernels read from a uniform buffer
-/// (`top_wide_nodes`, 64 KiB): on CPU Vulkan a uniform read at lanes' differing indices is a
-/// gather, a storage read a loop over the lanes.
+/// Nodes at the top of the tree numbered breadth-first: the levels every ray visits lie together
+/// in the first 64 KiB of the nodes. (The kernels once read them from a uniform copy on CPU
+/// devices, which stopped paying: docs/benchmarks.md, "Node words and stack entries".)
 pub const TOP_NODES: usize = 1024;
 
 /// Entries of a stack traversal's stack (`STACK_SIZE` in bvh.wesl). A traversal that would need
@@ -78,8 +78,7 @@ impl WideBvh {
     }
 
     /// Renumbers the nodes so that the first `TOP_NODES` are the top of the tree in
-    /// breadth-first order (the root first), the kernels' uniform copy (`top_wide_nodes`);
-    /// the others keep their depth-first order.
+    /// breadth-first order (the root first); the others keep their depth-first order.
     fn top_levels_first(&mut self) {
         let n = self.nodes.len();
         let top = n.min(TOP_NODES);

@@ -5,7 +5,6 @@ use anyhow::Result;
 
 use super::wavefront::{FILM_ELEMENT_BYTES, film_elements, target_cdf, upload_gate};
 use super::{Method, RenderSettings};
-use crate::bvh::wide::TOP_NODES;
 use crate::film::target::TargetSampler;
 use crate::gpu::layout::{
     MAX_UNIFORM_LIGHTS, MAX_UNIFORM_MATERIALS, Medium, NONE, RenderParams, TargetParams, TriangleShading, WaveParams,
@@ -99,9 +98,6 @@ pub fn upload_scene(
     let layout = |name: &str| shared.layouts[name];
     let (triangles, triangle_shading) = (layout("triangles"), layout("triangle_shading"));
     let (bvh_nodes, bvh_node_surfaces) = (layout("bvh_nodes"), layout("bvh_node_surfaces"));
-    // The top of the tree again, for CPU devices (TOP_NODES_IN_UNIFORMS).
-    let top = &scene.wide.nodes[..scene.wide.nodes.len().min(TOP_NODES)];
-    r.uniform_slice_init(ctx, "top_wide_nodes", &padded_table(top, TOP_NODES));
     let small_scene = crate::bvh::small_scene_triangles(&scene.triangles);
     let small = small_scene.len();
     let small_normals: Vec<[f32; 4]> = scene.normals[..small].iter().map(|n| [n[0], n[1], 0.0, 0.0]).collect();
@@ -150,7 +146,6 @@ pub fn upload_scene(
         ("SMALL_SCENE_TRIANGLES", small as f64),
         ("SCENE_TABLES_IN_UNIFORMS", flag(tables_in_uniforms)),
         ("RESUMABLE", flag(scene.wide.traversals_can_stop())),
-        ("TOP_NODES_IN_UNIFORMS", flag(ctx.is_cpu())),
         ("NLOS", flag(settings.nlos.is_some())),
         ("THIN_LENS", flag(scene.scene.camera.lens_radius() > 0.0)),
         ("STRATIFIED_TARGETS", flag(params.target_length.strata > 0)),
