@@ -12,9 +12,8 @@
 //! for round in 0, 1, ...:               (until every subpath has ended; a traversal that
 //!                                       stops at the budget resumes one round later)
 //!     setup_dispatch(rays)              next_ray_queue becomes ray_queue
-//!     [intersect_closest]               closest hits of ray_queue (BVHs where traversals can
-//!                                       stop; in smaller ones extend_subpaths traces them)
-//!     extend_subpaths                   store the vertex, sample the BSDF, next ray
+//!     extend_subpaths                   closest hit, store the vertex, sample the BSDF, next
+//!                                       ray (a traversal stopped at the budget: next round)
 //! connect_direct                        every (s, t): contribution, MIS, shadow_queue
 //! | connect_spherical                   (ellipsoidal) lights seen directly, and camera vertices
 //!                                       joined to directional lights: splat, shadow_queue
@@ -79,8 +78,6 @@ const QUERY_COUNTERS: usize = 7;
 struct Stages {
     generate_subpaths: Kernel,
     setup_dispatch_rays: Kernel,
-    /// Only where traversals can stop (RESUMABLE); else extend_subpaths finds the hits.
-    intersect_closest: Option<Kernel>,
     extend_subpaths: Kernel,
     connect: Kernel,
     /// Ellipsoidal connections: connect_spherical, queue_ellipsoid_queries and
@@ -99,7 +96,6 @@ struct Stages {
 struct Bindings {
     generate_subpaths: wgpu::BindGroup,
     setup_dispatch_rays: [wgpu::BindGroup; 2],
-    intersect_closest: Option<[wgpu::BindGroup; 2]>,
     extend_subpaths: [wgpu::BindGroup; 2],
     connect: wgpu::BindGroup,
     ellipsoidal: Option<[wgpu::BindGroup; 3]>,
@@ -204,7 +200,7 @@ impl<'a> BidirectionalTracer<'a> {
         }
         let limit = settings.binding_limit.unwrap_or(u64::MAX).min(ctx.max_binding_size());
         let layout = SlotLayout::new(scene, settings);
-        let (b, ellipsoidal, resumable) = (layout.bounces, layout.ellipsoidal, layout.resumable);
+        let (b, ellipsoidal) = (layout.bounces, layout.ellipsoidal);
         let (inline_shadow_rays, medium_connections) = (layout.inline_shadow_rays, layout.medium_connections);
         let strategy_count = strategies(b).len() as u64;
         let target = wave_target(ctx.is_cpu(), TARGET_SLOTS_PER_WAVE, layout.bytes.total(), settings);
@@ -332,7 +328,6 @@ impl<'a> BidirectionalTracer<'a> {
             let spherical = ellipsoidal.then(|| scope.spawn(|| build("connect_spherical")));
             let generate_subpaths = build("generate_subpaths");
             let setup_dispatch_rays = Kernel::new(ctx, "setup_dispatch", Some("rays"), &with(0.0));
-            let intersect_closest = resumable.then(|| build("intersect_closest"));
             let extend_subpaths = build("extend_subpaths");
             let queue = ellipsoidal.then(|| {
                 [
@@ -349,7 +344,6 @@ impl<'a> BidirectionalTracer<'a> {
             Stages {
                 generate_subpaths,
                 setup_dispatch_rays,
-                intersect_closest,
                 extend_subpaths,
                 connect: joined(connect),
                 ellipsoidal: spherical.zip(queue).map(|(spherical, [queue, setup])| [joined(spherical), queue, setup]),
@@ -365,7 +359,6 @@ impl<'a> BidirectionalTracer<'a> {
         let bindings = Bindings {
             generate_subpaths: stages.generate_subpaths.bind(ctx, &odd),
             setup_dispatch_rays: both(&stages.setup_dispatch_rays),
-            intersect_closest: stages.intersect_closest.as_ref().map(both),
             extend_subpaths: both(&stages.extend_subpaths),
             connect: stages.connect.bind(ctx, &even),
             ellipsoidal: stages.ellipsoidal.as_ref().map(|kernels| kernels.each_ref().map(|k| k.bind(ctx, &even))),
@@ -422,9 +415,6 @@ impl<'a> BidirectionalTracer<'a> {
             |pass, r| {
                 let parity = (r % 2) as usize;
                 s.setup_dispatch_rays.dispatch(pass, &b.setup_dispatch_rays[parity], 1);
-                if let (Some(kernel), Some(groups)) = (&s.intersect_closest, &b.intersect_closest) {
-                    kernel.dispatch_indirect(pass, &groups[parity], args, 0);
-                }
                 s.extend_subpaths.dispatch_indirect(pass, &b.extend_subpaths[parity], args, 0);
             },
         )?;

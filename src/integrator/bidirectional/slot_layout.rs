@@ -57,8 +57,6 @@ pub(super) struct SlotLayout {
     pub nlos: bool,
     /// Connections drawn per ellipsoid query, K (1 for direct connections' counts).
     pub connections_per_query: u64,
-    /// Traversals of the scene's BVH can stop at the step budget (`WideBvh::traversals_can_stop`).
-    pub resumable: bool,
     /// connect_ellipsoidal traces its shadow rays itself and sums a query's K camera-subpath
     /// contributions into one: ellipsoidal connections in BVHs whose traversals cannot stop, in
     /// scenes without media (trace_shadow_rays takes the media's transmittances).
@@ -85,8 +83,8 @@ impl SlotLayout {
         // Ellipsoidal connections need two shadow rays each, and K slots per strategy.
         let rays_per_connection = if ellipsoidal { 2 } else { 1 };
         let k = settings.connections_per_query as u64;
-        let resumable = scene.wide.traversals_can_stop();
-        let inline_shadow_rays = ellipsoidal && !resumable && !scene.scene.has_media();
+        // Where traversals can stop at the step budget, shadow rays that stop resume in later passes.
+        let inline_shadow_rays = ellipsoidal && !scene.wide.traversals_can_stop() && !scene.scene.has_media();
         let medium_connections = ellipsoidal && scene.scene.has_media();
         let contributions_per_slot =
             camera_vertices * (camera_vertices - 1) / 2 * if inline_shadow_rays { 1 } else { k };
@@ -110,7 +108,6 @@ impl SlotLayout {
             directional,
             nlos: settings.nlos.is_some(),
             connections_per_query: k,
-            resumable,
             inline_shadow_rays,
             medium_connections,
             contributions_per_slot,
