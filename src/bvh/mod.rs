@@ -45,7 +45,12 @@ impl Bvh {
         assert!(!triangles.is_empty(), "a BVH needs at least one triangle");
         let tris: Vec<ObvhsTriangle> =
             triangles.iter().map(|t| ObvhsTriangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
-        let params = BvhBuildParams { max_prims_per_leaf: 4, ..BvhBuildParams::medium_build() };
+        // A quarter of the nodes weighed for reinsertion (obvhs's medium build weighs 5 %): on the
+        // fence's chain-link slivers `path` ran 12-14 % faster, `direct` 6-10 %, for 1.55 times
+        // the build (docs/benchmarks.md, "How the BVH is built"); a whole pass (1.0) gained
+        // little more for 4 times the build and slowed the ellipsoid queries 5-7 %.
+        let params =
+            BvhBuildParams { max_prims_per_leaf: 4, reinsertion_batch_ratio: 0.25, ..BvhBuildParams::medium_build() };
         let bvh2 = obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
         let mut out = Bvh { nodes: Vec::with_capacity(bvh2.nodes.len()), order: Vec::with_capacity(triangles.len()) };
         out.flatten(&bvh2, 0);
