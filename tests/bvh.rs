@@ -9,6 +9,7 @@ use gatetrace::bvh::Bvh;
 use gatetrace::bvh::traverse::{brute_force_closest, trace_any, trace_closest};
 use gatetrace::bvh::wide::{self, WideBvh};
 use gatetrace::gpu::layout::{NONE, Triangle};
+use gatetrace::integrator::path::MAX_SHADOW_RESUMES;
 use gatetrace::integrator::{Integrator, Method, PathTracer, RenderSettings};
 use gatetrace::rng::Rng;
 use glam::Vec3;
@@ -415,7 +416,7 @@ fn deep_traversals_are_right_or_reported() {
     // visits every node before reaching the wall behind them. Lavapipe ends a shader's loops
     // after 65535 iterations in total; a traversal cut short must be counted, never silent.
     let n = 120_000;
-    let scene = slab_field(Slabs::OnAxis, "deep_traversal");
+    let scene = slab_field(n, Slabs::OnAxis, "deep_traversal");
     assert!(scene.bvh.nodes.len() > 65_535, "{} nodes", scene.bvh.nodes.len());
     let cpu = trace_closest(&scene.bvh.nodes, &scene.triangles, Vec3::new(-1.0, 0.0, 0.0), Vec3::X, 1e30, NONE);
     assert_eq!(scene.triangles[cpu.triangle as usize].source, n as u32, "the CPU twin hits the wall");
@@ -447,16 +448,16 @@ enum Slabs {
     Aside,
 }
 
-/// The slab field of `deep_traversals_are_right_or_reported` (120,000 triangles whose boxes all
-/// contain the x axis, which every triangle misses) in front of a double-sided wall at x = 20,
-/// lit by a point light near a camera that looks along the axis; `slabs` may leave them out
-/// or move them aside.
-fn slab_field(slabs: Slabs, name: &str) -> gatetrace::scene::PreparedScene {
+/// The slab field of `deep_traversals_are_right_or_reported` (`count` triangles 0.1 mm apart
+/// whose boxes all contain the x axis, which every triangle misses) in front of a
+/// double-sided wall at x = 20, lit by a point light near a camera that looks along the axis;
+/// `slabs` may leave them out or move them aside.
+fn slab_field(count: usize, slabs: Slabs, name: &str) -> gatetrace::scene::PreparedScene {
     use common::gltf_builder::{Camera, Material, Mesh, PointLight, Scene};
     use gatetrace::scene::{PreparedScene, load_gltf};
     let mut mesh = Mesh { positions: vec![], normals: None, uvs: None, indices: vec![], material: Some(0) };
     let lift = if slabs == Slabs::Aside { 3.0 } else { 0.0 };
-    for i in 0..if slabs == Slabs::None { 0 } else { 120_000 } {
+    for i in 0..if slabs == Slabs::None { 0 } else { count } {
         let x = i as f32 * 1e-4;
         for p in [[x, 1.0 + lift, -0.9], [x, 1.0 + lift, 1.0], [x, -0.9 + lift, 1.0]] {
             mesh.indices.push(mesh.positions.len() as u32);
@@ -486,6 +487,9 @@ fn slab_field(slabs: Slabs, name: &str) -> gatetrace::scene::PreparedScene {
     PreparedScene::new(load_gltf(&gltf.write(&dir, "slabs.gltf")).unwrap()).unwrap()
 }
 
+/// The slabs of `deep_traversals_resume_until_they_are_complete`.
+const SLABS_TO_RESUME: usize = 80_000;
+
 #[test]
 fn deep_traversals_resume_until_they_are_complete() {
     // Every camera ray and every shadow ray crosses the whole slab field: far more steps than
@@ -493,11 +497,15 @@ fn deep_traversals_resume_until_they_are_complete() {
     // rounds and shadow rays in resume passes: nothing is cut short, and the images equal
     // those of the wall alone (same random numbers, same hits, same lights).
     use gatetrace::integrator::{Method, create_integrator};
+    // 80,000 slabs: a traversal stops several times, and at most MAX_SHADOW_RESUMES times
+    // (more is counted as cut short, which the test rules out).
     let ctx = common::gpu();
-    let with = slab_field(Slabs::OnAxis, "slabs_with");
-    let without = slab_field(Slabs::None, "slabs_without");
+    let with = slab_field(SLABS_TO_RESUME, Slabs::OnAxis, "slabs_with");
+    let without = slab_field(0, Slabs::None, "slabs_without");
     let steps = with.wide.nodes.len() + with.wide.leaves;
     assert!(steps as u32 > 4 * wide::TRAVERSAL_BUDGET, "{steps} steps to visit every node and leaf");
+    let stops = with.wide.most_stops();
+    assert!(stops <= MAX_SHADOW_RESUMES, "{stops} stops of a traversal, above {MAX_SHADOW_RESUMES}");
     for method in [Method::Path, Method::Direct] {
         let settings = RenderSettings { width: 4, height: 4, max_bounces: 1, method, seed: 3, ..Default::default() };
         let render = |scene| {
@@ -530,7 +538,7 @@ fn deep_traversals_resume_until_they_are_complete() {
     };
     let (resumes, _, cut) = render(&with);
     assert!(resumes > 0 && cut == 0, "slabs on the axis: {resumes} resume passes, {cut} traversals cut short");
-    let aside = slab_field(Slabs::Aside, "slabs_aside");
+    let aside = slab_field(SLABS_TO_RESUME, Slabs::Aside, "slabs_aside");
     assert!(aside.wide.traversals_can_stop(), "the BVH of the slabs aside has resumable traversals");
     let (resumes, a, cut) = render(&aside);
     let (_, b, _) = render(&without);

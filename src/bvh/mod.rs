@@ -30,6 +30,19 @@ pub fn small_scene_triangles(triangles: &[Triangle]) -> &[Triangle] {
     if triangles.len() <= MAX_SMALL_SCENE_TRIANGLES { triangles } else { &[] }
 }
 
+/// Scenes of at most this many triangles get leaves of at most 3 triangles, larger ones leaves
+/// of at most 4. Smaller leaves made `path` up to 10 % and `ellipsoidal` up to 14 % faster
+/// (docs/benchmarks.md, "How the BVH is built"), for about 20 % more wide nodes: at 10M
+/// triangles those would overflow a 128 MiB storage binding (lavapipe's cap), which leaves
+/// of 4 keep below it.
+pub const SMALL_LEAVES_UP_TO: usize = 6_000_000;
+
+/// The most triangles a leaf of the BVH of `triangles` triangles holds (see
+/// [`SMALL_LEAVES_UP_TO`]).
+pub fn leaf_triangles(triangles: usize) -> u32 {
+    if triangles <= SMALL_LEAVES_UP_TO { 3 } else { 4 }
+}
+
 /// A flattened BVH over a triangle list.
 #[derive(Clone, Debug)]
 pub struct Bvh {
@@ -49,8 +62,11 @@ impl Bvh {
         // fence's chain-link slivers `path` ran 12-14 % faster, `direct` 6-10 %, for 1.55 times
         // the build (docs/benchmarks.md, "How the BVH is built"); a whole pass (1.0) gained
         // little more for 4 times the build and slowed the ellipsoid queries 5-7 %.
-        let params =
-            BvhBuildParams { max_prims_per_leaf: 4, reinsertion_batch_ratio: 0.25, ..BvhBuildParams::medium_build() };
+        let params = BvhBuildParams {
+            max_prims_per_leaf: leaf_triangles(triangles.len()),
+            reinsertion_batch_ratio: 0.25,
+            ..BvhBuildParams::medium_build()
+        };
         let bvh2 = obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
         let mut out = Bvh { nodes: Vec::with_capacity(bvh2.nodes.len()), order: Vec::with_capacity(triangles.len()) };
         out.flatten(&bvh2, 0);

@@ -538,8 +538,9 @@ fn reached_wide(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allo
     let bounds = spheroid_bounds(q);
     let nodes = scene.wide;
     let bottom_nodes = settings.device_bottom_nodes() as usize;
-    // Whole visits need the estimates' zeros only, and weigh by the counted area (as the
-    // device's `surface_estimate` with `modelled` false).
+    // Whole visits of small subtrees need the estimates' zeros only, and weigh by the counted
+    // area (as the device's `surface_estimate` with `modelled` false); descent steps and
+    // top-level visits (whose children's estimates weigh the final descent) use the model.
     let estimates = |n: usize, modelled: bool| -> [f64; WIDTH] {
         std::array::from_fn(|slot| {
             if nodes[n].children[slot] == NONE {
@@ -594,7 +595,7 @@ fn reached_wide(scene: QueryScene<'_>, q: &Query, settings: &QuerySettings, allo
             entry = Entry::Start(0.0);
         }
         let whole = matches!(entry, Entry::Top(_)) || node.subtree as usize <= bottom_nodes;
-        let e = estimates(n, !whole);
+        let e = estimates(n, !whole || matches!(entry, Entry::Top(_)));
         let inv_p = match entry {
             Entry::Top(_) => {
                 for slot in (0..WIDTH).rev() {

@@ -124,7 +124,7 @@ const MOST_BACKED_UP_FILM_BYTES: u64 = 64 << 20;
 /// shadow rays that stop more than MAX_SHADOW_RESUMES times (which takes more than
 /// MAX_SHADOW_RESUMES - 1 budgets of resume-mode steps, asked for only by adversarial
 /// geometry) are counted as cut short.
-const MAX_SHADOW_RESUMES: u32 = 8;
+pub const MAX_SHADOW_RESUMES: u32 = 8;
 
 impl<'a> PathTracer<'a> {
     /// Uploads the scene, creates the wavefront state and builds the specialised kernels.

@@ -36,7 +36,7 @@ use crate::scene::PreparedScene;
 pub const AUTO_MIN_TRIANGLES: usize = 16;
 
 /// Most nodes of a cluster's subtree in scenes of more than SMALL_CLUSTERS_UP_TO triangles (31:
-/// at most 16 leaves of up to 4 triangles).
+/// at most 16 leaves of up to `crate::bvh::leaf_triangles` triangles).
 pub const CLUSTER_NODES: u32 = 31;
 
 /// Most nodes of a cluster's subtree in scenes of at most SMALL_CLUSTERS_UP_TO triangles (7: at
